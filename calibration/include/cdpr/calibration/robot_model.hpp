@@ -1,0 +1,113 @@
+// The constant description of a cable robot (Pinocchio-style "Model"): geometry, winches, cables,
+// pulleys, sensors. Algorithms take a const RobotModel& plus a scratch workspace of their own.
+//
+// Conventions (stated once, used everywhere; docs/config.md repeats them):
+// - SI units: m, rad, N, s, kg.
+// - World frame K0: z up, gravity g = (0, 0, -9.81) m/s^2.
+// - Platform pose: position r (world, m) of the platform frame origin, orientation from
+//   roll-pitch-yaw (rad) as R = Rz(yaw) * Ry(pitch) * Rx(roll).
+// - Cable i runs from frame anchor a_i (world) to platform anchor b_i (platform frame).
+//   Cable vector l_i = a_i - r - R b_i, length l_i = ||l_i||, unit vector u_i = l_i / l_i (points
+//   from the platform towards the frame). Cable force on the platform = f_i * u_i with f_i >= 0.
+// - Swivel pulley: a_i is the fixed point D_i on the swivel axis where the cable enters the
+//   pulley. The pulley frame (rotation `frame`, world columns ex, ey, ez) has ez along the swivel
+//   axis, pointing the way the incoming cable travels (from the winch into the pulley), and ex the
+//   reference direction of the swivel angle gamma. The pulley centre is at distance `radius` from
+//   the axis. With radius == 0 the pulley is a point anchor.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+namespace cdpr {
+
+// A platform pose: position and roll-pitch-yaw.
+struct Pose {
+  Eigen::Vector3d position = Eigen::Vector3d::Zero();  // m, world
+  Eigen::Vector3d rpy = Eigen::Vector3d::Zero();       // rad: roll, pitch, yaw
+
+  Eigen::Matrix<double, 6, 1> vector() const {
+    Eigen::Matrix<double, 6, 1> v;
+    v << position, rpy;
+    return v;
+  }
+  static Pose from_vector(const Eigen::Matrix<double, 6, 1>& v) {
+    return Pose{v.head<3>(), v.tail<3>()};
+  }
+};
+
+struct PulleyModel {
+  double radius = 0.0;                                 // m; 0 = point anchor (no pulley)
+  Eigen::Matrix3d frame = Eigen::Matrix3d::Identity();  // columns ex, ey, ez in world
+  bool enabled() const { return radius > 0.0; }
+};
+
+// Winch transmission, paper Eq. 1: L = sqrt((pi d)^2 + p^2) * turns_of_drum.
+struct WinchModel {
+  double drum_diameter = 0.05;     // m
+  double drum_pitch = 0.0;         // m per drum revolution (groove pitch)
+  double gear_ratio = 1.0;         // motor revolutions per drum revolution
+  double counts_per_rev = 65536;   // encoder counts per motor revolution
+  int direction = 1;               // +1: positive counts pay cable out (length grows); -1 reversed
+};
+
+enum class ElongationKind { kRigid, kHooke, kPolynomial };
+
+// Polynomial surface dL = sum_{i+j<=order} c_ij * L^i * F^j, coefficients in graded order
+// (i + j = 0, then 1, ...; within a degree, increasing j). L in m, F in N, dL in m.
+struct PolynomialSurface {
+  int order = 0;
+  std::vector<double> coefficients;
+};
+
+struct CableModel {
+  double ea = 1.0e5;              // axial stiffness E*A, N
+  double mass_per_length = 0.0;   // kg/m
+  ElongationKind elongation = ElongationKind::kHooke;
+  PolynomialSurface polynomial;   // used when elongation == kPolynomial
+  double f_min = 5.0;             // N, minimum allowed tension
+  double f_max = 500.0;           // N, maximum allowed tension
+};
+
+// Force sensor: raw = gain * tension + offset (the paper's rig: gain 2).
+struct ForceSensorModel {
+  double gain = 1.0;
+  double offset = 0.0;  // N (in raw units)
+};
+
+struct PlatformModel {
+  double mass = 1.0;                                          // kg
+  Eigen::Vector3d center_of_mass = Eigen::Vector3d::Zero();   // platform frame, m
+  Eigen::Matrix3d inertia = Eigen::Matrix3d::Identity() * 0.01;  // kg m^2 about the CoM (optional)
+};
+
+// A 1-D laser distance sensor on the platform, aimed at a plane fixed in the world.
+struct LaserModel {
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();          // platform frame, m
+  Eigen::Vector3d direction = -Eigen::Vector3d::UnitZ();     // platform frame, unit
+  Eigen::Vector3d plane_point = Eigen::Vector3d::Zero();     // world, m
+  Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitZ();   // world, unit
+  double range_min = 0.0;                                    // m
+  double range_max = 10.0;                                   // m
+};
+
+struct RobotModel {
+  std::string name;
+  Eigen::Matrix3Xd frame_anchors;      // a_i, 3 x m, world
+  Eigen::Matrix3Xd platform_anchors;   // b_i, 3 x m, platform frame
+  std::vector<PulleyModel> pulleys;    // m entries
+  std::vector<WinchModel> winches;     // m entries
+  std::vector<CableModel> cables;      // m entries
+  std::vector<ForceSensorModel> force_sensors;  // m entries
+  PlatformModel platform;
+  Pose home;
+  std::vector<LaserModel> lasers;
+  double gravity = 9.81;  // m/s^2, along -z of the world
+
+  int num_cables() const { return static_cast<int>(frame_anchors.cols()); }
+};
+
+}  // namespace cdpr

@@ -1,0 +1,130 @@
+// Errors as values at every boundary of cdpr.
+//
+// A Status is a code plus a human message that names what is wrong (the file, line, field, CAN node
+// or interface). The message lives in a fixed buffer, so creating, copying and returning a Status
+// never allocates: the RT loop may use it. Result<T> carries either a value or a non-ok Status
+// (std::expected is C++23; this is the small subset we need).
+#pragma once
+
+#include <array>
+#include <cstdarg>
+#include <cstdio>
+#include <cstring>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+
+namespace cdpr {
+
+enum class ErrorCode {
+  kOk = 0,
+  kInvalidArgument,   // the caller's input is wrong (config field, frame, parameter)
+  kNotFound,          // an interface, file, node or object does not exist
+  kTimeout,           // nothing arrived in time
+  kIoError,           // the operating system refused (errno given in the message)
+  kProtocolError,     // a peer answered with something the protocol forbids
+  kAborted,           // a peer aborted (SDO abort, Modbus exception), or an operator abort
+  kUnavailable,       // the resource exists but cannot be used now (interface down, bus-off)
+  kParseError,        // a file or message could not be read
+  kNumericalFailure,  // a solver did not converge or the problem is singular
+  kOutOfRange,        // a value is outside its allowed range
+  kFailedPrecondition,
+  kInternal,          // a bug of ours
+};
+
+constexpr std::string_view to_string(ErrorCode c) {
+  switch (c) {
+    case ErrorCode::kOk: return "ok";
+    case ErrorCode::kInvalidArgument: return "invalid argument";
+    case ErrorCode::kNotFound: return "not found";
+    case ErrorCode::kTimeout: return "timeout";
+    case ErrorCode::kIoError: return "I/O error";
+    case ErrorCode::kProtocolError: return "protocol error";
+    case ErrorCode::kAborted: return "aborted";
+    case ErrorCode::kUnavailable: return "unavailable";
+    case ErrorCode::kParseError: return "parse error";
+    case ErrorCode::kNumericalFailure: return "numerical failure";
+    case ErrorCode::kOutOfRange: return "out of range";
+    case ErrorCode::kFailedPrecondition: return "failed precondition";
+    case ErrorCode::kInternal: return "internal error";
+  }
+  return "unknown";
+}
+
+class Status {
+ public:
+  static constexpr std::size_t kMaxMessage = 240;
+
+  constexpr Status() = default;
+  Status(ErrorCode code, std::string_view message) : code_(code) { set(message); }
+
+  // printf-style constructor for messages with values: Status::Error(kTimeout, "node %d ...", id)
+  [[gnu::format(printf, 2, 3)]] static Status Error(ErrorCode code, const char* fmt, ...) {
+    Status s;
+    s.code_ = code;
+    va_list args;
+    va_start(args, fmt);
+    std::vsnprintf(s.msg_.data(), s.msg_.size(), fmt, args);
+    va_end(args);
+    return s;
+  }
+  static constexpr Status Ok() { return {}; }
+
+  bool ok() const { return code_ == ErrorCode::kOk; }
+  explicit operator bool() const { return ok(); }
+  ErrorCode code() const { return code_; }
+  std::string_view message() const { return std::string_view(msg_.data()); }
+  // "timeout: SDO upload 0x6064:00 from node 3 got no answer in 100 ms"
+  std::string to_string() const {
+    std::string s(cdpr::to_string(code_));
+    if (msg_[0] != '\0') {
+      s += ": ";
+      s += message();
+    }
+    return s;
+  }
+  // Prefixes context to the message: "reading config.yaml: " + old message.
+  Status& prepend(std::string_view context) {
+    std::array<char, kMaxMessage> old = msg_;
+    std::snprintf(msg_.data(), msg_.size(), "%.*s%s", static_cast<int>(context.size()),
+                  context.data(), old.data());
+    return *this;
+  }
+
+ private:
+  void set(std::string_view m) {
+    const std::size_t n = m.size() < kMaxMessage - 1 ? m.size() : kMaxMessage - 1;
+    std::memcpy(msg_.data(), m.data(), n);
+    msg_[n] = '\0';
+  }
+  ErrorCode code_ = ErrorCode::kOk;
+  std::array<char, kMaxMessage> msg_{};
+};
+
+// A value or the reason there is none.
+template <typename T>
+class [[nodiscard]] Result {
+ public:
+  Result(T value) : value_(std::move(value)) {}  // NOLINT(google-explicit-constructor)
+  Result(Status status) : status_(std::move(status)) {  // NOLINT(google-explicit-constructor)
+    if (status_.ok()) status_ = Status(ErrorCode::kInternal, "Result built from an ok Status");
+  }
+
+  bool ok() const { return value_.has_value(); }
+  explicit operator bool() const { return ok(); }
+  const Status& status() const { return status_; }
+  T& value() & { return *value_; }
+  const T& value() const& { return *value_; }
+  T&& value() && { return std::move(*value_); }
+  T* operator->() { return &*value_; }
+  const T* operator->() const { return &*value_; }
+  T& operator*() & { return *value_; }
+  const T& operator*() const& { return *value_; }
+
+ private:
+  std::optional<T> value_;
+  Status status_;
+};
+
+}  // namespace cdpr

@@ -1,0 +1,35 @@
+# Helpers that keep every test registration uniform.
+#
+# cdpr_add_gtest(NAME <target> SOURCES <files...> LIBS <targets...> [LABELS <labels...>])
+#   Builds one GoogleTest executable and registers its cases with CTest (label "unit" by default).
+#
+# cdpr_add_vcan_test(NAME <test> COMMAND <cmd...> [LABELS ...] [TIMEOUT s])
+#   Registers a test that needs a kernel CAN bus. It runs through tests/vcan/vcan-run, which uses
+#   native vcan where the kernel has it and boots user-mode-linux where it has not.
+set(CDPR_VCAN_RUN ${CMAKE_SOURCE_DIR}/tests/vcan/vcan-run)
+
+function(cdpr_add_gtest)
+  cmake_parse_arguments(T "" "NAME" "SOURCES;LIBS;LABELS" ${ARGN})
+  if(NOT CDPR_BUILD_TESTS)
+    return()
+  endif()
+  add_executable(${T_NAME} ${T_SOURCES})
+  target_link_libraries(${T_NAME} PRIVATE ${T_LIBS} GTest::gtest GTest::gtest_main GTest::gmock cdpr_options)
+  if(NOT T_LABELS)
+    set(T_LABELS unit)
+  endif()
+  gtest_discover_tests(${T_NAME} PROPERTIES LABELS "${T_LABELS}" DISCOVERY_TIMEOUT 60)
+endfunction()
+
+function(cdpr_add_vcan_test)
+  cmake_parse_arguments(T "" "NAME;TIMEOUT" "COMMAND;LABELS" ${ARGN})
+  if(NOT CDPR_BUILD_TESTS)
+    return()
+  endif()
+  if(NOT T_TIMEOUT)
+    set(T_TIMEOUT 300)
+  endif()
+  add_test(NAME ${T_NAME} COMMAND ${CDPR_VCAN_RUN} -- ${T_COMMAND})
+  set_tests_properties(${T_NAME} PROPERTIES LABELS "vcan;${T_LABELS}" TIMEOUT ${T_TIMEOUT}
+                                            WORKING_DIRECTORY ${CMAKE_BINARY_DIR})
+endfunction()
