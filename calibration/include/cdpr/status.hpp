@@ -30,24 +30,37 @@ enum class ErrorCode {
   kNumericalFailure,  // a solver did not converge or the problem is singular
   kOutOfRange,        // a value is outside its allowed range
   kFailedPrecondition,
-  kInternal,          // a bug of ours
+  kInternal,  // a bug of ours
 };
 
 constexpr std::string_view to_string(ErrorCode c) {
   switch (c) {
-    case ErrorCode::kOk: return "ok";
-    case ErrorCode::kInvalidArgument: return "invalid argument";
-    case ErrorCode::kNotFound: return "not found";
-    case ErrorCode::kTimeout: return "timeout";
-    case ErrorCode::kIoError: return "I/O error";
-    case ErrorCode::kProtocolError: return "protocol error";
-    case ErrorCode::kAborted: return "aborted";
-    case ErrorCode::kUnavailable: return "unavailable";
-    case ErrorCode::kParseError: return "parse error";
-    case ErrorCode::kNumericalFailure: return "numerical failure";
-    case ErrorCode::kOutOfRange: return "out of range";
-    case ErrorCode::kFailedPrecondition: return "failed precondition";
-    case ErrorCode::kInternal: return "internal error";
+    case ErrorCode::kOk:
+      return "ok";
+    case ErrorCode::kInvalidArgument:
+      return "invalid argument";
+    case ErrorCode::kNotFound:
+      return "not found";
+    case ErrorCode::kTimeout:
+      return "timeout";
+    case ErrorCode::kIoError:
+      return "I/O error";
+    case ErrorCode::kProtocolError:
+      return "protocol error";
+    case ErrorCode::kAborted:
+      return "aborted";
+    case ErrorCode::kUnavailable:
+      return "unavailable";
+    case ErrorCode::kParseError:
+      return "parse error";
+    case ErrorCode::kNumericalFailure:
+      return "numerical failure";
+    case ErrorCode::kOutOfRange:
+      return "out of range";
+    case ErrorCode::kFailedPrecondition:
+      return "failed precondition";
+    case ErrorCode::kInternal:
+      return "internal error";
   }
   return "unknown";
 }
@@ -106,7 +119,7 @@ class Status {
 template <typename T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : value_(std::move(value)) {}  // NOLINT(google-explicit-constructor)
+  Result(T value) : value_(std::move(value)) {}         // NOLINT(google-explicit-constructor)
   Result(Status status) : status_(std::move(status)) {  // NOLINT(google-explicit-constructor)
     if (status_.ok()) status_ = Status(ErrorCode::kInternal, "Result built from an ok Status");
   }

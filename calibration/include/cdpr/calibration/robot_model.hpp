@@ -16,11 +16,10 @@
 //   the axis. With radius == 0 the pulley is a point anchor.
 #pragma once
 
-#include <string>
-#include <vector>
-
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <string>
+#include <vector>
 
 namespace cdpr {
 
@@ -40,18 +39,18 @@ struct Pose {
 };
 
 struct PulleyModel {
-  double radius = 0.0;                                 // m; 0 = point anchor (no pulley)
+  double radius = 0.0;                                  // m; 0 = point anchor (no pulley)
   Eigen::Matrix3d frame = Eigen::Matrix3d::Identity();  // columns ex, ey, ez in world
   bool enabled() const { return radius > 0.0; }
 };
 
 // Winch transmission, paper Eq. 1: L = sqrt((pi d)^2 + p^2) * turns_of_drum.
 struct WinchModel {
-  double drum_diameter = 0.05;     // m
-  double drum_pitch = 0.0;         // m per drum revolution (groove pitch)
-  double gear_ratio = 1.0;         // motor revolutions per drum revolution
-  double counts_per_rev = 65536;   // encoder counts per motor revolution
-  int direction = 1;               // +1: positive counts pay cable out (length grows); -1 reversed
+  double drum_diameter = 0.05;    // m
+  double drum_pitch = 0.0;        // m per drum revolution (groove pitch)
+  double gear_ratio = 1.0;        // motor revolutions per drum revolution
+  double counts_per_rev = 65536;  // encoder counts per motor revolution
+  int direction = 1;              // +1: positive counts pay cable out (length grows); -1 reversed
 };
 
 enum class ElongationKind { kRigid, kHooke, kPolynomial };
@@ -64,12 +63,12 @@ struct PolynomialSurface {
 };
 
 struct CableModel {
-  double ea = 1.0e5;              // axial stiffness E*A, N
-  double mass_per_length = 0.0;   // kg/m
+  double ea = 1.0e5;             // axial stiffness E*A, N
+  double mass_per_length = 0.0;  // kg/m
   ElongationKind elongation = ElongationKind::kHooke;
-  PolynomialSurface polynomial;   // used when elongation == kPolynomial
-  double f_min = 5.0;             // N, minimum allowed tension
-  double f_max = 500.0;           // N, maximum allowed tension
+  PolynomialSurface polynomial;  // used when elongation == kPolynomial
+  double f_min = 5.0;            // N, minimum allowed tension
+  double f_max = 500.0;          // N, maximum allowed tension
 };
 
 // Force sensor: raw = gain * tension + offset (the paper's rig: gain 2).
@@ -79,28 +78,28 @@ struct ForceSensorModel {
 };
 
 struct PlatformModel {
-  double mass = 1.0;                                          // kg
-  Eigen::Vector3d center_of_mass = Eigen::Vector3d::Zero();   // platform frame, m
+  double mass = 1.0;                                             // kg
+  Eigen::Vector3d center_of_mass = Eigen::Vector3d::Zero();      // platform frame, m
   Eigen::Matrix3d inertia = Eigen::Matrix3d::Identity() * 0.01;  // kg m^2 about the CoM (optional)
 };
 
 // A 1-D laser distance sensor on the platform, aimed at a plane fixed in the world.
 struct LaserModel {
-  Eigen::Vector3d origin = Eigen::Vector3d::Zero();          // platform frame, m
-  Eigen::Vector3d direction = -Eigen::Vector3d::UnitZ();     // platform frame, unit
-  Eigen::Vector3d plane_point = Eigen::Vector3d::Zero();     // world, m
-  Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitZ();   // world, unit
-  double range_min = 0.0;                                    // m
-  double range_max = 10.0;                                   // m
+  Eigen::Vector3d origin = Eigen::Vector3d::Zero();         // platform frame, m
+  Eigen::Vector3d direction = -Eigen::Vector3d::UnitZ();    // platform frame, unit
+  Eigen::Vector3d plane_point = Eigen::Vector3d::Zero();    // world, m
+  Eigen::Vector3d plane_normal = Eigen::Vector3d::UnitZ();  // world, unit
+  double range_min = 0.0;                                   // m
+  double range_max = 10.0;                                  // m
 };
 
 struct RobotModel {
   std::string name;
-  Eigen::Matrix3Xd frame_anchors;      // a_i, 3 x m, world
-  Eigen::Matrix3Xd platform_anchors;   // b_i, 3 x m, platform frame
-  std::vector<PulleyModel> pulleys;    // m entries
-  std::vector<WinchModel> winches;     // m entries
-  std::vector<CableModel> cables;      // m entries
+  Eigen::Matrix3Xd frame_anchors;               // a_i, 3 x m, world
+  Eigen::Matrix3Xd platform_anchors;            // b_i, 3 x m, platform frame
+  std::vector<PulleyModel> pulleys;             // m entries
+  std::vector<WinchModel> winches;              // m entries
+  std::vector<CableModel> cables;               // m entries
   std::vector<ForceSensorModel> force_sensors;  // m entries
   PlatformModel platform;
   Pose home;
