@@ -10,7 +10,7 @@ PACKAGES=(
   libeigen3-dev libceres-dev libspdlog-dev libfmt-dev libmodbus-dev libyaml-cpp-dev
   nlohmann-json3-dev libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libsystemd-dev
   # virtual CAN bus through user-mode-linux, and independent protocol peers for interop tests
-  user-mode-linux kmod iproute2 can-utils socat python3 python3-can python3-pymodbus
+  user-mode-linux kmod iproute2 can-utils socat python3 python3-can python3-pymodbus python3-yaml
   tshark mbpoll
 )
 

@@ -99,9 +99,12 @@ class Status {
   }
   // Prefixes context to the message: "reading config.yaml: " + old message.
   Status& prepend(std::string_view context) {
-    std::array<char, kMaxMessage> old = msg_;
-    std::snprintf(msg_.data(), msg_.size(), "%.*s%s", static_cast<int>(context.size()),
-                  context.data(), old.data());
+    const std::size_t old_len = std::strlen(msg_.data());
+    const std::size_t ctx = context.size() < kMaxMessage - 1 ? context.size() : kMaxMessage - 1;
+    const std::size_t keep = old_len < kMaxMessage - 1 - ctx ? old_len : kMaxMessage - 1 - ctx;
+    std::memmove(msg_.data() + ctx, msg_.data(), keep);
+    std::memcpy(msg_.data(), context.data(), ctx);
+    msg_[ctx + keep] = '\0';
     return *this;
   }
 
