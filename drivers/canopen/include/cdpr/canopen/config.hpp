@@ -1,0 +1,104 @@
+// Configuration of the CANopen network: the master's timing and every node (what its PDOs carry,
+// heartbeats, drive and force-sensor parameters). Loaded from YAML (see docs/canopen.md and
+// config/canopen-mini.yaml); errors name file, line and field. Durations are SI in code.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "cdpr/canopen/pdo.hpp"
+#include "cdpr/canopen/types.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr::canopen {
+
+using std::chrono::nanoseconds;
+
+enum class NodeKind : std::uint8_t { kGeneric, kCia402Drive, kForceSensor };
+std::string_view to_string(NodeKind k);
+
+// CiA 402 modes of operation (0x6060) the master uses.
+enum class Mode : std::int8_t {
+  kNone = 0,
+  kProfilePosition = 1,
+  kHoming = 6,
+  kCyclicSyncPosition = 8,
+};
+std::string_view to_string(Mode m);
+
+struct DriveConfig {
+  Mode mode = Mode::kCyclicSyncPosition;  // mode set at boot
+  double counts_per_unit = 1.0;           // drive position counts per SI unit (m or rad)
+  nanoseconds transition_timeout{std::chrono::milliseconds(500)};
+  nanoseconds mode_switch_timeout{std::chrono::milliseconds(1000)};
+  std::int16_t abort_connection_option =
+      3;  // 0x6007: 0 none, 1 fault, 2 disable voltage, 3 quick stop
+  std::optional<std::int16_t> quick_stop_option;  // 0x605A, written when set
+  std::uint32_t profile_velocity =
+      0;  // 0x6081 in counts/s for profile position moves (0: not written)
+  std::uint32_t profile_acceleration = 0;  // 0x6083/0x6084 in counts/s^2 (0: not written)
+  std::int8_t homing_method = 37;  // 0x6098: 37 (35 in old drives) = current position is home
+};
+
+struct ForceConfig {
+  // Channel k is the k-th value the node's TPDOs map, in order. raw = gain * tension + offset.
+  std::vector<double> gain;
+  std::vector<double> offset;
+};
+
+struct SdoWrite {
+  ObjectAddress object;
+  DataType type = DataType::kU8;
+  std::int64_t value = 0;
+};
+
+struct NodeConfig {
+  NodeId id = 0;
+  std::string name;
+  NodeKind kind = NodeKind::kGeneric;
+  nanoseconds heartbeat_period{std::chrono::milliseconds(100)};   // 0x1017 on the node; 0: off
+  nanoseconds heartbeat_timeout{std::chrono::milliseconds(300)};  // the master's consumer; 0: off
+  nanoseconds master_heartbeat_timeout{0};  // 0x1016:01 on the node watching the master; 0: off
+  std::vector<PdoConfig> rpdos;
+  std::vector<PdoConfig> tpdos;
+  std::vector<SdoWrite> sdo_writes;  // extra start-up writes, after the PDOs
+  DriveConfig drive;
+  ForceConfig force;
+};
+
+struct MasterConfig {
+  std::string interface = "can0";
+  double bitrate = 1e6;
+  NodeId master_id = 127;
+  std::uint32_t master_heartbeat_cob_id = 0;  // 0: 0x700 + master_id
+  nanoseconds master_heartbeat_period{std::chrono::milliseconds(50)};
+  nanoseconds sync_period{std::chrono::milliseconds(4)};
+  std::uint8_t sync_counter_overflow = 0;
+  nanoseconds boot_timeout{std::chrono::seconds(5)};
+  nanoseconds sdo_timeout{std::chrono::milliseconds(100)};
+  int sdo_retries = 2;
+  nanoseconds bus_off_recovery{std::chrono::milliseconds(500)};
+  double bus_load_warning = 0.7;
+  bool reset_communication = true;  // boot starts with NMT reset communication to all nodes
+  bool quick_stop_on_fault = true;  // a faulted or lost node quick-stops every drive
+  std::vector<NodeConfig> nodes;
+
+  std::uint32_t heartbeat_cob_id() const {
+    return master_heartbeat_cob_id != 0 ? master_heartbeat_cob_id : cob::kHeartbeat + master_id;
+  }
+  const NodeConfig* find(NodeId id) const;
+};
+
+// Parses YAML text; `source` names it in errors ("config/canopen-mini.yaml:12: nodes[3].id: ...").
+Result<MasterConfig> parse_config(std::string_view yaml, std::string_view source);
+Result<MasterConfig> load_config(const std::string& path);
+
+// Checks what parsing cannot: unique node ids and COB-IDs, PDO sizes, drive and force-sensor
+// mappings, heartbeat timeouts longer than the producer period.
+Status validate(const MasterConfig& config);
+
+}  // namespace cdpr::canopen

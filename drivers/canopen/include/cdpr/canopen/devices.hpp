@@ -1,0 +1,116 @@
+// The master's view of its devices, bound to slots of the node's process image: a CiA 402 drive
+// (state supervision, no-jump targets, CSP/PP/homing handshakes) and a force-sensor node (raw
+// channels to tensions). update() runs in the RT cycle: no allocation, no locks.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "cdpr/canopen/cia402.hpp"
+#include "cdpr/canopen/config.hpp"
+#include "cdpr/canopen/pdo.hpp"
+
+namespace cdpr::canopen {
+
+class Drive {
+ public:
+  // Binds to the image slots of controlword/target (RPDO) and statusword/actual (TPDO).
+  static Result<Drive> bind(const NodeConfig& config, ProcessImage& image);
+
+  NodeId node() const { return node_; }
+
+  // Requests (taken at the next cycle).
+  void enable() { sup_.request(cia402::Target::kOperationEnabled); }
+  void disable() { sup_.request(cia402::Target::kSwitchOnDisabled); }
+  void switch_on() { sup_.request(cia402::Target::kSwitchedOn); }
+  void quick_stop() { sup_.request(cia402::Target::kQuickStop); }
+  void reset_fault() { sup_.request_fault_reset(); }
+
+  // Position commands in SI units (counts / counts_per_unit) or raw counts. In CSP they are only
+  // taken while OPERATION_ENABLED; otherwise the target follows the actual position, so enabling
+  // never jumps. Returns false when the target was not taken.
+  bool set_target(double position) { return set_target_counts(to_counts(position)); }
+  bool set_target_counts(std::int32_t counts);
+  // Profile position move (new set-point handshake with set-point acknowledge).
+  bool move_to(double position) { return move_to_counts(to_counts(position)); }
+  bool move_to_counts(std::int32_t counts);
+  bool move_done() const { return !pp_pending_ && !pp_bit4_ && pp_reached_; }
+  // Homing (method from the configuration; 37/35 = "the current position is home").
+  void start_homing() {
+    homing_requested_ = true;
+    homing_done_ = homing_error_ = false;
+  }
+  bool homing_done() const { return homing_done_; }
+  bool homing_error() const { return homing_error_; }
+
+  // RT: read statusword/actual from the image, step the supervisor, write controlword/target.
+  // Until the first TPDO arrived (on_pdo), nothing is known: the supervisor does not run.
+  void update(Timestamp now);
+  void on_pdo() { received_ = true; }
+  bool received() const { return received_; }
+
+  Mode mode() const { return mode_; }
+  void set_mode(Mode m) { mode_ = m; }  // after the master switched it (0x6060/0x6061)
+
+  cia402::State state() const { return sup_.state(); }
+  const cia402::Supervisor& supervisor() const { return sup_; }
+  std::uint16_t statusword() const { return statusword_; }
+  std::uint16_t controlword() const { return controlword_; }
+  std::int32_t actual_counts() const { return actual_; }
+  std::int32_t target_counts() const { return target_; }
+  double actual_position() const { return actual_ / counts_per_unit_; }
+  double target_position() const { return target_ / counts_per_unit_; }
+  bool enabled() const { return sup_.state() == cia402::State::kOperationEnabled; }
+  // Number of transitions into OPERATION_ENABLED and the largest |target - actual| seen at them.
+  std::uint32_t enable_count() const { return enable_count_; }
+  std::int64_t max_enable_error() const { return max_enable_error_; }
+
+ private:
+  std::int32_t to_counts(double x) const;
+
+  NodeId node_ = 0;
+  ProcessImage* image_ = nullptr;
+  std::uint16_t cw_slot_ = 0, target_slot_ = 0, sw_slot_ = 0, actual_slot_ = 0;
+  double counts_per_unit_ = 1.0;
+  Mode mode_ = Mode::kNone;
+  cia402::Supervisor sup_;
+  std::uint16_t statusword_ = 0;
+  std::uint16_t controlword_ = 0;
+  std::int32_t actual_ = 0;
+  std::int32_t target_ = 0;
+  std::int32_t user_target_ = 0;
+  bool user_target_valid_ = false;
+  bool was_enabled_ = false;
+  bool received_ = false;
+  std::uint32_t enable_count_ = 0;
+  std::int64_t max_enable_error_ = 0;
+  // Profile position handshake.
+  std::int32_t pp_target_ = 0;
+  bool pp_pending_ = false;
+  bool pp_bit4_ = false;
+  bool pp_reached_ = true;
+  // Homing.
+  bool homing_requested_ = false;
+  bool homing_done_ = false;
+  bool homing_error_ = false;
+};
+
+class ForceSensor {
+ public:
+  static Result<ForceSensor> bind(const NodeConfig& config, const ProcessImage& image);
+  NodeId node() const { return node_; }
+  std::size_t channels() const { return slots_.size(); }
+  std::int64_t raw(std::size_t ch) const { return image_->get(slots_[ch]); }
+  // Tension in N: raw = gain * tension + offset.
+  double tension(std::size_t ch) const {
+    return (static_cast<double>(raw(ch)) - offset_[ch]) / gain_[ch];
+  }
+
+ private:
+  NodeId node_ = 0;
+  const ProcessImage* image_ = nullptr;
+  std::vector<std::uint16_t> slots_;
+  std::vector<double> gain_, offset_;
+};
+
+}  // namespace cdpr::canopen

@@ -1,0 +1,150 @@
+// The CANopen master: boots the network (reset communication, boot-ups, SDO configuration of
+// heartbeats, PDOs and drive modes, NMT start, SYNC), then runs cycle(now) from the RT loop: it
+// takes in TPDOs, heartbeats, EMCYs and error frames, steps the drives, sends RPDOs, SYNC and its
+// own heartbeat. cycle() never allocates, locks, logs or throws; what it has to say goes to
+// events() and to the drives' Status.
+//
+// Blocking calls (boot, set_mode, wait_for, shutdown) wait through the Hooks: `now` is the clock
+// (the RT loop's, or a test's injected one) and `idle` runs whenever nothing is waiting on the bus
+// (tests step simulated nodes and advance the clock there). While the master is running, blocking
+// calls keep cycling at the SYNC period, so drives stay fed during maintenance SDO traffic.
+#pragma once
+
+#include <array>
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include "cdpr/can/can_bus.hpp"
+#include "cdpr/canopen/bus_supervisor.hpp"
+#include "cdpr/canopen/config.hpp"
+#include "cdpr/canopen/devices.hpp"
+#include "cdpr/canopen/events.hpp"
+#include "cdpr/canopen/nmt.hpp"
+#include "cdpr/canopen/pdo.hpp"
+#include "cdpr/canopen/sdo_client.hpp"
+
+namespace cdpr::canopen {
+
+struct MasterHooks {
+  std::function<Timestamp()> now;
+  std::function<void()> idle;
+  std::chrono::nanoseconds receive_timeout{std::chrono::milliseconds(1)};
+};
+
+struct MasterStats {
+  std::uint64_t cycles = 0;
+  std::uint64_t rpdos_sent = 0;
+  std::uint64_t tpdos_received = 0;
+  std::uint64_t short_pdos = 0;  // TPDOs shorter than their mapping (not processed)
+  std::uint64_t emcys = 0;
+  std::uint64_t tx_failures = 0;
+  std::uint64_t unknown_frames = 0;
+};
+
+class Master {
+ public:
+  // Builds process images, PDO layouts and devices from the configuration (allocates here only).
+  static Result<std::unique_ptr<Master>> create(can::CanBus& bus, MasterConfig config,
+                                                MasterHooks hooks);
+
+  // Start-up: reset communication, wait for boot-ups, configure every node, start them, start
+  // SYNC. Errors name the node and the step.
+  Status boot();
+  // Configures one node through SDO (heartbeats, 0x6007, PDOs, mode, extra writes). Part of boot.
+  Status configure_node(NodeId id);
+
+  // The RT cycle.
+  void cycle(Timestamp now);
+
+  // Blocking helpers (start-up/maintenance).
+  Status nmt(NmtCommand cmd, NodeId node);  // node 0 = all
+  Status set_mode(NodeId node, Mode mode);  // 0x6060, then wait until 0x6061 matches
+  // Cycles (or pumps) until done() or the timeout; `what` names the wait in the error.
+  Status wait_for(const std::function<bool()>& done, std::chrono::nanoseconds timeout,
+                  const char* what);
+  // Requests OPERATION_ENABLED on every drive and waits; fails with the drive supervisor's
+  // message ("node 4: stuck in SWITCH_ON_DISABLED for 500 ms after shutdown").
+  Status enable_all(std::chrono::nanoseconds timeout);
+  // Quick stop to every drive, wait for it, disable voltage, stop SYNC, NMT pre-operational.
+  Status shutdown(std::chrono::nanoseconds timeout);
+
+  // Quick stop to every drive (RT-safe; taken at the next cycle).
+  void quick_stop_all();
+  // Latched by a drive fault or a lost node when quick_stop_on_fault is set.
+  bool faulted() const { return faulted_; }
+  void clear_fault() { faulted_ = false; }
+
+  bool running() const { return running_; }
+  Drive* drive(NodeId id);
+  ForceSensor* force_sensor(NodeId id);
+  std::span<Drive> drives() { return drives_; }
+  std::span<ForceSensor> force_sensors() { return forces_; }
+  SdoClient* sdo(NodeId id);
+  ProcessImage* image(NodeId id);
+  Pump& pump() { return pump_; }
+  Events& events() { return events_; }
+  const NodeMonitor& nodes() const { return monitor_; }
+  const BusSupervisor& bus() const { return bus_sup_; }
+  BusSupervisor& bus() { return bus_sup_; }
+  const SyncProducer& sync() const { return sync_; }
+  const MasterStats& stats() const { return stats_; }
+  const MasterConfig& config() const { return config_; }
+  // Bus load of SYNC + all configured PDOs + heartbeats per SYNC period.
+  BusLoad bus_load() const;
+
+ private:
+  struct NodeRt {
+    NodeConfig config;
+    ProcessImage image;
+    std::vector<PdoLayout> rpdos;
+    std::vector<PdoLayout> tpdos;
+    std::unique_ptr<SdoClient> sdo;
+    int drive = -1;
+    int force = -1;
+  };
+
+  class MasterPump final : public Pump {
+   public:
+    explicit MasterPump(Master& m) : m_(m) {}
+    Timestamp now() override { return m_.hooks_.now(); }
+    void step() override { m_.pump_step(); }
+
+   private:
+    Master& m_;
+  };
+
+  Master(can::CanBus& bus, MasterConfig config, MasterHooks hooks);
+  void dispatch(const can::Frame& f, Timestamp now);
+  void background(Timestamp now);  // heartbeat, consumer checks, SDO timeouts
+  void pump_step();
+  void send(const can::Frame& f, Timestamp now);
+  NodeRt* node(NodeId id) { return node_index_[id] < 0 ? nullptr : nodes_[node_index_[id]].get(); }
+
+  can::CanBus& bus_;
+  MasterConfig config_;
+  MasterHooks hooks_;
+  MasterPump pump_{*this};
+  std::vector<std::unique_ptr<NodeRt>> nodes_;
+  std::array<int, kMaxNodeId + 1> node_index_{};
+  // COB-ID -> (node, TPDO) for O(1) dispatch in the cycle.
+  struct TpdoRef {
+    std::int16_t node = -1;
+    std::int16_t pdo = -1;
+  };
+  std::array<TpdoRef, 0x800> tpdo_table_{};
+  std::vector<Drive> drives_;
+  std::vector<ForceSensor> forces_;
+  NodeMonitor monitor_;
+  SyncProducer sync_;
+  HeartbeatProducer heartbeat_;
+  BusSupervisor bus_sup_;
+  Events events_;
+  MasterStats stats_;
+  NmtState own_state_ = NmtState::kPreOperational;
+  bool running_ = false;
+  bool faulted_ = false;
+  Timestamp next_cycle_{0};
+};
+
+}  // namespace cdpr::canopen

@@ -1,0 +1,189 @@
+// A CANopen slave (CiA 301 subset) for tests and the virtual robot: object dictionary, SDO
+// server (expedited and segmented), NMT state machine with boot-up and heartbeat producer,
+// master-heartbeat consumer (0x1016), PDOs configured through the dictionary (0x1400/0x1600,
+// 0x1800/0x1A00) and SYNC handling, EMCY producer. Plus a CiA 402 drive model (Drive402) and
+// fault injection to test masters against misbehaving nodes.
+//
+// Single-threaded: the owner calls step(now) to process what the node's bus endpoint received and
+// to produce heartbeats. Not real-time (it allocates): it stands in for real devices.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "cdpr/can/can_bus.hpp"
+#include "cdpr/canopen/pdo.hpp"
+#include "cdpr/canopen/types.hpp"
+
+namespace cdpr::canopen::slave {
+
+enum class Access : std::uint8_t { kRo, kWo, kRw, kConst };
+
+struct Entry {
+  std::vector<std::uint8_t> data;
+  Access access = Access::kRw;
+  bool variable_size = false;  // VISIBLE_STRING / DOMAIN
+  // Called before a write is accepted; returns 0 or the SDO abort code.
+  std::function<std::uint32_t(std::span<const std::uint8_t>)> validate;
+  // Called after a write was stored.
+  std::function<void()> on_write;
+};
+
+class ObjectDictionary {
+ public:
+  Entry& add(ObjectAddress a, DataType type, std::int64_t value, Access access = Access::kRw);
+  Entry& add_string(ObjectAddress a, std::string_view value, Access access = Access::kRo);
+  bool has_index(std::uint16_t index) const;
+  Entry* find(ObjectAddress a);
+  const Entry* find(ObjectAddress a) const;
+  // Typed access for the application (no access checks); 0 if the entry does not exist.
+  std::int64_t get(ObjectAddress a, bool is_signed = false) const;
+  void set(ObjectAddress a, std::int64_t value);
+
+  // SDO semantics: 0 or an abort code.
+  std::uint32_t read(ObjectAddress a, std::vector<std::uint8_t>& out) const;
+  std::uint32_t write(ObjectAddress a, std::span<const std::uint8_t> data);
+
+ private:
+  std::map<std::uint32_t, Entry> entries_;
+};
+
+// Misbehaviour on demand.
+struct Faults {
+  int drop_sdo_requests = 0;  // ignore this many SDO requests (to test timeouts/retries)
+  bool bad_toggle = false;    // the next segment answer carries the wrong toggle bit
+  std::map<std::uint32_t, std::uint32_t> abort_on;  // ObjectAddress::key() -> abort code
+  bool silent = false;  // no boot-up, heartbeat or answers at all (dead node)
+};
+
+class SlaveNode {
+ public:
+  SlaveNode(can::CanBus& bus, NodeId id);
+  virtual ~SlaveNode() = default;
+
+  NodeId id() const { return id_; }
+  ObjectDictionary& od() { return od_; }
+  NmtState nmt_state() const { return state_; }
+  Faults& faults() { return faults_; }
+
+  // Powers the node on: sends its boot-up and enters PRE-OPERATIONAL.
+  void power_on(Timestamp now);
+  // Processes received frames and produces heartbeats.
+  void step(Timestamp now);
+  void send_emcy(std::uint16_t code, std::uint8_t error_register,
+                 std::array<std::uint8_t, 5> manufacturer = {});
+
+  std::uint64_t syncs() const { return syncs_; }
+  std::uint64_t rpdos_applied() const { return rpdos_applied_; }
+  bool master_lost() const { return master_lost_; }
+
+ protected:
+  // Hooks for device models.
+  virtual void on_sync(Timestamp) {}
+  virtual void on_rpdo_applied(Timestamp) {}
+  virtual void on_master_lost(Timestamp) {}
+  virtual void on_reset_application() {}
+
+ private:
+  void handle(const can::Frame& f, Timestamp now);
+  void handle_sdo(const can::Frame& f);
+  void sdo_abort(ObjectAddress a, std::uint32_t code);
+  void sdo_send(can::Frame& f);
+  void reset_communication(Timestamp now);
+  void apply_rpdo(std::size_t i, Timestamp now);
+  void send_tpdos();
+  void build_pdos();
+  void send(const can::Frame& f);
+
+  struct Pdo {
+    std::uint32_t cob_id = 0;
+    std::uint8_t type = 0;
+    std::vector<std::pair<ObjectAddress, std::uint8_t>> map;  // object, bytes
+    std::array<std::uint8_t, 8> pending{};
+    bool has_pending = false;
+    std::uint32_t sync_count = 0;
+  };
+
+  can::CanBus& bus_;
+  NodeId id_;
+  ObjectDictionary od_;
+  Faults faults_;
+  NmtState state_ = NmtState::kUnknown;  // off until power_on
+  Timestamp next_heartbeat_{0};
+  Timestamp master_last_{0};
+  bool master_heard_ = false;
+  bool master_lost_ = false;
+  std::vector<Pdo> rpdos_, tpdos_;
+  std::uint64_t syncs_ = 0, rpdos_applied_ = 0;
+  // SDO server state.
+  enum class SdoState { kIdle, kDownload, kUpload } sdo_state_ = SdoState::kIdle;
+  ObjectAddress sdo_addr_{};
+  std::vector<std::uint8_t> sdo_buf_;
+  std::size_t sdo_offset_ = 0;
+  bool sdo_toggle_ = false;
+};
+
+// CiA 402 drive model: state machine driven by 0x6040, statusword 0x6041, modes 0x6060/0x6061,
+// CSP (actual follows 0x607A at each SYNC), profile position (moves at 0x6081 per second, new
+// set-point handshake), homing (method 35/37: current position becomes 0x607C), quick stop,
+// fault injection with EMCY, 0x6007 reaction to a lost master.
+class Drive402 : public SlaveNode {
+ public:
+  Drive402(can::CanBus& bus, NodeId id, std::int32_t initial_position = 0);
+
+  // Goes to FAULT (through FAULT_REACTION_ACTIVE) and sends an EMCY with `emcy_code`.
+  void inject_fault(std::uint16_t emcy_code);
+  // A drive that ignores the controlword (to test the master's supervisor).
+  void set_ignore_controlword(bool v) { ignore_cw_ = v; }
+  // Moves the shaft by hand (the model's actual position) while not enabled.
+  void set_actual_position(std::int32_t p) { position_ = p; }
+
+  std::uint16_t statusword() const { return statusword_; }
+  std::int32_t position() const { return position_; }
+  // Largest |position change| in one SYNC seen right at a transition into OPERATION_ENABLED.
+  std::int64_t max_jump_on_enable() const { return max_jump_on_enable_; }
+  std::uint32_t enable_count() const { return enable_count_; }
+  std::uint16_t last_controlword() const { return last_cw_; }
+
+ protected:
+  void on_rpdo_applied(Timestamp now) override;
+  void on_sync(Timestamp now) override;
+  void on_master_lost(Timestamp now) override;
+  void on_reset_application() override;
+
+ private:
+  enum class S : std::uint8_t {
+    kNotReady,
+    kSwitchOnDisabled,
+    kReady,
+    kSwitchedOn,
+    kEnabled,
+    kQuickStop,
+    kFaultReaction,
+    kFault
+  };
+  void apply_controlword(std::uint16_t cw);
+  void publish();
+
+  S s_ = S::kNotReady;
+  std::uint16_t last_cw_ = 0;
+  std::uint16_t statusword_ = 0;
+  std::int32_t position_ = 0;
+  bool ignore_cw_ = false;
+  bool set_point_ack_ = false;
+  bool homing_attained_ = false;
+  std::int32_t pp_target_ = 0;
+  bool pp_moving_ = false;
+  std::int64_t max_jump_on_enable_ = 0;
+  std::uint32_t enable_count_ = 0;
+  bool enable_sync_pending_ = false;
+  int fault_reaction_syncs_ = 0;
+  double sync_period_s_ = 0.004;
+};
+
+}  // namespace cdpr::canopen::slave

@@ -1,0 +1,522 @@
+#include "cdpr/canopen/master.hpp"
+
+#include <cmath>
+#include <string>
+
+namespace cdpr::canopen {
+
+Master::Master(can::CanBus& bus, MasterConfig config, MasterHooks hooks)
+    : bus_(bus), config_(std::move(config)), hooks_(std::move(hooks)) {
+  node_index_.fill(-1);
+  sync_ = SyncProducer(config_.sync_period, config_.sync_counter_overflow);
+  heartbeat_ = HeartbeatProducer(config_.heartbeat_cob_id(), config_.master_heartbeat_period);
+  bus_sup_ = BusSupervisor(BusRecoveryPolicy{config_.bus_off_recovery});
+}
+
+Result<std::unique_ptr<Master>> Master::create(can::CanBus& bus, MasterConfig config,
+                                               MasterHooks hooks) {
+  Status s = validate(config);
+  if (!s.ok()) return s;
+  if (!hooks.now)
+    return Status(ErrorCode::kInvalidArgument, "CANopen master: hooks.now is not set");
+  std::unique_ptr<Master> m(new Master(bus, std::move(config), std::move(hooks)));
+  const SdoTiming timing{m->config_.sdo_timeout, m->config_.sdo_retries};
+  std::size_t n_drives = 0;
+  for (const auto& nc : m->config_.nodes) n_drives += nc.kind == NodeKind::kCia402Drive ? 1 : 0;
+  m->drives_.reserve(n_drives);
+  for (const auto& nc : m->config_.nodes) {
+    auto rt = std::make_unique<NodeRt>();
+    rt->config = nc;
+    rt->sdo = std::make_unique<SdoClient>(bus, nc.id, timing);
+    for (const auto& p : nc.rpdos) {
+      if (p.entries.empty()) continue;
+      auto l = PdoLayout::compile(p, nc.id, rt->image);
+      if (!l.ok()) return l.status();
+      rt->rpdos.push_back(*l);
+    }
+    for (const auto& p : nc.tpdos) {
+      if (p.entries.empty()) continue;
+      auto l = PdoLayout::compile(p, nc.id, rt->image);
+      if (!l.ok()) return l.status();
+      TpdoRef& ref = m->tpdo_table_[l->cob_id() & 0x7FF];
+      ref.node = static_cast<std::int16_t>(m->nodes_.size());
+      ref.pdo = static_cast<std::int16_t>(rt->tpdos.size());
+      rt->tpdos.push_back(*l);
+    }
+    if (nc.kind == NodeKind::kCia402Drive) {
+      auto d = Drive::bind(nc, rt->image);
+      if (!d.ok()) return d.status();
+      rt->drive = static_cast<int>(m->drives_.size());
+      m->drives_.push_back(*d);
+    } else if (nc.kind == NodeKind::kForceSensor) {
+      auto f = ForceSensor::bind(nc, rt->image);
+      if (!f.ok()) return f.status();
+      rt->force = static_cast<int>(m->forces_.size());
+      m->forces_.push_back(std::move(*f));
+    }
+    m->node_index_[nc.id] = static_cast<int>(m->nodes_.size());
+    m->nodes_.push_back(std::move(rt));
+  }
+  return m;
+}
+
+Drive* Master::drive(NodeId id) {
+  NodeRt* n = node(id);
+  return n && n->drive >= 0 ? &drives_[static_cast<std::size_t>(n->drive)] : nullptr;
+}
+ForceSensor* Master::force_sensor(NodeId id) {
+  NodeRt* n = node(id);
+  return n && n->force >= 0 ? &forces_[static_cast<std::size_t>(n->force)] : nullptr;
+}
+SdoClient* Master::sdo(NodeId id) {
+  NodeRt* n = node(id);
+  return n ? n->sdo.get() : nullptr;
+}
+ProcessImage* Master::image(NodeId id) {
+  NodeRt* n = node(id);
+  return n ? &n->image : nullptr;
+}
+
+void Master::send(const can::Frame& f, Timestamp now) {
+  if (!bus_.send(f).ok()) {
+    ++stats_.tx_failures;
+    Event e;
+    e.type = EventType::kTxFailed;
+    e.value = f.id;
+    e.time = now;
+    events_.push(e);
+  }
+}
+
+void Master::dispatch(const can::Frame& f, Timestamp now) {
+  if (f.error) {
+    bus_sup_.on_error_frame(f, now, events_);
+    return;
+  }
+  if (f.extended || f.rtr || f.id > 0x7FF) {
+    ++stats_.unknown_frames;
+    return;
+  }
+  const std::uint32_t id = f.id;
+  if (id > cob::kHeartbeat && id <= cob::kHeartbeat + kMaxNodeId) {
+    const auto nid = static_cast<NodeId>(id - cob::kHeartbeat);
+    const bool booted = f.dlc == 1 && f.data[0] == 0;
+    monitor_.on_frame(f, now, events_);
+    // A configured node that reboots while we run has lost its configuration.
+    if (booted && running_ && node(nid) != nullptr && config_.quick_stop_on_fault) faulted_ = true;
+    return;
+  }
+  if (id > cob::kEmcy && id <= cob::kEmcy + kMaxNodeId) {
+    Event e;
+    if (decode_emcy(f, e.emcy)) {
+      e.type = EventType::kEmcy;
+      e.node = e.emcy.node;
+      e.value = e.emcy.code;
+      e.time = now;
+      events_.push(e);
+      ++stats_.emcys;
+    }
+    return;
+  }
+  if (id > cob::kSdoTx && id <= cob::kSdoTx + kMaxNodeId) {
+    if (NodeRt* n = node(static_cast<NodeId>(id - cob::kSdoTx))) n->sdo->on_frame(f, now);
+    return;
+  }
+  const TpdoRef ref = tpdo_table_[id];
+  if (ref.node >= 0) {
+    NodeRt& n = *nodes_[static_cast<std::size_t>(ref.node)];
+    if (n.tpdos[static_cast<std::size_t>(ref.pdo)].decode(f, n.image)) {
+      ++stats_.tpdos_received;
+      if (n.drive >= 0) drives_[static_cast<std::size_t>(n.drive)].on_pdo();
+    } else {
+      ++stats_.short_pdos;
+    }
+    return;
+  }
+  ++stats_.unknown_frames;
+}
+
+void Master::background(Timestamp now) {
+  can::Frame f;
+  if (heartbeat_.poll(now, own_state_, f)) send(f, now);
+  monitor_.check(now, events_);
+  for (auto& n : nodes_) {
+    if (n->sdo->busy()) n->sdo->poll(now);
+  }
+}
+
+void Master::cycle(Timestamp now) {
+  ++stats_.cycles;
+  can::Frame f;
+  // Bounded drain: a babbling node must not starve the cycle.
+  for (int i = 0; i < 1024 && bus_.receive(f, std::chrono::nanoseconds(0)).ok(); ++i) {
+    dispatch(f, now);
+  }
+  bus_sup_.on_stats(bus_.stats(), now, events_);
+  monitor_.check(now, events_);
+  for (auto& n : nodes_) {
+    if (n->sdo->busy()) n->sdo->poll(now);
+    if (config_.quick_stop_on_fault && running_ && n->config.heartbeat_timeout.count() > 0 &&
+        monitor_.state(n->config.id) == NmtState::kLost) {
+      faulted_ = true;
+    }
+  }
+  for (Drive& d : drives_) {
+    d.update(now);
+    const auto& sup = d.supervisor();
+    if (sup.became_faulted() || sup.became_stuck()) {
+      Event e;
+      e.type = sup.became_faulted() ? EventType::kDriveFault : EventType::kDriveStuck;
+      e.node = d.node();
+      e.value = d.statusword();
+      e.time = now;
+      events_.push(e);
+      if (sup.became_faulted() && config_.quick_stop_on_fault) faulted_ = true;
+    }
+  }
+  if (faulted_) {
+    for (Drive& d : drives_) d.quick_stop();
+  }
+  if (!bus_sup_.may_transmit(now, events_)) return;
+  for (auto& n : nodes_) {
+    for (const PdoLayout& l : n->rpdos) {
+      l.encode(n->image, f);
+      send(f, now);
+      ++stats_.rpdos_sent;
+    }
+  }
+  const std::uint64_t overruns = sync_.overruns();
+  if (sync_.poll(now, f)) send(f, now);
+  if (sync_.overruns() != overruns) {
+    Event e;
+    e.type = EventType::kSyncOverrun;
+    e.value = static_cast<std::uint32_t>(sync_.overruns() - overruns);
+    e.time = now;
+    events_.push(e);
+  }
+  if (heartbeat_.poll(now, own_state_, f)) send(f, now);
+}
+
+void Master::pump_step() {
+  const Timestamp now = hooks_.now();
+  if (running_ && now >= next_cycle_) {
+    cycle(now);
+    next_cycle_ += config_.sync_period;
+    if (next_cycle_ <= now) next_cycle_ = now + config_.sync_period;
+    return;
+  }
+  can::Frame f;
+  auto wait = hooks_.receive_timeout;
+  if (running_ && next_cycle_ - now < wait) wait = next_cycle_ - now;
+  if (bus_.receive(f, wait).ok()) {
+    dispatch(f, hooks_.now());
+  } else if (hooks_.idle) {
+    hooks_.idle();
+  }
+  if (!running_) background(hooks_.now());
+}
+
+Status Master::wait_for(const std::function<bool()>& done, std::chrono::nanoseconds timeout,
+                        const char* what) {
+  const Timestamp start = hooks_.now();
+  while (!done()) {
+    if (hooks_.now() - start >= timeout) {
+      return Status::Error(ErrorCode::kTimeout, "%s: not done after %.0f ms", what, to_ms(timeout));
+    }
+    pump_step();
+  }
+  return Status::Ok();
+}
+
+Status Master::nmt(NmtCommand cmd, NodeId node_id) {
+  const Timestamp now = hooks_.now();
+  Status s = bus_.send(nmt_frame(cmd, node_id));
+  if (!s.ok()) {
+    return Status::Error(ErrorCode::kIoError, "NMT %s to node %u: %.*s", to_string(cmd).data(),
+                         unsigned{node_id}, static_cast<int>(s.message().size()),
+                         s.message().data());
+  }
+  (void)now;
+  return Status::Ok();
+}
+
+Status Master::boot() {
+  running_ = false;
+  own_state_ = NmtState::kPreOperational;
+  // Take in what is already queued (old boot-ups) so that only fresh boot-ups count below.
+  can::Frame stale;
+  while (bus_.receive(stale, std::chrono::nanoseconds(0)).ok()) dispatch(stale, hooks_.now());
+  std::vector<std::uint32_t> boots(nodes_.size());
+  for (std::size_t i = 0; i < nodes_.size(); ++i) {
+    boots[i] = monitor_.node(nodes_[i]->config.id).boot_count;
+  }
+  auto missing = [&](auto&& ok_fn) {
+    std::string ids;
+    for (std::size_t i = 0; i < nodes_.size(); ++i) {
+      if (ok_fn(i)) continue;
+      if (!ids.empty()) ids += ", ";
+      ids += std::to_string(nodes_[i]->config.id) + " (" + nodes_[i]->config.name + ")";
+    }
+    return ids;
+  };
+
+  if (config_.reset_communication) {
+    Status s = nmt(NmtCommand::kResetCommunication, 0);
+    if (!s.ok()) return s;
+    auto booted = [&](std::size_t i) {
+      return monitor_.node(nodes_[i]->config.id).boot_count > boots[i];
+    };
+    s = wait_for([&] { return missing(booted).empty(); }, config_.boot_timeout, "boot-up");
+    if (!s.ok()) {
+      return Status::Error(ErrorCode::kTimeout,
+                           "node %s: no boot-up within %.0f ms after NMT reset communication",
+                           missing(booted).c_str(), to_ms(config_.boot_timeout));
+    }
+  }
+  for (auto& n : nodes_) {
+    Status s = configure_node(n->config.id);
+    if (!s.ok()) return s;
+  }
+  for (auto& n : nodes_) {
+    Status s = nmt(NmtCommand::kStart, n->config.id);
+    if (!s.ok()) return s;
+  }
+  auto operational = [&](std::size_t i) {
+    const NodeConfig& c = nodes_[i]->config;
+    return c.heartbeat_period.count() == 0 || monitor_.state(c.id) == NmtState::kOperational;
+  };
+  Status s =
+      wait_for([&] { return missing(operational).empty(); }, config_.boot_timeout, "NMT start");
+  if (!s.ok()) {
+    return Status::Error(ErrorCode::kTimeout,
+                         "node %s: not OPERATIONAL within %.0f ms after NMT start",
+                         missing(operational).c_str(), to_ms(config_.boot_timeout));
+  }
+  for (auto& n : nodes_) {
+    if (n->config.heartbeat_timeout.count() > 0) {
+      monitor_.consume(n->config.id, n->config.heartbeat_timeout);
+    }
+  }
+  own_state_ = NmtState::kOperational;
+  const Timestamp now = hooks_.now();
+  sync_.start(now);
+  next_cycle_ = now;
+  running_ = true;
+  return Status::Ok();
+}
+
+Status Master::configure_node(NodeId id) {
+  NodeRt* n = node(id);
+  if (n == nullptr) {
+    return Status::Error(ErrorCode::kNotFound, "node %u: not in the configuration", unsigned{id});
+  }
+  const NodeConfig& c = n->config;
+  SdoClient& sdo = *n->sdo;
+  Status s;
+  if (c.heartbeat_period.count() > 0) {
+    s = sdo.write<std::uint16_t>(
+        {0x1017, 0}, static_cast<std::uint16_t>(std::lround(to_ms(c.heartbeat_period))), pump_);
+    if (!s.ok()) return s;
+  }
+  if (c.master_heartbeat_timeout.count() > 0) {
+    const auto ms = static_cast<std::uint32_t>(std::lround(to_ms(c.master_heartbeat_timeout)));
+    s = sdo.write<std::uint32_t>({0x1016, 1}, (std::uint32_t{config_.master_id} << 16) | ms, pump_);
+    if (!s.ok()) return s;
+  }
+  if (c.kind == NodeKind::kCia402Drive) {
+    s = sdo.write<std::int16_t>(cia402::obj::kAbortConnectionOption,
+                                c.drive.abort_connection_option, pump_);
+    if (!s.ok()) return s;
+    if (c.drive.quick_stop_option) {
+      s = sdo.write<std::int16_t>(cia402::obj::kQuickStopOption, *c.drive.quick_stop_option, pump_);
+      if (!s.ok()) return s;
+    }
+  }
+  for (const auto* list : {&c.rpdos, &c.tpdos}) {
+    for (const PdoConfig& p : *list) {
+      s = configure_pdo(sdo, pump_, p);
+      if (!s.ok()) return s;
+    }
+  }
+  if (c.kind == NodeKind::kCia402Drive) {
+    if (c.drive.profile_velocity != 0) {
+      s = sdo.write<std::uint32_t>(cia402::obj::kProfileVelocity, c.drive.profile_velocity, pump_);
+      if (!s.ok()) return s;
+    }
+    if (c.drive.profile_acceleration != 0) {
+      s = sdo.write<std::uint32_t>(cia402::obj::kProfileAcceleration, c.drive.profile_acceleration,
+                                   pump_);
+      if (!s.ok()) return s;
+      s = sdo.write<std::uint32_t>(cia402::obj::kProfileDeceleration, c.drive.profile_acceleration,
+                                   pump_);
+      if (!s.ok()) return s;
+    }
+    if (c.drive.mode == Mode::kHoming) {
+      s = sdo.write<std::int8_t>(cia402::obj::kHomingMethod, c.drive.homing_method, pump_);
+      if (!s.ok()) return s;
+    }
+  }
+  for (const SdoWrite& w : c.sdo_writes) {
+    std::uint8_t b[4];
+    put_le(b, static_cast<std::uint32_t>(w.value), size_of(w.type));
+    s = sdo.download(w.object, std::span<const std::uint8_t>(b, size_of(w.type)), pump_);
+    if (!s.ok()) return s;
+  }
+  if (c.kind == NodeKind::kCia402Drive && c.drive.mode != Mode::kNone) {
+    s = set_mode(id, c.drive.mode);
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+Status Master::set_mode(NodeId id, Mode mode) {
+  NodeRt* n = node(id);
+  if (n == nullptr || n->drive < 0) {
+    return Status::Error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
+                         unsigned{id});
+  }
+  SdoClient& sdo = *n->sdo;
+  Status s;
+  if (mode == Mode::kCyclicSyncPosition) {
+    // 0x60C2 interpolation time period = value * 10^index s, equal to the SYNC period.
+    const double ms = to_ms(config_.sync_period);
+    std::int8_t exponent = -3;
+    double value = ms;
+    while (std::abs(value - std::round(value)) > 1e-9 && exponent > -6) {
+      value *= 10;
+      --exponent;
+    }
+    if (value > 255) {
+      return Status::Error(ErrorCode::kOutOfRange,
+                           "node %u: SYNC period %.4f ms does not fit 0x60C2 (u8 value)",
+                           unsigned{id}, ms);
+    }
+    s = sdo.write<std::uint8_t>(cia402::obj::kInterpolationPeriodValue,
+                                static_cast<std::uint8_t>(std::lround(value)), pump_);
+    if (!s.ok()) return s;
+    s = sdo.write<std::int8_t>(cia402::obj::kInterpolationPeriodIndex, exponent, pump_);
+    if (!s.ok()) return s;
+  }
+  s = sdo.write<std::int8_t>(cia402::obj::kModesOfOperation, static_cast<std::int8_t>(mode), pump_);
+  if (!s.ok()) return s;
+  const Timestamp start = hooks_.now();
+  const auto timeout = n->config.drive.mode_switch_timeout;
+  std::int8_t shown = 0;
+  for (;;) {
+    auto r = sdo.read<std::int8_t>(cia402::obj::kModesDisplay, pump_);
+    if (!r.ok()) return r.status();
+    shown = *r;
+    if (shown == static_cast<std::int8_t>(mode)) break;
+    if (hooks_.now() - start >= timeout) {
+      return Status::Error(ErrorCode::kTimeout,
+                           "node %u: 0x6061 shows mode %d %.0f ms after writing 0x6060 = %d (%s)",
+                           unsigned{id}, int{shown}, to_ms(timeout), static_cast<int>(mode),
+                           to_string(mode).data());
+    }
+    const Timestamp until = hooks_.now() + std::chrono::milliseconds(10);
+    (void)wait_for([&] { return hooks_.now() >= until; }, std::chrono::seconds(1), "mode poll");
+  }
+  drives_[static_cast<std::size_t>(n->drive)].set_mode(mode);
+  return Status::Ok();
+}
+
+void Master::quick_stop_all() {
+  for (Drive& d : drives_) d.quick_stop();
+}
+
+Status Master::enable_all(std::chrono::nanoseconds timeout) {
+  if (!running_) return Status(ErrorCode::kFailedPrecondition, "enable: the master is not running");
+  for (Drive& d : drives_) d.enable();
+  Status err;
+  auto done = [&] {
+    bool all = true;
+    for (const Drive& d : drives_) {
+      const auto& sup = d.supervisor();
+      if (sup.stuck() || (sup.in_fault() && d.received() && !sup.fault_reset_pending())) {
+        err = d.supervisor().error();
+        if (err.ok())
+          err =
+              Status::Error(ErrorCode::kUnavailable, "node %u: drive in fault", unsigned{d.node()});
+        return true;
+      }
+      all = all && d.enabled();
+    }
+    return all;
+  };
+  Status s = wait_for(done, timeout, "enable");
+  if (!err.ok()) return err;
+  if (!s.ok()) {
+    for (const Drive& d : drives_) {
+      if (!d.enabled()) {
+        return Status::Error(
+            ErrorCode::kTimeout, "node %u: not OPERATION_ENABLED after %.0f ms (in %s)",
+            unsigned{d.node()}, to_ms(timeout), cia402::to_string(d.state()).data());
+      }
+    }
+  }
+  return s;
+}
+
+Status Master::shutdown(std::chrono::nanoseconds timeout) {
+  Status first;
+  if (running_) {
+    quick_stop_all();
+    Status s = wait_for(
+        [&] {
+          for (const Drive& d : drives_) {
+            if (d.received() && !d.supervisor().reached() && !d.supervisor().in_fault()) {
+              return false;
+            }
+          }
+          return true;
+        },
+        timeout, "quick stop of the drives");
+    if (!s.ok()) first = s;
+    for (Drive& d : drives_) d.disable();
+    s = wait_for(
+        [&] {
+          for (const Drive& d : drives_) {
+            if (d.received() && !d.supervisor().reached() && !d.supervisor().in_fault()) {
+              return false;
+            }
+          }
+          return true;
+        },
+        timeout, "disable voltage of the drives");
+    if (!s.ok() && first.ok()) first = s;
+  }
+  running_ = false;
+  sync_.stop();
+  own_state_ = NmtState::kPreOperational;
+  Status s = nmt(NmtCommand::kEnterPreOperational, 0);
+  if (!s.ok() && first.ok()) first = s;
+  return first;
+}
+
+BusLoad Master::bus_load() const {
+  std::vector<PeriodicFrame> frames;
+  const double cycle_ms = to_ms(config_.sync_period);
+  frames.push_back({static_cast<std::uint8_t>(config_.sync_counter_overflow >= 2 ? 1 : 0), 1.0});
+  auto per_cycle = [&](const PdoConfig& p) {
+    if (p.transmission_type >= 1 && p.transmission_type <= 240) return 1.0 / p.transmission_type;
+    if (p.transmission_type >= 254 && p.event_timer_ms > 0) return cycle_ms / p.event_timer_ms;
+    return 1.0;  // acyclic or event driven without timer: assume once per cycle (worst case)
+  };
+  for (const auto& n : nodes_) {
+    for (const auto* list : {&n->config.rpdos, &n->config.tpdos}) {
+      for (const auto& p : *list) {
+        if (p.entries.empty()) continue;
+        frames.push_back({static_cast<std::uint8_t>(p.byte_size()), per_cycle(p)});
+      }
+    }
+    if (n->config.heartbeat_period.count() > 0) {
+      frames.push_back({1, cycle_ms / to_ms(n->config.heartbeat_period)});
+    }
+  }
+  if (config_.master_heartbeat_period.count() > 0) {
+    frames.push_back({1, cycle_ms / to_ms(config_.master_heartbeat_period)});
+  }
+  return compute_bus_load(frames, config_.sync_period, config_.bitrate, config_.bus_load_warning);
+}
+
+}  // namespace cdpr::canopen
