@@ -133,6 +133,7 @@ Status VirtualCanEndpoint::send(const Frame& frame) {
     f.id = 0;
     f.extended = false;
     f.rtr = false;
+    f.dlc = 8;  // an error frame always carries 8 bytes (CAN_ERR_DLC)
   } else {
     f.error_class = 0;
   }
