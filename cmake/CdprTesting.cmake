@@ -30,6 +30,8 @@ function(cdpr_add_vcan_test)
     set(T_TIMEOUT 300)
   endif()
   add_test(NAME ${T_NAME} COMMAND ${CDPR_VCAN_RUN} -- ${T_COMMAND})
+  # One user-mode-linux kernel at a time: two at once on a 2-core machine make both late.
   set_tests_properties(${T_NAME} PROPERTIES LABELS "vcan;${T_LABELS}" TIMEOUT ${T_TIMEOUT}
+                                            RESOURCE_LOCK cdpr_kernel_can
                                             WORKING_DIRECTORY ${CMAKE_BINARY_DIR})
 endfunction()
