@@ -1,0 +1,188 @@
+// Calibration recordings and pre-calibration experiments as CSV files (docs/recording-format.md).
+//
+// Three file kinds share one syntax: `# key: value` metadata lines, then a header row, then one
+// row of comma-separated numbers per sample. Every reader checks every row and names the file,
+// line and column of the first bad cell; every writer writes the shortest decimal that reads back
+// to the same double (std::to_chars), so write -> read is exact.
+//
+// - Recording: one row per measured pose (commanded pose, cable lengths, tensions, laser
+//   distances, optional reference pose and temperature). Empty cells are "not measured" (NaN).
+// - CableExperiment: (length_m, tension_n, elongation_m) samples for the elongation surface fit.
+// - ForceSensorExperiment: (channel, mass_kg, raw) samples for the force-sensor gain/offset fit.
+//
+// SI units everywhere (m, rad, N, s, kg; temperature in degrees Celsius). A file must state
+// `# units: SI`; readers refuse any other statement or none, so a file written in mm is caught.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr::recording {
+
+inline constexpr std::string_view kUnitsSI = "SI";
+
+// Ordered `# key: value` lines. Keys are unique; writers keep the order they were added in.
+class Metadata {
+ public:
+  // Sets (or replaces) a value.
+  void set(std::string key, std::string value);
+  // Sets a number, written so it reads back exactly.
+  void set_number(std::string key, double value);
+  bool has(std::string_view key) const;
+  // The value, or "" when absent.
+  std::string get(std::string_view key) const;
+  // The value as a number; an error names the key when it is absent or not a number.
+  Result<double> number(std::string_view key) const;
+  const std::vector<std::pair<std::string, std::string>>& entries() const { return entries_; }
+  bool operator==(const Metadata&) const = default;
+
+ private:
+  std::vector<std::pair<std::string, std::string>> entries_;
+};
+
+// Well-known metadata keys (writers set those they know; readers only require `units`).
+namespace key {
+inline constexpr const char* kFormat = "format";               // "cdpr-recording 1", ...
+inline constexpr const char* kUnits = "units";                 // must be "SI"
+inline constexpr const char* kRobot = "robot";                 // RobotModel::name
+inline constexpr const char* kDate = "date";                   // ISO 8601, UTC
+inline constexpr const char* kConfigFile = "config_file";      // path of the robot config
+inline constexpr const char* kConfigHash = "config_hash";      // "fnv1a64:<16 hex digits>"
+inline constexpr const char* kNoiseLength = "noise_length_m";  // std dev of length_i, m
+inline constexpr const char* kNoiseForce = "noise_force_n";    // std dev of tension_i, N
+inline constexpr const char* kNoiseLaser = "noise_laser_m";    // std dev of laser_j, m
+inline constexpr const char* kNoiseRefPosition = "noise_reference_position_m";  // m
+inline constexpr const char* kNoiseRefAngle = "noise_reference_angle_rad";      // rad
+inline constexpr const char* kSeed = "seed";      // simulator seed, if simulated
+inline constexpr const char* kSource = "source";  // "simulated", "robot", "hand-made"
+}  // namespace key
+
+// One measured pose. Vectors hold NaN where a cell was empty (not measured).
+struct RecordedPose {
+  std::int64_t index = 0;    // the `pose` column; strictly increasing through a file
+  double time_s = 0.0;       // s since the start of the recording
+  Pose commanded;            // cmd_x..cmd_z (m), cmd_roll..cmd_yaw (rad)
+  Eigen::VectorXd lengths;   // m entries, m
+  Eigen::VectorXd tensions;  // m entries, N
+  Eigen::VectorXd lasers;    // k entries, m
+  Pose reference;            // ref_*; NaN when not measured (or when the file has no ref_ columns)
+  double temperature_c = std::numeric_limits<double>::quiet_NaN();  // degrees Celsius
+};
+
+struct Recording {
+  Metadata metadata;
+  int num_cables = 0;            // m >= 1
+  int num_lasers = 0;            // k >= 1
+  bool has_reference = false;    // the file has the six ref_* columns
+  bool has_temperature = false;  // the file has the temperature_c column
+  std::vector<RecordedPose> poses;
+};
+
+// Reads and checks a recording. Errors: kNotFound/kIoError (file), kParseError (syntax; the
+// message is "<file>:<line>: column <c> (<name>): <reason>" or "<file>:<line>: <reason>").
+Result<Recording> read_recording(const std::string& path);
+// Same, from text in memory; `name` stands for the file in messages.
+Result<Recording> parse_recording(std::string_view text, std::string_view name);
+// Writes the canonical form (columns in the documented order). Refuses inconsistent sizes,
+// non-increasing pose indices and infinite values.
+Status write_recording(const Recording& recording, const std::string& path);
+Result<std::string> format_recording(const Recording& recording);
+
+// Checks a recording against the robot model it will be used with: cable count m and laser
+// count k. kFailedPrecondition with a message naming both counts on mismatch. (A different robot
+// name is not an error: a nominal and a measured config of one robot may carry different names.)
+Status check_against_model(const Recording& recording, const RobotModel& model);
+
+// ---------------------------------------------------------------------------------------------
+// Recording <-> MeasurementSet (calibration/measurement.hpp)
+// ---------------------------------------------------------------------------------------------
+
+// The identification's view of a recording. Noise sigmas come from the metadata keys
+// noise_length_m, noise_force_n, noise_laser_m, noise_reference_position_m and
+// noise_reference_angle_rad when present (a value that is not a positive
+// number is refused), else from `defaults`. A reference pose is taken when all six ref_* cells of
+// a row are filled; a row with only some of them filled is refused (it names the pose). Tensions
+// that are all empty in every row give empty tension vectors (no force sensors).
+Result<MeasurementSet> to_measurement_set(const Recording& recording,
+                                          const SensorNoise& defaults = {});
+
+// The recording of a measurement set (poses numbered 0, 1, ...; the noise sigmas go to the
+// metadata next to `metadata`'s entries). Refuses sets whose poses disagree on sizes, or with no
+// laser.
+Result<Recording> from_measurement_set(const MeasurementSet& set, Metadata metadata = {});
+
+// ---------------------------------------------------------------------------------------------
+// Pre-calibration experiments
+// ---------------------------------------------------------------------------------------------
+
+// One bench sample, as cdpr::ElongationSample (elongation.hpp): the cable loaded to tension_n
+// has loaded length length_m (drum to platform anchor) and stretched by elongation_m.
+struct CableSample {
+  double length_m = 0.0;      // loaded length L, m
+  double tension_n = 0.0;     // N
+  double elongation_m = 0.0;  // measured elongation, m
+};
+
+struct CableExperiment {
+  Metadata metadata;
+  std::vector<CableSample> samples;
+};
+
+Result<CableExperiment> read_cable_experiment(const std::string& path);
+Result<CableExperiment> parse_cable_experiment(std::string_view text, std::string_view name);
+Status write_cable_experiment(const CableExperiment& experiment, const std::string& path);
+Result<std::string> format_cable_experiment(const CableExperiment& experiment);
+
+struct ForceSample {
+  int channel = 1;       // cable / sensor number, 1..m
+  double mass_kg = 0.0;  // the known hanging mass, kg (tension = mass * g)
+  double raw = 0.0;      // sensor reading, raw units (raw = gain * tension + offset)
+};
+
+struct ForceSensorExperiment {
+  Metadata metadata;  // may carry `gravity_m_s2` (default 9.81)
+  std::vector<ForceSample> samples;
+};
+
+Result<ForceSensorExperiment> read_force_experiment(const std::string& path);
+Result<ForceSensorExperiment> parse_force_experiment(std::string_view text, std::string_view name);
+Status write_force_experiment(const ForceSensorExperiment& experiment, const std::string& path);
+Result<std::string> format_force_experiment(const ForceSensorExperiment& experiment);
+
+// ---------------------------------------------------------------------------------------------
+// Pose lists (`cdpr-fit design-poses` writes them, `cdpr-fit simulate --poses` reads them)
+// ---------------------------------------------------------------------------------------------
+
+// Columns pose, x, y, z (m), roll, pitch, yaw (rad); pose indices strictly increasing.
+struct PoseList {
+  Metadata metadata;
+  std::vector<Pose> poses;
+};
+
+Result<PoseList> read_pose_list(const std::string& path);
+Result<PoseList> parse_pose_list(std::string_view text, std::string_view name);
+Status write_pose_list(const PoseList& list, const std::string& path);
+Result<std::string> format_pose_list(const PoseList& list);
+
+// ---------------------------------------------------------------------------------------------
+// Helpers
+// ---------------------------------------------------------------------------------------------
+
+// 64-bit FNV-1a of a byte string, and "fnv1a64:<16 lower-case hex digits>" of a file's bytes.
+std::uint64_t fnv1a64(std::string_view bytes);
+Result<std::string> file_hash(const std::string& path);
+// Shortest decimal that reads back to exactly `value` (std::to_chars); "" for NaN.
+std::string format_number(double value);
+// UTC now as "YYYY-MM-DDTHH:MM:SSZ".
+std::string utc_timestamp();
+
+}  // namespace cdpr::recording

@@ -1,0 +1,128 @@
+// Recording <-> MeasurementSet.
+#include <cmath>
+
+#include "cdpr/recording/recording.hpp"
+
+namespace cdpr::recording {
+
+namespace {
+
+Status sigma_from(const Metadata& md, const char* k, double* sigma) {
+  if (!md.has(k)) return Status::Ok();
+  auto v = md.number(k);
+  if (!v.ok()) return v.status();
+  if (!(*v > 0.0)) {
+    return Status::Error(ErrorCode::kInvalidArgument, "metadata '%s': %s is not a positive sigma",
+                         k, md.get(k).c_str());
+  }
+  *sigma = *v;
+  return Status::Ok();
+}
+
+}  // namespace
+
+Result<MeasurementSet> to_measurement_set(const Recording& rec, const SensorNoise& defaults) {
+  MeasurementSet set;
+  set.noise = defaults;
+  const Metadata& md = rec.metadata;
+  if (Status s = sigma_from(md, key::kNoiseLength, &set.noise.sigma_length); !s.ok()) return s;
+  if (Status s = sigma_from(md, key::kNoiseForce, &set.noise.sigma_force); !s.ok()) return s;
+  if (Status s = sigma_from(md, key::kNoiseLaser, &set.noise.sigma_laser); !s.ok()) return s;
+  if (Status s = sigma_from(md, key::kNoiseRefPosition, &set.noise.sigma_reference_position);
+      !s.ok()) {
+    return s;
+  }
+  if (Status s = sigma_from(md, key::kNoiseRefAngle, &set.noise.sigma_reference_angle); !s.ok()) {
+    return s;
+  }
+  bool any_tension = false;
+  for (const RecordedPose& p : rec.poses) {
+    if (p.tensions.size() > 0 && !p.tensions.array().isNaN().all()) any_tension = true;
+  }
+  set.poses.reserve(rec.poses.size());
+  for (const RecordedPose& p : rec.poses) {
+    if (p.lengths.size() != rec.num_cables || p.tensions.size() != rec.num_cables ||
+        p.lasers.size() != rec.num_lasers) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "pose %lld: vector sizes do not match the recording's %d cables and %d "
+                           "lasers",
+                           static_cast<long long>(p.index), rec.num_cables, rec.num_lasers);
+    }
+    PoseMeasurement m;
+    m.commanded = p.commanded;
+    m.cable_lengths = p.lengths;
+    if (any_tension) m.tensions = p.tensions;
+    m.laser_distances = p.lasers;
+    m.time = p.time_s;
+    m.temperature = p.temperature_c;
+    if (rec.has_reference) {
+      const auto ref = p.reference.vector();
+      const int filled = static_cast<int>(ref.array().isFinite().count());
+      if (filled == 6) {
+        m.reference = p.reference;
+      } else if (filled != 0) {
+        return Status::Error(ErrorCode::kInvalidArgument,
+                             "pose %lld: reference pose has %d of its 6 ref_ cells filled (all "
+                             "or none)",
+                             static_cast<long long>(p.index), filled);
+      }
+    }
+    set.poses.push_back(std::move(m));
+  }
+  return set;
+}
+
+Result<Recording> from_measurement_set(const MeasurementSet& set, Metadata metadata) {
+  if (set.poses.empty()) return Status(ErrorCode::kInvalidArgument, "measurement set is empty");
+  Recording rec;
+  const PoseMeasurement& first = set.poses.front();
+  rec.num_cables = static_cast<int>(first.cable_lengths.size());
+  rec.num_lasers = static_cast<int>(first.laser_distances.size());
+  if (rec.num_lasers < 1) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "measurement set has no laser distances; a recording needs at least one laser");
+  }
+  rec.has_reference = false;
+  rec.has_temperature = false;
+  for (const PoseMeasurement& p : set.poses) {
+    if (p.reference) rec.has_reference = true;
+    if (std::isfinite(p.temperature)) rec.has_temperature = true;
+  }
+  metadata.set_number(key::kNoiseLength, set.noise.sigma_length);
+  metadata.set_number(key::kNoiseForce, set.noise.sigma_force);
+  metadata.set_number(key::kNoiseLaser, set.noise.sigma_laser);
+  if (rec.has_reference) {
+    metadata.set_number(key::kNoiseRefPosition, set.noise.sigma_reference_position);
+    metadata.set_number(key::kNoiseRefAngle, set.noise.sigma_reference_angle);
+  }
+  rec.metadata = std::move(metadata);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  for (std::size_t j = 0; j < set.poses.size(); ++j) {
+    const PoseMeasurement& p = set.poses[j];
+    if (p.cable_lengths.size() != rec.num_cables ||
+        (p.tensions.size() != 0 && p.tensions.size() != rec.num_cables) ||
+        p.laser_distances.size() != rec.num_lasers) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %zu has other vector sizes than pose 0", j);
+    }
+    RecordedPose r;
+    r.index = static_cast<std::int64_t>(j);
+    r.time_s = std::isfinite(p.time) ? p.time : static_cast<double>(j);
+    r.commanded = p.commanded;
+    r.lengths = p.cable_lengths;
+    r.tensions = p.tensions.size() == 0 ? Eigen::VectorXd::Constant(rec.num_cables, nan)
+                                        : Eigen::VectorXd(p.tensions);
+    r.lasers = p.laser_distances;
+    if (p.reference) {
+      r.reference = *p.reference;
+    } else {
+      r.reference.position.setConstant(nan);
+      r.reference.rpy.setConstant(nan);
+    }
+    r.temperature_c = p.temperature;
+    rec.poses.push_back(std::move(r));
+  }
+  return rec;
+}
+
+}  // namespace cdpr::recording

@@ -1,0 +1,547 @@
+#include "cdpr/recording/recording.hpp"
+
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <map>
+
+#include "csv.hpp"
+
+namespace cdpr::recording {
+
+namespace {
+
+using detail::CsvRow;
+using detail::CsvTable;
+
+constexpr std::array<const char*, 6> kCmd = {"cmd_x",    "cmd_y",     "cmd_z",
+                                             "cmd_roll", "cmd_pitch", "cmd_yaw"};
+constexpr std::array<const char*, 6> kRef = {"ref_x",    "ref_y",     "ref_z",
+                                             "ref_roll", "ref_pitch", "ref_yaw"};
+constexpr const char* kRecordingFormat = "cdpr-recording 1";
+constexpr const char* kCableFormat = "cdpr-cable-experiment 1";
+constexpr const char* kForceFormat = "cdpr-force-experiment 1";
+constexpr const char* kPoseListFormat = "cdpr-poses 1";
+
+// "length_12" -> 12 for prefix "length_"; 0 when the name is not of that form.
+int indexed(std::string_view column, std::string_view prefix) {
+  if (column.size() <= prefix.size() || column.substr(0, prefix.size()) != prefix) return 0;
+  const std::string_view digits = column.substr(prefix.size());
+  if (digits.front() == '0') return 0;
+  int v = 0;
+  const auto [ptr, ec] = std::from_chars(digits.data(), digits.data() + digits.size(), v);
+  if (ec != std::errc() || ptr != digits.data() + digits.size() || v <= 0) return 0;
+  return v;
+}
+
+Status check_format(const CsvTable& t, const char* expected) {
+  if (!t.metadata.has(key::kFormat)) return Status::Ok();
+  const std::string f = t.metadata.get(key::kFormat);
+  const std::string_view want(expected);
+  const std::string_view family = want.substr(0, want.find(' '));
+  if (f.compare(0, family.size(), family) != 0 ||
+      (f.size() > family.size() && f[family.size()] != ' ')) {
+    return Status::Error(ErrorCode::kParseError, "%s: format '%s' is not '%s'", t.name.c_str(),
+                         f.c_str(), expected);
+  }
+  if (f != want) {
+    return Status::Error(ErrorCode::kParseError,
+                         "%s: format '%s' is not supported (this build reads '%s')", t.name.c_str(),
+                         f.c_str(), expected);
+  }
+  return Status::Ok();
+}
+
+Status header_error(const CsvTable& t, const char* fmt, const char* what) {
+  char reason[160];
+  std::snprintf(reason, sizeof reason, fmt, what);
+  return Status::Error(ErrorCode::kParseError, "%s:%d: %s", t.name.c_str(), t.header_line, reason);
+}
+
+// Column layout of a recording, resolved from its header.
+struct Layout {
+  int pose = -1, time = -1;
+  std::array<int, 6> cmd{-1, -1, -1, -1, -1, -1};
+  std::array<int, 6> ref{-1, -1, -1, -1, -1, -1};
+  std::vector<int> lengths, tensions, lasers;
+  int temperature = -1;
+};
+
+Status resolve_layout(const CsvTable& t, Layout* layout) {
+  std::map<int, int> lengths, tensions, lasers;  // index -> column
+  for (std::size_t c = 0; c < t.header.size(); ++c) {
+    const std::string& h = t.header[c];
+    const int col = static_cast<int>(c);
+    bool known = true;
+    if (h == "pose") {
+      layout->pose = col;
+    } else if (h == "time_s") {
+      layout->time = col;
+    } else if (h == "temperature_c") {
+      layout->temperature = col;
+    } else if (int i = indexed(h, "length_"); i > 0) {
+      lengths[i] = col;
+    } else if (int j = indexed(h, "tension_"); j > 0) {
+      tensions[j] = col;
+    } else if (int k = indexed(h, "laser_"); k > 0) {
+      lasers[k] = col;
+    } else {
+      known = false;
+      for (std::size_t a = 0; a < 6; ++a) {
+        if (h == kCmd[a]) layout->cmd[a] = col, known = true;
+        if (h == kRef[a]) layout->ref[a] = col, known = true;
+      }
+    }
+    if (!known) {
+      return Status::Error(ErrorCode::kParseError, "%s:%d: column %zu (%s): unknown column",
+                           t.name.c_str(), t.header_line, c + 1, h.c_str());
+    }
+  }
+  if (layout->pose < 0) return header_error(t, "missing required column '%s'", "pose");
+  if (layout->time < 0) return header_error(t, "missing required column '%s'", "time_s");
+  for (std::size_t a = 0; a < 6; ++a) {
+    if (layout->cmd[a] < 0) return header_error(t, "missing required column '%s'", kCmd[a]);
+  }
+  auto contiguous = [&](const std::map<int, int>& cols, const char* prefix, std::vector<int>* out) {
+    const int n = cols.empty() ? 0 : cols.rbegin()->first;
+    for (int i = 1; i <= n; ++i) {
+      const auto it = cols.find(i);
+      if (it == cols.end()) {
+        char name[48];
+        std::snprintf(name, sizeof name, "%s%d", prefix, i);
+        return header_error(t, "missing required column '%s'", name);
+      }
+      out->push_back(it->second);
+    }
+    return Status::Ok();
+  };
+  if (Status s = contiguous(lengths, "length_", &layout->lengths); !s.ok()) return s;
+  if (Status s = contiguous(tensions, "tension_", &layout->tensions); !s.ok()) return s;
+  if (Status s = contiguous(lasers, "laser_", &layout->lasers); !s.ok()) return s;
+  if (layout->lengths.empty()) return header_error(t, "missing required column '%s'", "length_1");
+  if (layout->tensions.size() != layout->lengths.size()) {
+    return Status::Error(ErrorCode::kParseError,
+                         "%s:%d: %zu length_ columns but %zu tension_ columns (one of each per "
+                         "cable)",
+                         t.name.c_str(), t.header_line, layout->lengths.size(),
+                         layout->tensions.size());
+  }
+  if (layout->lasers.empty()) {
+    return header_error(t, "missing required column '%s' (at least one laser)", "laser_1");
+  }
+  int refs = 0;
+  for (const int c : layout->ref) refs += c >= 0 ? 1 : 0;
+  if (refs != 0 && refs != 6) {
+    for (std::size_t a = 0; a < 6; ++a) {
+      if (layout->ref[a] < 0) {
+        return header_error(t, "missing column '%s' (ref_ columns are all six or none)", kRef[a]);
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+Status check_size(const char* what, Eigen::Index got, int want, std::int64_t pose) {
+  if (got != want) {
+    return Status::Error(ErrorCode::kInvalidArgument, "pose %lld: %ld %s values, expected %d",
+                         static_cast<long long>(pose), static_cast<long>(got), what, want);
+  }
+  return Status::Ok();
+}
+
+Status append(std::string* out, double v, const char* what, std::int64_t pose) {
+  if (std::isinf(v)) {
+    return Status::Error(ErrorCode::kInvalidArgument, "pose %lld: %s is infinite",
+                         static_cast<long long>(pose), what);
+  }
+  *out += ',';
+  *out += format_number(v);
+  return Status::Ok();
+}
+
+// "writing <path>: <message>" (Status::prepend trips -Wformat-truncation in GCC 12).
+Status with_path(const Status& s, const std::string& path) {
+  const std::string_view m = s.message();
+  return Status::Error(s.code(), "writing %s: %.*s", path.c_str(), static_cast<int>(m.size()),
+                       m.data());
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// Recording
+// ---------------------------------------------------------------------------------------------
+
+Result<Recording> parse_recording(std::string_view text, std::string_view name) {
+  auto table = detail::parse_table(text, name);
+  if (!table.ok()) return table.status();
+  const CsvTable& t = *table;
+  if (Status s = check_format(t, kRecordingFormat); !s.ok()) return s;
+  Layout layout;
+  if (Status s = resolve_layout(t, &layout); !s.ok()) return s;
+
+  Recording rec;
+  rec.metadata = t.metadata;
+  rec.num_cables = static_cast<int>(layout.lengths.size());
+  rec.num_lasers = static_cast<int>(layout.lasers.size());
+  rec.has_reference = layout.ref[0] >= 0;
+  rec.has_temperature = layout.temperature >= 0;
+  rec.poses.reserve(t.rows.size());
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  int previous_line = 0;
+  for (const CsvRow& row : t.rows) {
+    RecordedPose p;
+    if (Status s = detail::parse_int(t, row, layout.pose, &p.index); !s.ok()) return s;
+    if (!rec.poses.empty() && p.index <= rec.poses.back().index) {
+      return detail::cell_error(t, row, layout.pose,
+                                "pose index %lld does not increase (line %d has %lld)",
+                                static_cast<long long>(p.index), previous_line,
+                                static_cast<long long>(rec.poses.back().index));
+    }
+    previous_line = row.line;
+    if (Status s = detail::parse_double(t, row, layout.time, false, &p.time_s); !s.ok()) return s;
+    for (int a = 0; a < 6; ++a) {
+      double v = 0.0;
+      if (Status s = detail::parse_double(t, row, layout.cmd[a], false, &v); !s.ok()) return s;
+      (a < 3 ? p.commanded.position : p.commanded.rpy)(a % 3) = v;
+    }
+    auto fill = [&](const std::vector<int>& cols, Eigen::VectorXd* out) {
+      out->resize(static_cast<Eigen::Index>(cols.size()));
+      for (std::size_t i = 0; i < cols.size(); ++i) {
+        if (Status s =
+                detail::parse_double(t, row, cols[i], true, &(*out)(static_cast<Eigen::Index>(i)));
+            !s.ok()) {
+          return s;
+        }
+      }
+      return Status::Ok();
+    };
+    if (Status s = fill(layout.lengths, &p.lengths); !s.ok()) return s;
+    if (Status s = fill(layout.tensions, &p.tensions); !s.ok()) return s;
+    if (Status s = fill(layout.lasers, &p.lasers); !s.ok()) return s;
+    p.reference.position.setConstant(nan);
+    p.reference.rpy.setConstant(nan);
+    if (rec.has_reference) {
+      for (int a = 0; a < 6; ++a) {
+        double v = 0.0;
+        if (Status s = detail::parse_double(t, row, layout.ref[a], true, &v); !s.ok()) return s;
+        (a < 3 ? p.reference.position : p.reference.rpy)(a % 3) = v;
+      }
+    }
+    if (rec.has_temperature) {
+      if (Status s = detail::parse_double(t, row, layout.temperature, true, &p.temperature_c);
+          !s.ok()) {
+        return s;
+      }
+    }
+    rec.poses.push_back(std::move(p));
+  }
+  return rec;
+}
+
+Result<Recording> read_recording(const std::string& path) {
+  auto text = detail::read_file(path);
+  if (!text.ok()) return text.status();
+  return parse_recording(*text, path);
+}
+
+Result<std::string> format_recording(const Recording& rec) {
+  if (rec.num_cables < 1 || rec.num_lasers < 1) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "a recording needs at least one cable and one laser (has %d and %d)",
+                         rec.num_cables, rec.num_lasers);
+  }
+  if (rec.poses.empty()) {
+    return Status(ErrorCode::kInvalidArgument, "a recording needs at least one pose");
+  }
+  std::string out;
+  if (Status s = detail::format_metadata(rec.metadata, kRecordingFormat, &out); !s.ok()) return s;
+  out += "pose,time_s";
+  for (const char* c : kCmd) out += std::string(",") + c;
+  for (int i = 1; i <= rec.num_cables; ++i) out += ",length_" + std::to_string(i);
+  for (int i = 1; i <= rec.num_cables; ++i) out += ",tension_" + std::to_string(i);
+  for (int i = 1; i <= rec.num_lasers; ++i) out += ",laser_" + std::to_string(i);
+  if (rec.has_reference) {
+    for (const char* c : kRef) out += std::string(",") + c;
+  }
+  if (rec.has_temperature) out += ",temperature_c";
+  out += '\n';
+  for (std::size_t n = 0; n < rec.poses.size(); ++n) {
+    const RecordedPose& p = rec.poses[n];
+    if (n > 0 && p.index <= rec.poses[n - 1].index) {
+      return Status::Error(ErrorCode::kInvalidArgument, "pose index %lld does not increase",
+                           static_cast<long long>(p.index));
+    }
+    if (Status s = check_size("length", p.lengths.size(), rec.num_cables, p.index); !s.ok())
+      return s;
+    if (Status s = check_size("tension", p.tensions.size(), rec.num_cables, p.index); !s.ok()) {
+      return s;
+    }
+    if (Status s = check_size("laser", p.lasers.size(), rec.num_lasers, p.index); !s.ok()) return s;
+    if (!std::isfinite(p.time_s) || !p.commanded.vector().allFinite()) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "pose %lld: time and commanded pose must be finite",
+                           static_cast<long long>(p.index));
+    }
+    out += std::to_string(p.index);
+    out += ',' + format_number(p.time_s);
+    const auto cmd = p.commanded.vector();
+    for (int a = 0; a < 6; ++a) out += ',' + format_number(cmd(a));
+    for (Eigen::Index i = 0; i < p.lengths.size(); ++i) {
+      if (Status s = append(&out, p.lengths(i), "a length", p.index); !s.ok()) return s;
+    }
+    for (Eigen::Index i = 0; i < p.tensions.size(); ++i) {
+      if (Status s = append(&out, p.tensions(i), "a tension", p.index); !s.ok()) return s;
+    }
+    for (Eigen::Index i = 0; i < p.lasers.size(); ++i) {
+      if (Status s = append(&out, p.lasers(i), "a laser distance", p.index); !s.ok()) return s;
+    }
+    if (rec.has_reference) {
+      const auto ref = p.reference.vector();
+      for (int a = 0; a < 6; ++a) {
+        if (Status s = append(&out, ref(a), "the reference pose", p.index); !s.ok()) return s;
+      }
+    }
+    if (rec.has_temperature) {
+      if (Status s = append(&out, p.temperature_c, "the temperature", p.index); !s.ok()) return s;
+    }
+    out += '\n';
+  }
+  return out;
+}
+
+Status write_recording(const Recording& recording, const std::string& path) {
+  auto text = format_recording(recording);
+  if (!text.ok()) return with_path(text.status(), path);
+  return detail::write_file(path, *text);
+}
+
+Status check_against_model(const Recording& recording, const RobotModel& model) {
+  const int m = model.num_cables();
+  const int k = static_cast<int>(model.lasers.size());
+  const std::string robot =
+      model.name.empty() ? std::string("the config") : "config '" + model.name + "'";
+  if (recording.num_cables != m) {
+    return Status::Error(ErrorCode::kFailedPrecondition,
+                         "cable count mismatch: the recording has %d cables (length_1..length_%d) "
+                         "but %s has %d",
+                         recording.num_cables, recording.num_cables, robot.c_str(), m);
+  }
+  if (recording.num_lasers != k) {
+    return Status::Error(ErrorCode::kFailedPrecondition,
+                         "laser count mismatch: the recording has %d laser columns but %s has %d "
+                         "lasers",
+                         recording.num_lasers, robot.c_str(), k);
+  }
+  return Status::Ok();
+}
+
+// ---------------------------------------------------------------------------------------------
+// Cable experiment
+// ---------------------------------------------------------------------------------------------
+
+namespace {
+
+// Resolves required columns by name; no other column is allowed.
+template <std::size_t N>
+Status resolve_fixed(const CsvTable& t, const std::array<const char*, N>& names,
+                     std::array<int, N>* cols) {
+  for (std::size_t c = 0; c < t.header.size(); ++c) {
+    bool known = false;
+    for (std::size_t a = 0; a < N; ++a) {
+      if (t.header[c] == names[a]) (*cols)[a] = static_cast<int>(c), known = true;
+    }
+    if (!known) {
+      return Status::Error(ErrorCode::kParseError, "%s:%d: column %zu (%s): unknown column",
+                           t.name.c_str(), t.header_line, c + 1, t.header[c].c_str());
+    }
+  }
+  for (std::size_t a = 0; a < N; ++a) {
+    if ((*cols)[a] < 0) return header_error(t, "missing required column '%s'", names[a]);
+  }
+  return Status::Ok();
+}
+
+constexpr std::array<const char*, 3> kCableColumns = {"length_m", "tension_n", "elongation_m"};
+constexpr std::array<const char*, 3> kForceColumns = {"channel", "mass_kg", "raw"};
+
+}  // namespace
+
+Result<CableExperiment> parse_cable_experiment(std::string_view text, std::string_view name) {
+  auto table = detail::parse_table(text, name);
+  if (!table.ok()) return table.status();
+  const CsvTable& t = *table;
+  if (Status s = check_format(t, kCableFormat); !s.ok()) return s;
+  std::array<int, 3> cols{-1, -1, -1};
+  if (Status s = resolve_fixed(t, kCableColumns, &cols); !s.ok()) return s;
+  CableExperiment e;
+  e.metadata = t.metadata;
+  for (const CsvRow& row : t.rows) {
+    CableSample c;
+    if (Status s = detail::parse_double(t, row, cols[0], false, &c.length_m); !s.ok()) return s;
+    if (Status s = detail::parse_double(t, row, cols[1], false, &c.tension_n); !s.ok()) return s;
+    if (Status s = detail::parse_double(t, row, cols[2], false, &c.elongation_m); !s.ok()) return s;
+    if (c.length_m <= 0.0) return detail::cell_error(t, row, cols[0], "a length must be > 0 m");
+    if (c.tension_n < 0.0) return detail::cell_error(t, row, cols[1], "a tension must be >= 0 N");
+    e.samples.push_back(c);
+  }
+  return e;
+}
+
+Result<CableExperiment> read_cable_experiment(const std::string& path) {
+  auto text = detail::read_file(path);
+  if (!text.ok()) return text.status();
+  return parse_cable_experiment(*text, path);
+}
+
+Result<std::string> format_cable_experiment(const CableExperiment& e) {
+  std::string out;
+  if (Status s = detail::format_metadata(e.metadata, kCableFormat, &out); !s.ok()) return s;
+  out += "length_m,tension_n,elongation_m\n";
+  for (const CableSample& c : e.samples) {
+    if (!std::isfinite(c.length_m) || !std::isfinite(c.tension_n) ||
+        !std::isfinite(c.elongation_m)) {
+      return Status(ErrorCode::kInvalidArgument, "cable experiment: every value must be finite");
+    }
+    out += format_number(c.length_m) + ',' + format_number(c.tension_n) + ',' +
+           format_number(c.elongation_m) + '\n';
+  }
+  return out;
+}
+
+Status write_cable_experiment(const CableExperiment& e, const std::string& path) {
+  auto text = format_cable_experiment(e);
+  if (!text.ok()) return with_path(text.status(), path);
+  return detail::write_file(path, *text);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Force-sensor experiment
+// ---------------------------------------------------------------------------------------------
+
+Result<ForceSensorExperiment> parse_force_experiment(std::string_view text, std::string_view name) {
+  auto table = detail::parse_table(text, name);
+  if (!table.ok()) return table.status();
+  const CsvTable& t = *table;
+  if (Status s = check_format(t, kForceFormat); !s.ok()) return s;
+  std::array<int, 3> cols{-1, -1, -1};
+  if (Status s = resolve_fixed(t, kForceColumns, &cols); !s.ok()) return s;
+  ForceSensorExperiment e;
+  e.metadata = t.metadata;
+  for (const CsvRow& row : t.rows) {
+    ForceSample f;
+    std::int64_t channel = 0;
+    if (Status s = detail::parse_int(t, row, cols[0], &channel); !s.ok()) return s;
+    if (channel < 1 || channel > 1000) {
+      return detail::cell_error(t, row, cols[0], "channel %lld is not in 1..1000",
+                                static_cast<long long>(channel));
+    }
+    f.channel = static_cast<int>(channel);
+    if (Status s = detail::parse_double(t, row, cols[1], false, &f.mass_kg); !s.ok()) return s;
+    if (Status s = detail::parse_double(t, row, cols[2], false, &f.raw); !s.ok()) return s;
+    if (f.mass_kg < 0.0) return detail::cell_error(t, row, cols[1], "a mass must be >= 0 kg");
+    e.samples.push_back(f);
+  }
+  return e;
+}
+
+Result<ForceSensorExperiment> read_force_experiment(const std::string& path) {
+  auto text = detail::read_file(path);
+  if (!text.ok()) return text.status();
+  return parse_force_experiment(*text, path);
+}
+
+Result<std::string> format_force_experiment(const ForceSensorExperiment& e) {
+  std::string out;
+  if (Status s = detail::format_metadata(e.metadata, kForceFormat, &out); !s.ok()) return s;
+  out += "channel,mass_kg,raw\n";
+  for (const ForceSample& f : e.samples) {
+    if (f.channel < 1 || !std::isfinite(f.mass_kg) || !std::isfinite(f.raw)) {
+      return Status(ErrorCode::kInvalidArgument,
+                    "force experiment: channels start at 1 and values must be finite");
+    }
+    out += std::to_string(f.channel) + ',' + format_number(f.mass_kg) + ',' + format_number(f.raw) +
+           '\n';
+  }
+  return out;
+}
+
+Status write_force_experiment(const ForceSensorExperiment& e, const std::string& path) {
+  auto text = format_force_experiment(e);
+  if (!text.ok()) return with_path(text.status(), path);
+  return detail::write_file(path, *text);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Pose list
+// ---------------------------------------------------------------------------------------------
+
+namespace {
+constexpr std::array<const char*, 7> kPoseColumns = {"pose", "x", "y", "z", "roll", "pitch", "yaw"};
+}  // namespace
+
+Result<PoseList> parse_pose_list(std::string_view text, std::string_view name) {
+  auto table = detail::parse_table(text, name);
+  if (!table.ok()) return table.status();
+  const CsvTable& t = *table;
+  if (Status s = check_format(t, kPoseListFormat); !s.ok()) return s;
+  std::array<int, 7> cols{-1, -1, -1, -1, -1, -1, -1};
+  if (Status s = resolve_fixed(t, kPoseColumns, &cols); !s.ok()) return s;
+  PoseList list;
+  list.metadata = t.metadata;
+  std::int64_t previous = 0;
+  int previous_line = 0;
+  for (const CsvRow& row : t.rows) {
+    std::int64_t index = 0;
+    if (Status s = detail::parse_int(t, row, cols[0], &index); !s.ok()) return s;
+    if (previous_line != 0 && index <= previous) {
+      return detail::cell_error(
+          t, row, cols[0], "pose index %lld does not increase (line %d has %lld)",
+          static_cast<long long>(index), previous_line, static_cast<long long>(previous));
+    }
+    previous = index;
+    previous_line = row.line;
+    Pose p;
+    for (int a = 0; a < 6; ++a) {
+      double v = 0.0;
+      if (Status s = detail::parse_double(t, row, cols[static_cast<std::size_t>(a) + 1], false, &v);
+          !s.ok()) {
+        return s;
+      }
+      (a < 3 ? p.position : p.rpy)(a % 3) = v;
+    }
+    list.poses.push_back(p);
+  }
+  return list;
+}
+
+Result<PoseList> read_pose_list(const std::string& path) {
+  auto text = detail::read_file(path);
+  if (!text.ok()) return text.status();
+  return parse_pose_list(*text, path);
+}
+
+Result<std::string> format_pose_list(const PoseList& list) {
+  if (list.poses.empty()) return Status(ErrorCode::kInvalidArgument, "a pose list needs a pose");
+  std::string out;
+  if (Status s = detail::format_metadata(list.metadata, kPoseListFormat, &out); !s.ok()) return s;
+  out += "pose,x,y,z,roll,pitch,yaw\n";
+  for (std::size_t j = 0; j < list.poses.size(); ++j) {
+    const auto v = list.poses[j].vector();
+    if (!v.allFinite()) {
+      return Status::Error(ErrorCode::kInvalidArgument, "pose %zu is not finite", j);
+    }
+    out += std::to_string(j);
+    for (int a = 0; a < 6; ++a) out += ',' + format_number(v(a));
+    out += '\n';
+  }
+  return out;
+}
+
+Status write_pose_list(const PoseList& list, const std::string& path) {
+  auto text = format_pose_list(list);
+  if (!text.ok()) return with_path(text.status(), path);
+  return detail::write_file(path, *text);
+}
+
+}  // namespace cdpr::recording

@@ -1,0 +1,410 @@
+// Integration tests of cdpr-fit: the real binary runs as a separate process (CDPR_FIT_BIN), on the
+// shipped MINI configs (CDPR_SOURCE_DIR/config). Results are checked independently of the tool:
+// the calibrated YAML is loaded with the config library and compared with the true robot, the
+// JSON output is parsed, refused inputs must exit non-zero and say where and why.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/recording/recording.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using ::testing::Not;
+
+const std::string kSource = CDPR_SOURCE_DIR;
+const std::string kNominal = kSource + "/config/mini.yaml";
+const std::string kTruth = kSource + "/config/mini-measured.yaml";
+
+struct ProcessResult {
+  int status = -1;
+  std::string out;
+  std::string err;
+};
+
+std::string slurp(const fs::path& p) {
+  std::ifstream f(p);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+std::string quote(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) {
+    if (c == '\'') {
+      q += "'\\''";
+    } else {
+      q += c;
+    }
+  }
+  return q + "'";
+}
+
+class CdprFit : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("cdpr_fit_test_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(dir_);
+  }
+
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+
+  // Runs cdpr-fit with `args`; stdout and stderr captured separately.
+  ProcessResult fit(const std::vector<std::string>& args) const {
+    std::string cmd = quote(CDPR_FIT_BIN);
+    for (const std::string& a : args) cmd += " " + quote(a);
+    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
+    cmd += " >" + quote(out.string()) + " 2>" + quote(err.string());
+    ProcessResult r;
+    const int raw = std::system(cmd.c_str());
+    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    return r;
+  }
+
+  // A simulated recording of the true MINI at `count` designed poses (home first).
+  std::string simulate(int count, const std::string& name = "rec.csv", int seed = 5) {
+    const std::string rec = path(name);
+    const ProcessResult r = fit({"simulate", "--config", kTruth, "--design", std::to_string(count),
+                                 "--noise-laser", "1e-4", "--noise-length", "1e-5", "--noise-force",
+                                 "0.1", "--seed", std::to_string(seed), "--out", rec});
+    EXPECT_EQ(r.status, 0) << r.err;
+    return rec;
+  }
+
+  fs::path dir_;
+};
+
+double anchor_rms(const cdpr::RobotModel& a, const cdpr::RobotModel& b) {
+  return std::sqrt((a.frame_anchors - b.frame_anchors).colwise().squaredNorm().mean());
+}
+
+TEST_F(CdprFit, SimulateThenCalibrateReducesTheAnchorError) {
+  const std::string rec = simulate(40);
+  const std::string cal = path("calibrated.yaml"), report = path("report.json");
+  const ProcessResult r = fit(
+      {"calibrate", "--config", kNominal, "--recording", rec, "--out", cal, "--report", report});
+  ASSERT_EQ(r.status, 0) << r.err << r.out;
+  EXPECT_THAT(r.out, HasSubstr("Frame anchors"));
+
+  auto nominal = cdpr::config::load_robot_config(kNominal);
+  auto truth = cdpr::config::load_robot_config(kTruth);
+  auto calibrated = cdpr::config::load_robot_config(cal);
+  ASSERT_TRUE(nominal.ok() && truth.ok());
+  ASSERT_TRUE(calibrated.ok()) << calibrated.status().to_string();
+  const double before = anchor_rms(*nominal, *truth);
+  const double after = anchor_rms(*calibrated, *truth);
+  EXPECT_GT(before, 5e-3);  // the design and the measured frame differ by several mm
+  EXPECT_LT(after, 0.25 * before) << "anchor RMS error " << before << " m -> " << after << " m";
+
+  const nlohmann::json j = nlohmann::json::parse(slurp(report));
+  EXPECT_TRUE(j.at("converged").get<bool>());
+  EXPECT_LT(j.at("cost").at("final").get<double>(), j.at("cost").at("initial").get<double>());
+  EXPECT_EQ(j.at("residuals").size(), 40u);
+  EXPECT_EQ(j.at("residuals")[0].at("length_m").size(), 8u);
+  EXPECT_FALSE(j.at("estimate").empty());
+  EXPECT_TRUE(j.contains("identifiability"));
+  EXPECT_TRUE(j.contains("warnings"));
+}
+
+TEST_F(CdprFit, SimulateIsReproducibleBySeed) {
+  const std::string a = simulate(6, "a.csv", 9);
+  const std::string b = simulate(6, "b.csv", 9);
+  const std::string c = simulate(6, "c.csv", 10);
+  auto ra = cdpr::recording::read_recording(a);
+  auto rb = cdpr::recording::read_recording(b);
+  auto rc = cdpr::recording::read_recording(c);
+  ASSERT_TRUE(ra.ok() && rb.ok() && rc.ok()) << ra.status().to_string();
+  EXPECT_EQ(ra->num_cables, 8);
+  EXPECT_EQ(ra->metadata.get("units"), "SI");
+  EXPECT_EQ(ra->metadata.get("seed"), "9");
+  bool differs = false;
+  for (std::size_t j = 0; j < ra->poses.size(); ++j) {
+    EXPECT_EQ(ra->poses[j].lengths, rb->poses[j].lengths);
+    EXPECT_EQ(ra->poses[j].lasers, rb->poses[j].lasers);
+    if (ra->poses[j].lengths != rc->poses[j].lengths) differs = true;
+  }
+  EXPECT_TRUE(differs) << "another seed must give other noise";
+}
+
+// Rewrites a recording's text: `edit` gets the lines and changes them.
+std::string edited(const std::string& file,
+                   const std::function<void(std::vector<std::string>&)>& edit) {
+  std::vector<std::string> lines;
+  std::istringstream in(slurp(file));
+  for (std::string l; std::getline(in, l);) lines.push_back(l);
+  edit(lines);
+  std::string s;
+  for (const std::string& l : lines) s += l + "\n";
+  return s;
+}
+
+int header_index(const std::vector<std::string>& lines) {
+  for (std::size_t i = 0; i < lines.size(); ++i) {
+    if (!lines[i].empty() && lines[i][0] != '#') return static_cast<int>(i);
+  }
+  return -1;
+}
+
+std::vector<std::string> split(const std::string& line) {
+  std::vector<std::string> cells;
+  std::stringstream ss(line);
+  for (std::string c; std::getline(ss, c, ',');) cells.push_back(c);
+  return cells;
+}
+
+std::string join(const std::vector<std::string>& cells) {
+  std::string s;
+  for (std::size_t i = 0; i < cells.size(); ++i) s += (i ? "," : "") + cells[i];
+  return s;
+}
+
+// Removes the named columns from every line from the header on.
+void drop_columns(std::vector<std::string>& lines, const std::vector<std::string>& names) {
+  const int h = header_index(lines);
+  const auto header = split(lines[static_cast<std::size_t>(h)]);
+  std::vector<bool> keep(header.size(), true);
+  for (std::size_t c = 0; c < header.size(); ++c) {
+    for (const std::string& n : names) {
+      if (header[c] == n) keep[c] = false;
+    }
+  }
+  for (std::size_t i = static_cast<std::size_t>(h); i < lines.size(); ++i) {
+    const auto cells = split(lines[i]);
+    std::vector<std::string> kept;
+    for (std::size_t c = 0; c < cells.size(); ++c) {
+      if (keep[c]) kept.push_back(cells[c]);
+    }
+    lines[i] = join(kept);
+  }
+}
+
+TEST_F(CdprFit, BadRecordingsAreRefusedWithLineAndReason) {
+  const std::string rec = simulate(20);
+  struct Case {
+    std::string name;
+    std::string text;
+    std::vector<std::string> expected;  // substrings of stderr
+  };
+  std::vector<Case> cases;
+  // Missing column: cmd_yaw gone from the header and the rows.
+  cases.push_back({"missing-column.csv",
+                   edited(rec, [](auto& l) { drop_columns(l, {"cmd_yaw"}); }),
+                   {"missing-column.csv:", "missing required column 'cmd_yaw'"}});
+  // NaN literal in length_3 of the third data row.
+  int nan_line = 0;
+  cases.push_back({"nan-cell.csv",
+                   edited(rec,
+                          [&](auto& l) {
+                            const int h = header_index(l);
+                            const auto header = split(l[static_cast<std::size_t>(h)]);
+                            const std::size_t row = static_cast<std::size_t>(h) + 3;
+                            auto cells = split(l[row]);
+                            for (std::size_t c = 0; c < header.size(); ++c) {
+                              if (header[c] == "length_3") cells[c] = "nan";
+                            }
+                            l[row] = join(cells);
+                            nan_line = static_cast<int>(row) + 1;
+                          }),
+                   {}});
+  cases.back().expected = {"nan-cell.csv:" + std::to_string(nan_line) + ": column",
+                           "(length_3): 'nan' is not allowed"};
+  // Wrong cable count: cable 8's columns gone, so the recording has 7 cables, MINI 8.
+  cases.push_back({"seven-cables.csv",
+                   edited(rec,
+                          [](auto& l) {
+                            drop_columns(l, {"length_8", "tension_8"});
+                          }),
+                   {"cable count mismatch", "7 cables", "has 8"}});
+  // Too few poses: two rows cannot determine 8 anchors, 8 offsets and the poses.
+  cases.push_back({"two-poses.csv",
+                   edited(rec,
+                          [](auto& l) {
+                            const int h = header_index(l);
+                            l.resize(static_cast<std::size_t>(h) + 3);
+                          }),
+                   {"too few poses"}});
+  // Not SI: a file exported in millimetres.
+  cases.push_back({"mm.csv",
+                   edited(rec,
+                          [](auto& l) {
+                            for (auto& line : l) {
+                              if (line == "# units: SI") line = "# units: mm";
+                            }
+                          }),
+                   {"mm.csv:", "units 'mm' are not supported"}});
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string file = path(c.name);
+    {
+      std::ofstream f(file);
+      f << c.text;
+    }
+    const std::string out = path(c.name + ".yaml");
+    const ProcessResult r =
+        fit({"calibrate", "--config", kNominal, "--recording", file, "--out", out});
+    EXPECT_NE(r.status, 0);
+    for (const std::string& e : c.expected) EXPECT_THAT(r.err, HasSubstr(e));
+    EXPECT_FALSE(fs::exists(out)) << "no calibrated config may be written for a refused input";
+  }
+}
+
+TEST_F(CdprFit, JsonOutputParses) {
+  const std::string rec = simulate(30);
+  const ProcessResult ok =
+      fit({"calibrate", "--config", kNominal, "--recording", rec, "--json", "--truth", kTruth});
+  ASSERT_EQ(ok.status, 0) << ok.err;
+  const nlohmann::json j = nlohmann::json::parse(ok.out);  // throws (fails) when not JSON
+  EXPECT_TRUE(j.at("ok").get<bool>());
+  EXPECT_EQ(j.at("command"), "calibrate");
+  const auto& err = j.at("anchor_error_vs_truth");
+  EXPECT_LT(err.at("calibrated_rms_m").get<double>(), err.at("nominal_rms_m").get<double>());
+
+  const ProcessResult bad =
+      fit({"calibrate", "--config", kNominal, "--recording", kNominal, "--json"});
+  EXPECT_EQ(bad.status, 1);
+  const nlohmann::json e = nlohmann::json::parse(bad.out);
+  EXPECT_FALSE(e.at("ok").get<bool>());
+  EXPECT_FALSE(e.at("error").at("message").get<std::string>().empty());
+}
+
+TEST_F(CdprFit, UsageErrorsExitWithTwo) {
+  EXPECT_EQ(fit({}).status, 2);
+  EXPECT_EQ(fit({"calibrate", "--config", kNominal}).status, 2);  // --recording missing
+  EXPECT_EQ(fit({"frobnicate"}).status, 2);
+  const ProcessResult help = fit({"--help"});
+  EXPECT_EQ(help.status, 0);
+  EXPECT_THAT(help.out, HasSubstr("calibrate"));
+}
+
+TEST_F(CdprFit, FitForceSensorRecoversGainAndOffset) {
+  // Readings made from known gains and offsets plus small noise; the fit must find them.
+  cdpr::recording::ForceSensorExperiment e;
+  std::mt19937 rng(3);
+  std::normal_distribution<double> noise(0.0, 0.05);
+  const std::vector<double> gain = {2.0, 1.95, 2.1}, offset = {0.5, -1.2, 3.0};
+  for (int c = 0; c < 3; ++c) {
+    for (double m : {0.0, 1.0, 2.0, 5.0, 10.0, 20.0}) {
+      e.samples.push_back({c + 1, m,
+                           gain[static_cast<std::size_t>(c)] * m * 9.81 +
+                               offset[static_cast<std::size_t>(c)] + noise(rng)});
+    }
+  }
+  const std::string file = path("force.csv");
+  ASSERT_TRUE(cdpr::recording::write_force_experiment(e, file).ok());
+  const ProcessResult r = fit({"fit-force-sensor", "--experiment", file, "--json"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  ASSERT_EQ(j.at("channels").size(), 3u);
+  for (std::size_t c = 0; c < 3; ++c) {
+    const auto& ch = j.at("channels")[c];
+    EXPECT_EQ(ch.at("channel").get<int>(), static_cast<int>(c) + 1);
+    EXPECT_NEAR(ch.at("gain").get<double>(), gain[c], 4 * ch.at("gain_stderr").get<double>());
+    EXPECT_NEAR(ch.at("offset").get<double>(), offset[c], 4 * ch.at("offset_stderr").get<double>());
+    EXPECT_GT(ch.at("gain_stderr").get<double>(), 0.0);
+  }
+  const ProcessResult human = fit({"fit-force-sensor", "--experiment", file});
+  EXPECT_EQ(human.status, 0);
+  EXPECT_THAT(human.out, HasSubstr("force_sensor: {gain:"));
+}
+
+TEST_F(CdprFit, FitCableFindsTheOrderOfAQuadraticSurface) {
+  // dL = 1e-4 + 2e-5 L F... a surface of total degree 2; CV must not pick order 1.
+  cdpr::recording::CableExperiment e;
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0.0, 2e-6);
+  for (double L = 0.5; L <= 2.5; L += 0.25) {
+    for (double F = 10.0; F <= 200.0; F += 19.0) {
+      const double dl = 1e-4 + 2e-5 * L * F / 10.0 + 3e-8 * F * F;
+      e.samples.push_back({L, F, dl + noise(rng)});
+    }
+  }
+  const std::string file = path("cable.csv");
+  ASSERT_TRUE(cdpr::recording::write_cable_experiment(e, file).ok());
+  const ProcessResult r = fit({"fit-cable", "--experiment", file, "--max-order", "4", "--json"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_GE(j.at("order").get<int>(), 2);
+  EXPECT_LT(j.at("training_rmse_m").get<double>(), 1e-5);
+  EXPECT_EQ(j.at("cross_validation").size(), 4u);
+  const ProcessResult human = fit({"fit-cable", "--experiment", file});
+  EXPECT_THAT(human.out, HasSubstr("elongation: {model: polynomial, order: "));
+  // A broken experiment names its line.
+  {
+    std::ofstream f(path("broken.csv"));
+    f << "# units: SI\nlength_m,tension_n,elongation_m\n1,10,1e-4\n1,abc,1e-4\n";
+  }
+  const ProcessResult broken = fit({"fit-cable", "--experiment", path("broken.csv")});
+  EXPECT_EQ(broken.status, 1);
+  EXPECT_THAT(broken.err, HasSubstr("broken.csv:4: column 2 (tension_n): 'abc' is not a number"));
+}
+
+TEST_F(CdprFit, DesignedPosesStartAtHomeAndMoreNoisePredictsLessAccuracy) {
+  const std::string poses = path("designed.csv");
+  const ProcessResult d =
+      fit({"design-poses", "--config", kNominal, "--count", "12", "--out", poses});
+  ASSERT_EQ(d.status, 0) << d.err;
+  auto list = cdpr::recording::read_pose_list(poses);
+  ASSERT_TRUE(list.ok()) << list.status().to_string();
+  ASSERT_EQ(list->poses.size(), 12u);
+  auto nominal = cdpr::config::load_robot_config(kNominal);
+  ASSERT_TRUE(nominal.ok());
+  EXPECT_LT((list->poses[0].vector() - nominal->home.vector()).norm(), 1e-12);
+
+  auto predicted = [&](const std::string& sigma_length) {
+    const ProcessResult r = fit({"predict-accuracy", "--config", kNominal, "--poses", poses,
+                                 "--noise-length", sigma_length, "--json"});
+    EXPECT_EQ(r.status, 0) << r.err;
+    return nlohmann::json::parse(r.out);
+  };
+  const nlohmann::json low = predicted("1e-5");
+  const nlohmann::json high = predicted("1e-3");
+  EXPECT_GT(low.at("anchor_rms_std_m").get<double>(), 0.0);
+  EXPECT_GT(high.at("anchor_rms_std_m").get<double>(), low.at("anchor_rms_std_m").get<double>());
+  EXPECT_GT(high.at("position_rms_m").get<double>(), low.at("position_rms_m").get<double>());
+}
+
+TEST_F(CdprFit, PaperMethodRunsAndReportsItsIterations) {
+  const std::string rec = simulate(25);
+  const std::string out = path("paper.yaml");
+  const ProcessResult r =
+      fit({"calibrate", "--method", "paper", "--config", kNominal, "--recording", rec,
+           "--max-iterations", "20", "--out", out, "--json"});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("method"), "paper");
+  EXPECT_GT(j.at("iterations").get<int>(), 0);
+  EXPECT_GT(j.at("fk_solves").get<long>(), 0);
+  EXPECT_TRUE(fs::exists(out));
+  auto calibrated = cdpr::config::load_robot_config(out);
+  ASSERT_TRUE(calibrated.ok()) << calibrated.status().to_string();
+  // The paper's V = [x2..x7, y2..y7, z5..z8] leaves cable 1's anchor at its nominal value.
+  auto nominal = cdpr::config::load_robot_config(kNominal);
+  ASSERT_TRUE(nominal.ok());
+  EXPECT_EQ(calibrated->frame_anchors.col(0), nominal->frame_anchors.col(0));
+  EXPECT_NE(calibrated->frame_anchors.col(1), nominal->frame_anchors.col(1));
+}
+
+}  // namespace

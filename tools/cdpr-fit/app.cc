@@ -1,0 +1,264 @@
+#include "app.hpp"
+
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+#include <chrono>
+#include <functional>
+#include <memory>
+
+#include "commands.hpp"
+
+namespace cdpr::fit {
+
+namespace {
+
+constexpr const char* kFileNote =
+    "Files: recordings, experiments and pose lists are CSV (docs/recording-format.md), robot "
+    "configs YAML (docs/config.md). SI units throughout.";
+
+}  // namespace
+
+int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err) {
+  CLI::App app{"cdpr-fit: offline identification of cable-driven parallel robots"};
+  app.footer(kFileNote);
+  app.require_subcommand(1);
+  app.fallthrough();
+  bool json = false;
+  bool verbose = false;
+  app.add_flag("--json", json, "print the result as JSON on stdout instead of text");
+  app.add_flag("-v,--verbose", verbose, "progress messages on stderr");
+
+  std::string command;
+  std::function<Result<Output>()> action;
+
+  // ---- simulate -------------------------------------------------------------------------------
+  SimulateArgs sim;
+  std::string physics = "rigid";
+  bool no_noise = false;
+  auto* s = app.add_subcommand("simulate", "write the recording the TRUE robot would give");
+  s->add_option("--config", sim.config, "the true robot (YAML)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  auto* sim_poses = s->add_option("--poses", sim.poses, "pose list CSV (pose,x,y,z,roll,pitch,yaw)")
+                        ->check(CLI::ExistingFile);
+  auto* sim_design =
+      s->add_option("--design", sim.design,
+                    "instead of --poses: design N poses (D-optimal, home first) on --nominal, "
+                    "else on --config")
+          ->check(CLI::Range(2, 10000));
+  sim_poses->excludes(sim_design);
+  sim_design->excludes(sim_poses);
+  s->add_option("--nominal", sim.nominal,
+                "the controller's model: converts force readings with its sensor calibration and "
+                "computes the length commands of --physics elastic")
+      ->check(CLI::ExistingFile);
+  s->add_option("--noise-laser", sim.noise.sigma_laser, "laser noise std dev, m")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  s->add_option("--noise-length", sim.noise.sigma_length, "cable length noise std dev, m")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  s->add_option("--noise-force", sim.noise.sigma_force, "tension noise std dev, N")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  s->add_option("--noise-ref-position", sim.noise.sigma_reference_position,
+                "reference pose position noise std dev, m")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  s->add_option("--noise-ref-angle", sim.noise.sigma_reference_angle,
+                "reference pose angle noise std dev, rad")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  s->add_flag("--no-noise", no_noise, "write exact readings (the sigmas are still recorded)");
+  s->add_option("--seed", sim.seed, "random seed (same seed, same recording)")
+      ->capture_default_str();
+  s->add_option("--physics", physics,
+                "rigid: the platform is at each pose; elastic: the poses are "
+                "commands and the elastic robot settles")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"rigid", "elastic"}));
+  s->add_option("--reference-poses", sim.reference_poses,
+                "rows (0-based) that also get a reference pose reading, e.g. 0")
+      ->delimiter(',');
+  s->add_option("--reference-tension", sim.reference_tension, "planned pretension, N")
+      ->check(CLI::PositiveNumber);
+  s->add_option("--out", sim.out, "recording CSV to write")->required();
+  s->callback([&] {
+    command = "simulate";
+    if (sim.poses.empty() && sim.design == 0) {
+      throw CLI::RequiredError("simulate needs --poses FILE or --design N");
+    }
+    sim.add_noise = !no_noise;
+    sim.elastic = physics == "elastic";
+    action = [&] { return simulate(sim); };
+  });
+
+  // ---- calibrate ------------------------------------------------------------------------------
+  CalibrateArgs cal;
+  std::string estimate_help =
+      "comma-separated parameters to estimate (default: anchors, offsets, "
+      "laser-plane); any of:";
+  for (const std::string& n : estimate_names()) estimate_help += " " + n;
+  auto* c = app.add_subcommand("calibrate", "identify the robot from a recording");
+  c->add_option("--config", cal.config, "nominal robot (YAML): the starting point")
+      ->required()
+      ->check(CLI::ExistingFile);
+  c->add_option("--recording", cal.recording, "recording CSV")
+      ->required()
+      ->check(CLI::ExistingFile);
+  c->add_option("--method", cal.method, "identification method")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"ours", "paper"}));
+  c->add_option("--estimate", cal.estimate, estimate_help)->delimiter(',');
+  c->add_option("--gauge", cal.gauge, "what fixes the world frame: home, laser-plane, both, none")
+      ->capture_default_str();
+  c->add_option("--home-pose", cal.home_pose, "row (0-based) of the home pose for --gauge home")
+      ->capture_default_str();
+  c->add_option("--loss", cal.loss, "robust loss: none, huber, cauchy")->capture_default_str();
+  c->add_option("--max-iterations", cal.max_iterations, "solver iterations")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  c->add_option("--out", cal.out, "calibrated robot config to write (YAML)");
+  c->add_option("--report", cal.report, "JSON report to write");
+  c->add_option("--truth", cal.truth,
+                "true robot (simulation studies): report the frame anchor errors before and after")
+      ->check(CLI::ExistingFile);
+  c->callback([&] {
+    command = "calibrate";
+    action = [&] { return calibrate(cal); };
+  });
+
+  // ---- design-poses, predict-accuracy ----------------------------------------------------------
+  DesignArgs design;
+  auto* dp = app.add_subcommand("design-poses", "choose calibration poses (D-optimal, home first)");
+  dp->add_option("--config", design.config, "robot (YAML)")->required()->check(CLI::ExistingFile);
+  dp->add_option("--count", design.count, "number of poses, home included")
+      ->capture_default_str()
+      ->check(CLI::Range(2, 10000));
+  dp->add_option("--out", design.out, "pose list CSV to write")->required();
+  dp->add_option("--estimate", design.estimate, "parameters the design is for (as calibrate)")
+      ->delimiter(',');
+  dp->add_option("--half-extent", design.half_extent, "half side of the candidate cube, m")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  dp->add_option("--points-per-axis", design.points_per_axis, "candidate grid points per axis")
+      ->capture_default_str()
+      ->check(CLI::Range(2, 50));
+  dp->add_option("--max-angle", design.max_angle, "candidate orientations up to this angle, rad")
+      ->capture_default_str();
+  dp->add_option("--noise-laser", design.noise.sigma_laser, "laser noise std dev, m")
+      ->capture_default_str();
+  dp->add_option("--noise-length", design.noise.sigma_length, "length noise std dev, m")
+      ->capture_default_str();
+  dp->add_option("--noise-force", design.noise.sigma_force, "tension noise std dev, N")
+      ->capture_default_str();
+  dp->add_flag("--compare", design.compare,
+               "also predict the accuracy of random and box-corner sets of the same size");
+  dp->add_option("--seed", design.seed, "seed of the random comparison set")->capture_default_str();
+  dp->callback([&] {
+    command = "design-poses";
+    action = [&] { return design_poses(design); };
+  });
+
+  PredictArgs predict;
+  auto* pa = app.add_subcommand(
+      "predict-accuracy", "Cramer-Rao bounds and position error of calibrating at given poses");
+  pa->add_option("--config", predict.config, "robot (YAML)")->required()->check(CLI::ExistingFile);
+  pa->add_option("--poses", predict.poses, "pose list CSV")->required()->check(CLI::ExistingFile);
+  pa->add_option("--estimate", predict.estimate, "parameters (as calibrate)")->delimiter(',');
+  pa->add_option("--noise-laser", predict.noise.sigma_laser, "laser noise std dev, m")
+      ->capture_default_str();
+  pa->add_option("--noise-length", predict.noise.sigma_length, "length noise std dev, m")
+      ->capture_default_str();
+  pa->add_option("--noise-force", predict.noise.sigma_force, "tension noise std dev, N")
+      ->capture_default_str();
+  pa->add_option("--half-extent", predict.half_extent, "half side of the test cube, m")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  pa->add_option("--points-per-axis", predict.points_per_axis, "test grid points per axis")
+      ->capture_default_str()
+      ->check(CLI::Range(2, 50));
+  pa->callback([&] {
+    command = "predict-accuracy";
+    action = [&] { return predict_accuracy(predict); };
+  });
+
+  // ---- fit-cable ------------------------------------------------------------------------------
+  FitCableArgs cable;
+  auto* fc = app.add_subcommand("fit-cable", "fit the elongation surface dL = f(L, F) of a cable");
+  fc->add_option("--experiment", cable.experiment, "cable experiment CSV")
+      ->required()
+      ->check(CLI::ExistingFile);
+  fc->add_option("--min-order", cable.min_order, "lowest candidate order")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 8));
+  fc->add_option("--max-order", cable.max_order, "highest candidate order")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 8));
+  fc->add_option("--folds", cable.folds, "K of K-fold cross-validation")
+      ->capture_default_str()
+      ->check(CLI::Range(2, 1000));
+  fc->add_option("--seed", cable.seed, "fold shuffling seed")->capture_default_str();
+  fc->add_flag("--minimum-error", cable.minimum_error,
+               "choose the order of least CV error (default: one-standard-error rule)");
+  fc->callback([&] {
+    command = "fit-cable";
+    action = [&] { return fit_cable(cable); };
+  });
+
+  // ---- fit-force-sensor -----------------------------------------------------------------------
+  FitForceArgs force;
+  auto* ff = app.add_subcommand("fit-force-sensor", "fit gain and offset of each force sensor");
+  ff->add_option("--experiment", force.experiment, "force-sensor experiment CSV")
+      ->required()
+      ->check(CLI::ExistingFile);
+  ff->add_option("--gravity", force.gravity, "g, m/s^2 (default: the file's gravity_m_s2, 9.81)")
+      ->check(CLI::PositiveNumber);
+  ff->callback([&] {
+    command = "fit-force-sensor";
+    action = [&] { return fit_force_sensor(force); };
+  });
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e, out, err);
+    return code == 0 ? 0 : 2;
+  }
+
+  auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(err);
+  spdlog::logger log("cdpr-fit", sink);
+  log.set_pattern("cdpr-fit: %v");
+  log.set_level(verbose ? spdlog::level::info : spdlog::level::warn);
+  log.info("{} started", command);
+  const auto t0 = std::chrono::steady_clock::now();
+  Result<Output> result = action();
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  if (!result.ok()) {
+    const Status& st = result.status();
+    err << "cdpr-fit " << command << ": error: " << st.message() << "\n";
+    if (json) {
+      nlohmann::json j = {
+          {"command", command},
+          {"ok", false},
+          {"error",
+           {{"code", std::string(to_string(st.code()))}, {"message", std::string(st.message())}}}};
+      out << j.dump(2) << "\n";
+    }
+    return 1;
+  }
+  log.info("{} done in {:.3f} s", command, seconds);
+  if (json) {
+    result->json["ok"] = true;
+    out << result->json.dump(2) << "\n";
+  } else {
+    out << result->human;
+  }
+  out.flush();
+  return 0;
+}
+
+}  // namespace cdpr::fit

@@ -1,0 +1,149 @@
+// cdpr-fit design-poses and predict-accuracy: planning a calibration before measuring.
+#include <sstream>
+
+#include "cdpr/calibration/pose_design.hpp"
+#include "cdpr/calibration/predicted_accuracy.hpp"
+#include "cdpr/recording/recording.hpp"
+#include "commands.hpp"
+#include "common.hpp"
+
+namespace cdpr::fit {
+
+namespace {
+
+nlohmann::json poses_json(const std::vector<Pose>& poses) {
+  nlohmann::json a = nlohmann::json::array();
+  for (const Pose& p : poses) a.push_back(to_json(Eigen::VectorXd(p.vector())));
+  return a;
+}
+
+}  // namespace
+
+Result<Output> design_poses(const DesignArgs& args) {
+  auto model = load_config(args.config);
+  if (!model.ok()) return model.status();
+  PoseDesignOptions options;
+  options.num_poses = args.count;
+  options.center = model->home.position;
+  options.half_extent = Eigen::Vector3d::Constant(args.half_extent);
+  options.points_per_axis = args.points_per_axis;
+  options.max_angle = args.max_angle;
+  options.noise = args.noise;
+  if (Status s = apply_estimate(args.estimate, model->num_cables(), &options.identification);
+      !s.ok()) {
+    return s;
+  }
+  const CalibratedModel cm = CalibratedModel::FromRobot(*model);
+  auto design = cdpr::design_poses(cm, options);
+  if (!design.ok()) return with_context(design.status(), "designing poses for " + args.config);
+
+  recording::PoseList list;
+  list.metadata.set(recording::key::kRobot, model->name);
+  list.metadata.set(recording::key::kDate, recording::utc_timestamp());
+  list.metadata.set(recording::key::kConfigFile, args.config);
+  list.metadata.set(recording::key::kConfigHash, hash_or_unknown(args.config));
+  list.metadata.set(recording::key::kSource, "cdpr-fit design-poses (D-optimal, home first)");
+  list.poses = design->poses;
+  if (Status s = recording::write_pose_list(list, args.out); !s.ok()) return s;
+
+  Output out;
+  out.json = {{"command", "design-poses"},
+              {"config", args.config},
+              {"out", args.out},
+              {"count", design->poses.size()},
+              {"estimate", estimated_items(options.identification)},
+              {"candidates", design->candidates},
+              {"exchanges", design->exchanges},
+              {"log_det", design->log_det},
+              {"path_length", design->path_length},
+              {"poses", poses_json(design->poses)}};
+  std::ostringstream h;
+  h << "designed " << design->poses.size() << " poses for " << model->name << " ("
+    << design->candidates << " feasible candidates, " << design->exchanges << " exchanges, log det "
+    << fmt(design->log_det, 6) << ", path " << fmt(design->path_length, 4) << " m)\nestimating:";
+  for (const std::string& e : estimated_items(options.identification)) h << " " << e;
+  h << "\nwrote " << args.out << "\n";
+  if (args.compare) {
+    AccuracyBox box;
+    box.center = model->home.position;
+    box.half_extent = Eigen::Vector3d::Constant(args.half_extent);
+    auto cmp = compare_pose_sets(cm, options, box, args.seed);
+    if (!cmp.ok()) return with_context(cmp.status(), "comparing pose sets");
+    nlohmann::json rows = nlohmann::json::array();
+    h << "\npredicted accuracy (same size sets):\n"
+      << "  set                    poses   anchor std (m)   position RMS (m)   condition\n";
+    for (const PoseSetComparison& c : *cmp) {
+      rows.push_back({{"label", c.label},
+                      {"poses", c.num_poses},
+                      {"anchor_rms_std_m", c.anchor_rms_std_m},
+                      {"position_rms_m", c.position_rms_m},
+                      {"condition_number", number_or_null(c.condition_number)}});
+      char line[160];
+      std::snprintf(line, sizeof line, "  %-20s %7d   %14.3e   %16.3e   %9.3g\n", c.label.c_str(),
+                    c.num_poses, c.anchor_rms_std_m, c.position_rms_m, c.condition_number);
+      h << line;
+    }
+    out.json["comparison"] = rows;
+  }
+  out.human = h.str();
+  return out;
+}
+
+Result<Output> predict_accuracy(const PredictArgs& args) {
+  auto model = load_config(args.config);
+  if (!model.ok()) return model.status();
+  auto list = recording::read_pose_list(args.poses);
+  if (!list.ok()) return list.status();
+  PredictedAccuracyOptions options;
+  if (Status s = apply_estimate(args.estimate, model->num_cables(), &options.identification);
+      !s.ok()) {
+    return s;
+  }
+  options.box.center = model->home.position;
+  options.box.half_extent = Eigen::Vector3d::Constant(args.half_extent);
+  options.box.points_per_axis = args.points_per_axis;
+  auto p =
+      cdpr::predict_accuracy(CalibratedModel::FromRobot(*model), list->poses, args.noise, options);
+  if (!p.ok()) {
+    return with_context(p.status(), "predicting the accuracy of " + args.poses);
+  }
+  nlohmann::json params = nlohmann::json::array();
+  std::ostringstream h;
+  h << "predicted accuracy of calibrating " << model->name << " at the " << list->poses.size()
+    << " poses of " << args.poses << "\n(noise: length " << args.noise.sigma_length << " m, laser "
+    << args.noise.sigma_laser << " m, force " << args.noise.sigma_force
+    << " N)\n\n  parameter                  CRB std\n";
+  for (std::size_t i = 0; i < p->names.size(); ++i) {
+    const double sd = i < static_cast<std::size_t>(p->crb_std.size())
+                          ? p->crb_std(static_cast<Eigen::Index>(i))
+                          : std::numeric_limits<double>::quiet_NaN();
+    params.push_back({{"name", p->names[i]}, {"crb_std", number_or_null(sd)}});
+    char line[128];
+    std::snprintf(line, sizeof line, "  %-24s %10.3e\n", p->names[i].c_str(), sd);
+    h << line;
+  }
+  h << "\nrank " << p->rank << " of " << p->names.size() << "\nanchor RMS std "
+    << fmt(p->anchor_rms_std_m, 3) << " m\nposition error over the " << p->grid_points
+    << "-point test grid (cube of half side " << args.half_extent << " m): RMS "
+    << fmt(p->position_rms_m, 3) << " m, max " << fmt(p->position_max_m, 3) << " m\n";
+  Output out;
+  out.json = {{"command", "predict-accuracy"},
+              {"config", args.config},
+              {"poses", args.poses},
+              {"pose_count", list->poses.size()},
+              {"estimate", estimated_items(options.identification)},
+              {"noise",
+               {{"length_m", args.noise.sigma_length},
+                {"laser_m", args.noise.sigma_laser},
+                {"force_n", args.noise.sigma_force}}},
+              {"parameters", params},
+              {"rank", p->rank},
+              {"anchor_rms_std_m", p->anchor_rms_std_m},
+              {"position_rms_m", p->position_rms_m},
+              {"position_max_m", p->position_max_m},
+              {"grid_points", p->grid_points}};
+  out.human = h.str();
+  return out;
+}
+
+}  // namespace cdpr::fit

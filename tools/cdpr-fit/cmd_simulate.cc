@@ -1,0 +1,121 @@
+// cdpr-fit simulate: a recording of what the TRUE robot's sensors would read at given poses.
+#include <sstream>
+
+#include "cdpr/calibration/pose_design.hpp"
+#include "cdpr/calibration/simulate.hpp"
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/recording/recording.hpp"
+#include "commands.hpp"
+#include "common.hpp"
+
+namespace cdpr::fit {
+
+Result<Output> simulate(const SimulateArgs& args) {
+  auto truth = load_config(args.config);
+  if (!truth.ok()) return truth.status();
+  std::optional<CalibratedModel> nominal;
+  if (!args.nominal.empty()) {
+    auto n = load_config(args.nominal);
+    if (!n.ok()) return n.status();
+    if (n->num_cables() != truth->num_cables()) {
+      return Status::Error(
+          ErrorCode::kInvalidArgument, "--nominal %s has %d cables but --config %s has %d",
+          args.nominal.c_str(), n->num_cables(), args.config.c_str(), truth->num_cables());
+    }
+    nominal = CalibratedModel::FromRobot(*n);
+  }
+  if (truth->lasers.empty()) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "%s has no laser; a recording needs at least one laser column",
+                         args.config.c_str());
+  }
+  if (args.elastic && !nominal) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "--physics elastic needs --nominal (the "
+                  "controller's model computes the length commands)");
+  }
+  Result<recording::PoseList> list = recording::PoseList{};
+  std::string poses_source = args.poses;
+  if (args.design > 0) {
+    PoseDesignOptions design;
+    design.num_poses = args.design;
+    design.noise = args.noise;
+    const CalibratedModel planner = nominal ? *nominal : CalibratedModel::FromRobot(*truth);
+    auto d = cdpr::design_poses(planner, design);
+    if (!d.ok()) return with_context(d.status(), "--design " + std::to_string(args.design));
+    list->poses = d->poses;
+    poses_source = "design_poses(" + std::to_string(args.design) + ")";
+  } else {
+    list = recording::read_pose_list(args.poses);
+    if (!list.ok()) return list.status();
+  }
+
+  SimulationOptions options;
+  options.physics =
+      args.elastic ? SimulationOptions::Physics::kElastic : SimulationOptions::Physics::kRigid;
+  options.controller = nominal ? &*nominal : nullptr;
+  options.add_noise = args.add_noise;
+  options.reference_tension = args.reference_tension;
+  for (const int j : args.reference_poses) {
+    if (j < 0 || j >= static_cast<int>(list->poses.size())) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "--reference-poses: pose %d is not in %s (it has %zu poses)", j,
+                           poses_source.c_str(), list->poses.size());
+    }
+    options.reference_pose_indices.push_back(j);
+  }
+  const CalibratedModel truth_model = CalibratedModel::FromRobot(*truth);
+  auto sim = simulate_measurements(truth_model, list->poses, args.noise, args.seed, options);
+  if (!sim.ok()) {
+    return Status::Error(sim.status().code(), "simulating %s at the poses of %s: %.*s",
+                         args.config.c_str(), poses_source.c_str(),
+                         static_cast<int>(sim.status().message().size()),
+                         sim.status().message().data());
+  }
+
+  recording::Metadata md;
+  md.set(recording::key::kFormat, "cdpr-recording 1");
+  md.set(recording::key::kUnits, "SI");
+  md.set(recording::key::kRobot, truth->name);
+  md.set(recording::key::kDate, recording::utc_timestamp());
+  // The config in force while "recording" is the controller's; without one, the truth's.
+  const std::string& config_file = args.nominal.empty() ? args.config : args.nominal;
+  md.set(recording::key::kConfigFile, config_file);
+  md.set(recording::key::kConfigHash, hash_or_unknown(config_file));
+  md.set("truth_config", args.config);
+  md.set("truth_config_hash", hash_or_unknown(args.config));
+  md.set("poses", poses_source);
+  md.set(recording::key::kSource, "simulated");
+  md.set(recording::key::kSeed, std::to_string(args.seed));
+  md.set("physics", args.elastic ? "elastic" : "rigid");
+  md.set("noise_added", args.add_noise ? "yes" : "no");
+  auto rec = recording::from_measurement_set(sim->set, md);
+  if (!rec.ok()) return rec.status();
+  if (Status s = recording::write_recording(*rec, args.out); !s.ok()) return s;
+
+  Output out;
+  out.json = {{"command", "simulate"},
+              {"recording", args.out},
+              {"config", args.config},
+              {"poses", rec->poses.size()},
+              {"cables", rec->num_cables},
+              {"lasers", rec->num_lasers},
+              {"seed", args.seed},
+              {"physics", args.elastic ? "elastic" : "rigid"},
+              {"noise",
+               {{"length_m", args.noise.sigma_length},
+                {"force_n", args.noise.sigma_force},
+                {"laser_m", args.noise.sigma_laser},
+                {"added", args.add_noise}}}};
+  std::ostringstream h;
+  h << "simulated " << rec->poses.size() << " poses of " << truth->name << " (" << rec->num_cables
+    << " cables, " << rec->num_lasers << " laser" << (rec->num_lasers == 1 ? "" : "s") << ", "
+    << (args.elastic ? "elastic" : "rigid") << " physics, seed " << args.seed << ")\n"
+    << "noise: length " << args.noise.sigma_length << " m, force " << args.noise.sigma_force
+    << " N, laser " << args.noise.sigma_laser << " m" << (args.add_noise ? "" : " (not added)")
+    << "\nwrote " << args.out << "\n";
+  out.human = h.str();
+  return out;
+}
+
+}  // namespace cdpr::fit

@@ -1,0 +1,116 @@
+// cdpr-fit's subcommands as functions (the library cdpr_fit_app; main() only calls run()).
+//
+// Each command takes its arguments as a struct, does its work and returns an Output: the JSON
+// document (printed with --json) and the human text (printed otherwise), or a Status naming what
+// was wrong with the input. Files named in the arguments are read and written by the command.
+#pragma once
+
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr::fit {
+
+struct Output {
+  nlohmann::json json;
+  std::string human;
+};
+
+// ---------------------------------------------------------------------------------------------
+// simulate
+// ---------------------------------------------------------------------------------------------
+struct SimulateArgs {
+  std::string config;   // the TRUE robot (YAML)
+  std::string nominal;  // optional: the controller's model (force conversion, elastic physics)
+  std::string poses;    // pose list CSV, or
+  int design = 0;       // > 0: design this many poses (design_poses on the nominal, else truth)
+  std::string out;      // recording CSV to write
+  SensorNoise noise;
+  std::uint64_t seed = 1;
+  bool add_noise = true;
+  bool elastic = false;              // SimulationOptions::Physics::kElastic (needs nominal)
+  std::vector<int> reference_poses;  // poses that also get a reference pose reading
+  double reference_tension = std::numeric_limits<double>::quiet_NaN();  // N; NaN = default
+};
+Result<Output> simulate(const SimulateArgs& args);
+
+// ---------------------------------------------------------------------------------------------
+// calibrate
+// ---------------------------------------------------------------------------------------------
+struct CalibrateArgs {
+  std::string config;     // nominal robot (YAML), the starting point
+  std::string recording;  // recording CSV
+  std::string method = "ours";
+  std::vector<std::string> estimate;  // empty = the defaults of IdentificationOptions
+  std::string gauge = "home";         // home | laser-plane | both | none
+  std::string loss = "none";          // none | huber | cauchy
+  int home_pose = 0;
+  int max_iterations = 100;
+  std::string out;     // calibrated config YAML to write (optional)
+  std::string report;  // JSON report to write (optional)
+  std::string truth;   // optional true robot (simulation studies): anchor errors in the report
+};
+Result<Output> calibrate(const CalibrateArgs& args);
+
+// The names --estimate accepts, in the order of the help text.
+const std::vector<std::string>& estimate_names();
+
+// The calibrated robot with the reading model folded into the winches: the calibrated reading
+// is unstretched = (1 + s_i) reading + o_i with reading = length_offset + dir counts mpc, so the
+// winch gets length_offset' = (1 + s_i) length_offset + o_i and drum diameter and pitch scaled by
+// (1 + s_i) (metres per count scale by 1 + s_i).
+RobotModel fold_reading_model(const CalibratedModel& model);
+
+// ---------------------------------------------------------------------------------------------
+// design-poses, predict-accuracy
+// ---------------------------------------------------------------------------------------------
+struct DesignArgs {
+  std::string config;
+  int count = 25;
+  std::string out;                    // pose list CSV to write
+  std::vector<std::string> estimate;  // parameters the design is for (as calibrate --estimate)
+  double half_extent = 0.156;         // m, half side of the cube of candidate positions
+  int points_per_axis = 5;
+  double max_angle = 0.2618;  // rad
+  SensorNoise noise;
+  bool compare = false;  // also compare with random and box-corner sets of the same size
+  std::uint64_t seed = 1;
+};
+Result<Output> design_poses(const DesignArgs& args);
+
+struct PredictArgs {
+  std::string config;
+  std::string poses;
+  std::vector<std::string> estimate;
+  SensorNoise noise;
+  double half_extent = 0.156;  // m, test cube (ISO 9283 style) for the position error
+  int points_per_axis = 5;
+};
+Result<Output> predict_accuracy(const PredictArgs& args);
+
+// ---------------------------------------------------------------------------------------------
+// fit-cable, fit-force-sensor
+// ---------------------------------------------------------------------------------------------
+struct FitCableArgs {
+  std::string experiment;
+  int min_order = 1;
+  int max_order = 5;
+  int folds = 5;
+  std::uint32_t seed = 1;
+  bool minimum_error = false;  // choose the minimum-CV order instead of the one-standard-error rule
+};
+Result<Output> fit_cable(const FitCableArgs& args);
+
+struct FitForceArgs {
+  std::string experiment;
+  double gravity = std::numeric_limits<double>::quiet_NaN();  // NaN: metadata or 9.81
+};
+Result<Output> fit_force_sensor(const FitForceArgs& args);
+
+}  // namespace cdpr::fit

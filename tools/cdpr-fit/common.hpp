@@ -1,0 +1,38 @@
+// Helpers shared by cdpr-fit's commands.
+#pragma once
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr::fit {
+
+// load_robot_config with the file named in the message.
+Result<RobotModel> load_config(const std::string& path);
+
+// "fnv1a64:..." of a file, or "unknown" when it cannot be read.
+std::string hash_or_unknown(const std::string& path);
+
+// Status with "<context>: " in front (Status::prepend trips -Wformat-truncation in GCC 12).
+Status with_context(const Status& s, const std::string& context);
+
+// JSON arrays of Eigen vectors/matrices (NaN and infinity become null).
+nlohmann::json to_json(const Eigen::VectorXd& v);
+nlohmann::json to_json(const Eigen::Matrix3Xd& m);  // list of columns
+nlohmann::json number_or_null(double v);
+
+// Applies --estimate items (estimate_names()) to `options`; an empty list keeps its defaults.
+Status apply_estimate(const std::vector<std::string>& names, int num_cables,
+                      IdentificationOptions* options);
+// The estimated items of `options`, for reports.
+std::vector<std::string> estimated_items(const IdentificationOptions& options);
+
+// A number for humans: "%.*g".
+std::string fmt(double v, int digits = 6);
+
+}  // namespace cdpr::fit
