@@ -20,10 +20,18 @@
 // beta = pi/4 + 3 pi/4 = pi, exit point D + (0.2, 0, 0), L = 0.1 pi + 0.1 (half a turn, then down).
 // A property used below: dL/dP = -(T - P) / l_f, i.e. the length changes as for a point anchor
 // placed at the exit point, so the structure matrix keeps its usual form with u_i = (T - P)/l_f.
+//
+// Evaluation (same values as the formulas above, fewer transcendental calls, better derivatives
+// near acos(+-1)): with a = |rho - r|, cos(beta) = (l_f h - r a) / BM^2, sin(beta) =
+// (r h + l_f a) / BM^2, beta = atan2(sin, cos) taken in [0, 2 pi); e_gamma = (v_x, v_y) / rho.
+//
+// Which way the cable enters: it travels along +ez at D. With h > 0 the platform lies ahead
+// (wrap below pi/2 when rho > r); with h < 0 it lies behind and the cable wraps past pi/2.
 #pragma once
 
 #include <Eigen/Core>
 #include <cmath>
+#include <numbers>
 
 #include "cdpr/calibration/robot_model.hpp"
 
@@ -58,6 +66,36 @@ Mat3<T> rotation_from_rpy(const T& roll, const T& pitch, const T& yaw) {
 template <typename T>
 Mat3<T> rotation_from_rpy(const Vec3<T>& rpy) {
   return rotation_from_rpy<T>(rpy(0), rpy(1), rpy(2));
+}
+
+// Inverse of rotation_from_rpy: (roll, pitch, yaw) with pitch in [-pi/2, pi/2], roll and yaw in
+// (-pi, pi]. At the singularity |pitch| = pi/2 it returns yaw = 0 and puts the whole rotation
+// about the vertical into roll.
+inline Eigen::Vector3d rpy_from_rotation(const Eigen::Matrix3d& R) {
+  const double cp = std::hypot(R(0, 0), R(1, 0));
+  const double pitch = std::atan2(-R(2, 0), cp);
+  if (cp < 1e-12) {
+    const double sp = -R(2, 0) > 0.0 ? 1.0 : -1.0;
+    return {std::atan2(sp * R(0, 1), R(1, 1)), pitch, 0.0};
+  }
+  return {std::atan2(R(2, 1), R(2, 2)), pitch, std::atan2(R(1, 0), R(0, 0))};
+}
+
+// exp([w]x): the rotation by |w| about w / |w| (Rodrigues), exact to rounding for small |w|.
+inline Eigen::Matrix3d rotation_exp(const Eigen::Vector3d& w) {
+  const double t2 = w.squaredNorm();
+  double a, b;  // sin(t) / t, (1 - cos(t)) / t^2
+  if (t2 < 1e-8) {
+    a = 1.0 - t2 / 6.0 + t2 * t2 / 120.0;
+    b = 0.5 - t2 / 24.0 + t2 * t2 / 720.0;
+  } else {
+    const double t = std::sqrt(t2);
+    a = std::sin(t) / t;
+    b = (1.0 - std::cos(t)) / t2;
+  }
+  Eigen::Matrix3d K;
+  K << 0.0, -w(2), w(1), w(2), 0.0, -w(0), -w(1), w(0), 0.0;
+  return Eigen::Matrix3d::Identity() + a * K + b * (K * K);
 }
 
 // The geometry of one cable between its frame-side point D and platform anchor P (both world).
@@ -104,7 +142,8 @@ CableGeometry<T> cable_geometry(const Vec3<T>& d, const Eigen::Matrix3d& pulley_
   const T rho = sqrt(v(0) * v(0) + v(1) * v(1));
   const T h = v(2);
   g.swivel_angle = atan2(v(1), v(0));
-  const T bm2 = (rho - radius) * (rho - radius) + h * h;
+  const T e = rho - radius;
+  const T bm2 = e * e + h * h;
   const T r2 = radius * radius;
   if (!(bm2 > r2)) {
     g.valid = false;
@@ -115,14 +154,18 @@ CableGeometry<T> cable_geometry(const Vec3<T>& d, const Eigen::Matrix3d& pulley_
     g.unit = Vec3<T>::Zero();
     return g;
   }
-  const T bm = sqrt(bm2);
   g.free_length = sqrt(bm2 - r2);
-  g.wrap_angle = acos(g.free_length / bm) + acos(h / bm);
+  // beta = acos(l_f / BM) + acos(h / BM), through its cosine and sine (see the file comment).
+  const T a = e < T(0) ? T(-e) : e;
+  const T cos_beta = (g.free_length * h - radius * a) / bm2;
+  const T sin_beta = (radius * h + g.free_length * a) / bm2;
+  g.wrap_angle = atan2(sin_beta, cos_beta);
+  if (g.wrap_angle < T(0)) g.wrap_angle += T(2.0 * std::numbers::pi);
   g.length = radius * g.wrap_angle + g.free_length;
-  const T cg = cos(g.swivel_angle), sg = sin(g.swivel_angle);
-  const Vec3<T> e_gamma = Rp.col(0) * cg + Rp.col(1) * sg;
-  g.exit_point = d + e_gamma * (radius * (T(1) - cos(g.wrap_angle))) +
-                 Rp.col(2) * (radius * sin(g.wrap_angle));
+  // e_gamma = cos(gamma) ex + sin(gamma) ey; gamma = 0 when P is on the swivel axis.
+  Vec3<T> e_gamma = Rp.col(0);
+  if (rho > T(0)) e_gamma = (Rp.col(0) * v(0) + Rp.col(1) * v(1)) / rho;
+  g.exit_point = d + e_gamma * (radius * (T(1) - cos_beta)) + Rp.col(2) * (radius * sin_beta);
   g.unit = (g.exit_point - p) / g.free_length;
   return g;
 }
@@ -158,15 +201,16 @@ struct KinematicsData {
   int invalid_cable = -1;  // first cable whose geometry is degenerate, -1 if none
 };
 
-// All cables at once. Returns false (and sets data.invalid_cable) when a cable is degenerate.
-// Allocates nothing.
-inline bool inverse_kinematics(const RobotModel& model, const Pose& pose, KinematicsData& data) {
+// All cables at once for a platform at `position` with rotation matrix `rotation` (world).
+// Returns false (and sets data.invalid_cable) when a cable is degenerate. Allocates nothing.
+inline bool inverse_kinematics(const RobotModel& model, const Eigen::Vector3d& position,
+                               const Eigen::Matrix3d& rotation, KinematicsData& data) {
   const int m = model.num_cables();
-  data.rotation = rotation_from_rpy<double>(pose.rpy);
+  data.rotation = rotation;
   data.invalid_cable = -1;
   for (int i = 0; i < m; ++i) {
-    const Eigen::Vector3d rb = data.rotation * model.platform_anchors.col(i);
-    const Eigen::Vector3d p = pose.position + rb;
+    const Eigen::Vector3d rb = rotation * model.platform_anchors.col(i);
+    const Eigen::Vector3d p = position + rb;
     const PulleyModel& pulley = model.pulleys[static_cast<std::size_t>(i)];
     const Eigen::Vector3d d = model.frame_anchors.col(i);
     const CableGeometry<double> g = cable_geometry<double>(d, pulley.frame, pulley.radius, p);
@@ -181,6 +225,12 @@ inline bool inverse_kinematics(const RobotModel& model, const Pose& pose, Kinema
     data.structure_matrix.col(i).tail<3>() = rb.cross(g.unit);
   }
   return data.invalid_cable < 0;
+}
+
+// All cables at once. Returns false (and sets data.invalid_cable) when a cable is degenerate.
+// Allocates nothing.
+inline bool inverse_kinematics(const RobotModel& model, const Pose& pose, KinematicsData& data) {
+  return inverse_kinematics(model, pose.position, rotation_from_rpy<double>(pose.rpy), data);
 }
 
 }  // namespace cdpr

@@ -51,20 +51,36 @@ struct WinchModel {
   double gear_ratio = 1.0;        // motor revolutions per drum revolution
   double counts_per_rev = 65536;  // encoder counts per motor revolution
   int direction = 1;              // +1: positive counts pay cable out (length grows); -1 reversed
+  // Added for winch.hpp (encoder zero): the cable length command (unstretched length from the
+  // frame anchor D to the platform anchor, see ik_compensation.hpp) at encoder count 0, m.
+  // Identified by the calibration (it trades against the frame anchor along the cable).
+  double length_offset = 0.0;
 };
 
 enum class ElongationKind { kRigid, kHooke, kPolynomial };
 
 // Polynomial surface dL = sum_{i+j<=order} c_ij * L^i * F^j, coefficients in graded order
 // (i + j = 0, then 1, ...; within a degree, increasing j). L in m, F in N, dL in m.
+//
+// Added for elongation.hpp (well-conditioned fits): the polynomial is evaluated in the scaled
+// variables s = (L - length_center) / length_scale and t = (F - tension_center) / tension_scale,
+// i.e. dL = sum c_ij s^i t^j. The defaults (0, 1, 0, 1) give the plain form above. L is the loaded
+// cable length between drum and platform (routing_length + kinematic length), F the tension.
 struct PolynomialSurface {
   int order = 0;
-  std::vector<double> coefficients;
+  std::vector<double> coefficients;  // (order + 1) (order + 2) / 2 entries, graded order
+  double length_center = 0.0;        // m
+  double length_scale = 1.0;         // m, > 0
+  double tension_center = 0.0;       // N
+  double tension_scale = 1.0;        // N, > 0
 };
 
 struct CableModel {
   double ea = 1.0e5;             // axial stiffness E*A, N
   double mass_per_length = 0.0;  // kg/m
+  // m, cable between the winch drum and the frame anchor (through the routing pulleys). It is
+  // stretched by the tension too. Added for the config loader (drivers/config); 0 = unknown.
+  double routing_length = 0.0;
   ElongationKind elongation = ElongationKind::kHooke;
   PolynomialSurface polynomial;  // used when elongation == kPolynomial
   double f_min = 5.0;            // N, minimum allowed tension
