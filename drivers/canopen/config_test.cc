@@ -23,6 +23,10 @@ TEST(Config, LoadsTheMiniExample) {
     EXPECT_EQ(n.master_heartbeat_timeout, 150ms);
     EXPECT_EQ(n.drive.abort_connection_option, 3);
   }
+  EXPECT_EQ(c->sdo_quiet, 50ms);  // default
+  auto q = parse_config("master:\n  sdo_quiet_ms: 20\nnodes:\n  - id: 1\n", "q.yaml");
+  ASSERT_TRUE(q.ok()) << q.status().to_string();
+  EXPECT_EQ(q->sdo_quiet, 20ms);
   const NodeConfig& f = c->nodes[8];
   EXPECT_EQ(f.kind, NodeKind::kForceSensor);
   ASSERT_EQ(f.force.gain.size(), 8u);  // a scalar gain expands to every channel
@@ -46,6 +50,17 @@ TEST(Config, ErrorsNameFileLineAndField) {
   EXPECT_NE(bad_map.status().message().find("x.yaml:5: nodes[0].rpdo[0].map[0]: object '0x6040'"),
             std::string::npos)
       << bad_map.status().message();
+
+  // Bad hex digits in the index or the sub-index (the parser checks where strtoul stopped).
+  for (const char* obj : {"0x60ZZ:00", "0x6040:0G"}) {
+    auto bad_hex = parse_config(std::string("nodes:\n  - id: 2\n    rpdo:\n      - number: 1\n"
+                                            "        map: [\"") +
+                                    obj + " u16\"]\n",
+                                "h.yaml");
+    ASSERT_FALSE(bad_hex.ok()) << obj;
+    EXPECT_NE(bad_hex.status().message().find("is not INDEX:SUB in hexadecimal"), std::string::npos)
+        << bad_hex.status().message();
+  }
 
   auto typo = parse_config("master:\n  sync_periode_ms: 4\nnodes:\n  - id: 1\n", "t.yaml");
   ASSERT_FALSE(typo.ok());

@@ -233,6 +233,197 @@ TEST_F(MasterTest, BootFailsNamingTheMissingNode) {
             "node 6 (winch6): no boot-up within 5000 ms after NMT reset communication");
 }
 
+TEST_F(MasterTest, SetModeWhileRunningWaitsForTheModeDisplay) {
+  ASSERT_TRUE(make_and_boot().ok());
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  run(20ms);
+  drain();
+  drives[2]->set_mode_display_delay(60ms);  // 0x6061 follows 60 ms after 0x6060
+  const auto syncs_before = drives[2]->syncs();
+  const Timestamp t0 = net.now();
+  Status s = master->set_mode(2, Mode::kProfilePosition);
+  ASSERT_TRUE(s.ok()) << s.to_string();
+  EXPECT_GE(net.now() - t0, 60ms);
+  EXPECT_LT(net.now() - t0, 200ms);
+  EXPECT_EQ(drives[2]->od().get({0x6061, 0}), 1);
+  EXPECT_EQ(master->drive(2)->mode(), Mode::kProfilePosition);
+  // The master kept cycling while it waited: SYNCs, RPDOs and heartbeats went on.
+  EXPECT_GE(drives[2]->syncs() - syncs_before, 14u);
+  for (const EventType t : drain()) EXPECT_NE(t, EventType::kHeartbeatLost);
+  EXPECT_FALSE(master->faulted());
+  for (NodeId id = 1; id <= 8; ++id) EXPECT_TRUE(master->drive(id)->enabled()) << int{id};
+  EXPECT_EQ(drives[2]->position(), 2017);  // held during the switch
+  // CSP commands are not taken in profile position.
+  EXPECT_FALSE(master->drive(2)->set_target_counts(2500));
+}
+
+TEST_F(MasterTest, SetModeTimesOutNamingTheNodeWhenTheDriveNeverConfirms) {
+  ASSERT_TRUE(make_and_boot().ok());
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  Drive* d4 = master->drive(4);
+  ASSERT_TRUE(d4->set_target_counts(4017 + 300));
+  run(20ms);
+  ASSERT_EQ(drives[4]->position(), 4317);
+  drives[4]->set_ignore_mode_switch(true);
+  const Timestamp t0 = net.now();
+  Status s = master->set_mode(4, Mode::kProfilePosition);
+  ASSERT_FALSE(s.ok());
+  EXPECT_EQ(s.code(), ErrorCode::kTimeout);
+  EXPECT_EQ(std::string(s.message()),
+            "node 4: 0x6061 shows mode 8 1000 ms after writing 0x6060 = 1 (profile_position)");
+  EXPECT_GE(net.now() - t0, 1000ms);
+  EXPECT_LT(net.now() - t0, 1100ms);
+  // The drive is held where it is: no mode is assumed, no command of either mode is taken.
+  EXPECT_EQ(d4->mode(), Mode::kNone);
+  EXPECT_FALSE(d4->set_target_counts(9000));
+  EXPECT_FALSE(d4->move_to_counts(9000));
+  run(40ms);
+  EXPECT_EQ(drives[4]->position(), 4317);
+  EXPECT_EQ(d4->target_counts(), 4317);
+  // The network stayed up during the wait.
+  EXPECT_FALSE(master->faulted());
+  EXPECT_TRUE(d4->enabled());
+  // Once the drive follows again the switch succeeds.
+  drives[4]->set_ignore_mode_switch(false);
+  ASSERT_TRUE(master->set_mode(4, Mode::kCyclicSyncPosition).ok());
+  EXPECT_TRUE(d4->set_target_counts(4317 + 5));
+}
+
+TEST_F(MasterTest, ProfilePositionMoveHandshakeAndTargetReached) {
+  ASSERT_TRUE(make_and_boot().ok());
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  Status s = master->set_mode(3, Mode::kProfilePosition);
+  ASSERT_TRUE(s.ok()) << s.to_string();
+  run(20ms);
+  Drive* d = master->drive(3);
+  EXPECT_FALSE(master->drive(1)->move_to_counts(5000));  // drive 1 is in CSP
+  EXPECT_TRUE(d->move_done());
+  const std::int32_t start = 3017;
+  ASSERT_EQ(drives[3]->position(), start);
+  ASSERT_TRUE(d->move_to_counts(start + 2000));
+  EXPECT_FALSE(d->move_done());
+
+  // One cycle at a time: master bit 4 (new set-point), drive bit 12 (set-point acknowledge).
+  int first_bit4 = -1, first_ack = -1, bit4_dropped = -1, ack_dropped = -1, done_at = -1;
+  std::int32_t last = start;
+  std::int32_t max_step = 0;
+  for (int k = 0; k < 200 && done_at < 0; ++k) {
+    run(config.sync_period);
+    const bool bit4 = (d->controlword() & cia402::cw::kNewSetPoint) != 0;
+    const bool ack = (d->statusword() & cia402::sw::kSetPointAcknowledge) != 0;
+    if (bit4 && first_bit4 < 0) first_bit4 = k;
+    if (ack && first_ack < 0) first_ack = k;
+    if (first_bit4 >= 0 && !bit4 && bit4_dropped < 0) bit4_dropped = k;
+    if (first_ack >= 0 && !ack && ack_dropped < 0) ack_dropped = k;
+    const std::int32_t p = drives[3]->position();
+    EXPECT_GE(p, last);          // monotonic
+    EXPECT_LE(p, start + 2000);  // no overshoot
+    max_step = std::max(max_step, p - last);
+    last = p;
+    if (d->move_done()) done_at = k;
+  }
+  ASSERT_GE(done_at, 0) << "move not done";
+  EXPECT_EQ(first_bit4, 0);
+  EXPECT_GT(first_ack, first_bit4);      // the drive acknowledged the set-point
+  EXPECT_GE(bit4_dropped, first_ack);    // then the master dropped bit 4
+  EXPECT_GT(ack_dropped, bit4_dropped);  // then the drive dropped the acknowledge
+  EXPECT_GE(done_at, ack_dropped);       // target reached judged after the handshake
+  EXPECT_GE(done_at, 2000 / 80);         // 20000 counts/s at 4 ms: 80 counts per SYNC
+  EXPECT_LE(max_step, 80);
+  EXPECT_EQ(drives[3]->position(), start + 2000);
+  EXPECT_EQ(d->actual_counts(), start + 2000);
+  EXPECT_EQ(drives[3]->od().get({0x607A, 0}, true), start + 2000);
+  EXPECT_NE(d->statusword() & cia402::sw::kTargetReached, 0);
+
+  // A second move in SI units (1e6 counts per m), backwards.
+  ASSERT_TRUE(d->move_to(d->actual_position() - 0.0005));
+  for (int k = 0; k < 200 && !d->move_done(); ++k) run(config.sync_period);
+  EXPECT_TRUE(d->move_done());
+  EXPECT_EQ(drives[3]->position(), start + 1500);
+  // Not enabled: no move is taken.
+  master->drive(3)->disable();
+  run(40ms);
+  EXPECT_FALSE(d->move_to_counts(start));
+}
+
+TEST_F(MasterTest, SetActualPositionForTheReferencePlatform) {
+  ASSERT_TRUE(make_and_boot().ok());
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  Drive* d5 = master->drive(5);
+  // A CSP target from before the homing: it is in the old coordinates and must not be replayed.
+  ASSERT_TRUE(d5->set_target_counts(5017 + 100));
+  run(20ms);
+  ASSERT_EQ(drives[5]->position(), 5117);
+
+  Status s = master->set_actual_position(5, 1.234567, 2s);  // m of cable at the reference pose
+  ASSERT_TRUE(s.ok()) << s.to_string();
+  EXPECT_EQ(drives[5]->od().get({0x6098, 0}, true), 37);
+  EXPECT_EQ(drives[5]->od().get({0x607C, 0}, true), 1234567);
+  EXPECT_EQ(drives[5]->homings(), 1u);
+  EXPECT_EQ(drives[5]->position(), 1234567);
+  EXPECT_EQ(d5->actual_counts(), 1234567);
+  EXPECT_NEAR(d5->actual_position(), 1.234567, 1e-9);
+  // Back in CSP, holding the new position (no jump to the old target).
+  EXPECT_EQ(d5->mode(), Mode::kCyclicSyncPosition);
+  EXPECT_EQ(drives[5]->od().get({0x6061, 0}), 8);
+  run(40ms);
+  EXPECT_EQ(drives[5]->position(), 1234567);
+  ASSERT_TRUE(d5->set_target(1.234567 + 1e-4));
+  run(20ms);
+  EXPECT_EQ(drives[5]->position(), 1234667);
+  // Nobody else moved or faulted.
+  EXPECT_EQ(drives[1]->position(), 1017);
+  EXPECT_FALSE(master->faulted());
+  EXPECT_TRUE(d5->enabled());
+}
+
+TEST_F(MasterTest, HomingIsJudgedOnlyAfterTheDriveSawTheStart) {
+  ASSERT_TRUE(make_and_boot().ok());
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  drives[6]->set_homing_duration(40ms);
+  Status s = master->set_actual_position(6, 0.5, 2s);
+  ASSERT_TRUE(s.ok()) << s.to_string();
+  EXPECT_EQ(drives[6]->position(), 500000);
+  // The drive still shows "homing attained" from the first homing when the second one starts:
+  // it must not be taken for the new one.
+  const Timestamp t0 = net.now();
+  s = master->set_actual_position(6, 0.25, 2s);
+  ASSERT_TRUE(s.ok()) << s.to_string();
+  EXPECT_GE(net.now() - t0, 40ms);
+  EXPECT_EQ(drives[6]->homings(), 2u);
+  EXPECT_EQ(drives[6]->position(), 250000);
+  EXPECT_EQ(master->drive(6)->actual_counts(), 250000);
+}
+
+TEST_F(MasterTest, HomingErrorsAndPreconditionsNameTheNode) {
+  ASSERT_TRUE(make_and_boot().ok());
+  run(20ms);
+  Status s = master->set_actual_position(7, 0.1, 1s);
+  EXPECT_EQ(s.code(), ErrorCode::kFailedPrecondition);
+  EXPECT_EQ(std::string(s.message()),
+            "node 7: set actual position needs OPERATION_ENABLED (drive in SWITCH_ON_DISABLED)");
+  EXPECT_EQ(master->set_actual_position(9, 0.1, 1s).code(), ErrorCode::kNotFound);
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  // The drive refuses the home offset: the SDO abort is the answer.
+  drives[7]->faults().abort_on[ObjectAddress{0x607C, 0}.key()] = abort_code::kValueRange;
+  s = master->set_actual_position(7, 0.1, 1s);
+  EXPECT_EQ(s.code(), ErrorCode::kAborted);
+  EXPECT_NE(s.message().find("node 7: SDO download 0x607C:00 aborted: 0x06090030"),
+            std::string::npos)
+      << s.message();
+  EXPECT_EQ(drives[7]->position(), 7017);
+  // A homing method the drive cannot do ends with "homing error" (statusword bit 13).
+  ASSERT_TRUE(master->set_mode(7, Mode::kHoming).ok());
+  ASSERT_TRUE(master->sdo(7)->write<std::int8_t>({0x6098, 0}, 1, master->pump()).ok());
+  Drive* d7 = master->drive(7);
+  d7->start_homing();
+  s = master->wait_for([&] { return d7->homing_done() || d7->homing_error(); }, 1s, "homing");
+  ASSERT_TRUE(s.ok()) << s.to_string();
+  EXPECT_TRUE(d7->homing_error());
+  EXPECT_FALSE(d7->homing_done());
+  EXPECT_EQ(drives[7]->position(), 7017);
+}
+
 TEST_F(MasterTest, CycleDoesNotAllocate) {
   ASSERT_TRUE(make_and_boot().ok());
   ASSERT_TRUE(master->enable_all(2s).ok());

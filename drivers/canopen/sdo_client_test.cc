@@ -150,6 +150,102 @@ TEST_F(SdoTest, ServerAbortsNameTheReason) {
   EXPECT_NE(len.message().find("0x06070012"), std::string::npos);
 }
 
+// Found by the vcan interop test: a server that stalls for longer than the SDO timeout answers
+// the aborted attempt late, in a burst with its answer to the retry. The late initiate answer
+// used to be taken for the retry's; everything after was one step off and the transfer failed
+// with "unexpected answer to upload segment (command byte 0x41)".
+TEST_F(SdoTest, LateAnswerToAnAbortedAttemptIsNotTakenForTheRetry) {
+  drive.faults().delay_sdo_answers = 1;
+  drive.faults().sdo_answer_delay = 70ms;  // longer than the 50 ms timeout
+  auto name = sdo.read_string({0x1008, 0}, pump);
+  ASSERT_TRUE(name.ok()) << name.status().to_string();
+  EXPECT_EQ(*name, "cdpr simulated CANopen node");
+  EXPECT_EQ(sdo.attempts(), 2);
+  // The following transfers are in step: each gets its own answer.
+  auto type = sdo.read<std::uint32_t>({0x1000, 0}, pump);
+  ASSERT_TRUE(type.ok()) << type.status().to_string();
+  EXPECT_EQ(*type, 0x00020192u);
+  auto vendor = sdo.read<std::uint32_t>({0x1018, 1}, pump);
+  ASSERT_TRUE(vendor.ok()) << vendor.status().to_string();
+  EXPECT_EQ(*vendor, 0x00CD9001u);
+  EXPECT_EQ(sdo.attempts(), 1);
+}
+
+// The same burst without a quiet period: the phase checks alone keep the transfer in step.
+TEST_F(SdoTest, DuplicateInitiateAnswerIsDiscardedWithoutQuietPeriod) {
+  sdo.set_timing({50ms, 2, 0ns});
+  drive.faults().delay_sdo_answers = 1;
+  drive.faults().sdo_answer_delay = 70ms;
+  auto name = sdo.read_string({0x1008, 0}, pump);
+  ASSERT_TRUE(name.ok()) << name.status().to_string();
+  EXPECT_EQ(*name, "cdpr simulated CANopen node");
+  EXPECT_EQ(sdo.attempts(), 2);
+  EXPECT_EQ(sdo.stale_answers(), 1u);  // the second initiate answer
+  // Segmented download: the late 0x60 starts the segments, the retry's 0x60 is dropped.
+  drive.od().add_string({0x2000, 0}, "", slave::Access::kRw);
+  drive.faults().delay_sdo_answers = 1;
+  ASSERT_TRUE(sdo.write_string({0x2000, 0}, "a label of 24 characters", pump).ok());
+  const auto& d = drive.od().find({0x2000, 0})->data;
+  EXPECT_EQ(std::string(d.begin(), d.end()), "a label of 24 characters");
+  EXPECT_EQ(sdo.attempts(), 2);
+  EXPECT_EQ(sdo.stale_answers(), 2u);
+  auto type = sdo.read<std::uint32_t>({0x1000, 0}, pump);
+  ASSERT_TRUE(type.ok()) << type.status().to_string();
+  EXPECT_EQ(*type, 0x00020192u);
+}
+
+// With the quiet period the late answer arrives while the client waits, and the retry's initiate
+// is sent only after it.
+TEST_F(SdoTest, QuietPeriodDrainsTheLateAnswerBeforeTheRetry) {
+  sdo.set_timing({50ms, 2, 40ms});
+  drive.faults().delay_sdo_answers = 1;
+  drive.faults().sdo_answer_delay = 70ms;
+  const Timestamp t0 = net.now();
+  auto name = sdo.read_string({0x1008, 0}, pump);
+  ASSERT_TRUE(name.ok()) << name.status().to_string();
+  EXPECT_EQ(*name, "cdpr simulated CANopen node");
+  EXPECT_EQ(sdo.attempts(), 2);
+  EXPECT_EQ(sdo.stale_answers(), 1u);
+  EXPECT_GE(net.now() - t0, 90ms);  // timeout + quiet period
+  EXPECT_LT(net.now() - t0, 100ms);
+  // Server side: initiate (late), abort, initiate, 4 segments; nothing of the retry was lost.
+  EXPECT_EQ(drive.sdo_requests(), 7u);
+}
+
+// A stall in the middle of a segmented upload: the late segment answer arrives in the retry's
+// initiate phase and is discarded (it used to fail with "unexpected answer to initiate upload").
+TEST_F(SdoTest, LateSegmentAnswerIsDiscardedByTheRetry) {
+  sdo.set_timing({50ms, 2, 0ns});
+  drive.faults().delay_sdo_after = 2;  // initiate and first segment answered in time
+  drive.faults().delay_sdo_answers = 1;
+  drive.faults().sdo_answer_delay = 70ms;
+  auto name = sdo.read_string({0x1008, 0}, pump);
+  ASSERT_TRUE(name.ok()) << name.status().to_string();
+  EXPECT_EQ(*name, "cdpr simulated CANopen node");
+  EXPECT_EQ(sdo.attempts(), 2);
+  EXPECT_EQ(sdo.stale_answers(), 1u);
+}
+
+// A transfer that failed on a timeout leaves an answer on its way; it must not be taken by the
+// next transfer (another object), with or without the quiet period.
+TEST_F(SdoTest, LateAnswerOfAFailedTransferDoesNotLeakIntoTheNext) {
+  for (const auto quiet : {std::chrono::nanoseconds(0), std::chrono::nanoseconds(50ms)}) {
+    sdo.set_timing({50ms, 0, quiet});
+    drive.faults().delay_sdo_answers = 1;
+    drive.faults().sdo_answer_delay = 70ms;
+    auto lost = sdo.read<std::uint32_t>({0x1018, 1}, pump);
+    ASSERT_FALSE(lost.ok());
+    EXPECT_EQ(lost.status().code(), ErrorCode::kTimeout);
+    const auto stale_before = sdo.stale_answers();
+    auto type = sdo.read<std::uint32_t>({0x1000, 0}, pump);
+    ASSERT_TRUE(type.ok()) << type.status().to_string();
+    EXPECT_EQ(*type, 0x00020192u);
+    EXPECT_EQ(sdo.stale_answers(), stale_before + 1);
+    // Drain the bus so that nothing of this round reaches the next.
+    for (int i = 0; i < 400; ++i) pump.step();
+  }
+}
+
 TEST(SdoClientStateMachine, RejectsSecondTransferAndIgnoresOtherNodes) {
   can::ManualClock clock;
   can::VirtualCanBus bus(clock);
@@ -170,6 +266,95 @@ TEST(SdoClientStateMachine, RejectsSecondTransferAndIgnoresOtherNodes) {
   EXPECT_EQ(c.state(), SdoClient::State::kDone);
   ASSERT_EQ(c.data().size(), 2u);
   EXPECT_EQ(get_u16(c.data().data()), 0x1234);
+}
+
+TEST(SdoClientStateMachine, DiscardsAnswersThatCannotBelongToTheAttempt) {
+  can::ManualClock clock;
+  can::VirtualCanBus bus(clock);
+  auto a = bus.endpoint("a");
+  auto b = bus.endpoint("b");
+  SdoClient c(*a, 5, SdoTiming{100ms, 1, 20ms});
+  auto answer = [&](std::array<std::uint8_t, 8> d) {
+    can::Frame f = make_frame(0x585, 8);
+    f.data = d;
+    return c.on_frame(f, clock.now());
+  };
+  auto sent = [&] {
+    std::vector<std::uint8_t> cmds;
+    can::Frame f;
+    while (b->receive(f, 0ns).ok()) cmds.push_back(f.data[0]);
+    return cmds;
+  };
+  // Idle: a late answer is consumed and counted.
+  EXPECT_TRUE(answer({0x43, 0x00, 0x10, 0x00, 1, 2, 3, 4}));
+  EXPECT_EQ(c.stale_answers(), 1u);
+
+  ASSERT_TRUE(c.start_upload({0x1000, 0}, clock.now()).ok());
+  EXPECT_EQ(sent(), std::vector<std::uint8_t>{0x40});
+  // Initiate phase: an answer for another object, a segment answer and an abort of another
+  // object cannot answer this initiate.
+  EXPECT_TRUE(answer({0x43, 0x18, 0x10, 0x01, 1, 0, 0, 0}));
+  EXPECT_TRUE(answer({0x00, 1, 2, 3, 4, 5, 6, 7}));
+  EXPECT_TRUE(answer({0x80, 0x00, 0x20, 0x00, 0x00, 0x00, 0x02, 0x06}));
+  EXPECT_TRUE(c.busy());
+  EXPECT_EQ(c.stale_answers(), 4u);
+
+  // Timeout: abort, then nothing until the quiet period is over; what comes meanwhile is stale.
+  clock.advance(100ms);
+  c.poll(clock.now());
+  EXPECT_EQ(sent(), std::vector<std::uint8_t>{0x80});
+  EXPECT_EQ(c.attempts(), 2);
+  EXPECT_TRUE(answer({0x43, 0x00, 0x10, 0x00, 0x92, 0x01, 0x02, 0x00}));  // late: no initiate yet
+  EXPECT_EQ(c.stale_answers(), 5u);
+  clock.advance(19ms);
+  c.poll(clock.now());
+  EXPECT_TRUE(sent().empty());
+  clock.advance(1ms);
+  c.poll(clock.now());
+  EXPECT_EQ(sent(), std::vector<std::uint8_t>{0x40});
+  // Still before any other answer: the server's echo of our abort (SDO timeout) and a
+  // mid-transfer abort (toggle bit) belong to the aborted attempt.
+  EXPECT_TRUE(answer({0x80, 0x00, 0x10, 0x00, 0x00, 0x00, 0x04, 0x05}));
+  EXPECT_TRUE(answer({0x80, 0x00, 0x10, 0x00, 0x00, 0x00, 0x03, 0x05}));
+  EXPECT_TRUE(c.busy());
+  EXPECT_EQ(c.stale_answers(), 7u);
+  EXPECT_TRUE(answer({0x43, 0x00, 0x10, 0x00, 0x92, 0x01, 0x02, 0x00}));
+  ASSERT_EQ(c.state(), SdoClient::State::kDone);
+  EXPECT_EQ(get_u32(c.data().data()), 0x00020192u);
+
+  // A server abort naming our object is the answer.
+  ASSERT_TRUE(c.start_upload({0x2000, 0}, clock.now()).ok());
+  EXPECT_TRUE(answer({0x80, 0x00, 0x20, 0x00, 0x00, 0x00, 0x02, 0x06}));
+  ASSERT_EQ(c.state(), SdoClient::State::kFailed);
+  EXPECT_EQ(std::string(c.result().message()),
+            "node 5: SDO upload 0x2000:00 aborted: 0x06020000 object does not exist in the object "
+            "dictionary");
+
+  // A timeout names the discarded answers (a server that always answers for another object).
+  c.set_timing({100ms, 0, 20ms});
+  ASSERT_TRUE(c.start_upload({0x1000, 0}, clock.now()).ok());
+  EXPECT_TRUE(answer({0x43, 0x00, 0x10, 0x01, 1, 0, 0, 0}));
+  clock.advance(100ms);
+  c.poll(clock.now());
+  ASSERT_EQ(c.state(), SdoClient::State::kFailed);
+  EXPECT_EQ(std::string(c.result().message()),
+            "node 5: SDO upload 0x1000:00 timed out: no answer in 100 ms (1 attempt; 1 stale "
+            "answer discarded, last command byte 0x43 for 0x1000:01)");
+
+  // In the segment phase a second initiate answer is dropped before the first segment answer,
+  // and is a protocol error after it.
+  clock.advance(20ms);
+  sent();
+  ASSERT_TRUE(c.start_upload({0x1008, 0}, clock.now()).ok());
+  EXPECT_TRUE(answer({0x41, 0x08, 0x10, 0x00, 10, 0, 0, 0}));
+  EXPECT_TRUE(answer({0x41, 0x08, 0x10, 0x00, 10, 0, 0, 0}));
+  EXPECT_TRUE(c.busy());
+  EXPECT_TRUE(answer({0x00, 'a', 'b', 'c', 'd', 'e', 'f', 'g'}));
+  EXPECT_TRUE(answer({0x41, 0x08, 0x10, 0x00, 10, 0, 0, 0}));
+  ASSERT_EQ(c.state(), SdoClient::State::kFailed);
+  EXPECT_NE(c.result().message().find("unexpected answer to upload segment (command byte 0x41)"),
+            std::string::npos)
+      << c.result().message();
 }
 
 }  // namespace

@@ -150,6 +150,7 @@ void SlaveNode::power_on(Timestamp now) {
 
 void SlaveNode::reset_communication(Timestamp now) {
   sdo_state_ = SdoState::kIdle;
+  held_sdo_.clear();
   rpdos_.clear();
   tpdos_.clear();
   master_heard_ = false;
@@ -170,8 +171,15 @@ void SlaveNode::send_emcy(std::uint16_t code, std::uint8_t error_register,
 }
 
 void SlaveNode::step(Timestamp now) {
+  now_ = now;
   can::Frame f;
   while (bus_.receive(f, std::chrono::nanoseconds(0)).ok()) handle(f, now);
+  // A stalled SDO server catches up: held requests in order.
+  while (!held_sdo_.empty() && held_sdo_.front().due <= now) {
+    const can::Frame held = held_sdo_.front().frame;
+    held_sdo_.pop_front();
+    handle_sdo(held);
+  }
   if (state_ == NmtState::kUnknown) return;
   const auto hb_ms = od_.get({0x1017, 0});
   if (hb_ms > 0 && now >= next_heartbeat_) {
@@ -185,6 +193,7 @@ void SlaveNode::step(Timestamp now) {
     send_emcy(0x8130, 0x11);
     on_master_lost(now);
   }
+  on_step(now);
 }
 
 void SlaveNode::handle(const can::Frame& f, Timestamp now) {
@@ -220,7 +229,7 @@ void SlaveNode::handle(const can::Frame& f, Timestamp now) {
   }
   if (state_ == NmtState::kStopped) return;  // only NMT and heartbeats in STOPPED
   if (f.id == cob::kSdoRx + id_) {
-    handle_sdo(f);
+    receive_sdo(f, now);
     return;
   }
   if (state_ != NmtState::kOperational) return;
@@ -324,12 +333,32 @@ void SlaveNode::sdo_abort(ObjectAddress a, std::uint32_t code) {
   sdo_send(f);
 }
 
+void SlaveNode::receive_sdo(const can::Frame& rx, Timestamp now) {
+  if (rx.dlc < 8) return;
+  if (faults_.delay_sdo_answers > 0) {
+    if (faults_.delay_sdo_after > 0) {
+      --faults_.delay_sdo_after;
+    } else {
+      --faults_.delay_sdo_answers;
+      held_sdo_.push_back({now + faults_.sdo_answer_delay, rx});
+      return;
+    }
+  }
+  // Behind a held request: keep the order.
+  if (!held_sdo_.empty()) {
+    held_sdo_.push_back({held_sdo_.back().due, rx});
+    return;
+  }
+  handle_sdo(rx);
+}
+
 void SlaveNode::handle_sdo(const can::Frame& rx) {
   if (rx.dlc < 8) return;
   if (faults_.drop_sdo_requests > 0) {
     --faults_.drop_sdo_requests;
     return;
   }
+  ++sdo_requests_;
   const std::uint8_t cmd = rx.data[0];
   const ObjectAddress mux{get_u16(&rx.data[1]), rx.data[3]};
   can::Frame tx;
@@ -438,7 +467,16 @@ Drive402::Drive402(can::CanBus& bus, NodeId id, std::int32_t initial_position)
     const auto m = static_cast<std::int8_t>(v[0]);
     return (m == 0 || m == 1 || m == 6 || m == 8) ? 0 : abort_code::kValueRange;
   };
-  mode.on_write = [this] { od().set({0x6061, 0}, od().get({0x6060, 0})); };
+  mode.on_write = [this] {
+    if (ignore_mode_switch_) return;
+    if (mode_delay_.count() <= 0) {
+      od().set({0x6061, 0}, od().get({0x6060, 0}));
+      publish();
+      return;
+    }
+    mode_pending_ = true;
+    mode_due_ = now() + mode_delay_;
+  };
   d.add({0x6061, 0}, DataType::kI8, 0, Access::kRo);
   d.add({0x6064, 0}, DataType::kI32, position_, Access::kRo);
   d.add({0x606C, 0}, DataType::kI32, 0, Access::kRo);
@@ -462,7 +500,25 @@ Drive402::Drive402(can::CanBus& bus, NodeId id, std::int32_t initial_position)
 void Drive402::on_reset_application() {
   s_ = S::kNotReady;
   last_cw_ = 0;
+  mode_pending_ = false;
+  homing_running_ = false;
   publish();
+}
+
+void Drive402::on_step(Timestamp now) {
+  bool changed = false;
+  if (mode_pending_ && now >= mode_due_) {
+    mode_pending_ = false;
+    od().set({0x6061, 0}, od().get({0x6060, 0}));
+    changed = true;
+  }
+  if (homing_running_ && now >= homing_until_) {
+    homing_running_ = false;
+    position_ = static_cast<std::int32_t>(od().get({0x607C, 0}, true));
+    homing_attained_ = true;
+    changed = true;
+  }
+  if (changed) publish();
 }
 
 void Drive402::inject_fault(std::uint16_t emcy_code) {
@@ -553,14 +609,25 @@ void Drive402::apply_controlword(std::uint16_t cw) {
         set_point_ack_ = true;
       }
       if (!(cw & 0x10)) set_point_ack_ = false;
-    } else if (mode == 6 && (cw & 0x10) && !homing_attained_) {
-      position_ = static_cast<std::int32_t>(od().get({0x607C, 0}, true));
-      homing_attained_ = true;
+    } else if (mode == 6 && (cw & 0x10) && !(prev & 0x10)) {
+      ++homings_;
+      homing_attained_ = homing_error_ = false;
+      const auto method = od().get({0x6098, 0}, true);
+      if (method != 35 && method != 37) {
+        homing_error_ = true;  // the model knows only "the current position is home"
+      } else if (homing_duration_.count() <= 0) {
+        position_ = static_cast<std::int32_t>(od().get({0x607C, 0}, true));
+        homing_attained_ = true;
+      } else {
+        homing_running_ = true;
+        homing_until_ = now() + homing_duration_;
+      }
     }
   }
   if (s_ != S::kEnabled) {
     set_point_ack_ = false;
     pp_moving_ = false;
+    homing_running_ = false;  // interrupted (attained stays false)
   }
   publish();
 }
@@ -632,6 +699,7 @@ void Drive402::publish() {
     if (!pp_moving_) sw |= 0x0400;
   } else if (mode == 6) {
     if (homing_attained_) sw |= 0x1400;
+    if (homing_error_) sw |= 0x2000;
   } else {
     sw |= 0x0400;
   }

@@ -143,8 +143,10 @@ class Parser {
     if (colon == std::string::npos) {
       return error(n, field, "object '" + s + "' is not INDEX:SUB (e.g. 0x6041:00)");
     }
+    // Both parts live in named strings: strtoul's end pointers point into them.
+    const std::string idx_s = s.substr(0, colon);
     char* end = nullptr;
-    const unsigned long idx = std::strtoul(s.substr(0, colon).c_str(), &end, 16);
+    const unsigned long idx = std::strtoul(idx_s.c_str(), &end, 16);
     const std::string sub_s = s.substr(colon + 1);
     char* end2 = nullptr;
     const unsigned long sub = std::strtoul(sub_s.c_str(), &end2, 16);
@@ -167,11 +169,11 @@ class Parser {
   }
 
   Status master(const YAML::Node& m, MasterConfig& c) const {
-    Status s = check_keys(
-        m, "master",
-        {"interface", "bitrate", "node_id", "heartbeat_cob_id", "heartbeat_ms", "sync_period_ms",
-         "sync_counter_overflow", "boot_timeout_ms", "sdo_timeout_ms", "sdo_retries",
-         "bus_off_recovery_ms", "bus_load_warning", "reset_communication", "quick_stop_on_fault"});
+    Status s = check_keys(m, "master",
+                          {"interface", "bitrate", "node_id", "heartbeat_cob_id", "heartbeat_ms",
+                           "sync_period_ms", "sync_counter_overflow", "boot_timeout_ms",
+                           "sdo_timeout_ms", "sdo_retries", "sdo_quiet_ms", "bus_off_recovery_ms",
+                           "bus_load_warning", "reset_communication", "quick_stop_on_fault"});
     if (!s.ok()) return s;
     std::int64_t v = 0;
     if (m["interface"]) c.interface = m["interface"].Scalar();
@@ -227,6 +229,10 @@ class Parser {
     if (m["sdo_retries"]) {
       if (!(s = integer(m["sdo_retries"], "master.sdo_retries", 0, 10, v)).ok()) return s;
       c.sdo_retries = static_cast<int>(v);
+    }
+    if (m["sdo_quiet_ms"] &&
+        !(s = millis(m["sdo_quiet_ms"], "master.sdo_quiet_ms", 60000, c.sdo_quiet)).ok()) {
+      return s;
     }
     if (m["bus_off_recovery_ms"] &&
         !(s = millis(m["bus_off_recovery_ms"], "master.bus_off_recovery_ms", 60000,

@@ -45,6 +45,15 @@ bool Drive::set_target_counts(std::int32_t counts) {
   return true;
 }
 
+void Drive::set_mode(Mode m) {
+  mode_ = m;
+  user_target_valid_ = false;
+  pp_pending_ = pp_bit4_ = false;
+  pp_reached_ = true;
+  homing_requested_ = false;
+  target_ = actual_;
+}
+
 bool Drive::move_to_counts(std::int32_t counts) {
   if (!enabled() || mode_ != Mode::kProfilePosition) return false;
   pp_target_ = counts;
@@ -95,14 +104,23 @@ void Drive::update(Timestamp now) {
         break;
       case Mode::kHoming:
         if (homing_requested_) {
-          c |= cia402::cw::kStartHoming;
-          if (statusword_ & cia402::sw::kHomingError) {
-            homing_error_ = true;
-            homing_requested_ = false;
-          } else if ((statusword_ & cia402::sw::kHomingAttained) &&
-                     (statusword_ & cia402::sw::kTargetReached)) {
-            homing_done_ = true;
-            homing_requested_ = false;
+          if (homing_cycles_ < 0) {
+            homing_cycles_ = 0;  // bit 4 low for one cycle: the next one is an edge
+          } else {
+            // The statusword of the SYNC after the edge was applied is the first to count
+            // (a drive may sample its TPDO before it applies the RPDO of the same SYNC).
+            if (homing_cycles_ >= 2) {
+              if (statusword_ & cia402::sw::kHomingError) {
+                homing_error_ = true;
+                homing_requested_ = false;
+              } else if ((statusword_ & cia402::sw::kHomingAttained) &&
+                         (statusword_ & cia402::sw::kTargetReached)) {
+                homing_done_ = true;
+                homing_requested_ = false;
+              }
+            }
+            if (homing_cycles_ < 1000) ++homing_cycles_;
+            c |= cia402::cw::kStartHoming;
           }
         }
         target_ = actual_;

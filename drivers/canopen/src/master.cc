@@ -20,7 +20,7 @@ Result<std::unique_ptr<Master>> Master::create(can::CanBus& bus, MasterConfig co
   if (!hooks.now)
     return Status(ErrorCode::kInvalidArgument, "CANopen master: hooks.now is not set");
   std::unique_ptr<Master> m(new Master(bus, std::move(config), std::move(hooks)));
-  const SdoTiming timing{m->config_.sdo_timeout, m->config_.sdo_retries};
+  const SdoTiming timing{m->config_.sdo_timeout, m->config_.sdo_retries, m->config_.sdo_quiet};
   std::size_t n_drives = 0;
   for (const auto& nc : m->config_.nodes) n_drives += nc.kind == NodeKind::kCia402Drive ? 1 : 0;
   m->drives_.reserve(n_drives);
@@ -376,6 +376,10 @@ Status Master::set_mode(NodeId id, Mode mode) {
                          unsigned{id});
   }
   SdoClient& sdo = *n->sdo;
+  Drive& drive = drives_[static_cast<std::size_t>(n->drive)];
+  // Hold the position while the drive switches: whichever mode it is in meanwhile, the target
+  // follows the actual position and no command of the old mode is carried over.
+  drive.set_mode(Mode::kNone);
   Status s;
   if (mode == Mode::kCyclicSyncPosition) {
     // 0x60C2 interpolation time period = value * 10^index s, equal to the SYNC period.
@@ -416,7 +420,56 @@ Status Master::set_mode(NodeId id, Mode mode) {
     const Timestamp until = hooks_.now() + std::chrono::milliseconds(10);
     (void)wait_for([&] { return hooks_.now() >= until; }, std::chrono::seconds(1), "mode poll");
   }
-  drives_[static_cast<std::size_t>(n->drive)].set_mode(mode);
+  drive.set_mode(mode);
+  return Status::Ok();
+}
+
+Status Master::set_actual_position(NodeId id, double position, std::chrono::nanoseconds timeout) {
+  NodeRt* n = node(id);
+  if (n == nullptr || n->drive < 0) {
+    return Status::Error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
+                         unsigned{id});
+  }
+  Drive& drive = drives_[static_cast<std::size_t>(n->drive)];
+  if (!running_) {
+    return Status::Error(ErrorCode::kFailedPrecondition,
+                         "node %u: set actual position: the master is not running", unsigned{id});
+  }
+  if (!drive.enabled()) {
+    return Status::Error(ErrorCode::kFailedPrecondition,
+                         "node %u: set actual position needs OPERATION_ENABLED (drive in %s)",
+                         unsigned{id}, cia402::to_string(drive.state()).data());
+  }
+  const Mode previous = drive.mode();
+  const std::int32_t counts = drive.to_counts(position);
+  const std::int8_t method = n->config.drive.homing_method == 35 ? 35 : 37;
+  SdoClient& sdo = *n->sdo;
+  Status s = sdo.write<std::int8_t>(cia402::obj::kHomingMethod, method, pump_);
+  if (!s.ok()) return s;
+  s = sdo.write<std::int32_t>(cia402::obj::kHomeOffset, counts, pump_);
+  if (!s.ok()) return s;
+  s = set_mode(id, Mode::kHoming);
+  if (!s.ok()) return s;
+  drive.start_homing();
+  const Timestamp t0 = hooks_.now();
+  s = wait_for([&] { return drive.homing_done() || drive.homing_error() || !drive.enabled(); },
+               timeout, "homing");
+  if (drive.homing_error() || !drive.enabled() || !s.ok()) {
+    const char* what = drive.homing_error() ? "reported a homing error"
+                       : !drive.enabled()   ? "left OPERATION_ENABLED"
+                                            : "did not report homing attained";
+    return Status::Error(s.ok() ? ErrorCode::kUnavailable : ErrorCode::kTimeout,
+                         "node %u: homing method %d to %d counts: %s after %.0f ms (statusword "
+                         "0x%04X)",
+                         unsigned{id}, int{method}, counts, what, to_ms(hooks_.now() - t0),
+                         unsigned{drive.statusword()});
+  }
+  if (drive.actual_counts() != counts) {
+    return Status::Error(ErrorCode::kProtocolError,
+                         "node %u: position actual is %d counts after homing, expected %d",
+                         unsigned{id}, drive.actual_counts(), counts);
+  }
+  if (previous != Mode::kNone && previous != Mode::kHoming) return set_mode(id, previous);
   return Status::Ok();
 }
 

@@ -1,6 +1,7 @@
 #include "cdpr/canopen/sdo_client.hpp"
 
 #include <algorithm>
+#include <cstdio>
 
 #include "cdpr/canopen/codes.hpp"
 
@@ -52,12 +53,8 @@ Status SdoClient::start_upload(ObjectAddress a, Timestamp now) {
   }
   op_ = Op::kUpload;
   addr_ = a;
-  attempt_ = 1;
   buf_.clear();
-  state_ = State::kBusy;
-  result_ = Status::Ok();
-  deadline_ = now + timing_.timeout;
-  return send_request();
+  return begin(now);
 }
 
 Status SdoClient::start_download(ObjectAddress a, std::span<const std::uint8_t> data,
@@ -74,10 +71,23 @@ Status SdoClient::start_download(ObjectAddress a, std::span<const std::uint8_t> 
   }
   op_ = Op::kDownload;
   addr_ = a;
-  attempt_ = 1;
   buf_.assign(data.begin(), data.end());
+  return begin(now);
+}
+
+// First attempt of a new transfer: sent now, or held back while the quiet period of an earlier
+// abort runs (poll() sends it).
+Status SdoClient::begin(Timestamp now) {
+  last_now_ = now;
+  attempt_ = 1;
+  transfer_stale_ = 0;
   state_ = State::kBusy;
   result_ = Status::Ok();
+  if (now < quiet_until_) {
+    phase_ = Phase::kQuiet;
+    deadline_ = quiet_until_;
+    return Status::Ok();
+  }
   deadline_ = now + timing_.timeout;
   return send_request();
 }
@@ -88,6 +98,7 @@ Status SdoClient::send_request() {
   toggle_ = false;
   offset_ = 0;
   segments_ = 0;
+  segment_answers_ = 0;
   last_segment_sent_ = false;
   expected_size_ = 0;
   size_unknown_ = false;
@@ -132,12 +143,23 @@ Status SdoClient::send_segment() {
   return bus_.send(f);
 }
 
-void SdoClient::send_abort(std::uint32_t code) {
+void SdoClient::send_abort(std::uint32_t code, Timestamp now) {
   can::Frame f = make_frame(cob::kSdoRx + node_, 8);
   f.data[0] = kAbort;
   put_mux(f, addr_);
   put_u32(&f.data[4], code);
   (void)bus_.send(f);  // best effort: the transfer fails either way
+  // The server may still answer the aborted request (or answer the abort): drain that first.
+  quiet_until_ = now + timing_.quiet;
+  abort_sent_ = code;
+}
+
+bool SdoClient::discard(const can::Frame& f) {
+  ++stale_answers_;
+  ++transfer_stale_;
+  last_stale_cmd_ = f.dlc > 0 ? f.data[0] : 0;
+  last_stale_mux_ = f.dlc >= 4 ? ObjectAddress{get_u16(&f.data[1]), f.data[3]} : ObjectAddress{};
+  return true;
 }
 
 void SdoClient::fail(Status s) {
@@ -151,27 +173,52 @@ void SdoClient::finish() {
 }
 
 void SdoClient::cancel() {
+  cancel(last_now_);
+}
+
+void SdoClient::cancel(Timestamp now) {
   if (!busy()) return;
-  send_abort(abort_code::kGeneral);
+  last_now_ = now;
+  // Nothing was sent yet while the initiate is held back: no abort needed.
+  if (phase_ != Phase::kQuiet) send_abort(abort_code::kGeneral, now);
   fail(Status::Error(ErrorCode::kAborted, "node %u: SDO %s 0x%04X:%02X cancelled by the master",
                      unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub}));
 }
 
 void SdoClient::retry_or_fail(Timestamp now, const char* why) {
   // why == nullptr means the server did not answer in time.
-  if (why == nullptr) send_abort(abort_code::kTimeout);
+  if (why == nullptr) send_abort(abort_code::kTimeout, now);
   if (attempt_ <= timing_.retries) {
-    // The abort above (or the toggle abort before) made the server drop its half-done transfer.
+    // The abort (above, or the toggle abort before) made the server drop its half-done transfer;
+    // the new initiate waits for the quiet period so that late answers are drained first.
     ++attempt_;
+    if (now < quiet_until_) {
+      phase_ = Phase::kQuiet;
+      deadline_ = quiet_until_;
+      return;
+    }
     deadline_ = now + timing_.timeout;
     (void)send_request();
     return;
   }
   if (why == nullptr) {
-    fail(Status::Error(ErrorCode::kTimeout,
-                       "node %u: SDO %s 0x%04X:%02X timed out: no answer in %.0f ms (%d attempt%s)",
-                       unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub},
-                       to_ms(timing_.timeout), attempt_, attempt_ == 1 ? "" : "s"));
+    if (transfer_stale_ == 0) {
+      fail(Status::Error(
+          ErrorCode::kTimeout,
+          "node %u: SDO %s 0x%04X:%02X timed out: no answer in %.0f ms (%d attempt%s)",
+          unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub},
+          to_ms(timing_.timeout), attempt_, attempt_ == 1 ? "" : "s"));
+    } else {
+      fail(Status::Error(ErrorCode::kTimeout,
+                         "node %u: SDO %s 0x%04X:%02X timed out: no answer in %.0f ms (%d "
+                         "attempt%s; %u stale answer%s discarded, last command byte 0x%02X for "
+                         "0x%04X:%02X)",
+                         unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub},
+                         to_ms(timing_.timeout), attempt_, attempt_ == 1 ? "" : "s",
+                         unsigned{transfer_stale_}, transfer_stale_ == 1 ? "" : "s",
+                         unsigned{last_stale_cmd_}, unsigned{last_stale_mux_.index},
+                         unsigned{last_stale_mux_.sub}));
+    }
   } else {
     fail(Status::Error(ErrorCode::kProtocolError, "node %u: SDO %s 0x%04X:%02X: %s (%d attempt%s)",
                        unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub}, why,
@@ -180,14 +227,25 @@ void SdoClient::retry_or_fail(Timestamp now, const char* why) {
 }
 
 void SdoClient::poll(Timestamp now) {
-  if (busy() && now >= deadline_) retry_or_fail(now, nullptr);
+  last_now_ = now;
+  if (!busy()) return;
+  if (phase_ == Phase::kQuiet) {
+    if (now >= quiet_until_) {
+      deadline_ = now + timing_.timeout;
+      (void)send_request();
+    }
+    return;
+  }
+  if (now >= deadline_) retry_or_fail(now, nullptr);
 }
 
 bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
   if (f.error || f.rtr || f.extended || f.id != cob::kSdoTx + node_) return false;
-  if (!busy()) return true;  // late answer to a finished transfer: ignore
+  last_now_ = now;
+  // Late answer to a finished transfer, or anything while the quiet period drains the server.
+  if (!busy() || phase_ == Phase::kQuiet) return discard(f);
   if (f.dlc < 8) {
-    send_abort(abort_code::kCommandSpecifier);
+    send_abort(abort_code::kCommandSpecifier, now);
     fail(Status::Error(
         ErrorCode::kProtocolError, "node %u: SDO %s 0x%04X:%02X: answer with dlc %u (must be 8)",
         unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub}, unsigned{f.dlc}));
@@ -198,6 +256,13 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
 
   if (cmd == kAbort) {
     const std::uint32_t code = get_u32(&f.data[4]);
+    // A server aborts an initiate naming its object. Until it answered anything after our last
+    // abort, an abort with a mid-transfer reason or our own code is its echo of that abort or its
+    // own timeout of the aborted transfer.
+    const bool echo = abort_sent_ != 0 && (code == abort_sent_ || code == abort_code::kToggleBit ||
+                                           code == abort_code::kTimeout);
+    if (phase_ == Phase::kInitiate && (!(mux == addr_) || echo)) return discard(f);
+    abort_sent_ = 0;
     const std::string_view text = sdo_abort_text(code);
     fail(Status::Error(ErrorCode::kAborted, "node %u: SDO %s 0x%04X:%02X aborted: 0x%08X %.*s",
                        unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub},
@@ -205,10 +270,25 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
     return true;
   }
 
-  deadline_ = now + timing_.timeout;
   const std::uint8_t cs = cmd & kCsMask;
+  const std::uint8_t initiate_answer =
+      op_ == Op::kUpload ? kScsInitiateUpload : kScsInitiateDownload;
+  if (phase_ == Phase::kInitiate) {
+    // Only the initiate answer naming our object can answer the initiate we sent; a segment
+    // answer or an answer for another object is late (an aborted attempt or an earlier transfer).
+    if (cs != initiate_answer || !(mux == addr_)) return discard(f);
+  } else if (cs == initiate_answer && segment_answers_ == 0) {
+    // A second initiate answer before any segment answer: the first of the two was the late
+    // answer to the aborted attempt. The server answers in order, so our segment request reaches
+    // it after the retry's initiate and the transfer stays in step: drop this one.
+    return discard(f);
+  }
+
+  // Answers come in order: after this one, nothing of an aborted transfer can follow.
+  abort_sent_ = 0;
+  deadline_ = now + timing_.timeout;
   auto protocol_error = [&](const char* what) {
-    send_abort(abort_code::kCommandSpecifier);
+    send_abort(abort_code::kCommandSpecifier, now);
     fail(Status::Error(ErrorCode::kProtocolError,
                        "node %u: SDO %s 0x%04X:%02X: %s (command byte 0x%02X)", unsigned{node_},
                        op_name(), unsigned{addr_.index}, unsigned{addr_.sub}, what, unsigned{cmd}));
@@ -216,9 +296,6 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
 
   if (op_ == Op::kUpload) {
     if (phase_ == Phase::kInitiate) {
-      if (cs != kScsInitiateUpload)
-        return protocol_error("unexpected answer to initiate upload"), true;
-      if (!(mux == addr_)) return protocol_error("answer names another object"), true;
       const bool expedited = (cmd & 0x02) != 0;
       const bool size_indicated = (cmd & 0x01) != 0;
       if (expedited) {
@@ -237,12 +314,13 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
     }
     if (cs != kScsUploadSegment) return protocol_error("unexpected answer to upload segment"), true;
     if (((cmd & kToggle) != 0) != toggle_) {
-      send_abort(abort_code::kToggleBit);
+      send_abort(abort_code::kToggleBit, now);
       char why[64];
       std::snprintf(why, sizeof why, "toggle bit not alternated (segment %u)", unsigned{segments_});
       retry_or_fail(now, why);
       return true;
     }
+    ++segment_answers_;
     const std::size_t n = 7u - ((cmd >> 1) & 0x07u);
     buf_.insert(buf_.end(), f.data.begin() + 1,
                 f.data.begin() + 1 + static_cast<std::ptrdiff_t>(n));
@@ -257,6 +335,15 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
       finish();
       return true;
     }
+    if (expected_size_ != 0 && buf_.size() > expected_size_) {
+      send_abort(abort_code::kGeneral, now);
+      fail(Status::Error(ErrorCode::kProtocolError,
+                         "node %u: SDO upload 0x%04X:%02X: %zu bytes and no last segment, "
+                         "server announced %zu",
+                         unsigned{node_}, unsigned{addr_.index}, unsigned{addr_.sub}, buf_.size(),
+                         expected_size_));
+      return true;
+    }
     toggle_ = !toggle_;
     if (!send_segment().ok()) retry_or_fail(now, "could not send a segment request");
     return true;
@@ -264,9 +351,6 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
 
   // Download.
   if (phase_ == Phase::kInitiate) {
-    if (cs != kScsInitiateDownload)
-      return protocol_error("unexpected answer to initiate download"), true;
-    if (!(mux == addr_)) return protocol_error("answer names another object"), true;
     if (buf_.size() <= 4) {
       finish();
       return true;
@@ -279,12 +363,13 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
   if (cs != kScsDownloadSegment)
     return protocol_error("unexpected answer to download segment"), true;
   if (((cmd & kToggle) != 0) != toggle_) {
-    send_abort(abort_code::kToggleBit);
+    send_abort(abort_code::kToggleBit, now);
     char why[64];
     std::snprintf(why, sizeof why, "toggle bit not alternated (segment %u)", unsigned{segments_});
     retry_or_fail(now, why);
     return true;
   }
+  ++segment_answers_;
   if (last_segment_sent_) {
     finish();
     return true;

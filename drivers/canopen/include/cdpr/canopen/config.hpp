@@ -81,6 +81,7 @@ struct MasterConfig {
   nanoseconds boot_timeout{std::chrono::seconds(5)};
   nanoseconds sdo_timeout{std::chrono::milliseconds(100)};
   int sdo_retries = 2;
+  nanoseconds sdo_quiet{std::chrono::milliseconds(50)};  // after an SDO abort (SdoTiming::quiet)
   nanoseconds bus_off_recovery{std::chrono::milliseconds(500)};
   double bus_load_warning = 0.7;
   bool reset_communication = true;  // boot starts with NMT reset communication to all nodes

@@ -35,10 +35,13 @@ class Drive {
   bool move_to(double position) { return move_to_counts(to_counts(position)); }
   bool move_to_counts(std::int32_t counts);
   bool move_done() const { return !pp_pending_ && !pp_bit4_ && pp_reached_; }
-  // Homing (method from the configuration; 37/35 = "the current position is home").
+  // Homing (method from the configuration; 37/35 = "the current position is home"). Bit 4 gets
+  // a rising edge (one cycle low first if it is still high), and the statusword is judged only
+  // from the second cycle on: a "homing attained" left from an earlier homing is not taken.
   void start_homing() {
     homing_requested_ = true;
     homing_done_ = homing_error_ = false;
+    homing_cycles_ = (controlword_ & cia402::cw::kStartHoming) ? -1 : 0;
   }
   bool homing_done() const { return homing_done_; }
   bool homing_error() const { return homing_error_; }
@@ -50,7 +53,10 @@ class Drive {
   bool received() const { return received_; }
 
   Mode mode() const { return mode_; }
-  void set_mode(Mode m) { mode_ = m; }  // after the master switched it (0x6060/0x6061)
+  // After the master switched the drive (0x6060/0x6061); kNone holds the position (the target
+  // follows the actual position) while a switch is under way. Commands of the old mode are
+  // dropped: a CSP target or a move from before a homing would be in the old coordinates.
+  void set_mode(Mode m);
 
   cia402::State state() const { return sup_.state(); }
   const cia402::Supervisor& supervisor() const { return sup_; }
@@ -65,9 +71,10 @@ class Drive {
   std::uint32_t enable_count() const { return enable_count_; }
   std::int64_t max_enable_error() const { return max_enable_error_; }
 
- private:
+  // SI units to counts (rounded, saturated to int32).
   std::int32_t to_counts(double x) const;
 
+ private:
   NodeId node_ = 0;
   ProcessImage* image_ = nullptr;
   std::uint16_t cw_slot_ = 0, target_slot_ = 0, sw_slot_ = 0, actual_slot_ = 0;
@@ -93,6 +100,7 @@ class Drive {
   bool homing_requested_ = false;
   bool homing_done_ = false;
   bool homing_error_ = false;
+  int homing_cycles_ = 0;  // cycles bit 4 was sent (-1: one cycle low first)
 };
 
 class ForceSensor {

@@ -59,7 +59,15 @@ class Master {
 
   // Blocking helpers (start-up/maintenance).
   Status nmt(NmtCommand cmd, NodeId node);  // node 0 = all
-  Status set_mode(NodeId node, Mode mode);  // 0x6060, then wait until 0x6061 matches
+  // 0x6060, then polls 0x6061 until it matches (mode_switch_timeout, error names the node).
+  // While running, the drive is held (target = actual, Drive mode kNone) during the switch and
+  // stays held if the drive never confirms.
+  Status set_mode(NodeId node, Mode mode);
+  // Reference platform: with the platform held at its reference pose, makes the drive's position
+  // actual read `position` (SI units) without moving it: homing method 37 (35 if configured)
+  // with 0x607C = position in counts, then back to the previous mode. The drive must be
+  // OPERATION_ENABLED (homing starts only there); the master must be running.
+  Status set_actual_position(NodeId node, double position, std::chrono::nanoseconds timeout);
   // Cycles (or pumps) until done() or the timeout; `what` names the wait in the error.
   Status wait_for(const std::function<bool()>& done, std::chrono::nanoseconds timeout,
                   const char* what);

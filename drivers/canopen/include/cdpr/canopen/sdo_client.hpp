@@ -1,6 +1,19 @@
 // SDO client (CiA 301, 7.2.4): expedited and segmented upload and download with toggle-bit
 // checking, per-request timeouts and whole-transfer retries.
 //
+// SDO frames carry no transaction number, so after a timeout the server's late answer to the
+// aborted attempt can arrive while the retry runs. The client guards against pairing it with the
+// wrong request: after it sent an abort it waits a quiet period (SdoTiming::quiet) before the next
+// initiate and discards everything the server sends meanwhile; afterwards it discards (and counts,
+// stale_answers()) every answer that cannot belong to the current attempt: an answer of the wrong
+// kind or naming another object in the initiate phase, an abort of another object or with a
+// mid-transfer code (toggle bit, timeout: the server's echo/answer to the aborted transfer) in the
+// initiate phase until the server answered anything after our abort, a second initiate answer
+// before the first segment answer (the server answers in order, so one of the two initiate answers
+// was late and the segment request we sent after the first one reaches the server after the retry's
+// initiate), and anything while idle. The server may answer our abort with nothing or with an
+// abort; neither is waited for.
+//
 // The client is a state machine fed with frames and time (on_frame / poll), so the master can run
 // one per node in parallel, or in its RT cycle for small transfers (the data buffer is reserved at
 // construction: transfers up to kReserved bytes never allocate). The blocking helpers (upload,
@@ -27,6 +40,9 @@ namespace cdpr::canopen {
 struct SdoTiming {
   std::chrono::nanoseconds timeout{std::chrono::milliseconds(100)};  // per request/answer
   int retries = 2;  // whole-transfer restarts after a timeout or a toggle error
+  // After the client sent an abort: no new initiate and every answer discarded for this long, so
+  // that late answers of the aborted transfer are drained before the retry (or next transfer).
+  std::chrono::nanoseconds quiet{std::chrono::milliseconds(50)};
 };
 
 class SdoClient;
@@ -83,12 +99,16 @@ class SdoClient {
   void poll(Timestamp now);
   // Abandons a running transfer and tells the server (abort 0x08000000 general error).
   void cancel();
+  void cancel(Timestamp now);
 
   State state() const { return state_; }
   bool busy() const { return state_ == State::kBusy; }
   const Status& result() const { return result_; }
   std::span<const std::uint8_t> data() const { return buf_; }
   int attempts() const { return attempt_; }
+  // Answers discarded because they cannot belong to the running attempt (late answers to an
+  // aborted attempt or an earlier transfer), since construction.
+  std::uint64_t stale_answers() const { return stale_answers_; }
 
   // Blocking interface (start-up/maintenance). Errors name node, object and reason.
   Result<std::vector<std::uint8_t>> upload(ObjectAddress a, Pump& pump);
@@ -122,13 +142,16 @@ class SdoClient {
 
  private:
   enum class Op { kUpload, kDownload };
-  enum class Phase { kInitiate, kSegment };
+  // kQuiet: the initiate is held back until quiet_until_ (after an abort we sent).
+  enum class Phase { kQuiet, kInitiate, kSegment };
 
   Status run_upload(ObjectAddress a, Pump& pump);
   Status wait(Pump& pump);
+  Status begin(Timestamp now);
   Status send_request();
   Status send_segment();
-  void send_abort(std::uint32_t code);
+  void send_abort(std::uint32_t code, Timestamp now);
+  bool discard(const can::Frame& f);  // counts a stale answer; returns true (frame consumed)
   void fail(Status s);
   void retry_or_fail(Timestamp now, const char* why);
   void finish();
@@ -149,7 +172,15 @@ class SdoClient {
   bool last_segment_sent_ = false;
   int attempt_ = 0;
   std::uint32_t segments_ = 0;
+  std::uint32_t segment_answers_ = 0;  // segment answers taken in this attempt
   Timestamp deadline_{0};
+  Timestamp quiet_until_{0};
+  Timestamp last_now_{0};         // latest time seen (for cancel() without a time)
+  std::uint32_t abort_sent_ = 0;  // code of our last abort until the server answered anything
+  std::uint64_t stale_answers_ = 0;
+  std::uint32_t transfer_stale_ = 0;  // stale answers during the running transfer
+  std::uint8_t last_stale_cmd_ = 0;
+  ObjectAddress last_stale_mux_{};
   Status result_;
 };
 

@@ -10,6 +10,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <map>
 #include <span>
@@ -59,6 +60,13 @@ struct Faults {
   bool bad_toggle = false;    // the next segment answer carries the wrong toggle bit
   std::map<std::uint32_t, std::uint32_t> abort_on;  // ObjectAddress::key() -> abort code
   bool silent = false;  // no boot-up, heartbeat or answers at all (dead node)
+  // A stalling SDO server: after `delay_sdo_after` more requests were answered normally, the next
+  // `delay_sdo_answers` requests are processed (and answered) `sdo_answer_delay` late. Requests
+  // arriving meanwhile queue behind them and are processed in order when they are released,
+  // so a late answer, and then the answers to what the client sent meanwhile, come in a burst.
+  int delay_sdo_answers = 0;
+  int delay_sdo_after = 0;
+  std::chrono::nanoseconds sdo_answer_delay{0};
 };
 
 class SlaveNode {
@@ -79,6 +87,7 @@ class SlaveNode {
                  std::array<std::uint8_t, 5> manufacturer = {});
 
   std::uint64_t syncs() const { return syncs_; }
+  std::uint64_t sdo_requests() const { return sdo_requests_; }  // processed (not dropped/held)
   std::uint64_t rpdos_applied() const { return rpdos_applied_; }
   bool master_lost() const { return master_lost_; }
 
@@ -88,9 +97,14 @@ class SlaveNode {
   virtual void on_rpdo_applied(Timestamp) {}
   virtual void on_master_lost(Timestamp) {}
   virtual void on_reset_application() {}
+  // Called at the end of every step(now).
+  virtual void on_step(Timestamp) {}
+  // Time of the step() being processed (for hooks without a time argument).
+  Timestamp now() const { return now_; }
 
  private:
   void handle(const can::Frame& f, Timestamp now);
+  void receive_sdo(const can::Frame& f, Timestamp now);
   void handle_sdo(const can::Frame& f);
   void sdo_abort(ObjectAddress a, std::uint32_t code);
   void sdo_send(can::Frame& f);
@@ -119,7 +133,13 @@ class SlaveNode {
   bool master_heard_ = false;
   bool master_lost_ = false;
   std::vector<Pdo> rpdos_, tpdos_;
-  std::uint64_t syncs_ = 0, rpdos_applied_ = 0;
+  std::uint64_t syncs_ = 0, rpdos_applied_ = 0, sdo_requests_ = 0;
+  Timestamp now_{0};
+  struct HeldRequest {
+    Timestamp due;
+    can::Frame frame;
+  };
+  std::deque<HeldRequest> held_sdo_;  // requests of a stalling server (Faults::delay_sdo_*)
   // SDO server state.
   enum class SdoState { kIdle, kDownload, kUpload } sdo_state_ = SdoState::kIdle;
   ObjectAddress sdo_addr_{};
@@ -130,7 +150,8 @@ class SlaveNode {
 
 // CiA 402 drive model: state machine driven by 0x6040, statusword 0x6041, modes 0x6060/0x6061,
 // CSP (actual follows 0x607A at each SYNC), profile position (moves at 0x6081 per second, new
-// set-point handshake), homing (method 35/37: current position becomes 0x607C), quick stop,
+// set-point handshake), homing (method 35/37: current position becomes 0x607C, on the rising edge
+// of bit 4), delayed or missing 0x6061 confirmation, quick stop,
 // fault injection with EMCY, 0x6007 reaction to a lost master.
 class Drive402 : public SlaveNode {
  public:
@@ -142,6 +163,14 @@ class Drive402 : public SlaveNode {
   void set_ignore_controlword(bool v) { ignore_cw_ = v; }
   // Moves the shaft by hand (the model's actual position) while not enabled.
   void set_actual_position(std::int32_t p) { position_ = p; }
+  // 0x6061 follows a write of 0x6060 only after `d` (0: at once), or never.
+  void set_mode_display_delay(std::chrono::nanoseconds d) { mode_delay_ = d; }
+  void set_ignore_mode_switch(bool v) { ignore_mode_switch_ = v; }
+  // Homing (mode 6) starts on a rising edge of controlword bit 4 while OPERATION_ENABLED and
+  // clears "homing attained"; methods 35/37 set the position to 0x607C after `d` (0: at the
+  // edge), other methods end with "homing error".
+  void set_homing_duration(std::chrono::nanoseconds d) { homing_duration_ = d; }
+  std::uint32_t homings() const { return homings_; }
 
   std::uint16_t statusword() const { return statusword_; }
   std::int32_t position() const { return position_; }
@@ -155,6 +184,7 @@ class Drive402 : public SlaveNode {
   void on_sync(Timestamp now) override;
   void on_master_lost(Timestamp now) override;
   void on_reset_application() override;
+  void on_step(Timestamp now) override;
 
  private:
   enum class S : std::uint8_t {
@@ -177,6 +207,15 @@ class Drive402 : public SlaveNode {
   bool ignore_cw_ = false;
   bool set_point_ack_ = false;
   bool homing_attained_ = false;
+  bool homing_error_ = false;
+  bool homing_running_ = false;
+  Timestamp homing_until_{0};
+  std::chrono::nanoseconds homing_duration_{0};
+  std::uint32_t homings_ = 0;
+  std::chrono::nanoseconds mode_delay_{0};
+  bool ignore_mode_switch_ = false;
+  bool mode_pending_ = false;
+  Timestamp mode_due_{0};
   std::int32_t pp_target_ = 0;
   bool pp_moving_ = false;
   std::int64_t max_jump_on_enable_ = 0;
