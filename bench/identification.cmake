@@ -1,0 +1,7 @@
+# Identification benchmark: accuracy versus the Cramer-Rao bound and the paper's method, ISO 9283
+# box position error, speed (ours vs the paper's method, 25 -> 2,500 poses), Monte Carlo bias and
+# coverage. Printed figures, not timed tests:
+#   build/<dir>/bench/identification_bench [--seeds N] [--quick]
+add_executable(identification_bench ${CMAKE_CURRENT_LIST_DIR}/identification_bench.cc)
+target_link_libraries(identification_bench PRIVATE cdpr_calibration cdpr_calibration_testing cdpr_options)
+target_include_directories(identification_bench PRIVATE ${CMAKE_SOURCE_DIR}/calibration/src)

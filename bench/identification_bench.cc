@@ -1,0 +1,274 @@
+// Identification benchmark (printed figures). See bench/identification.cmake for the command.
+//
+// MINI: truth = Table 1 "measured" anchors, nominal = SolidWorks anchors, elastic cables; the
+// measurements are simulated with the elastic physics (the nominal controller commands lengths,
+// the true robot settles), laser 1 mm, encoder 0.1 mm, force 1 N. 25 designed poses.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "cdpr/calibration/identifiability.hpp"
+#include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/paper_method.hpp"
+#include "cdpr/calibration/pose_design.hpp"
+#include "cdpr/calibration/predicted_accuracy.hpp"
+#include "cdpr/calibration/simulate.hpp"
+#include "identification_scenario.hpp"
+
+namespace {
+
+using cdpr::CalibratedModel;
+using cdpr::Pose;
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+double anchor_rms_error(const CalibratedModel& est, const CalibratedModel& truth) {
+  const Eigen::Matrix3Xd d = est.robot.frame_anchors - truth.robot.frame_anchors;
+  return std::sqrt(d.squaredNorm() / static_cast<double>(d.size()));
+}
+
+template <typename T>
+T must(cdpr::Result<T> r, const char* what) {
+  if (!r.ok()) {
+    std::fprintf(stderr, "%s failed: %s\n", what, r.status().to_string().c_str());
+    std::exit(1);
+  }
+  return std::move(r).value();
+}
+
+cdpr::SensorNoise bench_noise() {
+  cdpr::SensorNoise n;
+  n.sigma_laser = 1e-3;
+  n.sigma_length = 1e-4;
+  n.sigma_force = 1.0;
+  return n;
+}
+
+cdpr::SimulatedMeasurements simulate(const cdpr::scenario::Scenario& s,
+                                     const std::vector<Pose>& poses, std::uint64_t seed,
+                                     bool elastic = true) {
+  cdpr::SimulationOptions so;
+  so.physics = elastic ? cdpr::SimulationOptions::Physics::kElastic
+                       : cdpr::SimulationOptions::Physics::kRigid;
+  so.controller = &s.nominal;
+  return must(cdpr::simulate_measurements(s.truth, poses, bench_noise(), seed, so), "simulate");
+}
+
+// The paper's set-up: coordinates outside V known (measured), laser plane known.
+CalibratedModel paper_start(const cdpr::scenario::Scenario& s) {
+  CalibratedModel start = s.nominal;
+  const cdpr::AnchorMask V = cdpr::paper_anchor_mask();
+  for (int i = 0; i < 8; ++i) {
+    for (int q = 0; q < 3; ++q) {
+      if (!V(q, i)) start.robot.frame_anchors(q, i) = s.truth.robot.frame_anchors(q, i);
+    }
+  }
+  start.robot.lasers = s.truth.robot.lasers;
+  return start;
+}
+
+struct RobotRun {
+  std::string name;
+  double crb_anchor_rms = 0, crb_position_rms = 0;
+  double ours_anchor_rms = 0, paper_anchor_rms = 0, nominal_anchor_rms = 0;
+  double ours_pos_rms = 0, ours_pos_max = 0, paper_pos_rms = 0, paper_pos_max = 0;
+  double nominal_pos_rms = 0;
+  double ours_ms = 0, paper_ms = 0;
+  int ours_iterations = 0, paper_iterations = 0;
+  std::string ours_brief, paper_brief;
+};
+
+RobotRun run_robot(const std::string& name, const cdpr::scenario::Scenario& s,
+                   const cdpr::PoseDesignOptions& design_options, const cdpr::AccuracyBox& box,
+                   bool run_paper, std::vector<Pose>* designed_out) {
+  RobotRun r;
+  r.name = name;
+  auto t0 = std::chrono::steady_clock::now();
+  const cdpr::PoseDesign design = must(cdpr::design_poses(s.nominal, design_options), "design");
+  std::printf("[%s] pose design: %d feasible candidates, %d exchanges, path %.2f, %.2f s\n",
+              name.c_str(), design.candidates, design.exchanges, design.path_length,
+              seconds_since(t0));
+  if (designed_out) *designed_out = design.poses;
+  const cdpr::SimulatedMeasurements sim = simulate(s, design.poses, 1);
+  cdpr::PredictedAccuracyOptions po;
+  po.box = box;
+  const cdpr::PredictedAccuracy crb =
+      must(cdpr::predict_accuracy(s.nominal, design.poses, bench_noise(), po), "predict");
+  r.crb_anchor_rms = crb.anchor_rms_std_m;
+  r.crb_position_rms = crb.position_rms_m;
+
+  const cdpr::IdentificationReport ours =
+      must(cdpr::identify(s.nominal, sim.set, cdpr::IdentificationOptions{}), "identify");
+  r.ours_ms = 1e3 * ours.total_time_s;
+  r.ours_iterations = ours.iterations;
+  r.ours_anchor_rms = anchor_rms_error(ours.estimate, s.truth);
+  r.ours_brief = ours.BriefReport();
+  for (const std::string& w : ours.warnings)
+    std::printf("[%s]   warning: %s\n", name.c_str(), w.c_str());
+  const cdpr::RealizedAccuracy acc_ours =
+      must(cdpr::measure_position_accuracy(s.truth, ours.estimate, box), "accuracy ours");
+  r.ours_pos_rms = acc_ours.position_rms_m;
+  r.ours_pos_max = acc_ours.position_max_m;
+  const cdpr::RealizedAccuracy acc_nom =
+      must(cdpr::measure_position_accuracy(s.truth, s.nominal, box), "accuracy nominal");
+  r.nominal_pos_rms = acc_nom.position_rms_m;
+  r.nominal_anchor_rms = anchor_rms_error(s.nominal, s.truth);
+  if (run_paper) {
+    const CalibratedModel start = paper_start(s);
+    const cdpr::PaperMethodReport paper =
+        must(cdpr::paper_method(start, sim.set, cdpr::PaperMethodOptions{}), "paper method");
+    r.paper_ms = 1e3 * paper.time_s;
+    r.paper_iterations = paper.iterations;
+    r.paper_anchor_rms = anchor_rms_error(paper.estimate, s.truth);
+    r.paper_brief = paper.Summary();
+    const cdpr::RealizedAccuracy acc_paper =
+        must(cdpr::measure_position_accuracy(s.truth, paper.estimate, box), "accuracy paper");
+    r.paper_pos_rms = acc_paper.position_rms_m;
+    r.paper_pos_max = acc_paper.position_max_m;
+  }
+  return r;
+}
+
+void print_run(const RobotRun& r) {
+  std::printf("\n== %s: accuracy (25 designed poses, one noise draw) ==\n", r.name.c_str());
+  std::printf("  %s\n", r.ours_brief.c_str());
+  if (!r.paper_brief.empty()) std::printf("  %s\n", r.paper_brief.c_str());
+  std::printf("  %-40s %14s %16s %16s\n", "", "anchor RMS err", "box pos RMS", "box pos max");
+  std::printf("  %-40s %11.3f mm %13.3f mm %13s\n", "nominal (SolidWorks / uncalibrated)",
+              1e3 * r.nominal_anchor_rms, 1e3 * r.nominal_pos_rms, "");
+  std::printf("  %-40s %11.3f mm %13.3f mm %13s\n", "Cramer-Rao bound (predicted std)",
+              1e3 * r.crb_anchor_rms, 1e3 * r.crb_position_rms, "");
+  std::printf("  %-40s %11.3f mm %13.3f mm %13.3f mm\n", "ours (joint LSQ, 24 anchors + offsets)",
+              1e3 * r.ours_anchor_rms, 1e3 * r.ours_pos_rms, 1e3 * r.ours_pos_max);
+  if (!r.paper_brief.empty()) {
+    std::printf("  %-40s %11.3f mm %13.3f mm %13.3f mm\n", "paper method (16 of 24, rest known)",
+                1e3 * r.paper_anchor_rms, 1e3 * r.paper_pos_rms, 1e3 * r.paper_pos_max);
+  }
+  std::printf(
+      "  paper (Jin et al. 2018, real robot): 0.92 mm position accuracy, 1.28 mm path "
+      "accuracy\n");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int seeds = 200;
+  bool quick = false;
+  for (int k = 1; k < argc; ++k) {
+    if (std::strcmp(argv[k], "--seeds") == 0 && k + 1 < argc) seeds = std::atoi(argv[++k]);
+    if (std::strcmp(argv[k], "--quick") == 0) quick = true;
+  }
+  if (quick && seeds == 200) seeds = 20;
+  std::printf("cdpr identification benchmark (seeds %d%s)\n", seeds, quick ? ", quick" : "");
+  std::printf("noise: laser 1 mm, encoder 0.1 mm, force 1 N; elastic simulation\n");
+
+  // ---------------- MINI ----------------
+  const cdpr::scenario::Scenario mini = cdpr::scenario::mini_scenario();
+  cdpr::PoseDesignOptions dmini;
+  dmini.noise = bench_noise();
+  dmini.half_extent = Eigen::Vector3d::Constant(0.156);
+  dmini.exchange_passes = quick ? 1 : 4;
+  cdpr::AccuracyBox iso;  // 312 mm cube, 5 x 5 x 5
+  std::vector<Pose> designed;
+  const RobotRun rm = run_robot("MINI", mini, dmini, iso, true, &designed);
+  print_run(rm);
+
+  // Pose set comparison (predicted).
+  {
+    auto cmp = must(cdpr::compare_pose_sets(mini.nominal, dmini, iso, 5), "compare");
+    std::printf("\n== MINI: pose sets (predicted, 25 poses) ==\n");
+    std::printf("  %-34s %18s %18s %12s\n", "set", "anchor CRB RMS", "box pos RMS (CRB)", "cond");
+    for (const auto& c : cmp) {
+      std::printf("  %-34s %15.3f mm %15.3f mm %12.3g\n", c.label.c_str(), 1e3 * c.anchor_rms_std_m,
+                  1e3 * c.position_rms_m, c.condition_number);
+    }
+  }
+
+  // ---------------- Speed ----------------
+  std::printf("\n== Speed (same 25 poses) ==\n");
+  std::printf(
+      "  ours %.1f ms (%d iterations), paper method %.1f ms (%d iterations): ours is %.0fx "
+      "faster\n",
+      rm.ours_ms, rm.ours_iterations, rm.paper_ms, rm.paper_iterations, rm.paper_ms / rm.ours_ms);
+  std::printf("  %-10s %14s %14s\n", "poses", "ours (ms)", "per pose (ms)");
+  for (int n : {25, 250, 2500}) {
+    if (quick && n > 250) break;
+    const std::vector<Pose> poses = cdpr::scenario::random_feasible_poses(
+        mini.nominal.robot, mini.box, n, 99, &mini.truth.robot);
+    const cdpr::SimulatedMeasurements sim = simulate(mini, poses, 2, /*elastic=*/false);
+    const auto t0 = std::chrono::steady_clock::now();
+    const cdpr::IdentificationReport rep =
+        must(cdpr::identify(mini.nominal, sim.set, cdpr::IdentificationOptions{}), "identify");
+    const double ms = 1e3 * seconds_since(t0);
+    std::printf("  %-10d %14.1f %14.3f   (%d iterations, chi2/dof %.3f)\n", n, ms, ms / n,
+                rep.iterations, rep.chi2 / rep.dof);
+  }
+
+  // ---------------- Monte Carlo ----------------
+  {
+    std::printf("\n== MINI: Monte Carlo over %d seeds (designed poses) ==\n", seeds);
+    const int P = 24;
+    Eigen::VectorXd sum_err = Eigen::VectorXd::Zero(P), sum_sq = Eigen::VectorXd::Zero(P);
+    long covered = 0, total = 0;
+    double sum_std2 = 0.0;
+    int ok = 0;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (int seed = 0; seed < seeds; ++seed) {
+      const cdpr::SimulatedMeasurements sim = simulate(mini, designed, 1000 + seed);
+      auto rep = cdpr::identify(mini.nominal, sim.set, cdpr::IdentificationOptions{});
+      if (!rep.ok() || !rep->converged) continue;
+      ++ok;
+      int k = 0;
+      for (const cdpr::ParameterEstimate& p : rep->parameters) {
+        if (p.name.rfind("a_", 0) != 0) continue;
+        const int cable = std::stoi(p.name.substr(2, p.name.find('.') - 2)) - 1;
+        const int axis = p.name.back() - 'x';
+        const double e = p.value - mini.truth.robot.frame_anchors(axis, cable);
+        sum_err(k) += e;
+        sum_sq(k) += e * e;
+        sum_std2 += p.std_dev * p.std_dev;
+        covered += std::abs(e) <= 1.96 * p.std_dev ? 1 : 0;
+        ++total;
+        ++k;
+      }
+    }
+    const Eigen::VectorXd bias = sum_err / std::max(1, ok);
+    const double rms_err = std::sqrt(sum_sq.sum() / std::max<long>(1, total));
+    const double rms_std = std::sqrt(sum_std2 / std::max<long>(1, total));
+    std::printf("  converged runs                 %d / %d (%.1f s)\n", ok, seeds,
+                seconds_since(t0));
+    std::printf("  anchor RMS error               %.4f mm\n", 1e3 * rms_err);
+    std::printf("  reported std (RMS)             %.4f mm\n", 1e3 * rms_std);
+    std::printf(
+        "  Cramer-Rao bound (RMS)         %.4f mm   error / CRB = %.3f (target within 15 %%)\n",
+        1e3 * rm.crb_anchor_rms, rms_err / rm.crb_anchor_rms);
+    std::printf("  bias: RMS over coords %.4f mm, max %.4f mm (std of the mean %.4f mm)\n",
+                1e3 * std::sqrt(bias.squaredNorm() / P), 1e3 * bias.cwiseAbs().maxCoeff(),
+                1e3 * rms_err / std::sqrt(std::max(1, ok)));
+    std::printf(
+        "  coverage of the 95 %% interval  %.1f %% (target 90-98 %%)\n",
+        100.0 * static_cast<double>(covered) / static_cast<double>(std::max<long>(1, total)));
+  }
+
+  // ---------------- Large robot ----------------
+  if (!quick) {
+    const cdpr::scenario::Scenario large = cdpr::scenario::large_scenario();
+    cdpr::PoseDesignOptions dl;
+    dl.noise = bench_noise();
+    dl.half_extent = Eigen::Vector3d(4.0, 2.8, 1.0);
+    dl.exchange_passes = 2;
+    cdpr::AccuracyBox lbox;
+    lbox.half_extent = Eigen::Vector3d(2.5, 1.75, 0.6);
+    const RobotRun rl = run_robot("LARGE", large, dl, lbox, true, nullptr);
+    print_run(rl);
+    std::printf("  speed: ours %.1f ms, paper %.1f ms (%.0fx)\n", rl.ours_ms, rl.paper_ms,
+                rl.paper_ms / rl.ours_ms);
+  }
+  return 0;
+}

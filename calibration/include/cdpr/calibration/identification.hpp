@@ -1,0 +1,195 @@
+// Identification of the geometry and sensor parameters of a cable robot from a MeasurementSet:
+// joint nonlinear least squares over the chosen parameters and the N unknown platform poses
+// (bundle-adjustment style), solved with Ceres (automatic derivatives through cable_geometry<Jet>,
+// DENSE_SCHUR with the poses in elimination group 0).
+//
+// Residuals (each divided by its stated sigma, so a correct model gives chi^2 ~ dof):
+// - Cable length, per cable and pose (SensorNoise::sigma_length, plus the force noise propagated
+//   through the elongation):
+//     r = U(pose) - ((1 + s_i) * reading_i + o_i),
+//     U = L_k(pose; a_i, b_i) - dL(L_k, F_i)          (unstretched length, elongation.hpp)
+//   with F_i the true tension from the reading through the force sensor model being estimated,
+//   and, when the stiffness is estimated, dL = F L / (EA_i + F) (Hooke) with EA_i estimated.
+//   A missing tension (NaN) gives dL = 0 for that cable (and a warning).
+// - Laser k (sigma_laser): distance along the beam from its origin to the target plane n.x = c at
+//   the pose, minus the reading.
+// - Static equilibrium (6 per pose with all tensions measured): A^T(pose) F + w(pose), whitened by
+//   the covariance sigma_force^2 A^T A computed at the initial pose (the force noise propagated).
+// - Reference pose (sigma_reference_position / _angle), when a PoseMeasurement has one.
+//
+// Gauge. A cable robot's measurements are invariant under a rigid motion of the world frame, so
+// something must fix it (IdentificationOptions::gauge):
+// - kHomePose (default): the pose `home_pose_index` is the home pose (reference platform, the
+//   paper's "same EE position"), held constant at its reference reading if it has one, else at
+//   RobotModel::home. This fixes all six freedoms.
+// - kLaserPlane: the laser target planes are held at their model values (3 freedoms fixed: z,
+//   roll, pitch); the remaining ones must be fixed by the parameter choice (e.g. the paper's
+//   16-parameter subset of the frame anchors).
+// - kHomePoseAndLaserPlane: both.
+// - kNone: the parameter choice alone must fix it.
+// Whatever the choice, the geometry information (poses profiled out) is checked for rank before
+// solving; a rank-deficient choice is refused with the unidentifiable directions in words.
+//
+// Parameterisation (tangent coordinates, each named in IdentificationReport::parameters):
+// a_i.x/y/z (m), b_i.x/y/z (m), o_i (m), s_i (-), EA scale e_i (EA = EA_nominal (1 + e)),
+// force sensor gain error g_i (gain = nominal (1 + g)) and offset c_i (raw units), laser origin
+// (m, platform frame), laser direction (two small angles about the nominal direction, rad), plane
+// normal (two small angles, rad) and plane offset c (m, n.x = c).
+#pragma once
+
+#include <Eigen/Core>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr {
+
+enum class Gauge { kHomePose, kLaserPlane, kHomePoseAndLaserPlane, kNone };
+enum class RobustLoss { kNone, kHuber, kCauchy };
+enum class StiffnessEstimate { kFixed, kShared, kPerCable };
+
+// Which coordinates of a 3 x m anchor set are estimated (true = estimated).
+using AnchorMask = Eigen::Array<bool, 3, Eigen::Dynamic>;
+
+// The paper's V = [x2..x7, y2..y7, z5..z8] for an 8-cable robot (1-based cable numbers).
+AnchorMask paper_anchor_mask();
+
+struct IdentificationOptions {
+  // --- What is estimated -------------------------------------------------------------------
+  bool estimate_frame_anchors = true;
+  AnchorMask frame_anchor_mask;  // 3 x m; empty = every coordinate
+  bool estimate_platform_anchors = false;
+  AnchorMask platform_anchor_mask;  // 3 x m; empty = every coordinate
+  bool estimate_length_offsets = true;
+  bool estimate_length_scales = false;
+  StiffnessEstimate estimate_stiffness = StiffnessEstimate::kFixed;
+  bool estimate_force_gains = false;
+  bool estimate_force_offsets = false;
+  bool estimate_laser_origin = false;
+  bool estimate_laser_direction = false;
+  bool estimate_laser_plane = true;
+
+  // --- Which residuals are used --------------------------------------------------------------
+  bool use_lengths = true;
+  bool use_laser = true;
+  bool use_equilibrium = true;
+  bool use_reference = true;
+  // Cables whose tension reading is below this (N) are slack: their length residual is skipped.
+  double slack_tension_threshold = 3.0;
+
+  // --- Gauge and robustness ------------------------------------------------------------------
+  Gauge gauge = Gauge::kHomePose;
+  int home_pose_index = 0;
+  RobustLoss loss = RobustLoss::kNone;
+  double loss_scale = 3.0;  // in units of sigma (residuals are normalised)
+
+  // --- Solver ----------------------------------------------------------------------------------
+  int max_iterations = 100;
+  double function_tolerance = 1e-14;
+  double gradient_tolerance = 1e-14;
+  double parameter_tolerance = 1e-12;
+  int num_threads = 1;
+
+  // --- Checks and report ---------------------------------------------------------------------
+  // Refuse (kFailedPrecondition) a choice whose column-normalised geometry information has
+  // sigma_min / sigma_max below this (unidentifiable, including open gauge freedoms).
+  double rank_tolerance = 1e-7;
+  bool refuse_unidentifiable = true;
+  bool compute_covariance = true;
+  double condition_warning = 1e4;    // warn above this condition number (column-normalised)
+  double huge_std_anchor = 0.01;     // m: warn when a length-like parameter's std exceeds it
+  double chi2_warning_sigmas = 4.0;  // warn when |chi2 - dof| > this * sqrt(2 dof)
+};
+
+// One estimated scalar (a tangent coordinate).
+struct ParameterEstimate {
+  std::string name;  // "a_3.x", "o_5", "laser_1.plane.c", ...
+  std::string unit;  // "m", "-", "rad", "N"
+  double initial = 0.0;
+  double value = 0.0;
+  double std_dev = 0.0;  // from the covariance; infinity if not computed / in the null space
+};
+
+// Residuals of one pose, in SI units and normalised by their sigma (NaN where not measured).
+struct PoseResiduals {
+  Eigen::VectorXd length_m, length_normalized;  // m entries
+  Eigen::VectorXd laser_m, laser_normalized;    // k entries
+  Eigen::Matrix<double, 6, 1> wrench_si = Eigen::Matrix<double, 6, 1>::Constant(
+      std::numeric_limits<double>::quiet_NaN());  // N, N m (before whitening)
+  Eigen::Matrix<double, 6, 1> wrench_normalized =
+      Eigen::Matrix<double, 6, 1>::Constant(std::numeric_limits<double>::quiet_NaN());
+  Eigen::Matrix<double, 6, 1> reference_normalized =
+      Eigen::Matrix<double, 6, 1>::Constant(std::numeric_limits<double>::quiet_NaN());
+};
+
+struct IdentificationReport {
+  // The calibrated model. robot.winches[i] carries the corrected encoder zero and transmission
+  // (length_offset' = (1 + s_i) length_offset + o_i, drum diameter and pitch scaled by 1 + s_i);
+  // readings holds o_i and s_i relative to the readings of the MeasurementSet.
+  CalibratedModel estimate;
+  std::vector<Pose> poses;                            // estimated poses
+  std::vector<Eigen::Matrix<double, 6, 1>> pose_std;  // their std (m, rad)
+  std::vector<ParameterEstimate> parameters;          // geometry/sensor tangent coordinates
+  Eigen::MatrixXd covariance;                         // of `parameters`, same order
+  std::vector<PoseResiduals> residuals;
+
+  // Channel RMS (SI) after the fit.
+  double rms_length_m = 0.0, rms_laser_m = 0.0, rms_wrench_n = 0.0;
+
+  double initial_cost = 0.0;  // 0.5 sum r^2 (normalised residuals, loss applied)
+  double final_cost = 0.0;
+  double chi2 = 0.0;  // sum of squared normalised residuals, no loss
+  int num_residuals = 0;
+  int num_parameters = 0;  // geometry + free pose coordinates
+  int dof = 0;             // num_residuals - num_parameters
+  int iterations = 0;
+  bool converged = false;
+  std::string termination;  // Ceres' message
+  double solve_time_s = 0.0;
+  double total_time_s = 0.0;
+  int rank = 0;                   // of the column-normalised geometry information
+  double condition_number = 0.0;  // sigma_max / sigma_min of the column-normalised Jacobian
+  std::vector<std::string> warnings;
+
+  bool trustworthy() const { return converged && warnings.empty(); }
+  std::string BriefReport() const;
+  std::string FullReport() const;
+};
+
+// Identifies the parameters chosen in `options` from `set`, starting from `initial` (the nominal
+// model). Errors: kInvalidArgument (sizes, options), kFailedPrecondition (too few poses or an
+// unidentifiable choice; the message names the directions), kNumericalFailure (the solver failed).
+Result<IdentificationReport> identify(const CalibratedModel& initial, const MeasurementSet& set,
+                                      const IdentificationOptions& options = {});
+
+// The Fisher information of the chosen parameters with the poses profiled out (Schur complement),
+// per pose, evaluated at `model` and the poses `poses` (the measured readings enter only the
+// elongation and force terms; residual values are not used). `information` = sum of per_pose.
+struct GeometryInformation {
+  std::vector<std::string> names;
+  std::vector<std::string> units;
+  Eigen::VectorXd values;                  // current tangent values (for naming)
+  std::vector<Eigen::MatrixXd> per_pose;   // P x P each (already Schur-reduced)
+  Eigen::MatrixXd information;             // P x P
+  Eigen::Matrix3Xd home_cable_directions;  // unit u_i at home (for naming anchor directions)
+  Eigen::Matrix3Xd frame_anchors;          // a_i at the evaluation point (gauge detection)
+  Eigen::Matrix3Xi anchor_columns;  // 3 x m: column of a_i.x/y/z in `names`, -1 if not estimated
+  int num_residuals = 0;
+  int num_pose_parameters = 0;
+  // Whitened Jacobian blocks per pose (rows = that pose's residuals), filled only when
+  // geometry_information is called with keep_jacobians = true.
+  std::vector<Eigen::MatrixXd> jacobian_geometry;  // rows x P
+  std::vector<Eigen::MatrixXd> jacobian_pose;      // rows x 6 (zero for a fixed pose)
+};
+
+Result<GeometryInformation> geometry_information(const CalibratedModel& model,
+                                                 const MeasurementSet& set,
+                                                 const std::vector<Pose>& poses,
+                                                 const IdentificationOptions& options,
+                                                 bool keep_jacobians = false);
+
+}  // namespace cdpr

@@ -1,0 +1,127 @@
+// What the identification consumes: a set of measured poses and the stated sensor noise.
+//
+// Pure data, no I/O. tools/cdpr-fit maps a recording (drivers/recording) onto these types; the
+// simulator (simulate.hpp) produces them from a true robot.
+//
+// Meaning of every field (SI units):
+// - `commanded`: the pose the controller was asked to reach (nominal model). It is the initial
+//   guess of the pose; the true pose is an unknown of the identification.
+// - `cable_lengths(i)`: the length of cable i as read from its encoder through the NOMINAL winch
+//   model, with the encoder zero set at homing so that the reading equals the nominal model's
+//   length at the home pose. It measures the UNSTRETCHED (paid-out) length between the frame
+//   anchor and the platform anchor; the identification relates it to the geometry by
+//     L_geom(pose) * EA / (EA + F)  =  (1 + s_i) * cable_lengths(i) + o_i
+//   where s_i is the transmission scale error, o_i the encoder-zero offset (identification.hpp).
+//   NaN = not measured.
+// - `tensions(i)`: cable tension in N through the NOMINAL force-sensor calibration
+//   (RobotModel::force_sensors). NaN = not measured. An empty vector = no force sensors.
+// - `laser_distances(k)`: distance in m along the beam of laser k (RobotModel::lasers[k]) from
+//   its origin to the target plane. NaN = not measured / out of range.
+// - `reference`: the pose given by an external reference (home-position reference platform,
+//   tracker), if any; weighted by the reference sigmas.
+// - `time` (s since the start of the recording) and `temperature` (degC): informative, NaN when
+//   unknown.
+#pragma once
+
+#include <Eigen/Core>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <vector>
+
+#include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr {
+
+// One standard deviation of each sensor channel (white Gaussian noise assumed).
+struct SensorNoise {
+  double sigma_length = 1.0e-4;              // m, encoder length reading
+  double sigma_laser = 1.0e-3;               // m, laser distance
+  double sigma_force = 1.0;                  // N, cable tension
+  double sigma_reference_position = 1.0e-4;  // m, reference pose position (per axis)
+  double sigma_reference_angle = 1.0e-3;     // rad, reference pose roll/pitch/yaw
+};
+
+// How readings relate to physics beyond RobotModel: per-cable encoder-zero offset o_i (m) and
+// transmission scale error s_i (dimensionless), in
+//   unstretched length = (1 + s_i) * reading + o_i.
+// Force sensors are described by RobotModel::force_sensors (raw = gain * tension + offset).
+struct ReadingModel {
+  Eigen::VectorXd length_offsets;  // o_i, m
+  Eigen::VectorXd length_scales;   // s_i, dimensionless (0 = the nominal winch model is right)
+
+  static ReadingModel Nominal(int num_cables) {
+    return ReadingModel{Eigen::VectorXd::Zero(num_cables), Eigen::VectorXd::Zero(num_cables)};
+  }
+};
+
+// Everything the identification estimates: the robot model plus the reading model.
+struct CalibratedModel {
+  RobotModel robot;
+  ReadingModel readings;
+
+  // A model with nominal readings (zero offsets and scale errors).
+  static CalibratedModel FromRobot(const RobotModel& robot) {
+    return CalibratedModel{robot, ReadingModel::Nominal(robot.num_cables())};
+  }
+};
+
+struct PoseMeasurement {
+  Pose commanded;
+  Eigen::VectorXd cable_lengths;    // m, size m; NaN = missing
+  Eigen::VectorXd tensions;         // N, size m or empty; NaN = missing
+  Eigen::VectorXd laser_distances;  // m, size = number of lasers (may be 0); NaN = missing
+  std::optional<Pose> reference;    // known pose, if any
+  double time = std::numeric_limits<double>::quiet_NaN();         // s
+  double temperature = std::numeric_limits<double>::quiet_NaN();  // degC
+};
+
+struct MeasurementSet {
+  std::vector<PoseMeasurement> poses;
+  SensorNoise noise;
+
+  int num_poses() const { return static_cast<int>(poses.size()); }
+};
+
+// Checks that `set` fits `model`: sizes of every vector, positive sigmas, finite commanded poses.
+// The message names the pose and the field.
+inline Status validate(const MeasurementSet& set, const RobotModel& model) {
+  const int m = model.num_cables();
+  const int k = static_cast<int>(model.lasers.size());
+  const SensorNoise& n = set.noise;
+  if (!(n.sigma_length > 0) || !(n.sigma_laser > 0) || !(n.sigma_force > 0) ||
+      !(n.sigma_reference_position > 0) || !(n.sigma_reference_angle > 0)) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "measurement set: every sensor sigma must be positive and finite");
+  }
+  for (int j = 0; j < set.num_poses(); ++j) {
+    const PoseMeasurement& p = set.poses[static_cast<std::size_t>(j)];
+    if (!p.commanded.vector().allFinite()) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %d: commanded pose is not finite", j);
+    }
+    if (p.cable_lengths.size() != m) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %d: %d cable lengths, the model has %d cables", j,
+                           static_cast<int>(p.cable_lengths.size()), m);
+    }
+    if (p.tensions.size() != 0 && p.tensions.size() != m) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %d: %d tensions, the model has %d cables", j,
+                           static_cast<int>(p.tensions.size()), m);
+    }
+    if (p.laser_distances.size() != 0 && p.laser_distances.size() != k) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %d: %d laser distances, the model has %d lasers",
+                           j, static_cast<int>(p.laser_distances.size()), k);
+    }
+    if (p.reference && !p.reference->vector().allFinite()) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %d: reference pose is not finite", j);
+    }
+  }
+  return Status::Ok();
+}
+
+}  // namespace cdpr

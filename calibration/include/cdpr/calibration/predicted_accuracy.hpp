@@ -1,0 +1,71 @@
+// Predicted accuracy of a calibration before it is run, and realised accuracy after.
+//
+// predict_accuracy: from a model, a pose set and the sensor noise, the Cramer-Rao bound of every
+// parameter (the inverse Fisher information with the poses profiled out; pseudo-inverse with the
+// null space removed) and the platform position error it causes over a test box (ISO 9283: MINI's
+// 312 mm cube centred at the origin by default), by propagating the parameter covariance through
+// the forward-kinematics sensitivity: the controller commands the lengths of its calibrated model,
+// the true robot reaches the pose whose lengths match them (least squares over the m cables),
+//   dx = -pinv(dL/dx) (dL/dp) dp,   Cov(x) = G Cov(p) G^T.
+//
+// measure_position_accuracy: the realised error of a calibrated controller on a true robot: at a
+// grid of box poses, the controller plans tensions and commands unstretched lengths with ITS model
+// (through its reading model), the true elastic robot settles (simulate.hpp settle_platform), and
+// the position error is measured.
+#pragma once
+
+#include <Eigen/Core>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/measurement.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr {
+
+// A grid of points_per_axis^3 positions (zero orientation) in a box.
+struct AccuracyBox {
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();                // m
+  Eigen::Vector3d half_extent = Eigen::Vector3d::Constant(0.156);  // m (MINI's 312 mm cube)
+  int points_per_axis = 5;
+
+  std::vector<Pose> grid() const;
+};
+
+struct PredictedAccuracyOptions {
+  IdentificationOptions identification;
+  AccuracyBox box;
+  double reference_tension = std::numeric_limits<double>::quiet_NaN();  // N; NaN: default
+  double rank_tolerance = 1e-7;
+};
+
+struct PredictedAccuracy {
+  std::vector<std::string> names;
+  Eigen::VectorXd crb_std;     // Cramer-Rao bound (standard deviation) of each parameter
+  Eigen::MatrixXd covariance;  // of the parameters
+  int rank = 0;
+  double anchor_rms_std_m = 0.0;  // sqrt(mean variance) over the estimated anchor coordinates
+  double position_rms_m = 0.0;    // predicted RMS position error over the box grid
+  double position_max_m = 0.0;    // largest per-point RMS
+  int grid_points = 0;            // feasible grid points used
+};
+
+Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
+                                           const std::vector<Pose>& poses, const SensorNoise& noise,
+                                           const PredictedAccuracyOptions& options = {});
+
+struct RealizedAccuracy {
+  double position_rms_m = 0.0;
+  double position_max_m = 0.0;
+  double orientation_rms_rad = 0.0;
+  int grid_points = 0;
+  int failed_points = 0;  // infeasible or not settled
+};
+
+Result<RealizedAccuracy> measure_position_accuracy(
+    const CalibratedModel& truth, const CalibratedModel& controller, const AccuracyBox& box,
+    double reference_tension = std::numeric_limits<double>::quiet_NaN());
+
+}  // namespace cdpr

@@ -1,0 +1,92 @@
+// Simulated measurements for tests, benchmarks and `cdpr-fit simulate`: what the robot's sensors
+// would read at a set of poses, given the TRUE robot and reading model. Deterministic by seed.
+//
+// Two physics levels (SimulationOptions::physics):
+// - kRigid: the platform is exactly at each given pose. Readings: the unstretched length from the
+//   true geometry and the true tensions (tension distribution below), through the true reading
+//   model; force sensors and the laser at that pose.
+// - kElastic: the given poses are COMMANDS. The controller model (the nominal one) computes the
+//   unstretched length commands from its IK and its planned tensions; the true robot settles
+//   where its elastic cables balance the platform weight (settle_platform). The encoder reads the
+//   command (plus noise), the force sensors the true tensions, the laser the true pose. This is the
+//   paper's measuring stage (Section 5.1).
+//
+// Gaussian noise from SensorNoise is added to every reading unless options.add_noise is false.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr {
+
+// Roll-pitch-yaw of R = Rz(yaw) Ry(pitch) Rx(roll) (inverse of rotation_from_rpy).
+Eigen::Vector3d rpy_from_rotation_matrix(const Eigen::Matrix3d& R);
+
+// Gravity wrench on the platform at `pose` (force and moment about the platform origin), world.
+Eigen::Matrix<double, 6, 1> platform_weight_wrench(const RobotModel& model, const Pose& pose);
+
+// A simple tension distribution: the tensions closest (least squares) to the uniform
+// `reference_tension` that balance the weight, f = f_ref 1 - pinv(A^T) (A^T f_ref 1 + w).
+// When a tension leaves [f_min, f_max], retries with 2 and 4 times the reference; then returns
+// kOutOfRange (not wrench-feasible with this distribution). kNumericalFailure when the geometry is
+// degenerate. (A stand-in until statics' force_distribution.hpp is used.)
+Result<Eigen::VectorXd> simple_tension_distribution(const RobotModel& model, const Pose& pose,
+                                                    double reference_tension);
+
+// The reference tension used when none is given: the midpoint of the largest f_min and the
+// smallest f_max over the cables, capped at 4 f_min_max (a moderate pretension).
+double default_reference_tension(const RobotModel& model);
+
+// Unstretched length of every cable at `pose` under `tensions` (kinematic length minus the
+// elongation of elongation.hpp's model).
+Result<Eigen::VectorXd> unstretched_lengths(const RobotModel& model, const Pose& pose,
+                                            const Eigen::VectorXd& tensions);
+
+// Where an elastic robot with unstretched cable lengths `unstretched` settles (Hooke cables,
+// CableModel::ea, slack cables carry nothing): Newton on the 6 wrench-balance equations from
+// `start`. Returns the pose and, in *tensions, the cable tensions there.
+Result<Pose> settle_platform(const RobotModel& model, const Eigen::VectorXd& unstretched,
+                             const Pose& start, Eigen::VectorXd* tensions = nullptr);
+
+// Ray-plane distance of laser k at `pose` (NaN when the beam misses the plane or is out of range).
+double laser_distance(const RobotModel& model, int laser, const Pose& pose);
+
+// Encoder-zero offsets produced by homing: the reading at the home pose is set to the nominal
+// model's unstretched length there, so o_i = U_true,i(home) - U_nominal,i(home) with the
+// tensions planned by each model at home.
+Result<Eigen::VectorXd> homing_offsets(const RobotModel& truth, const RobotModel& nominal,
+                                       double reference_tension);
+
+struct SimulationOptions {
+  enum class Physics { kRigid, kElastic };
+  Physics physics = Physics::kRigid;
+  // The model the controller believes (nominal), used by kElastic to compute the length commands
+  // and by both to convert raw force readings with the nominal sensor calibration. nullptr: the
+  // truth's force sensors are the nominal ones; kElastic requires it.
+  const CalibratedModel* controller = nullptr;
+  // Pretension planned by the controller (kElastic) or used for the tensions (kRigid), N. NaN:
+  // default_reference_tension of the model.
+  double reference_tension = std::numeric_limits<double>::quiet_NaN();
+  bool add_noise = true;
+  // Poses that also get a reference pose reading (e.g. {0} for a reference platform at home).
+  std::vector<int> reference_pose_indices;
+};
+
+struct SimulatedMeasurements {
+  MeasurementSet set;
+  std::vector<Pose> true_poses;                // where the platform really was
+  std::vector<Eigen::VectorXd> true_tensions;  // N
+};
+
+Result<SimulatedMeasurements> simulate_measurements(const CalibratedModel& truth,
+                                                    const std::vector<Pose>& poses,
+                                                    const SensorNoise& noise, std::uint64_t seed,
+                                                    const SimulationOptions& options = {});
+
+}  // namespace cdpr

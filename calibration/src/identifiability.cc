@@ -1,0 +1,273 @@
+#include "cdpr/calibration/identifiability.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+namespace cdpr {
+
+namespace {
+
+// Words for a parameter name ("o_3" -> "the length offset of cable 3").
+std::string words(const std::string& name) {
+  auto cable_of = [&](std::size_t prefix) { return name.substr(prefix); };
+  if (name.rfind("o_", 0) == 0) return "the length offset of cable " + cable_of(2);
+  if (name.rfind("s_", 0) == 0) return "the transmission scale of cable " + cable_of(2);
+  if (name.rfind("ea_scale_", 0) == 0) return "the stiffness EA of cable " + cable_of(9);
+  if (name == "ea_scale") return "the shared cable stiffness EA";
+  if (name.rfind("force_gain_", 0) == 0) return "the force sensor gain of cable " + cable_of(11);
+  if (name.rfind("force_offset_", 0) == 0)
+    return "the force sensor offset of cable " + cable_of(13);
+  if (name.rfind("b_", 0) == 0) return name + " (platform anchor)";
+  return name;
+}
+
+struct Named {
+  std::string text;
+  double weight;
+};
+
+// Names the main components of the unit direction v (column-normalised coordinates); `delta` is
+// the same direction in SI parameter units.
+std::vector<Named> components(const GeometryInformation& gi, const Eigen::VectorXd& v,
+                              const Eigen::VectorXd& delta, const IdentifiabilityOptions& opt) {
+  std::vector<Named> out;
+  const int P = static_cast<int>(v.size());
+  std::vector<bool> used(static_cast<std::size_t>(P), false);
+  const int m = static_cast<int>(gi.anchor_columns.cols());
+  const char* axis = "xyz";
+  for (int i = 0; i < m; ++i) {
+    Eigen::Vector3d w_si = Eigen::Vector3d::Zero();
+    double importance2 = 0.0;
+    int count = 0;
+    int biggest = -1;
+    double big = 0.0;
+    for (int q = 0; q < 3; ++q) {
+      const int col = gi.anchor_columns(q, i);
+      if (col < 0) continue;
+      used[static_cast<std::size_t>(col)] = true;
+      w_si(q) = delta(col);
+      importance2 += v(col) * v(col);
+      ++count;
+      if (std::abs(v(col)) > big) {
+        big = std::abs(v(col));
+        biggest = q;
+      }
+    }
+    if (count == 0) continue;
+    const double importance = std::sqrt(importance2);
+    if (importance < opt.component_threshold) continue;
+    const std::string a = "a_" + std::to_string(i + 1);
+    const Eigen::Vector3d u = gi.home_cable_directions.col(i);
+    const double along = w_si.dot(u);
+    // Sign convention: "+" moves the anchor away from the platform along its cable.
+    if (count == 3 && along * along >= 0.8 * w_si.squaredNorm()) {
+      out.push_back(
+          {a + " along cable " + std::to_string(i + 1), along > 0 ? importance : -importance});
+    } else if (big * big >= 0.8 * importance2) {
+      out.push_back({a + "." + axis[biggest], v(gi.anchor_columns(biggest, i))});
+    } else {
+      char buf[96];
+      const Eigen::Vector3d dir = w_si.normalized();
+      std::snprintf(buf, sizeof(buf), "%s along (%.2f, %.2f, %.2f)", a.c_str(), dir.x(), dir.y(),
+                    dir.z());
+      out.push_back({buf, importance});
+    }
+  }
+  for (int q = 0; q < P; ++q) {
+    if (used[static_cast<std::size_t>(q)]) continue;
+    if (std::abs(v(q)) < opt.component_threshold) continue;
+    out.push_back({words(gi.names[static_cast<std::size_t>(q)]), v(q)});
+  }
+  std::sort(out.begin(), out.end(),
+            [](const Named& x, const Named& y) { return std::abs(x.weight) > std::abs(y.weight); });
+  if (static_cast<int>(out.size()) > opt.max_components) {
+    out.resize(static_cast<std::size_t>(opt.max_components));
+  }
+  return out;
+}
+
+// True when the anchor part of `delta` is a rigid motion of the whole frame carrying most of v.
+bool is_gauge(const GeometryInformation& gi, const Eigen::VectorXd& v, const Eigen::VectorXd& delta,
+              std::string* what) {
+  const int m = static_cast<int>(gi.anchor_columns.cols());
+  if (m == 0 || gi.frame_anchors.cols() != m) return false;
+  double anchor_importance = 0.0;
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(3 * m);
+  for (int i = 0; i < m; ++i) {
+    for (int q = 0; q < 3; ++q) {
+      const int col = gi.anchor_columns(q, i);
+      if (col < 0) continue;
+      d(3 * i + q) = delta(col);
+      anchor_importance += v(col) * v(col);
+    }
+  }
+  if (anchor_importance < 0.5 || d.norm() == 0.0) return false;
+  // delta a_i = t + w x a_i = t - [a_i]x w
+  Eigen::MatrixXd G(3 * m, 6);
+  for (int i = 0; i < m; ++i) {
+    const Eigen::Vector3d a = gi.frame_anchors.col(i);
+    Eigen::Matrix3d ax;
+    ax << 0, -a.z(), a.y(), a.z(), 0, -a.x(), -a.y(), a.x(), 0;
+    G.block<3, 3>(3 * i, 0) = Eigen::Matrix3d::Identity();
+    G.block<3, 3>(3 * i, 3) = -ax;
+  }
+  const Eigen::VectorXd x = G.colPivHouseholderQr().solve(d);
+  if ((G * x - d).norm() > 0.1 * d.norm()) return false;
+  const Eigen::Vector3d t = x.head<3>(), w = x.tail<3>();
+  char buf[200];
+  // Express the translation in metres per unit rotation scale for the words.
+  const double scale = std::max(1e-12, d.norm());
+  std::snprintf(buf, sizeof(buf),
+                "gauge freedom: the whole frame moves rigidly with the poses (translation "
+                "%.2f %.2f %.2f, rotation %.2f %.2f %.2f); fix the home pose or anchor coordinates",
+                t.x() / scale, t.y() / scale, t.z() / scale, w.x() / scale, w.y() / scale,
+                w.z() / scale);
+  *what = buf;
+  return true;
+}
+
+}  // namespace
+
+IdentifiabilityReport analyze_identifiability(const GeometryInformation& gi,
+                                              const IdentifiabilityOptions& opt) {
+  IdentifiabilityReport r;
+  const Eigen::MatrixXd& S = gi.information;
+  const int P = static_cast<int>(S.rows());
+  r.parameter_names = gi.names;
+  r.num_parameters = P;
+  r.num_residuals = gi.num_residuals;
+  if (P == 0) return r;
+  // SI singular values.
+  {
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(S, Eigen::EigenvaluesOnly);
+    r.singular_values = es.eigenvalues().cwiseMax(0.0).cwiseSqrt().reverse();
+  }
+  Eigen::VectorXd d(P);
+  for (int q = 0; q < P; ++q) {
+    if (S(q, q) > 0) {
+      d(q) = std::sqrt(S(q, q));
+    } else {
+      d(q) = 1.0;
+      r.unobserved.push_back(q);
+    }
+  }
+  const Eigen::MatrixXd N = d.cwiseInverse().asDiagonal() * S * d.cwiseInverse().asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(N);
+  const Eigen::VectorXd sig = es.eigenvalues().cwiseMax(0.0).cwiseSqrt();  // ascending
+  r.normalized_singular_values = sig.reverse();
+  const double smax = sig.maxCoeff();
+  r.rank = 0;
+  for (int q = 0; q < P; ++q) r.rank += sig(q) > opt.rank_tolerance * smax ? 1 : 0;
+  r.condition_number = r.rank == P ? smax / sig(0) : std::numeric_limits<double>::infinity();
+  // Indices on SI values.
+  const Eigen::VectorXd& s = r.singular_values;
+  const double s1 = s(0), sl = s(P - 1);
+  double logsum = 0.0, invsum = 0.0;
+  bool zero = false;
+  for (int q = 0; q < P; ++q) {
+    if (!(s(q) > 0)) {
+      zero = true;
+      break;
+    }
+    logsum += std::log(s(q));
+    invsum += 1.0 / s(q);
+  }
+  r.o1 = zero ? 0.0 : std::exp(logsum / P) / std::sqrt(std::max(1, gi.num_residuals));
+  r.o2 = s1 > 0 ? sl / s1 : 0.0;
+  r.o3 = sl;
+  r.o4 = s1 > 0 ? sl * sl / s1 : 0.0;
+  r.o5 = zero ? 0.0 : 1.0 / invsum;
+  // Directions (ascending order = weakest first).
+  for (int q = 0; q < P; ++q) {
+    if (!(sig(q) <= opt.weak_tolerance * smax)) break;
+    ParameterDirection dir;
+    dir.singular_value = sig(q);
+    dir.null = sig(q) <= opt.rank_tolerance * smax;
+    const Eigen::VectorXd v = es.eigenvectors().col(q);
+    Eigen::VectorXd delta = d.cwiseInverse().asDiagonal() * v;
+    delta /= std::max(1e-300, delta.norm());
+    std::string gauge_text;
+    dir.gauge = is_gauge(gi, v, delta, &gauge_text);
+    const std::vector<Named> comps = components(gi, v, delta, opt);
+    for (const Named& c : comps) dir.components.push_back({c.text, c.weight});
+    if (dir.gauge) {
+      dir.description = gauge_text;
+    } else if (comps.empty()) {
+      dir.description = "a spread combination of many parameters";
+    } else if (comps.size() == 1) {
+      dir.description = comps[0].text + " is not determined by the data";
+    } else {
+      std::ostringstream os;
+      char w[32];
+      std::snprintf(w, sizeof(w), " (%+.2f)", comps[0].weight);
+      os << comps[0].text << w << " trades against ";
+      for (std::size_t k = 1; k < comps.size(); ++k) {
+        if (k > 1) os << (k + 1 == comps.size() ? " and " : ", ");
+        std::snprintf(w, sizeof(w), " (%+.2f)", comps[k].weight);
+        os << comps[k].text << w;
+      }
+      dir.description = os.str();
+    }
+    r.directions.push_back(std::move(dir));
+  }
+  return r;
+}
+
+Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& model,
+                                                      const MeasurementSet& set,
+                                                      const IdentificationOptions& identification,
+                                                      const IdentifiabilityOptions& options) {
+  std::vector<Pose> poses;
+  for (const PoseMeasurement& pm : set.poses)
+    poses.push_back(pm.reference ? *pm.reference : pm.commanded);
+  auto gi = geometry_information(model, set, poses, identification);
+  if (!gi) return gi.status();
+  return analyze_identifiability(*gi, options);
+}
+
+Status require_identifiable(const IdentifiabilityReport& report) {
+  if (report.identifiable()) return Status::Ok();
+  std::string msg = "unidentifiable parameter choice (rank " + std::to_string(report.rank) +
+                    " of " + std::to_string(report.num_parameters) + "): ";
+  int null_count = 0;
+  for (const ParameterDirection& d : report.directions) null_count += d.null ? 1 : 0;
+  bool first = true;
+  for (const ParameterDirection& d : report.directions) {
+    if (!d.null) continue;
+    if (!first) msg += "; ";
+    msg += d.description;
+    first = false;
+    if (msg.size() > Status::kMaxMessage) break;
+  }
+  if (msg.size() > Status::kMaxMessage - 1) {
+    msg.resize(Status::kMaxMessage - 16);
+    msg += " ... (" + std::to_string(null_count) + " dirs)";
+  }
+  return Status(ErrorCode::kFailedPrecondition, msg);
+}
+
+std::string IdentifiabilityReport::Summary() const {
+  std::ostringstream os;
+  char buf[256];
+  std::snprintf(buf, sizeof(buf),
+                "Identifiability: %d parameters, %d residuals, rank %d, condition number %.4g\n",
+                num_parameters, num_residuals, rank, condition_number);
+  os << buf;
+  std::snprintf(buf, sizeof(buf), "  O1 %.4g  O2 %.4g  O3 %.4g  O4 %.4g  O5 %.4g (SI)\n", o1, o2,
+                o3, o4, o5);
+  os << buf;
+  for (int q : unobserved) {
+    os << "  not observed at all: " << parameter_names[static_cast<std::size_t>(q)] << "\n";
+  }
+  for (const ParameterDirection& d : directions) {
+    std::snprintf(buf, sizeof(buf), "  %s direction (sigma %.3g): ", d.null ? "NULL" : "weak",
+                  d.singular_value);
+    os << buf << d.description << "\n";
+  }
+  return os.str();
+}
+
+}  // namespace cdpr

@@ -1,0 +1,1060 @@
+// The identification problem (Ceres) and its report. All autodiff cost functors live in this
+// translation unit (compiles slowly; keep them together).
+#include "cdpr/calibration/identification.hpp"
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+
+#include "cdpr/calibration/elongation.hpp"
+#include "cdpr/calibration/identifiability.hpp"
+#include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/simulate.hpp"
+#include "identification_internal.hpp"
+
+namespace cdpr {
+
+AnchorMask paper_anchor_mask() {
+  AnchorMask mask = AnchorMask::Constant(3, 8, false);
+  for (int c = 1; c <= 6; ++c) {  // x2..x7, y2..y7 (0-based 1..6)
+    mask(0, c) = true;
+    mask(1, c) = true;
+  }
+  for (int c = 4; c <= 7; ++c) mask(2, c) = true;  // z5..z8
+  return mask;
+}
+
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// Two unit vectors orthogonal to unit d (a tangent basis of the sphere at d).
+void tangent_basis(const Eigen::Vector3d& d, Eigen::Vector3d& e1, Eigen::Vector3d& e2) {
+  const Eigen::Vector3d helper =
+      std::abs(d.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  e1 = d.cross(helper).normalized();
+  e2 = d.cross(e1).normalized();
+}
+
+template <typename T>
+void pose_from_block(const T* pose, Vec3<T>& r, Mat3<T>& R) {
+  r = Vec3<T>(pose[0], pose[1], pose[2]);
+  R = rotation_from_rpy<T>(pose[3], pose[4], pose[5]);
+}
+
+// Everything a cable's residuals need that is not estimated.
+struct CableConstants {
+  Eigen::Matrix3d pulley_frame = Eigen::Matrix3d::Identity();
+  double pulley_radius = 0.0;
+  CableModel cable;
+  double sensor_gain = 1.0;    // nominal force sensor gain (raw = gain F + offset)
+  double sensor_offset = 0.0;  // nominal offset
+  bool estimated_stiffness = false;
+};
+
+// True tension from a reading made with the nominal sensor calibration, with the sensor
+// corrections g (relative gain) and c (offset, raw units) being estimated.
+template <typename T>
+T true_tension(const CableConstants& k, double reading, const T& g, const T& c) {
+  const double raw = k.sensor_gain * reading + k.sensor_offset;
+  return (T(raw) - T(k.sensor_offset) - c) / (T(k.sensor_gain) * (T(1) + g));
+}
+
+// Unstretched length U = L_k - dL at pose; false when the geometry is degenerate.
+template <typename T>
+bool unstretched_length(const CableConstants& k, const T* a, const T* b, const T* pose,
+                        double tension_reading, const T& e, const T& g, const T& c, T& U,
+                        Vec3<T>* unit = nullptr, Vec3<T>* arm = nullptr, T* force = nullptr) {
+  Vec3<T> r;
+  Mat3<T> R;
+  pose_from_block(pose, r, R);
+  const Vec3<T> rb = R * Vec3<T>(b[0], b[1], b[2]);
+  const Vec3<T> P = r + rb;
+  const CableGeometry<T> geom =
+      cable_geometry<T>(Vec3<T>(a[0], a[1], a[2]), k.pulley_frame, T(k.pulley_radius), P);
+  if (!geom.valid) return false;
+  U = geom.length;
+  if (!std::isnan(tension_reading)) {
+    const T F = true_tension(k, tension_reading, g, c);
+    const T loaded = ident_detail::loaded_length<T>(k.cable, geom.length);
+    if (k.estimated_stiffness) {
+      const T ea = T(k.cable.ea) * (T(1) + e);
+      U -= F * loaded / (ea + F);
+    } else {
+      U -= cable_elongation<T>(k.cable, loaded, F);
+    }
+    if (force) *force = F;
+  } else if (force) {
+    *force = T(0);
+  }
+  if (unit) *unit = geom.unit;
+  if (arm) *arm = rb;
+  return true;
+}
+
+// Cable length residual. Blocks: a(3), b(3), pose(6), o(1), s(1), e(1), g(1), c(1).
+struct LengthCost {
+  CableConstants k;
+  double reading = 0.0;
+  double tension = kNaN;
+  double sigma = 1.0;
+  template <typename T>
+  bool operator()(const T* a, const T* b, const T* pose, const T* o, const T* s, const T* e,
+                  const T* g, const T* c, T* residual) const {
+    T U;
+    if (!unstretched_length(k, a, b, pose, tension, e[0], g[0], c[0], U)) return false;
+    residual[0] = (U - ((T(1) + s[0]) * T(reading) + o[0])) / T(sigma);
+    return true;
+  }
+};
+
+// Laser residual. Blocks: pose(6), origin(3), direction angles(2), normal angles(2), c(1).
+struct LaserCost {
+  Eigen::Vector3d d0, de1, de2;  // platform frame
+  Eigen::Vector3d n0, ne1, ne2;  // world
+  double reading = 0.0;
+  double sigma = 1.0;
+  template <typename T>
+  bool operator()(const T* pose, const T* origin, const T* dir, const T* normal, const T* c,
+                  T* residual) const {
+    Vec3<T> r;
+    Mat3<T> R;
+    pose_from_block(pose, r, R);
+    Vec3<T> d = d0.cast<T>() + de1.cast<T>() * dir[0] + de2.cast<T>() * dir[1];
+    d = d / sqrt(d.squaredNorm());
+    Vec3<T> n = n0.cast<T>() + ne1.cast<T>() * normal[0] + ne2.cast<T>() * normal[1];
+    n = n / sqrt(n.squaredNorm());
+    const Vec3<T> p = r + R * Vec3<T>(origin[0], origin[1], origin[2]);
+    const Vec3<T> dw = R * d;
+    const T den = n.dot(dw);
+    if (!(abs(den) > T(1e-9))) return false;
+    const T t = (c[0] - n.dot(p)) / den;
+    residual[0] = (t - T(reading)) / T(sigma);
+    return true;
+  }
+};
+
+// Static equilibrium (6 residuals). Blocks: pose, a_1..a_m, b_1..b_m, g_1..g_m, c_1..c_m.
+struct EquilibriumCost {
+  std::vector<CableConstants> k;
+  Eigen::VectorXd tensions;
+  Eigen::Matrix<double, 6, 6> whitening;  // L^{-1}, with L L^T = covariance of the wrench
+  double mass = 1.0;
+  double gravity = 9.81;
+  Eigen::Vector3d com = Eigen::Vector3d::Zero();
+  template <typename T>
+  bool operator()(T const* const* p, T* residual) const {
+    const int m = static_cast<int>(k.size());
+    const T* pose = p[0];
+    Vec3<T> r;
+    Mat3<T> R;
+    pose_from_block(pose, r, R);
+    Eigen::Matrix<T, 6, 1> w;
+    const Vec3<T> weight(T(0), T(0), T(-mass * gravity));
+    w.template head<3>() = weight;
+    w.template tail<3>() = (R * com.cast<T>()).cross(weight);
+    for (int i = 0; i < m; ++i) {
+      const T* a = p[1 + i];
+      const T* b = p[1 + m + i];
+      const T* g = p[1 + 2 * m + i];
+      const T* c = p[1 + 3 * m + i];
+      const Vec3<T> rb = R * Vec3<T>(b[0], b[1], b[2]);
+      const CableGeometry<T> geom =
+          cable_geometry<T>(Vec3<T>(a[0], a[1], a[2]), k[static_cast<std::size_t>(i)].pulley_frame,
+                            T(k[static_cast<std::size_t>(i)].pulley_radius), r + rb);
+      if (!geom.valid) return false;
+      const T F = true_tension(k[static_cast<std::size_t>(i)], tensions(i), g[0], c[0]);
+      w.template head<3>() += geom.unit * F;
+      w.template tail<3>() += rb.cross(geom.unit) * F;
+    }
+    const Eigen::Matrix<T, 6, 1> out = whitening.cast<T>() * w;
+    for (int q = 0; q < 6; ++q) residual[q] = out(q);
+    return true;
+  }
+};
+
+struct ReferenceCost {
+  Eigen::Matrix<double, 6, 1> reference;
+  Eigen::Matrix<double, 6, 1> inv_sigma;
+  template <typename T>
+  bool operator()(const T* pose, T* residual) const {
+    for (int q = 0; q < 6; ++q) residual[q] = (pose[q] - T(reference(q))) * T(inv_sigma(q));
+    return true;
+  }
+};
+
+enum class Channel { kLength, kLaser, kWrench, kReference };
+
+struct RowInfo {
+  Channel channel;
+  int index;  // cable, laser or wrench component
+};
+
+struct LaserBlocks {
+  std::array<double, 3> origin{};
+  std::array<double, 2> direction{};
+  std::array<double, 2> normal{};
+  double c = 0.0;
+  Eigen::Vector3d d0, de1, de2, n0, ne1, ne2;
+};
+
+// The Ceres problem with its parameter storage and layout.
+struct Built {
+  ceres::Problem problem;
+  int m = 0;
+  std::vector<std::array<double, 3>> a, b;
+  std::vector<double> o, s, e, g, c;
+  std::vector<LaserBlocks> lasers;
+  std::vector<std::array<double, 6>> poses;
+  std::vector<bool> pose_free;
+  std::vector<CableConstants> constants;
+
+  std::vector<double*> geometry_blocks;  // free geometry blocks, column order
+  std::vector<int> geometry_sizes;       // tangent size of each
+  std::vector<std::string> names, units;
+  std::vector<double*> value_ptr;  // ambient value of each geometry column
+  Eigen::Matrix3Xi anchor_columns;
+  int num_geometry = 0;
+
+  std::vector<std::vector<ceres::ResidualBlockId>> blocks_per_pose;
+  std::vector<std::vector<RowInfo>> rows_per_pose;
+  std::vector<Eigen::Matrix<double, 6, 6>> wrench_whitening;  // per pose (for SI residuals)
+  std::vector<std::string> notes;                             // warnings found while building
+  int num_residuals = 0;
+  bool shared_stiffness = false;
+};
+
+void add_geometry_block(Built& B, double* ptr, int size, const std::vector<bool>& estimated,
+                        const std::vector<std::string>& names, const std::string& unit,
+                        bool any_free) {
+  B.problem.AddParameterBlock(ptr, size);
+  std::vector<int> fixed;
+  for (int q = 0; q < size; ++q) {
+    if (!any_free || !estimated[static_cast<std::size_t>(q)]) fixed.push_back(q);
+  }
+  if (static_cast<int>(fixed.size()) == size) {
+    B.problem.SetParameterBlockConstant(ptr);
+    return;
+  }
+  if (!fixed.empty()) B.problem.SetManifold(ptr, new ceres::SubsetManifold(size, fixed));
+  B.geometry_blocks.push_back(ptr);
+  B.geometry_sizes.push_back(size - static_cast<int>(fixed.size()));
+  for (int q = 0; q < size; ++q) {
+    if (std::find(fixed.begin(), fixed.end(), q) != fixed.end()) continue;
+    B.names.push_back(names[static_cast<std::size_t>(q)]);
+    B.units.push_back(unit);
+    B.value_ptr.push_back(ptr + q);
+  }
+}
+
+Status check_mask(const AnchorMask& mask, int m, const char* what) {
+  if (mask.size() != 0 && mask.cols() != m) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "identification options: %s mask has %d columns, the robot has %d cables",
+                         what, static_cast<int>(mask.cols()), m);
+  }
+  return Status::Ok();
+}
+
+// Builds the problem with values from `model` and pose guesses `poses`.
+Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const MeasurementSet& set,
+                                     const std::vector<Pose>& poses,
+                                     const IdentificationOptions& opt) {
+  const RobotModel& robot = model.robot;
+  const int m = robot.num_cables();
+  const int nl = static_cast<int>(robot.lasers.size());
+  const int n = set.num_poses();
+  if (Status st = validate(set, robot); !st.ok()) return st;
+  if (m < 1) return Status(ErrorCode::kInvalidArgument, "identification: the robot has no cables");
+  if (static_cast<int>(robot.pulleys.size()) != m || static_cast<int>(robot.cables.size()) != m ||
+      static_cast<int>(robot.force_sensors.size()) != m || robot.platform_anchors.cols() != m ||
+      static_cast<int>(robot.winches.size()) != m) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "identification: the robot model's per-cable vectors do not all have m entries");
+  }
+  if (model.readings.length_offsets.size() != m || model.readings.length_scales.size() != m) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "identification: the reading model needs one offset and one scale per cable");
+  }
+  if (Status st = check_mask(opt.frame_anchor_mask, m, "frame anchor"); !st.ok()) return st;
+  if (Status st = check_mask(opt.platform_anchor_mask, m, "platform anchor"); !st.ok()) return st;
+  if (static_cast<int>(poses.size()) != n) {
+    return Status(ErrorCode::kInternal, "identification: pose guesses do not match the set");
+  }
+  const bool fix_home = opt.gauge == Gauge::kHomePose || opt.gauge == Gauge::kHomePoseAndLaserPlane;
+  const bool fix_plane =
+      opt.gauge == Gauge::kLaserPlane || opt.gauge == Gauge::kHomePoseAndLaserPlane;
+  if (fix_home && (opt.home_pose_index < 0 || opt.home_pose_index >= n)) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "identification: home_pose_index %d is not one of the %d poses",
+                         opt.home_pose_index, n);
+  }
+  if (n == 0) return Status(ErrorCode::kInvalidArgument, "identification: no poses measured");
+
+  auto B = std::make_unique<Built>();
+  B->m = m;
+  B->a.resize(static_cast<std::size_t>(m));
+  B->b.resize(static_cast<std::size_t>(m));
+  B->o.assign(static_cast<std::size_t>(m), 0.0);
+  B->s.assign(static_cast<std::size_t>(m), 0.0);
+  B->e.assign(static_cast<std::size_t>(m), 0.0);
+  B->g.assign(static_cast<std::size_t>(m), 0.0);
+  B->c.assign(static_cast<std::size_t>(m), 0.0);
+  B->anchor_columns = Eigen::Matrix3Xi::Constant(3, m, -1);
+  const bool ea_estimated = opt.estimate_stiffness != StiffnessEstimate::kFixed;
+  B->shared_stiffness = opt.estimate_stiffness == StiffnessEstimate::kShared;
+  for (int i = 0; i < m; ++i) {
+    const auto ui = static_cast<std::size_t>(i);
+    for (int q = 0; q < 3; ++q) {
+      B->a[ui][static_cast<std::size_t>(q)] = robot.frame_anchors(q, i);
+      B->b[ui][static_cast<std::size_t>(q)] = robot.platform_anchors(q, i);
+    }
+    B->o[ui] = model.readings.length_offsets(i);
+    B->s[ui] = model.readings.length_scales(i);
+    CableConstants k;
+    k.pulley_frame = robot.pulleys[ui].frame;
+    k.pulley_radius = robot.pulleys[ui].radius;
+    k.cable = robot.cables[ui];
+    k.sensor_gain = robot.force_sensors[ui].gain;
+    k.sensor_offset = robot.force_sensors[ui].offset;
+    k.estimated_stiffness = ea_estimated;
+    B->constants.push_back(k);
+  }
+  // Geometry blocks in a fixed order: a, b, o, s, e, g, c, lasers.
+  const char* axis = "xyz";
+  for (int i = 0; i < m; ++i) {
+    std::vector<bool> est(3);
+    std::vector<std::string> nm(3);
+    for (int q = 0; q < 3; ++q) {
+      est[static_cast<std::size_t>(q)] =
+          opt.frame_anchor_mask.size() == 0 ? true : opt.frame_anchor_mask(q, i);
+      nm[static_cast<std::size_t>(q)] = "a_" + std::to_string(i + 1) + "." + axis[q];
+    }
+    const int before = static_cast<int>(B->names.size());
+    add_geometry_block(*B, B->a[static_cast<std::size_t>(i)].data(), 3, est, nm, "m",
+                       opt.estimate_frame_anchors);
+    int col = before;
+    for (int q = 0; q < 3; ++q) {
+      if (col < static_cast<int>(B->names.size()) &&
+          B->value_ptr[static_cast<std::size_t>(col)] ==
+              B->a[static_cast<std::size_t>(i)].data() + q) {
+        B->anchor_columns(q, i) = col++;
+      }
+    }
+  }
+  for (int i = 0; i < m; ++i) {
+    std::vector<bool> est(3);
+    std::vector<std::string> nm(3);
+    for (int q = 0; q < 3; ++q) {
+      est[static_cast<std::size_t>(q)] =
+          opt.platform_anchor_mask.size() == 0 ? true : opt.platform_anchor_mask(q, i);
+      nm[static_cast<std::size_t>(q)] = "b_" + std::to_string(i + 1) + "." + axis[q];
+    }
+    add_geometry_block(*B, B->b[static_cast<std::size_t>(i)].data(), 3, est, nm, "m",
+                       opt.estimate_platform_anchors);
+  }
+  auto scalar_blocks = [&](std::vector<double>& v, const char* prefix, const char* unit, bool on,
+                           int count) {
+    for (int i = 0; i < m; ++i) {
+      const bool free_i = on && i < count;
+      add_geometry_block(
+          *B, &v[static_cast<std::size_t>(i)], 1, {true},
+          {std::string(prefix) + (count == 1 ? std::string("") : "_" + std::to_string(i + 1))},
+          unit, free_i);
+    }
+  };
+  scalar_blocks(B->o, "o", "m", opt.estimate_length_offsets, m);
+  scalar_blocks(B->s, "s", "-", opt.estimate_length_scales, m);
+  scalar_blocks(B->e, "ea_scale", "-", ea_estimated,
+                opt.estimate_stiffness == StiffnessEstimate::kShared ? 1 : m);
+  scalar_blocks(B->g, "force_gain", "-", opt.estimate_force_gains, m);
+  scalar_blocks(B->c, "force_offset", "N", opt.estimate_force_offsets, m);
+  B->lasers.resize(static_cast<std::size_t>(nl));
+  for (int l = 0; l < nl; ++l) {
+    LaserBlocks& L = B->lasers[static_cast<std::size_t>(l)];
+    const LaserModel& lm = robot.lasers[static_cast<std::size_t>(l)];
+    for (int q = 0; q < 3; ++q) L.origin[static_cast<std::size_t>(q)] = lm.origin(q);
+    L.d0 = lm.direction.normalized();
+    tangent_basis(L.d0, L.de1, L.de2);
+    L.n0 = lm.plane_normal.normalized();
+    tangent_basis(L.n0, L.ne1, L.ne2);
+    L.c = L.n0.dot(lm.plane_point);
+    const std::string p = "laser_" + std::to_string(l + 1);
+    add_geometry_block(*B, L.origin.data(), 3, {true, true, true},
+                       {p + ".origin.x", p + ".origin.y", p + ".origin.z"}, "m",
+                       opt.estimate_laser_origin);
+    add_geometry_block(*B, L.direction.data(), 2, {true, true},
+                       {p + ".direction.u", p + ".direction.v"}, "rad",
+                       opt.estimate_laser_direction);
+    add_geometry_block(*B, L.normal.data(), 2, {true, true},
+                       {p + ".plane.normal.u", p + ".plane.normal.v"}, "rad",
+                       opt.estimate_laser_plane && !fix_plane);
+    add_geometry_block(*B, &L.c, 1, {true}, {p + ".plane.c"}, "m",
+                       opt.estimate_laser_plane && !fix_plane);
+  }
+  B->num_geometry = static_cast<int>(B->names.size());
+
+  // Poses.
+  B->poses.resize(static_cast<std::size_t>(n));
+  B->pose_free.assign(static_cast<std::size_t>(n), true);
+  for (int j = 0; j < n; ++j) {
+    Pose p = poses[static_cast<std::size_t>(j)];
+    if (fix_home && j == opt.home_pose_index) {
+      const PoseMeasurement& pm = set.poses[static_cast<std::size_t>(j)];
+      p = pm.reference ? *pm.reference : robot.home;
+      B->pose_free[static_cast<std::size_t>(j)] = false;
+    }
+    const auto v = p.vector();
+    for (int q = 0; q < 6; ++q)
+      B->poses[static_cast<std::size_t>(j)][static_cast<std::size_t>(q)] = v(q);
+    B->problem.AddParameterBlock(B->poses[static_cast<std::size_t>(j)].data(), 6);
+    if (!B->pose_free[static_cast<std::size_t>(j)]) {
+      B->problem.SetParameterBlockConstant(B->poses[static_cast<std::size_t>(j)].data());
+    }
+  }
+
+  // Residuals, pose by pose.
+  B->blocks_per_pose.resize(static_cast<std::size_t>(n));
+  B->rows_per_pose.resize(static_cast<std::size_t>(n));
+  B->wrench_whitening.assign(static_cast<std::size_t>(n), Eigen::Matrix<double, 6, 6>::Zero());
+  auto make_loss = [&]() -> ceres::LossFunction* {
+    switch (opt.loss) {
+      case RobustLoss::kHuber:
+        return new ceres::HuberLoss(opt.loss_scale);
+      case RobustLoss::kCauchy:
+        return new ceres::CauchyLoss(opt.loss_scale);
+      case RobustLoss::kNone:
+        return nullptr;
+    }
+    return nullptr;
+  };
+  const SensorNoise& noise = set.noise;
+  bool missing_tension_warned = false;
+  KinematicsData kin(robot);
+  for (int j = 0; j < n; ++j) {
+    const auto uj = static_cast<std::size_t>(j);
+    const PoseMeasurement& pm = set.poses[uj];
+    double* pose = B->poses[uj].data();
+    const bool have_tensions = pm.tensions.size() == m;
+    inverse_kinematics(robot,
+                       Pose::from_vector(Eigen::Map<const Eigen::Matrix<double, 6, 1>>(pose)), kin);
+    if (opt.use_lengths) {
+      for (int i = 0; i < m; ++i) {
+        const auto ui = static_cast<std::size_t>(i);
+        if (std::isnan(pm.cable_lengths(i))) continue;
+        // A slack cable (tension reading below the threshold) sags: its length says nothing
+        // exact about the geometry, so it is left out (its zero tension still enters the
+        // equilibrium).
+        if (have_tensions && !std::isnan(pm.tensions(i)) &&
+            pm.tensions(i) < opt.slack_tension_threshold) {
+          continue;
+        }
+        auto* f = new LengthCost;
+        f->k = B->constants[ui];
+        f->reading = pm.cable_lengths(i);
+        f->tension = have_tensions ? pm.tensions(i) : kNaN;
+        if (std::isnan(f->tension) && !missing_tension_warned &&
+            robot.cables[ui].elongation != ElongationKind::kRigid) {
+          B->notes.push_back("some tensions are missing: their cables are taken as unstretched");
+          missing_tension_warned = true;
+        }
+        // Force noise propagated through the elongation: dU/dF ~ -L / EA.
+        const double compliance =
+            robot.cables[ui].elongation == ElongationKind::kRigid && !ea_estimated
+                ? 0.0
+                : ident_detail::loaded_length<double>(robot.cables[ui], kin.lengths(i)) /
+                      robot.cables[ui].ea;
+        f->sigma = std::hypot(noise.sigma_length,
+                              std::isnan(f->tension) ? 0.0 : compliance * noise.sigma_force);
+        double* e_ptr = opt.estimate_stiffness == StiffnessEstimate::kShared ? &B->e[0] : &B->e[ui];
+        auto id = B->problem.AddResidualBlock(
+            new ceres::AutoDiffCostFunction<LengthCost, 1, 3, 3, 6, 1, 1, 1, 1, 1>(f), make_loss(),
+            B->a[ui].data(), B->b[ui].data(), pose, &B->o[ui], &B->s[ui], e_ptr, &B->g[ui],
+            &B->c[ui]);
+        B->blocks_per_pose[uj].push_back(id);
+        B->rows_per_pose[uj].push_back({Channel::kLength, i});
+      }
+    }
+    if (opt.use_laser) {
+      for (int l = 0; l < std::min<int>(nl, static_cast<int>(pm.laser_distances.size())); ++l) {
+        if (std::isnan(pm.laser_distances(l))) continue;
+        LaserBlocks& L = B->lasers[static_cast<std::size_t>(l)];
+        auto* f = new LaserCost;
+        f->d0 = L.d0;
+        f->de1 = L.de1;
+        f->de2 = L.de2;
+        f->n0 = L.n0;
+        f->ne1 = L.ne1;
+        f->ne2 = L.ne2;
+        f->reading = pm.laser_distances(l);
+        f->sigma = noise.sigma_laser;
+        auto id = B->problem.AddResidualBlock(
+            new ceres::AutoDiffCostFunction<LaserCost, 1, 6, 3, 2, 2, 1>(f), make_loss(), pose,
+            L.origin.data(), L.direction.data(), L.normal.data(), &L.c);
+        B->blocks_per_pose[uj].push_back(id);
+        B->rows_per_pose[uj].push_back({Channel::kLaser, l});
+      }
+    }
+    if (opt.use_equilibrium && have_tensions && pm.tensions.allFinite()) {
+      auto* f = new EquilibriumCost;
+      f->k = B->constants;
+      f->tensions = pm.tensions;
+      f->mass = robot.platform.mass;
+      f->gravity = robot.gravity;
+      f->com = robot.platform.center_of_mass;
+      const Eigen::MatrixXd At = kin.structure_matrix;
+      Eigen::Matrix<double, 6, 6> cov = noise.sigma_force * noise.sigma_force * At * At.transpose();
+      cov += 1e-12 * cov.trace() * Eigen::Matrix<double, 6, 6>::Identity();
+      const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cov);
+      f->whitening = llt.matrixL().solve(Eigen::Matrix<double, 6, 6>::Identity());
+      B->wrench_whitening[uj] = f->whitening;
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<EquilibriumCost, 8>(f);
+      std::vector<double*> blocks;
+      cost->AddParameterBlock(6);
+      blocks.push_back(pose);
+      for (int i = 0; i < m; ++i) {
+        cost->AddParameterBlock(3);
+        blocks.push_back(B->a[static_cast<std::size_t>(i)].data());
+      }
+      for (int i = 0; i < m; ++i) {
+        cost->AddParameterBlock(3);
+        blocks.push_back(B->b[static_cast<std::size_t>(i)].data());
+      }
+      for (int i = 0; i < m; ++i) {
+        cost->AddParameterBlock(1);
+        blocks.push_back(&B->g[static_cast<std::size_t>(i)]);
+      }
+      for (int i = 0; i < m; ++i) {
+        cost->AddParameterBlock(1);
+        blocks.push_back(&B->c[static_cast<std::size_t>(i)]);
+      }
+      cost->SetNumResiduals(6);
+      auto id = B->problem.AddResidualBlock(cost, make_loss(), blocks);
+      B->blocks_per_pose[uj].push_back(id);
+      for (int q = 0; q < 6; ++q) B->rows_per_pose[uj].push_back({Channel::kWrench, q});
+    }
+    if (opt.use_reference && pm.reference && B->pose_free[uj]) {
+      auto* f = new ReferenceCost;
+      f->reference = pm.reference->vector();
+      f->inv_sigma << Eigen::Vector3d::Constant(1.0 / noise.sigma_reference_position),
+          Eigen::Vector3d::Constant(1.0 / noise.sigma_reference_angle);
+      auto id = B->problem.AddResidualBlock(new ceres::AutoDiffCostFunction<ReferenceCost, 6, 6>(f),
+                                            make_loss(), pose);
+      B->blocks_per_pose[uj].push_back(id);
+      for (int q = 0; q < 6; ++q) B->rows_per_pose[uj].push_back({Channel::kReference, q});
+    }
+    B->num_residuals += static_cast<int>(B->rows_per_pose[uj].size());
+  }
+  return B;
+}
+
+// Jacobian pieces per pose and the Schur complement onto the geometry columns.
+struct Information {
+  std::vector<Eigen::MatrixXd> per_pose;             // P x P
+  Eigen::MatrixXd total;                             // P x P
+  std::vector<Eigen::Matrix<double, 6, 6>> hpp_inv;  // per free pose
+  std::vector<Eigen::MatrixXd> hpg;                  // 6 x P per free pose
+  std::vector<double> residuals;                     // in row order, as evaluated
+  std::vector<Eigen::MatrixXd> jg, jp;               // raw blocks (only when kept)
+};
+
+Result<Information> information(Built& B, bool apply_loss, bool keep = false) {
+  const int P = B.num_geometry;
+  const int n = static_cast<int>(B.poses.size());
+  ceres::Problem::EvaluateOptions eo;
+  eo.apply_loss_function = apply_loss;
+  eo.parameter_blocks = B.geometry_blocks;
+  std::vector<int> pose_col(static_cast<std::size_t>(n), -1);
+  int col = P;
+  for (int j = 0; j < n; ++j) {
+    if (!B.pose_free[static_cast<std::size_t>(j)]) continue;
+    eo.parameter_blocks.push_back(B.poses[static_cast<std::size_t>(j)].data());
+    pose_col[static_cast<std::size_t>(j)] = col;
+    col += 6;
+  }
+  for (const auto& v : B.blocks_per_pose) {
+    eo.residual_blocks.insert(eo.residual_blocks.end(), v.begin(), v.end());
+  }
+  Information info;
+  info.per_pose.assign(static_cast<std::size_t>(n), Eigen::MatrixXd::Zero(P, P));
+  info.total = Eigen::MatrixXd::Zero(P, P);
+  info.hpp_inv.assign(static_cast<std::size_t>(n), Eigen::Matrix<double, 6, 6>::Zero());
+  info.hpg.assign(static_cast<std::size_t>(n), Eigen::MatrixXd::Zero(6, P));
+  if (eo.residual_blocks.empty()) return info;
+  ceres::CRSMatrix J;
+  double cost = 0.0;
+  if (!B.problem.Evaluate(eo, &cost, &info.residuals, nullptr, &J)) {
+    return Status(
+        ErrorCode::kNumericalFailure,
+        "identification: the model cannot be evaluated (a cable is degenerate at a pose)");
+  }
+  if (J.num_cols != col) {
+    return Status::Error(ErrorCode::kInternal,
+                         "identification: Jacobian has %d columns, expected %d", J.num_cols, col);
+  }
+  int row = 0;
+  for (int j = 0; j < n; ++j) {
+    const int rows = static_cast<int>(B.rows_per_pose[static_cast<std::size_t>(j)].size());
+    Eigen::MatrixXd Jg = Eigen::MatrixXd::Zero(rows, P);
+    Eigen::MatrixXd Jp = Eigen::MatrixXd::Zero(rows, 6);
+    const int pc = pose_col[static_cast<std::size_t>(j)];
+    for (int r = 0; r < rows; ++r) {
+      const int R = row + r;
+      for (int idx = J.rows[static_cast<std::size_t>(R)];
+           idx < J.rows[static_cast<std::size_t>(R) + 1]; ++idx) {
+        const int cidx = J.cols[static_cast<std::size_t>(idx)];
+        const double v = J.values[static_cast<std::size_t>(idx)];
+        if (cidx < P) {
+          Jg(r, cidx) = v;
+        } else if (pc >= 0 && cidx >= pc && cidx < pc + 6) {
+          Jp(r, cidx - pc) = v;
+        }
+      }
+    }
+    row += rows;
+    Eigen::MatrixXd S = Jg.transpose() * Jg;
+    if (keep) {
+      info.jg.push_back(Jg);
+      info.jp.push_back(Jp);
+    }
+    if (pc >= 0) {
+      const Eigen::Matrix<double, 6, 6> Hpp = Jp.transpose() * Jp;
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(Hpp);
+      Eigen::Matrix<double, 6, 1> inv = Eigen::Matrix<double, 6, 1>::Zero();
+      const double lmax = es.eigenvalues().maxCoeff();
+      for (int q = 0; q < 6; ++q) {
+        if (es.eigenvalues()(q) > 1e-12 * lmax && lmax > 0) inv(q) = 1.0 / es.eigenvalues()(q);
+      }
+      const Eigen::Matrix<double, 6, 6> Hinv =
+          es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose();
+      const Eigen::MatrixXd Hpg = Jp.transpose() * Jg;
+      S -= Hpg.transpose() * Hinv * Hpg;
+      info.hpp_inv[static_cast<std::size_t>(j)] = Hinv;
+      info.hpg[static_cast<std::size_t>(j)] = Hpg;
+    }
+    S = 0.5 * (S + S.transpose());
+    info.total += S;
+    info.per_pose[static_cast<std::size_t>(j)] = std::move(S);
+  }
+  return info;
+}
+
+GeometryInformation to_public(const Built& B, const Information& info,
+                              const CalibratedModel& model) {
+  GeometryInformation gi;
+  gi.names = B.names;
+  gi.units = B.units;
+  gi.values.resize(B.num_geometry);
+  for (int q = 0; q < B.num_geometry; ++q) gi.values(q) = *B.value_ptr[static_cast<std::size_t>(q)];
+  gi.per_pose = info.per_pose;
+  gi.information = info.total;
+  gi.anchor_columns = B.anchor_columns;
+  KinematicsData kin(model.robot);
+  inverse_kinematics(model.robot, model.robot.home, kin);
+  gi.home_cable_directions = kin.unit_vectors;
+  gi.frame_anchors = model.robot.frame_anchors;
+  for (int i = 0; i < B.m; ++i) {
+    for (int q = 0; q < 3; ++q)
+      gi.frame_anchors(q, i) = B.a[static_cast<std::size_t>(i)][static_cast<std::size_t>(q)];
+  }
+  gi.num_residuals = B.num_residuals;
+  int free_poses = 0;
+  for (bool f : B.pose_free) free_poses += f ? 1 : 0;
+  gi.num_pose_parameters = 6 * free_poses;
+  return gi;
+}
+
+CalibratedModel extract(const Built& B, const CalibratedModel& initial) {
+  CalibratedModel out = initial;
+  const int m = B.m;
+  for (int i = 0; i < m; ++i) {
+    const auto ui = static_cast<std::size_t>(i);
+    for (int q = 0; q < 3; ++q) {
+      out.robot.frame_anchors(q, i) = B.a[ui][static_cast<std::size_t>(q)];
+      out.robot.platform_anchors(q, i) = B.b[ui][static_cast<std::size_t>(q)];
+    }
+    out.readings.length_offsets(i) = B.o[ui];
+    out.readings.length_scales(i) = B.s[ui];
+    WinchModel& w = out.robot.winches[ui];
+    const double k = 1.0 + B.s[ui] - initial.readings.length_scales(i);
+    w.length_offset = k * w.length_offset + (B.o[ui] - initial.readings.length_offsets(i));
+    w.drum_diameter *= k;
+    w.drum_pitch *= k;
+    out.robot.force_sensors[ui].gain = initial.robot.force_sensors[ui].gain * (1.0 + B.g[ui]);
+    out.robot.force_sensors[ui].offset = initial.robot.force_sensors[ui].offset + B.c[ui];
+  }
+  // Stiffness: only when it was estimated (a shared value lives in e[0]).
+  for (int i = 0; i < m; ++i) {
+    const auto ui = static_cast<std::size_t>(i);
+    const bool shared_used = B.constants[ui].estimated_stiffness;
+    if (!shared_used) continue;
+    const double e = B.shared_stiffness ? B.e[0] : B.e[ui];
+    out.robot.cables[ui].ea = initial.robot.cables[ui].ea * (1.0 + e);
+    out.robot.cables[ui].elongation = ElongationKind::kHooke;
+  }
+  for (std::size_t l = 0; l < B.lasers.size(); ++l) {
+    const LaserBlocks& L = B.lasers[l];
+    LaserModel& lm = out.robot.lasers[l];
+    lm.origin = Eigen::Vector3d(L.origin[0], L.origin[1], L.origin[2]);
+    lm.direction = (L.d0 + L.de1 * L.direction[0] + L.de2 * L.direction[1]).normalized();
+    lm.plane_normal = (L.n0 + L.ne1 * L.normal[0] + L.ne2 * L.normal[1]).normalized();
+    lm.plane_point = L.c * lm.plane_normal;
+  }
+  return out;
+}
+
+std::vector<Pose> initial_poses(const MeasurementSet& set) {
+  std::vector<Pose> p;
+  p.reserve(set.poses.size());
+  for (const PoseMeasurement& pm : set.poses)
+    p.push_back(pm.reference ? *pm.reference : pm.commanded);
+  return p;
+}
+
+// Pseudo-inverse of a symmetric PSD matrix after column normalisation; `null` receives the
+// normalised null-space basis.
+Eigen::MatrixXd pseudo_inverse_normalized(const Eigen::MatrixXd& S, double rel_tol, int* rank,
+                                          double* condition, Eigen::MatrixXd* null_basis) {
+  const int P = static_cast<int>(S.rows());
+  Eigen::VectorXd d(P);
+  for (int q = 0; q < P; ++q) d(q) = S(q, q) > 0 ? std::sqrt(S(q, q)) : 1.0;
+  const Eigen::MatrixXd N = d.cwiseInverse().asDiagonal() * S * d.cwiseInverse().asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(N);
+  const Eigen::VectorXd lam = es.eigenvalues().cwiseMax(0.0);
+  const double lmax = lam.size() ? lam.maxCoeff() : 0.0;
+  Eigen::VectorXd inv = Eigen::VectorXd::Zero(P);
+  int r = 0;
+  double smin = lmax;
+  std::vector<int> null_idx;
+  for (int q = 0; q < P; ++q) {
+    // Singular values are sqrt(lambda): compare sigma ratios with rel_tol.
+    if (lmax > 0 && std::sqrt(lam(q) / lmax) > rel_tol) {
+      inv(q) = 1.0 / lam(q);
+      ++r;
+      smin = std::min(smin, lam(q));
+    } else {
+      null_idx.push_back(q);
+    }
+  }
+  if (rank) *rank = r;
+  if (condition) {
+    *condition =
+        (r == P && smin > 0) ? std::sqrt(lmax / smin) : std::numeric_limits<double>::infinity();
+  }
+  if (null_basis) {
+    null_basis->resize(P, static_cast<int>(null_idx.size()));
+    for (std::size_t k = 0; k < null_idx.size(); ++k) {
+      null_basis->col(static_cast<int>(k)) = es.eigenvectors().col(null_idx[k]);
+    }
+  }
+  const Eigen::MatrixXd Ninv = es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose();
+  return d.cwiseInverse().asDiagonal() * Ninv * d.cwiseInverse().asDiagonal();
+}
+
+}  // namespace
+
+Result<GeometryInformation> geometry_information(const CalibratedModel& model,
+                                                 const MeasurementSet& set,
+                                                 const std::vector<Pose>& poses,
+                                                 const IdentificationOptions& options,
+                                                 bool keep_jacobians) {
+  auto built = build(model, set, poses, options);
+  if (!built) return built.status();
+  auto info = information(**built, false, keep_jacobians);
+  if (!info) return info.status();
+  GeometryInformation gi = to_public(**built, *info, model);
+  gi.jacobian_geometry = std::move(info->jg);
+  gi.jacobian_pose = std::move(info->jp);
+  return gi;
+}
+
+Result<IdentificationReport> identify(const CalibratedModel& initial, const MeasurementSet& set,
+                                      const IdentificationOptions& options) {
+  const auto t0 = std::chrono::steady_clock::now();
+  auto built = build(initial, set, initial_poses(set), options);
+  if (!built) return built.status();
+  Built& B = **built;
+  const int P = B.num_geometry;
+  if (P == 0) {
+    return Status(ErrorCode::kInvalidArgument, "identification: no parameter is estimated");
+  }
+  int free_pose_params = 0;
+  for (bool f : B.pose_free) free_pose_params += f ? 6 : 0;
+  const int num_params = P + free_pose_params;
+  if (B.num_residuals <= num_params) {
+    return Status::Error(
+        ErrorCode::kFailedPrecondition,
+        "identification: too few poses: %d poses give %d residuals for %d unknowns "
+        "(%d parameters + %d pose coordinates); measure more poses",
+        set.num_poses(), B.num_residuals, num_params, P, free_pose_params);
+  }
+  // Identifiability at the initial guess.
+  {
+    auto info0 = information(B, false);
+    if (!info0) return info0.status();
+    IdentifiabilityOptions io;
+    io.rank_tolerance = options.rank_tolerance;
+    const IdentifiabilityReport ir = analyze_identifiability(to_public(B, *info0, initial), io);
+    if (options.refuse_unidentifiable) {
+      if (Status st = require_identifiable(ir); !st.ok()) return st;
+    }
+  }
+
+  ceres::Solver::Options so;
+  so.max_num_iterations = options.max_iterations;
+  so.function_tolerance = options.function_tolerance;
+  so.gradient_tolerance = options.gradient_tolerance;
+  so.parameter_tolerance = options.parameter_tolerance;
+  so.num_threads = options.num_threads;
+  so.logging_type = ceres::SILENT;
+  if (free_pose_params > 0) {
+    so.linear_solver_type = ceres::DENSE_SCHUR;
+    auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
+    std::vector<double*> all;
+    B.problem.GetParameterBlocks(&all);
+    for (double* p : all) ordering->AddElementToGroup(p, 1);
+    for (std::size_t j = 0; j < B.poses.size(); ++j)
+      ordering->AddElementToGroup(B.poses[j].data(), 0);
+    so.linear_solver_ordering = ordering;
+  } else {
+    so.linear_solver_type = ceres::DENSE_QR;
+  }
+  ceres::Solver::Summary summary;
+  const auto ts = std::chrono::steady_clock::now();
+  ceres::Solve(so, &B.problem, &summary);
+  const auto te = std::chrono::steady_clock::now();
+
+  IdentificationReport rep;
+  rep.solve_time_s = std::chrono::duration<double>(te - ts).count();
+  rep.initial_cost = summary.initial_cost;
+  rep.final_cost = summary.final_cost;
+  rep.iterations = static_cast<int>(summary.iterations.size()) - 1;
+  rep.converged = summary.termination_type == ceres::CONVERGENCE;
+  rep.termination = summary.message;
+  rep.num_residuals = B.num_residuals;
+  rep.num_parameters = num_params;
+  rep.dof = B.num_residuals - num_params;
+  if (summary.termination_type == ceres::FAILURE) {
+    return Status::Error(ErrorCode::kNumericalFailure, "identification: Ceres failed: %s",
+                         summary.message.c_str());
+  }
+  rep.estimate = extract(B, initial);
+  for (const auto& p : B.poses) {
+    rep.poses.push_back(Pose::from_vector(Eigen::Map<const Eigen::Matrix<double, 6, 1>>(p.data())));
+  }
+
+  // Residuals without loss: chi2 and per pose / channel.
+  auto info_noloss = information(B, false);
+  if (!info_noloss) return info_noloss.status();
+  const RobotModel& robot = initial.robot;
+  const int m = robot.num_cables();
+  const int nl = static_cast<int>(robot.lasers.size());
+  const SensorNoise& noise = set.noise;
+  KinematicsData kin(robot);
+  double sl = 0, sla = 0, sw = 0;
+  int nlen = 0, nlas = 0, nw = 0;
+  std::size_t row = 0;
+  for (std::size_t j = 0; j < B.poses.size(); ++j) {
+    PoseResiduals pr;
+    pr.length_m = Eigen::VectorXd::Constant(m, kNaN);
+    pr.length_normalized = Eigen::VectorXd::Constant(m, kNaN);
+    pr.laser_m = Eigen::VectorXd::Constant(nl, kNaN);
+    pr.laser_normalized = Eigen::VectorXd::Constant(nl, kNaN);
+    for (const RowInfo& ri : B.rows_per_pose[j]) {
+      const double r = info_noloss->residuals[row++];
+      rep.chi2 += r * r;
+      switch (ri.channel) {
+        case Channel::kLength: {
+          pr.length_normalized(ri.index) = r;  // SI value computed below
+          break;
+        }
+        case Channel::kLaser:
+          pr.laser_normalized(ri.index) = r;
+          pr.laser_m(ri.index) = r * noise.sigma_laser;
+          sla += pr.laser_m(ri.index) * pr.laser_m(ri.index);
+          ++nlas;
+          break;
+        case Channel::kWrench:
+          pr.wrench_normalized(ri.index) = r;
+          break;
+        case Channel::kReference:
+          pr.reference_normalized(ri.index) = r;
+          break;
+      }
+    }
+    // SI values of the length residuals: recompute U - reading model directly.
+    inverse_kinematics(rep.estimate.robot, rep.poses[j], kin);
+    const PoseMeasurement& pm = set.poses[j];
+    for (int i = 0; i < m; ++i) {
+      if (std::isnan(pr.length_normalized(i))) continue;
+      const auto ui = static_cast<std::size_t>(i);
+      double U = kin.lengths(i);
+      const double tr = pm.tensions.size() == m ? pm.tensions(i) : kNaN;
+      if (!std::isnan(tr)) {
+        CableConstants k = B.constants[ui];
+        const double F = true_tension(k, tr, B.g[ui], B.c[ui]);
+        const double loaded = ident_detail::loaded_length<double>(k.cable, kin.lengths(i));
+        if (k.estimated_stiffness) {
+          const double ea =
+              k.cable.ea *
+              (1.0 + (options.estimate_stiffness == StiffnessEstimate::kShared ? B.e[0] : B.e[ui]));
+          U -= F * loaded / (ea + F);
+        } else {
+          U -= cable_elongation<double>(k.cable, loaded, F);
+        }
+      }
+      pr.length_m(i) = U - ((1.0 + B.s[ui]) * pm.cable_lengths(i) + B.o[ui]);
+      sl += pr.length_m(i) * pr.length_m(i);
+      ++nlen;
+    }
+    if (!std::isnan(pr.wrench_normalized(0))) {
+      const Eigen::Matrix<double, 6, 6> W = B.wrench_whitening[j];
+      pr.wrench_si = W.triangularView<Eigen::Lower>().solve(pr.wrench_normalized);
+      sw += pr.wrench_si.head<3>().squaredNorm();
+      nw += 3;
+    }
+    rep.residuals.push_back(std::move(pr));
+  }
+  rep.rms_length_m = nlen ? std::sqrt(sl / nlen) : 0.0;
+  rep.rms_laser_m = nlas ? std::sqrt(sla / nlas) : 0.0;
+  rep.rms_wrench_n = nw ? std::sqrt(sw / nw) : 0.0;
+
+  // Covariance of the geometry (Schur complement, pseudo-inverse with null-space handling) and of
+  // the poses.
+  rep.parameters.resize(static_cast<std::size_t>(P));
+  {
+    // Initial values: rebuild is not needed; recompute from the initial model.
+    auto b0 = build(initial, set, initial_poses(set), options);
+    for (int q = 0; q < P; ++q) {
+      ParameterEstimate& pe = rep.parameters[static_cast<std::size_t>(q)];
+      pe.name = B.names[static_cast<std::size_t>(q)];
+      pe.unit = B.units[static_cast<std::size_t>(q)];
+      pe.value = *B.value_ptr[static_cast<std::size_t>(q)];
+      pe.initial = b0 ? *(*b0)->value_ptr[static_cast<std::size_t>(q)] : kNaN;
+      pe.std_dev = std::numeric_limits<double>::infinity();
+    }
+  }
+  rep.pose_std.assign(B.poses.size(), Eigen::Matrix<double, 6, 1>::Zero());
+  auto info_loss =
+      options.loss == RobustLoss::kNone ? std::move(info_noloss) : information(B, true);
+  if (!info_loss) return info_loss.status();
+  {
+    Eigen::MatrixXd null_basis;
+    double cond = 0.0;
+    const Eigen::MatrixXd cov = pseudo_inverse_normalized(info_loss->total, options.rank_tolerance,
+                                                          &rep.rank, &cond, &null_basis);
+    rep.condition_number = cond;
+    if (options.compute_covariance) {
+      rep.covariance = cov;
+      for (int q = 0; q < P; ++q) {
+        const double in_null = null_basis.cols() ? null_basis.row(q).squaredNorm() : 0.0;
+        rep.parameters[static_cast<std::size_t>(q)].std_dev =
+            in_null > 1e-2 ? std::numeric_limits<double>::infinity()
+                           : std::sqrt(std::max(0.0, cov(q, q)));
+      }
+      for (std::size_t j = 0; j < B.poses.size(); ++j) {
+        if (!B.pose_free[j]) continue;
+        const Eigen::Matrix<double, 6, 6>& Hinv = info_loss->hpp_inv[j];
+        const Eigen::MatrixXd X = Hinv * info_loss->hpg[j];
+        const Eigen::Matrix<double, 6, 6> cp = Hinv + X * cov * X.transpose();
+        rep.pose_std[j] = cp.diagonal().cwiseMax(0.0).cwiseSqrt();
+      }
+    }
+  }
+
+  // Warnings.
+  char buf[256];
+  for (const std::string& n : B.notes) rep.warnings.push_back(n);
+  if (!rep.converged) {
+    rep.warnings.push_back("the solver did not converge: " + summary.message);
+  }
+  if (rep.dof > 0) {
+    const double z = (rep.chi2 - rep.dof) / std::sqrt(2.0 * rep.dof);
+    if (std::abs(z) > options.chi2_warning_sigmas) {
+      std::snprintf(buf, sizeof(buf),
+                    "chi-square %.1f is far from its %d degrees of freedom (%.1f sigma): the noise "
+                    "figures or the model are wrong%s",
+                    rep.chi2, rep.dof, z, z > 0 ? " (unmodelled effect or optimistic sigmas)" : "");
+      rep.warnings.emplace_back(buf);
+    }
+  }
+  if (rep.rank < P) {
+    std::snprintf(buf, sizeof(buf), "rank deficient: rank %d of %d parameters", rep.rank, P);
+    rep.warnings.emplace_back(buf);
+  }
+  if (rep.condition_number > options.condition_warning) {
+    std::snprintf(buf, sizeof(buf), "condition number %.3g > %.3g: weakly identifiable parameters",
+                  rep.condition_number, options.condition_warning);
+    rep.warnings.emplace_back(buf);
+  }
+  for (const ParameterEstimate& pe : rep.parameters) {
+    if (options.compute_covariance && pe.unit == "m" && pe.std_dev > options.huge_std_anchor) {
+      std::snprintf(buf, sizeof(buf), "%s has a huge standard deviation (%.3g m)", pe.name.c_str(),
+                    pe.std_dev);
+      rep.warnings.emplace_back(buf);
+    }
+  }
+  rep.total_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return rep;
+}
+
+std::string IdentificationReport::BriefReport() const {
+  char buf[320];
+  std::snprintf(buf, sizeof(buf),
+                "Identification: %s, %d iterations, cost %.6g -> %.6g, chi2 %.1f / dof %d, "
+                "rank %d, cond %.3g, %.1f ms, %zu warnings",
+                converged ? "CONVERGED" : "NOT CONVERGED", iterations, initial_cost, final_cost,
+                chi2, dof, rank, condition_number, 1e3 * total_time_s, warnings.size());
+  return buf;
+}
+
+std::string IdentificationReport::FullReport() const {
+  std::ostringstream os;
+  char buf[320];
+  os << "cdpr identification report\n";
+  os << "--------------------------\n";
+  std::snprintf(buf, sizeof(buf), "%-28s %12d\n%-28s %12d\n%-28s %12d\n", "Residuals",
+                num_residuals, "Parameters (incl. poses)", num_parameters, "Degrees of freedom",
+                dof);
+  os << buf;
+  std::snprintf(buf, sizeof(buf), "%-28s %12.6g\n%-28s %12.6g\n%-28s %12.6g\n", "Initial cost",
+                initial_cost, "Final cost", final_cost, "Chi-square (no loss)", chi2);
+  os << buf;
+  std::snprintf(buf, sizeof(buf), "%-28s %12d\n%-28s %12.3f\n%-28s %12.3f\n", "Iterations",
+                iterations, "Solve time (ms)", 1e3 * solve_time_s, "Total time (ms)",
+                1e3 * total_time_s);
+  os << buf;
+  std::snprintf(buf, sizeof(buf), "%-28s %12d\n%-28s %12.4g\n", "Rank (geometry)", rank,
+                "Condition number", condition_number);
+  os << buf;
+  std::snprintf(buf, sizeof(buf), "%-28s %12.4g\n%-28s %12.4g\n%-28s %12.4g\n",
+                "RMS length residual (m)", rms_length_m, "RMS laser residual (m)", rms_laser_m,
+                "RMS wrench residual (N)", rms_wrench_n);
+  os << buf;
+  os << "\nParameters:\n";
+  std::snprintf(buf, sizeof(buf), "  %-24s %14s %14s %14s %12s  %s\n", "name", "initial",
+                "estimate", "change", "std dev", "unit");
+  os << buf;
+  for (const ParameterEstimate& p : parameters) {
+    std::snprintf(buf, sizeof(buf), "  %-24s %14.7g %14.7g %14.4g %12.4g  %s\n", p.name.c_str(),
+                  p.initial, p.value, p.value - p.initial, p.std_dev, p.unit.c_str());
+    os << buf;
+  }
+  os << "\nTermination: " << (converged ? "CONVERGENCE" : "NO CONVERGENCE") << " (" << termination
+     << ")\n";
+  if (warnings.empty()) {
+    os << "No warnings.\n";
+  } else {
+    os << "Warnings:\n";
+    for (const std::string& w : warnings) os << "  - " << w << "\n";
+  }
+  return os.str();
+}
+
+}  // namespace cdpr

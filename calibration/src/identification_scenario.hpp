@@ -1,0 +1,102 @@
+// Scenarios shared by the identification tests and benchmarks (not installed): MINI with the
+// frame anchors of Jin et al. 2018 Table 1 (nominal = SolidWorks column, truth = measured column)
+// and a downward laser on a floor plane; the large test robot with perturbed anchors.
+#pragma once
+
+#include <Eigen/Core>
+#include <random>
+#include <vector>
+
+#include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/simulate.hpp"
+#include "testing/test_robots.hpp"
+
+namespace cdpr::scenario {
+
+// Table 1, "3D Equipment Measured Data", mm -> m. Cable 7 is taken at -x, +y (the table's sign
+// typo, see the field notes).
+inline Eigen::Matrix3Xd mini_measured_anchors() {
+  Eigen::Matrix3Xd a(3, 8);
+  a << 0.50640, -0.48887, -0.49189, 0.50363, 0.53936, -0.52095, -0.52415, 0.53657,  //
+      -0.37300, -0.37426, 0.38146, 0.38276, -0.33962, -0.34169, 0.34790, 0.34886,   //
+      -0.45320, -0.45320, -0.45320, -0.45320, 0.43026, 0.43064, 0.42968, 0.43048;
+  return a;
+}
+
+// A laser at the platform centre pointing down at a floor plane.
+inline void add_down_laser(RobotModel& robot, double floor_z) {
+  LaserModel laser;
+  laser.origin = Eigen::Vector3d(0.0, 0.0, 0.0);
+  laser.direction = -Eigen::Vector3d::UnitZ();
+  laser.plane_point = Eigen::Vector3d(0.0, 0.0, floor_z);
+  laser.plane_normal = Eigen::Vector3d::UnitZ();
+  laser.range_min = 0.0;
+  laser.range_max = 50.0;
+  robot.lasers = {laser};
+}
+
+struct Scenario {
+  CalibratedModel nominal;
+  CalibratedModel truth;
+  testing::WorkspaceBox box;
+};
+
+// MINI: nominal = SolidWorks anchors, truth = measured anchors, encoder zeros from homing with
+// the nominal model (so the true offsets are what homing really leaves).
+inline Scenario mini_scenario() {
+  Scenario s;
+  RobotModel nominal = testing::mini_robot();
+  add_down_laser(nominal, -0.40);
+  RobotModel truth = nominal;
+  truth.frame_anchors = mini_measured_anchors();
+  // The true floor is slightly tilted and lower than believed.
+  truth.lasers[0].plane_point = Eigen::Vector3d(0.0, 0.0, -0.4023);
+  truth.lasers[0].plane_normal = Eigen::Vector3d(0.002, -0.001, 1.0).normalized();
+  s.nominal = CalibratedModel::FromRobot(nominal);
+  s.truth = CalibratedModel::FromRobot(truth);
+  auto off = homing_offsets(truth, nominal, default_reference_tension(nominal));
+  if (off) s.truth.readings.length_offsets = *off;
+  s.box = testing::mini_workspace();
+  return s;
+}
+
+// LARGE: anchors perturbed by up to `perturbation` m per coordinate (seeded).
+inline Scenario large_scenario(double perturbation = 0.03, unsigned seed = 7) {
+  Scenario s;
+  RobotModel nominal = testing::large_robot();
+  add_down_laser(nominal, -2.0);
+  RobotModel truth = nominal;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-perturbation, perturbation);
+  for (int i = 0; i < truth.num_cables(); ++i) {
+    for (int q = 0; q < 3; ++q) truth.frame_anchors(q, i) += u(rng);
+  }
+  truth.lasers[0].plane_point = Eigen::Vector3d(0.0, 0.0, -2.01);
+  s.nominal = CalibratedModel::FromRobot(nominal);
+  s.truth = CalibratedModel::FromRobot(truth);
+  auto off = homing_offsets(truth, nominal, default_reference_tension(nominal));
+  if (off) s.truth.readings.length_offsets = *off;
+  s.box = testing::large_workspace();
+  return s;
+}
+
+// `n` poses: the home pose first, then random poses in `box` whose tensions are feasible in
+// `model` (simple_tension_distribution).
+// `also` (optional) must be feasible too (e.g. the truth as well as the nominal model).
+inline std::vector<Pose> random_feasible_poses(const RobotModel& model,
+                                               const testing::WorkspaceBox& box, int n,
+                                               unsigned seed, const RobotModel* also = nullptr) {
+  std::vector<Pose> poses{model.home};
+  std::mt19937 rng(seed);
+  const double f_ref = default_reference_tension(model);
+  int guard = 0;
+  while (static_cast<int>(poses.size()) < n && guard++ < 100000) {
+    const Pose p = testing::random_pose(box, rng);
+    if (!simple_tension_distribution(model, p, f_ref)) continue;
+    if (also && !simple_tension_distribution(*also, p, f_ref)) continue;
+    poses.push_back(p);
+  }
+  return poses;
+}
+
+}  // namespace cdpr::scenario

@@ -1,0 +1,164 @@
+#include "cdpr/calibration/identification.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "cdpr/calibration/identifiability.hpp"
+#include "cdpr/calibration/simulate.hpp"
+#include "identification_scenario.hpp"
+
+namespace cdpr {
+namespace {
+
+struct Data {
+  scenario::Scenario s;
+  std::vector<Pose> poses;
+  SimulatedMeasurements sim;
+};
+
+Data make_data(int n, const SensorNoise& noise, std::uint64_t seed, bool add_noise) {
+  Data d;
+  d.s = scenario::mini_scenario();
+  d.poses = scenario::random_feasible_poses(d.s.nominal.robot, d.s.box, n, 11, &d.s.truth.robot);
+  SimulationOptions so;
+  so.add_noise = add_noise;
+  so.controller = &d.s.nominal;
+  auto sim = simulate_measurements(d.s.truth, d.poses, noise, seed, so);
+  EXPECT_TRUE(sim.ok()) << sim.status().to_string();
+  if (sim.ok()) d.sim = *sim;
+  return d;
+}
+
+double max_anchor_error(const CalibratedModel& est, const CalibratedModel& truth) {
+  return (est.robot.frame_anchors - truth.robot.frame_anchors).cwiseAbs().maxCoeff();
+}
+
+TEST(Simulate, IsDeterministicBySeed) {
+  const SensorNoise noise;
+  const Data a = make_data(6, noise, 5, true);
+  const Data b = make_data(6, noise, 5, true);
+  const Data c = make_data(6, noise, 6, true);
+  ASSERT_EQ(a.sim.set.num_poses(), 6);
+  EXPECT_EQ(a.sim.set.poses[3].cable_lengths, b.sim.set.poses[3].cable_lengths);
+  EXPECT_NE(a.sim.set.poses[3].cable_lengths, c.sim.set.poses[3].cable_lengths);
+}
+
+TEST(Simulate, NoiseFreeLengthsMatchTheTrueGeometryAtHome) {
+  const Data d = make_data(3, SensorNoise{}, 1, false);
+  // Homing sets the reading at home to the NOMINAL unstretched length.
+  const RobotModel& nom = d.s.nominal.robot;
+  auto f = simple_tension_distribution(nom, nom.home, default_reference_tension(nom));
+  ASSERT_TRUE(f.ok());
+  auto u = unstretched_lengths(nom, nom.home, *f);
+  ASSERT_TRUE(u.ok());
+  // Rigid physics: the truth's tensions differ slightly from the nominal plan, so compare loosely.
+  EXPECT_LT((d.sim.set.poses[0].cable_lengths - *u).cwiseAbs().maxCoeff(), 2e-4);
+}
+
+TEST(Identification, NoiseFreeDataRecoversTheTruth) {
+  const Data d = make_data(25, SensorNoise{}, 1, false);
+  IdentificationOptions opt;
+  auto rep = identify(d.s.nominal, d.sim.set, opt);
+  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+  EXPECT_TRUE(rep->converged) << rep->FullReport();
+  EXPECT_LT(max_anchor_error(rep->estimate, d.s.truth), 1e-6) << rep->FullReport();
+  EXPECT_LT((rep->estimate.readings.length_offsets - d.s.truth.readings.length_offsets)
+                .cwiseAbs()
+                .maxCoeff(),
+            1e-6);
+  // Poses too.
+  double worst = 0.0;
+  for (std::size_t j = 0; j < d.poses.size(); ++j) {
+    worst = std::max(worst, (rep->poses[j].position - d.sim.true_poses[j].position).norm());
+  }
+  EXPECT_LT(worst, 1e-6);
+  EXPECT_LT(rep->final_cost, 1e-10);
+}
+
+TEST(Identification, ErrorIsConsistentWithTheReportedStd) {
+  SensorNoise noise;
+  noise.sigma_length = 1e-4;
+  noise.sigma_laser = 1e-3;
+  noise.sigma_force = 1.0;
+  const Data d = make_data(25, noise, 3, true);
+  auto rep = identify(d.s.nominal, d.sim.set, IdentificationOptions{});
+  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+  EXPECT_TRUE(rep->converged);
+  // z-scores of every anchor coordinate: their RMS is ~1 for an honest covariance.
+  double sum = 0.0;
+  int count = 0;
+  for (const ParameterEstimate& p : rep->parameters) {
+    if (p.name.rfind("a_", 0) != 0) continue;
+    const int cable = std::stoi(p.name.substr(2, p.name.find('.') - 2)) - 1;
+    const int axis = p.name.back() - 'x';
+    const double z = (p.value - d.s.truth.robot.frame_anchors(axis, cable)) / p.std_dev;
+    sum += z * z;
+    ++count;
+  }
+  ASSERT_EQ(count, 24);
+  const double rms_z = std::sqrt(sum / count);
+  EXPECT_GT(rms_z, 0.4) << rep->FullReport();
+  EXPECT_LT(rms_z, 1.8) << rep->FullReport();
+  // chi-square near its dof.
+  EXPECT_NEAR(rep->chi2 / rep->dof, 1.0, 0.35) << rep->FullReport();
+  EXPECT_FALSE(rep->FullReport().empty());
+}
+
+TEST(Identification, TooFewPosesAreRefused) {
+  const Data d = make_data(3, SensorNoise{}, 1, false);
+  auto rep = identify(d.s.nominal, d.sim.set, IdentificationOptions{});
+  ASSERT_FALSE(rep.ok());
+  EXPECT_EQ(rep.status().code(), ErrorCode::kFailedPrecondition);
+  EXPECT_NE(rep.status().to_string().find("too few poses"), std::string::npos)
+      << rep.status().to_string();
+}
+
+TEST(Identification, OpenGaugeIsRefusedWithTheDirections) {
+  const Data d = make_data(25, SensorNoise{}, 1, false);
+  IdentificationOptions opt;
+  opt.gauge = Gauge::kNone;
+  auto rep = identify(d.s.nominal, d.sim.set, opt);
+  ASSERT_FALSE(rep.ok());
+  EXPECT_EQ(rep.status().code(), ErrorCode::kFailedPrecondition);
+  EXPECT_NE(rep.status().to_string().find("gauge"), std::string::npos) << rep.status().to_string();
+}
+
+TEST(Identifiability, NamesAnchorAlongCableAgainstOffset) {
+  // Pure translations in a small box: an anchor moving along its cable is nearly
+  // indistinguishable from the encoder zero of that cable.
+  scenario::Scenario s = scenario::mini_scenario();
+  testing::WorkspaceBox box = s.box;
+  box.half_extent = Eigen::Vector3d::Constant(0.02);
+  box.max_angle = 0.0;
+  const std::vector<Pose> poses =
+      scenario::random_feasible_poses(s.nominal.robot, box, 25, 3, &s.truth.robot);
+  SimulationOptions so;
+  so.add_noise = false;
+  auto sim = simulate_measurements(s.truth, poses, SensorNoise{}, 1, so);
+  ASSERT_TRUE(sim.ok());
+  IdentificationOptions opt;
+  opt.use_equilibrium = false;
+  opt.use_laser = false;
+  opt.estimate_laser_plane = false;
+  IdentifiabilityOptions io;
+  io.weak_tolerance = 1e-2;
+  auto rep = analyze_identifiability(s.nominal, sim->set, opt, io);
+  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+  ASSERT_FALSE(rep->directions.empty()) << rep->Summary();
+  bool named = false;
+  for (const ParameterDirection& d : rep->directions) {
+    for (int i = 1; i <= 8; ++i) {
+      const std::string c = std::to_string(i);
+      if (d.description.find("a_" + c + " along cable " + c) != std::string::npos &&
+          d.description.find("length offset of cable " + c) != std::string::npos) {
+        named = true;
+      }
+    }
+  }
+  EXPECT_TRUE(named) << rep->Summary();
+}
+
+}  // namespace
+}  // namespace cdpr

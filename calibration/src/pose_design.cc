@@ -1,0 +1,257 @@
+#include "cdpr/calibration/pose_design.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "cdpr/calibration/identifiability.hpp"
+#include "cdpr/calibration/simulate.hpp"
+
+namespace cdpr {
+
+namespace {
+
+double log_det(const Eigen::MatrixXd& M) {
+  const Eigen::LLT<Eigen::MatrixXd> llt(M);
+  if (llt.info() != Eigen::Success) return -std::numeric_limits<double>::infinity();
+  return 2.0 * llt.matrixL().toDenseMatrix().diagonal().array().log().sum();
+}
+
+double pose_distance(const Pose& a, const Pose& b, double w) {
+  return (a.position - b.position).norm() + w * (a.rpy - b.rpy).norm();
+}
+
+std::vector<Pose> candidate_grid(const PoseDesignOptions& o) {
+  std::vector<Eigen::Vector3d> orientations{Eigen::Vector3d::Zero()};
+  for (int k = 0; k < 3; ++k) {
+    for (double s : {-1.0, 1.0}) {
+      Eigen::Vector3d r = Eigen::Vector3d::Zero();
+      r(k) = s * o.max_angle;
+      orientations.push_back(r);
+    }
+  }
+  AccuracyBox box;
+  box.center = o.center;
+  box.half_extent = o.half_extent;
+  box.points_per_axis = o.points_per_axis;
+  std::vector<Pose> out;
+  for (const Pose& p : box.grid()) {
+    for (const Eigen::Vector3d& r : orientations) out.push_back(Pose{p.position, r});
+  }
+  return out;
+}
+
+// Ordered tour: nearest neighbour from index 0, then 2-opt (index 0 stays first).
+std::vector<Pose> order_path(std::vector<Pose> poses, double w, double* length) {
+  const std::size_t n = poses.size();
+  if (n < 2) {
+    if (length) *length = 0.0;
+    return poses;
+  }
+  std::vector<Pose> tour{poses[0]};
+  std::vector<char> used(n, 0);
+  for (std::size_t k = 1; k < n; ++k) {
+    std::size_t best = 0;
+    double bd = std::numeric_limits<double>::infinity();
+    for (std::size_t c = 0; c < n; ++c) {
+      if (c == 0 || used[c]) continue;
+      const double d = pose_distance(tour.back(), poses[c], w);
+      if (d < bd) {
+        bd = d;
+        best = c;
+      }
+    }
+    used[best] = 1;
+    tour.push_back(poses[best]);
+  }
+  bool improved = true;
+  while (improved) {
+    improved = false;
+    for (std::size_t i = 1; i + 1 < n; ++i) {
+      for (std::size_t j = i + 1; j < n; ++j) {
+        const double before = pose_distance(tour[i - 1], tour[i], w) +
+                              (j + 1 < n ? pose_distance(tour[j], tour[j + 1], w) : 0.0);
+        const double after = pose_distance(tour[i - 1], tour[j], w) +
+                             (j + 1 < n ? pose_distance(tour[i], tour[j + 1], w) : 0.0);
+        if (after < before - 1e-12) {
+          std::reverse(tour.begin() + static_cast<long>(i),
+                       tour.begin() + static_cast<long>(j) + 1);
+          improved = true;
+        }
+      }
+    }
+  }
+  double L = 0.0;
+  for (std::size_t k = 1; k < n; ++k) L += pose_distance(tour[k - 1], tour[k], w);
+  if (length) *length = L;
+  return tour;
+}
+
+}  // namespace
+
+Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOptions& options) {
+  if (options.num_poses < 2) {
+    return Status(ErrorCode::kInvalidArgument, "pose design: at least 2 poses are needed");
+  }
+  const double f_ref = std::isnan(options.reference_tension)
+                           ? default_reference_tension(model.robot)
+                           : options.reference_tension;
+  std::vector<Pose> cands{model.robot.home};  // index 0: home (the gauge pose)
+  for (const Pose& p : candidate_grid(options)) {
+    if ((p.vector() - model.robot.home.vector()).norm() < 1e-12) continue;
+    if (simple_tension_distribution(model.robot, p, f_ref)) cands.push_back(p);
+  }
+  const int C = static_cast<int>(cands.size()) - 1;
+  if (C < options.num_poses - 1) {
+    return Status::Error(ErrorCode::kFailedPrecondition,
+                         "pose design: only %d feasible candidates for %d poses", C,
+                         options.num_poses - 1);
+  }
+  SimulationOptions so;
+  so.add_noise = false;
+  so.reference_tension = f_ref;
+  auto sim = simulate_measurements(model, cands, options.noise, 0, so);
+  if (!sim) return sim.status();
+  auto gi = geometry_information(model, sim->set, cands, options.identification);
+  if (!gi) return gi.status();
+  const int P = static_cast<int>(gi->information.rows());
+  // Column scaling from the whole candidate set.
+  Eigen::VectorXd d(P);
+  for (int q = 0; q < P; ++q) {
+    d(q) = gi->information(q, q) > 0 ? 1.0 / std::sqrt(gi->information(q, q)) : 1.0;
+  }
+  std::vector<Eigen::MatrixXd> S(cands.size());
+  for (std::size_t c = 0; c < cands.size(); ++c) {
+    S[c] = d.asDiagonal() * gi->per_pose[c] * d.asDiagonal();
+  }
+  const double ridge = 1e-9;
+  const Eigen::MatrixXd R = ridge * Eigen::MatrixXd::Identity(P, P);
+  std::vector<int> sel;
+  Eigen::MatrixXd M = S[0] + R;
+  Eigen::VectorXi chosen = Eigen::VectorXi::Zero(static_cast<Eigen::Index>(cands.size()));
+  for (int k = 1; k < options.num_poses; ++k) {
+    int best = -1;
+    double bv = -std::numeric_limits<double>::infinity();
+    for (int c = 1; c <= C; ++c) {
+      if (chosen(c)) continue;
+      const double v = log_det(M + S[static_cast<std::size_t>(c)]);
+      if (v > bv) {
+        bv = v;
+        best = c;
+      }
+    }
+    if (best < 0) break;
+    chosen(best) = 1;
+    sel.push_back(best);
+    M += S[static_cast<std::size_t>(best)];
+  }
+  PoseDesign out;
+  out.candidates = C;
+  double current = log_det(M);
+  for (int pass = 0; pass < options.exchange_passes; ++pass) {
+    bool any = false;
+    for (std::size_t s = 0; s < sel.size(); ++s) {
+      const Eigen::MatrixXd without = M - S[static_cast<std::size_t>(sel[s])];
+      int best = -1;
+      double bv = current;
+      for (int c = 1; c <= C; ++c) {
+        if (chosen(c)) continue;
+        const double v = log_det(without + S[static_cast<std::size_t>(c)]);
+        if (v > bv + 1e-9) {
+          bv = v;
+          best = c;
+        }
+      }
+      if (best >= 0) {
+        chosen(sel[s]) = 0;
+        chosen(best) = 1;
+        M = without + S[static_cast<std::size_t>(best)];
+        sel[s] = best;
+        current = bv;
+        ++out.exchanges;
+        any = true;
+      }
+    }
+    if (!any) break;
+  }
+  out.log_det = log_det(M - R);
+  std::vector<Pose> poses{cands[0]};
+  for (int c : sel) poses.push_back(cands[static_cast<std::size_t>(c)]);
+  out.poses = order_path(poses, options.angle_weight, &out.path_length);
+  return out;
+}
+
+Result<std::vector<PoseSetComparison>> compare_pose_sets(const CalibratedModel& model,
+                                                         const PoseDesignOptions& options,
+                                                         const AccuracyBox& box,
+                                                         std::uint64_t seed) {
+  auto design = design_poses(model, options);
+  if (!design) return design.status();
+  const double f_ref = std::isnan(options.reference_tension)
+                           ? default_reference_tension(model.robot)
+                           : options.reference_tension;
+  // Random feasible set.
+  std::vector<Pose> random{model.robot.home};
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int guard = 0; static_cast<int>(random.size()) < options.num_poses && guard < 100000;
+       ++guard) {
+    Pose p;
+    for (int k = 0; k < 3; ++k) {
+      p.position(k) = options.center(k) + options.half_extent(k) * u(rng);
+      p.rpy(k) = options.max_angle * u(rng);
+    }
+    if (simple_tension_distribution(model.robot, p, f_ref)) random.push_back(p);
+  }
+  // Box corners at several orientations.
+  std::vector<Pose> corners{model.robot.home};
+  const std::vector<Eigen::Vector3d> orient{Eigen::Vector3d::Zero(),
+                                            Eigen::Vector3d(options.max_angle, 0, 0),
+                                            Eigen::Vector3d(0, options.max_angle, 0),
+                                            Eigen::Vector3d(0, 0, options.max_angle),
+                                            Eigen::Vector3d(-options.max_angle, 0, 0),
+                                            Eigen::Vector3d(0, -options.max_angle, 0),
+                                            Eigen::Vector3d(0, 0, -options.max_angle)};
+  for (double scale : {1.0, 0.8, 0.5}) {
+    for (const Eigen::Vector3d& r : orient) {
+      for (int c = 0; c < 8 && static_cast<int>(corners.size()) < options.num_poses; ++c) {
+        Pose p;
+        p.position = options.center +
+                     scale * Eigen::Vector3d((c & 1) ? 1 : -1, (c & 2) ? 1 : -1, (c & 4) ? 1 : -1)
+                                 .cwiseProduct(options.half_extent);
+        p.rpy = r;
+        if (simple_tension_distribution(model.robot, p, f_ref)) corners.push_back(p);
+      }
+    }
+  }
+  PredictedAccuracyOptions po;
+  po.identification = options.identification;
+  po.box = box;
+  po.reference_tension = f_ref;
+  std::vector<PoseSetComparison> out;
+  const std::vector<std::pair<std::string, std::vector<Pose>>> sets{
+      {"designed (D-optimal + exchange)", design->poses},
+      {"random", random},
+      {"box corners", corners}};
+  for (const auto& [label, poses] : sets) {
+    auto pa = predict_accuracy(model, poses, options.noise, po);
+    if (!pa) return pa.status();
+    SimulationOptions so;
+    so.add_noise = false;
+    so.reference_tension = f_ref;
+    auto sim = simulate_measurements(model, poses, options.noise, 0, so);
+    if (!sim) return sim.status();
+    auto ir = analyze_identifiability(model, sim->set, options.identification);
+    PoseSetComparison c;
+    c.label = label;
+    c.num_poses = static_cast<int>(poses.size());
+    c.anchor_rms_std_m = pa->anchor_rms_std_m;
+    c.position_rms_m = pa->position_rms_m;
+    c.condition_number = ir ? ir->condition_number : std::numeric_limits<double>::quiet_NaN();
+    out.push_back(c);
+  }
+  return out;
+}
+
+}  // namespace cdpr

@@ -1,0 +1,157 @@
+#include "cdpr/calibration/predicted_accuracy.hpp"
+
+#include <Eigen/Dense>
+#include <cmath>
+
+#include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/simulate.hpp"
+
+namespace cdpr {
+
+std::vector<Pose> AccuracyBox::grid() const {
+  std::vector<Pose> out;
+  const int n = std::max(1, points_per_axis);
+  for (int ix = 0; ix < n; ++ix) {
+    for (int iy = 0; iy < n; ++iy) {
+      for (int iz = 0; iz < n; ++iz) {
+        auto t = [&](int k) { return n == 1 ? 0.0 : -1.0 + 2.0 * k / (n - 1); };
+        Pose p;
+        p.position = center + half_extent.cwiseProduct(Eigen::Vector3d(t(ix), t(iy), t(iz)));
+        out.push_back(p);
+      }
+    }
+  }
+  return out;
+}
+
+namespace {
+
+Eigen::MatrixXd normalized_pinv(const Eigen::MatrixXd& S, double tol, int* rank) {
+  const int P = static_cast<int>(S.rows());
+  Eigen::VectorXd d(P);
+  for (int q = 0; q < P; ++q) d(q) = S(q, q) > 0 ? std::sqrt(S(q, q)) : 1.0;
+  const Eigen::MatrixXd N = d.cwiseInverse().asDiagonal() * S * d.cwiseInverse().asDiagonal();
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(N);
+  const double lmax = es.eigenvalues().maxCoeff();
+  Eigen::VectorXd inv = Eigen::VectorXd::Zero(P);
+  int r = 0;
+  for (int q = 0; q < P; ++q) {
+    if (lmax > 0 && es.eigenvalues()(q) > 0 && std::sqrt(es.eigenvalues()(q) / lmax) > tol) {
+      inv(q) = 1.0 / es.eigenvalues()(q);
+      ++r;
+    }
+  }
+  if (rank) *rank = r;
+  return d.cwiseInverse().asDiagonal() *
+         (es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose()) *
+         d.cwiseInverse().asDiagonal();
+}
+
+}  // namespace
+
+Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
+                                           const std::vector<Pose>& poses, const SensorNoise& noise,
+                                           const PredictedAccuracyOptions& options) {
+  SimulationOptions so;
+  so.add_noise = false;
+  so.reference_tension = options.reference_tension;
+  auto sim = simulate_measurements(model, poses, noise, 0, so);
+  if (!sim) return sim.status();
+  auto gi = geometry_information(model, sim->set, poses, options.identification);
+  if (!gi) return gi.status();
+  PredictedAccuracy out;
+  out.names = gi->names;
+  out.covariance = normalized_pinv(gi->information, options.rank_tolerance, &out.rank);
+  out.crb_std = out.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
+  double sum = 0.0;
+  int count = 0;
+  for (std::size_t q = 0; q < out.names.size(); ++q) {
+    if (out.names[q].rfind("a_", 0) == 0) {
+      sum += out.covariance(static_cast<int>(q), static_cast<int>(q));
+      ++count;
+    }
+  }
+  out.anchor_rms_std_m = count ? std::sqrt(sum / count) : 0.0;
+
+  // Sensitivity of the commanded lengths at the grid.
+  std::vector<Pose> grid;
+  const double f_ref = std::isnan(options.reference_tension)
+                           ? default_reference_tension(model.robot)
+                           : options.reference_tension;
+  for (const Pose& p : options.box.grid()) {
+    if (simple_tension_distribution(model.robot, p, f_ref)) grid.push_back(p);
+  }
+  if (grid.empty()) return out;
+  auto gsim = simulate_measurements(model, grid, noise, 0, so);
+  if (!gsim) return gsim.status();
+  IdentificationOptions go = options.identification;
+  go.use_laser = false;
+  go.use_equilibrium = false;
+  go.use_reference = false;
+  if (go.gauge == Gauge::kHomePose) go.gauge = Gauge::kNone;
+  if (go.gauge == Gauge::kHomePoseAndLaserPlane) go.gauge = Gauge::kLaserPlane;
+  auto gg = geometry_information(model, gsim->set, grid, go, /*keep_jacobians=*/true);
+  if (!gg) return gg.status();
+  if (gg->names != gi->names) {
+    return Status(ErrorCode::kInternal, "predicted accuracy: parameter lists differ");
+  }
+  double total = 0.0;
+  for (std::size_t k = 0; k < grid.size(); ++k) {
+    const Eigen::MatrixXd& Jp = gg->jacobian_pose[k];
+    const Eigen::MatrixXd& Jg = gg->jacobian_geometry[k];
+    const Eigen::MatrixXd G = -Jp.completeOrthogonalDecomposition().pseudoInverse() * Jg;
+    const Eigen::MatrixXd cx = G * out.covariance * G.transpose();
+    const double v = cx.topLeftCorner<3, 3>().trace();
+    total += v;
+    out.position_max_m = std::max(out.position_max_m, std::sqrt(std::max(0.0, v)));
+  }
+  out.grid_points = static_cast<int>(grid.size());
+  out.position_rms_m = std::sqrt(total / static_cast<double>(grid.size()));
+  return out;
+}
+
+Result<RealizedAccuracy> measure_position_accuracy(const CalibratedModel& truth,
+                                                   const CalibratedModel& controller,
+                                                   const AccuracyBox& box,
+                                                   double reference_tension) {
+  const double f_ref = std::isnan(reference_tension) ? default_reference_tension(controller.robot)
+                                                     : reference_tension;
+  RealizedAccuracy out;
+  double sp = 0.0, so = 0.0;
+  for (const Pose& target : box.grid()) {
+    auto f = simple_tension_distribution(controller.robot, target, f_ref);
+    if (!f) {
+      ++out.failed_points;
+      continue;
+    }
+    auto u = unstretched_lengths(controller.robot, target, *f);
+    if (!u) {
+      ++out.failed_points;
+      continue;
+    }
+    const Eigen::VectorXd reading = ((u->array() - controller.readings.length_offsets.array()) /
+                                     (1.0 + controller.readings.length_scales.array()))
+                                        .matrix();
+    const Eigen::VectorXd u_true = ((1.0 + truth.readings.length_scales.array()) * reading.array() +
+                                    truth.readings.length_offsets.array())
+                                       .matrix();
+    auto reached = settle_platform(truth.robot, u_true, target);
+    if (!reached) {
+      ++out.failed_points;
+      continue;
+    }
+    const double e = (reached->position - target.position).norm();
+    sp += e * e;
+    so += (reached->rpy - target.rpy).squaredNorm();
+    out.position_max_m = std::max(out.position_max_m, e);
+    ++out.grid_points;
+  }
+  if (out.grid_points == 0) {
+    return Status(ErrorCode::kNumericalFailure, "accuracy: no grid point could be reached");
+  }
+  out.position_rms_m = std::sqrt(sp / out.grid_points);
+  out.orientation_rms_rad = std::sqrt(so / out.grid_points);
+  return out;
+}
+
+}  // namespace cdpr
