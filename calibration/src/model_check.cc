@@ -1,0 +1,274 @@
+#include "cdpr/calibration/model_check.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdio>
+#include <limits>
+
+#include "cdpr/calibration/kinematics.hpp"
+
+namespace cdpr {
+namespace {
+
+bool finite(double v) {
+  return std::isfinite(v);
+}
+template <typename Derived>
+bool finite(const Eigen::MatrixBase<Derived>& m) {
+  return m.allFinite();
+}
+
+Status not_finite(const char* prefix, const char* field) {
+  return Status::Error(ErrorCode::kInvalidArgument, "%s%s: expected finite numbers, got NaN or inf",
+                       prefix, field);
+}
+
+Status check_positive(const char* prefix, const char* field, double v, const char* unit) {
+  if (!finite(v)) return not_finite(prefix, field);
+  if (!(v > 0.0)) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "%s%s: expected a positive number (%s), got %g", prefix, field, unit, v);
+  }
+  return Status::Ok();
+}
+
+Status check_non_negative(const char* prefix, const char* field, double v, const char* unit) {
+  if (!finite(v)) return not_finite(prefix, field);
+  if (!(v >= 0.0)) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "%s%s: expected a non-negative number (%s), got %g", prefix, field, unit,
+                         v);
+  }
+  return Status::Ok();
+}
+
+Status check_unit(const char* prefix, const char* field, const Eigen::Vector3d& v, double tol) {
+  if (!finite(v)) return not_finite(prefix, field);
+  const double n = v.norm();
+  if (std::abs(n - 1.0) > tol) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "%s%s: expected a unit vector, got [%g, %g, %g] of length %g", prefix,
+                         field, v.x(), v.y(), v.z(), n);
+  }
+  return Status::Ok();
+}
+
+#define CDPR_RETURN_IF_ERROR(expr)     \
+  do {                                 \
+    Status status_ = (expr);           \
+    if (!status_.ok()) return status_; \
+  } while (false)
+
+Status check_cable(const RobotModel& model, int i, const ModelCheckOptions& options) {
+  const auto k = static_cast<std::size_t>(i);
+  char p[40];
+  std::snprintf(p, sizeof(p), "cables[%d].", i);
+  if (!finite(model.frame_anchors.col(i))) return not_finite(p, "frame_anchor");
+  if (!finite(model.platform_anchors.col(i))) return not_finite(p, "platform_anchor");
+
+  const PulleyModel& pulley = model.pulleys[k];
+  CDPR_RETURN_IF_ERROR(check_non_negative(p, "pulley.radius", pulley.radius, "m"));
+  if (!finite(pulley.frame)) return not_finite(p, "pulley");
+  const Eigen::Matrix3d gram = pulley.frame.transpose() * pulley.frame;
+  const double orthonormality = (gram - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+  if (orthonormality > options.unit_tolerance || pulley.frame.determinant() < 0.0) {
+    return Status::Error(
+        ErrorCode::kInvalidArgument,
+        "%spulley: the pulley frame (columns reference, axis x reference, axis) is "
+        "not a right-handed orthonormal frame (|R^T R - I| = %g, det = %g)",
+        p, orthonormality, pulley.frame.determinant());
+  }
+
+  const WinchModel& w = model.winches[k];
+  CDPR_RETURN_IF_ERROR(check_positive(p, "winch.drum_diameter", w.drum_diameter, "m"));
+  CDPR_RETURN_IF_ERROR(check_non_negative(p, "winch.drum_pitch", w.drum_pitch, "m"));
+  CDPR_RETURN_IF_ERROR(
+      check_positive(p, "winch.gear_ratio", w.gear_ratio, "motor rev per drum rev"));
+  CDPR_RETURN_IF_ERROR(check_positive(p, "winch.counts_per_rev", w.counts_per_rev, "counts"));
+  if (!finite(w.length_offset)) return not_finite(p, "winch.length_offset");
+  if (w.direction != 1 && w.direction != -1) {
+    return Status::Error(ErrorCode::kInvalidArgument, "%swinch.direction: expected 1 or -1, got %d",
+                         p, w.direction);
+  }
+
+  const CableModel& c = model.cables[k];
+  CDPR_RETURN_IF_ERROR(check_positive(p, "ea", c.ea, "N"));
+  CDPR_RETURN_IF_ERROR(check_non_negative(p, "mass_per_length", c.mass_per_length, "kg/m"));
+  CDPR_RETURN_IF_ERROR(check_non_negative(p, "routing_length", c.routing_length, "m"));
+  CDPR_RETURN_IF_ERROR(check_non_negative(p, "f_min", c.f_min, "N"));
+  CDPR_RETURN_IF_ERROR(check_positive(p, "f_max", c.f_max, "N"));
+  if (c.f_min > c.f_max) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "%sf_min: the minimum tension %g N is above the maximum f_max = %g N", p,
+                         c.f_min, c.f_max);
+  }
+  if (c.elongation == ElongationKind::kPolynomial) {
+    const int n = c.polynomial.order;
+    if (n < 0) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "%selongation.order: expected a non-negative order, got %d", p, n);
+    }
+    const std::size_t expected = static_cast<std::size_t>((n + 1) * (n + 2) / 2);
+    if (c.polynomial.coefficients.size() != expected) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "%selongation.coefficients: order %d needs %zu coefficients, got %zu", p,
+                           n, expected, c.polynomial.coefficients.size());
+    }
+    for (double v : c.polynomial.coefficients) {
+      if (!finite(v)) return not_finite(p, "elongation.coefficients");
+    }
+    if (!finite(c.polynomial.length_center)) return not_finite(p, "elongation.length_center");
+    if (!finite(c.polynomial.tension_center)) return not_finite(p, "elongation.tension_center");
+    CDPR_RETURN_IF_ERROR(
+        check_positive(p, "elongation.length_scale", c.polynomial.length_scale, "m"));
+    CDPR_RETURN_IF_ERROR(
+        check_positive(p, "elongation.tension_scale", c.polynomial.tension_scale, "N"));
+  }
+
+  const ForceSensorModel& s = model.force_sensors[k];
+  if (!finite(s.gain)) return not_finite(p, "force_sensor.gain");
+  if (s.gain == 0.0) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "%sforce_sensor.gain: expected a non-zero number, got 0", p);
+  }
+  if (!finite(s.offset)) return not_finite(p, "force_sensor.offset");
+  return Status::Ok();
+}
+
+Status check_sizes(const RobotModel& model) {
+  const std::size_t m = static_cast<std::size_t>(model.num_cables());
+  auto mismatch = [&](const char* field, std::size_t n) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "%s: expected one entry per cable (%zu, the number of frame anchors), got "
+                         "%zu",
+                         field, m, n);
+  };
+  if (static_cast<std::size_t>(model.platform_anchors.cols()) != m) {
+    return mismatch("platform_anchors", static_cast<std::size_t>(model.platform_anchors.cols()));
+  }
+  if (model.pulleys.size() != m) return mismatch("pulleys", model.pulleys.size());
+  if (model.winches.size() != m) return mismatch("winches", model.winches.size());
+  if (model.cables.size() != m) return mismatch("cables", model.cables.size());
+  if (model.force_sensors.size() != m) return mismatch("force_sensors", model.force_sensors.size());
+  return Status::Ok();
+}
+
+Status check_platform(const PlatformModel& p) {
+  CDPR_RETURN_IF_ERROR(check_positive("", "platform.mass", p.mass, "kg"));
+  if (!finite(p.center_of_mass)) return not_finite("", "platform.center_of_mass");
+  if (!finite(p.inertia)) return not_finite("", "platform.inertia");
+  const double asym = (p.inertia - p.inertia.transpose()).cwiseAbs().maxCoeff();
+  if (asym > 1e-12 * (1.0 + p.inertia.cwiseAbs().maxCoeff())) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "platform.inertia: expected a symmetric matrix (kg m^2)");
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(p.inertia, Eigen::EigenvaluesOnly);
+  if (!(eig.eigenvalues()(0) > 0.0)) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "platform.inertia: expected a positive definite matrix (kg m^2), smallest "
+                         "eigenvalue %g",
+                         eig.eigenvalues()(0));
+  }
+  return Status::Ok();
+}
+
+Status check_laser(const LaserModel& l, int j, double tol) {
+  char p[40];
+  std::snprintf(p, sizeof(p), "lasers[%d].", j);
+  if (!finite(l.origin)) return not_finite(p, "origin");
+  if (!finite(l.plane_point)) return not_finite(p, "plane_point");
+  if (!finite(l.direction) || l.direction.norm() == 0.0) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "%sdirection: expected a unit vector, got a zero or non-finite vector", p);
+  }
+  CDPR_RETURN_IF_ERROR(check_unit(p, "direction", l.direction, tol));
+  CDPR_RETURN_IF_ERROR(check_unit(p, "plane_normal", l.plane_normal, tol));
+  CDPR_RETURN_IF_ERROR(check_non_negative(p, "range", l.range_min, "m"));
+  if (!finite(l.range_max) || !(l.range_max > l.range_min)) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "%srange: expected [min, max] with 0 <= min < max (m), got [%g, %g]", p,
+                         l.range_min, l.range_max);
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+StructureConditioning structure_conditioning(const RobotModel& model, const Pose& pose,
+                                             double rank_tolerance) {
+  StructureConditioning out;
+  KinematicsData data(model);
+  if (!inverse_kinematics(model, pose, data)) {
+    out.invalid_cable = data.invalid_cable;
+    return out;
+  }
+  out.valid = true;
+  double rho = 0.0;
+  for (int i = 0; i < model.num_cables(); ++i) {
+    rho = std::max(rho, model.platform_anchors.col(i).norm());
+  }
+  Eigen::MatrixXd a = data.structure_matrix;
+  if (rho > 0.0) a.bottomRows<3>() /= rho;
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(a);
+  const Eigen::VectorXd& sv = svd.singularValues();
+  const int n = static_cast<int>(sv.size());
+  for (int k = 0; k < 6; ++k) out.singular_values(k) = k < n ? sv(k) : 0.0;
+  const double smax = out.singular_values(0);
+  out.rank = 0;
+  for (int k = 0; k < 6; ++k) {
+    if (out.singular_values(k) > rank_tolerance * smax && smax > 0.0) ++out.rank;
+  }
+  out.condition_number =
+      out.rank == 6 ? smax / out.singular_values(5) : std::numeric_limits<double>::infinity();
+  return out;
+}
+
+Status check_model(const RobotModel& model, const ModelCheckOptions& options) {
+  const int m = model.num_cables();
+  if (m < options.min_cables) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "cables: a spatial robot needs at least %d cables, got %d",
+                         options.min_cables, m);
+  }
+  CDPR_RETURN_IF_ERROR(check_sizes(model));
+  for (int i = 0; i < m; ++i) CDPR_RETURN_IF_ERROR(check_cable(model, i, options));
+  CDPR_RETURN_IF_ERROR(check_platform(model.platform));
+  if (!finite(model.gravity) || model.gravity < 0.0) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "gravity: expected a non-negative number (m/s^2), got %g", model.gravity);
+  }
+  for (std::size_t j = 0; j < model.lasers.size(); ++j) {
+    CDPR_RETURN_IF_ERROR(check_laser(model.lasers[j], static_cast<int>(j), options.unit_tolerance));
+  }
+  if (!finite(model.home.position)) return not_finite("", "home.position");
+  if (!finite(model.home.rpy)) return not_finite("", "home.rpy");
+
+  // Platform anchors that coincide (e.g. all at the origin) are legal; the structure matrix
+  // below tells whether the geometry can hold the platform.
+  const StructureConditioning sc =
+      structure_conditioning(model, model.home, options.rank_tolerance);
+  if (!sc.valid) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "cables[%d].frame_anchor: at the home pose the platform anchor lies on "
+                         "the frame anchor or inside its pulley (degenerate cable)",
+                         sc.invalid_cable);
+  }
+  if (sc.rank < 6) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "cables: the structure matrix at the home pose has rank %d < 6 (the "
+                         "anchors cannot hold the platform in all six directions)",
+                         sc.rank);
+  }
+  if (sc.condition_number > options.max_condition_number) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "cables: the structure matrix at the home pose is badly conditioned "
+                         "(condition number %.3g > %.3g)",
+                         sc.condition_number, options.max_condition_number);
+  }
+  return Status::Ok();
+}
+
+}  // namespace cdpr
