@@ -1,0 +1,6 @@
+# Mismatch locator: where simulation and recordings disagree, and which missing physics explains it.
+target_sources(cdpr_calibration PRIVATE ${CMAKE_CURRENT_LIST_DIR}/src/mismatch.cc)
+
+cdpr_add_gtest(NAME mismatch_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src/mismatch_test.cc
+               LIBS cdpr_calibration cdpr_calibration_testing)
+target_include_directories(mismatch_test PRIVATE ${CMAKE_CURRENT_LIST_DIR}/src)

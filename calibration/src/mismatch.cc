@@ -1,0 +1,762 @@
+#include "cdpr/calibration/mismatch.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <map>
+#include <numeric>
+#include <utility>
+
+#include "cdpr/calibration/kinematics.hpp"
+
+namespace cdpr {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// ------------------------------------------------------------------------------------------
+// Distributions (Numerical Recipes style: series and Lentz continued fractions).
+// ------------------------------------------------------------------------------------------
+
+double gamma_p_series(double a, double x) {
+  double sum = 1.0 / a;
+  double del = sum;
+  double ap = a;
+  for (int n = 0; n < 1000; ++n) {
+    ap += 1.0;
+    del *= x / ap;
+    sum += del;
+    if (std::abs(del) < std::abs(sum) * 1e-16) break;
+  }
+  return sum * std::exp(-x + a * std::log(x) - std::lgamma(a));
+}
+
+double gamma_q_fraction(double a, double x) {
+  constexpr double kTiny = 1e-300;
+  double b = x + 1.0 - a;
+  double c = 1.0 / kTiny;
+  double d = 1.0 / b;
+  double h = d;
+  for (int i = 1; i < 1000; ++i) {
+    const double an = -i * (i - a);
+    b += 2.0;
+    d = an * d + b;
+    if (std::abs(d) < kTiny) d = kTiny;
+    c = b + an / c;
+    if (std::abs(c) < kTiny) c = kTiny;
+    d = 1.0 / d;
+    const double del = d * c;
+    h *= del;
+    if (std::abs(del - 1.0) < 1e-16) break;
+  }
+  return std::exp(-x + a * std::log(x) - std::lgamma(a)) * h;
+}
+
+// Regularised upper incomplete gamma Q(a, x).
+double gamma_q(double a, double x) {
+  if (!(x > 0.0)) return 1.0;
+  if (x < a + 1.0) return std::max(0.0, 1.0 - gamma_p_series(a, x));
+  return gamma_q_fraction(a, x);
+}
+
+double beta_fraction(double a, double b, double x) {
+  constexpr double kTiny = 1e-300;
+  const double qab = a + b, qap = a + 1.0, qam = a - 1.0;
+  double c = 1.0;
+  double d = 1.0 - qab * x / qap;
+  if (std::abs(d) < kTiny) d = kTiny;
+  d = 1.0 / d;
+  double h = d;
+  for (int m = 1; m < 1000; ++m) {
+    const int m2 = 2 * m;
+    double aa = m * (b - m) * x / ((qam + m2) * (a + m2));
+    d = 1.0 + aa * d;
+    if (std::abs(d) < kTiny) d = kTiny;
+    c = 1.0 + aa / c;
+    if (std::abs(c) < kTiny) c = kTiny;
+    d = 1.0 / d;
+    h *= d * c;
+    aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
+    d = 1.0 + aa * d;
+    if (std::abs(d) < kTiny) d = kTiny;
+    c = 1.0 + aa / c;
+    if (std::abs(c) < kTiny) c = kTiny;
+    d = 1.0 / d;
+    const double del = d * c;
+    h *= del;
+    if (std::abs(del - 1.0) < 1e-16) break;
+  }
+  return h;
+}
+
+// Regularised incomplete beta I_x(a, b).
+double beta_i(double a, double b, double x) {
+  if (x <= 0.0) return 0.0;
+  if (x >= 1.0) return 1.0;
+  const double bt = std::exp(std::lgamma(a + b) - std::lgamma(a) - std::lgamma(b) +
+                             a * std::log(x) + b * std::log1p(-x));
+  if (x < (a + 1.0) / (a + b + 2.0)) return bt * beta_fraction(a, b, x) / a;
+  return 1.0 - bt * beta_fraction(b, a, 1.0 - x) / b;
+}
+
+std::string format(const char* fmt, auto... args) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf, fmt, args...);
+  return buf;
+}
+
+// ------------------------------------------------------------------------------------------
+// Residual layout (mirrors identification.cc's row order per pose: lengths, lasers, wrench,
+// reference).
+// ------------------------------------------------------------------------------------------
+
+enum class RowKind { kLength, kLaser, kWrench, kReference };
+
+struct Row {
+  RowKind kind;
+  int pose;
+  int index;  // cable, laser or wrench/reference component
+};
+
+// Orthonormal basis of the column space of X (columns scaled to unit norm first), with the
+// singular-value threshold `tol` relative to 1.
+Eigen::MatrixXd column_basis(const Eigen::MatrixXd& X, double tol) {
+  if (X.cols() == 0) return Eigen::MatrixXd(X.rows(), 0);
+  Eigen::MatrixXd Xs = X;
+  for (Eigen::Index c = 0; c < Xs.cols(); ++c) {
+    const double n = Xs.col(c).norm();
+    if (n > 0) Xs.col(c) /= n;
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Xs, Eigen::ComputeThinU);
+  int r = 0;
+  const Eigen::VectorXd& s = svd.singularValues();
+  for (Eigen::Index k = 0; k < s.size(); ++k) {
+    if (s(k) > tol) ++r;
+  }
+  return svd.matrixU().leftCols(r);
+}
+
+struct Candidate {
+  std::string id, name, family;
+  Eigen::MatrixXd X;  // n x k, whitened
+};
+
+MisfitGroup make_group(std::string name, const std::vector<int>& rows, const Eigen::VectorXd& r,
+                       const Eigen::VectorXd& leverage, const std::vector<double>& si,
+                       std::string unit, double alpha) {
+  MisfitGroup g;
+  g.name = std::move(name);
+  g.unit = std::move(unit);
+  g.count = static_cast<int>(rows.size());
+  double s2 = 0.0;
+  bool si_ok = !g.unit.empty();
+  for (int k : rows) {
+    const auto uk = static_cast<std::size_t>(k);
+    g.chi2 += r(k) * r(k);
+    g.expected_chi2 += 1.0 - leverage(k);
+    if (si_ok && std::isfinite(si[uk])) s2 += si[uk] * si[uk];
+  }
+  if (g.count == 0) return g;
+  g.rms_normalized = std::sqrt(g.chi2 / g.count);
+  g.rms_si = si_ok ? std::sqrt(s2 / g.count) : kNaN;
+  g.ratio = g.expected_chi2 > 0 ? std::sqrt(g.chi2 / g.expected_chi2) : kNaN;
+  g.p_value = g.expected_chi2 > 1e-9 ? chi2_upper_tail(g.chi2, g.expected_chi2) : 1.0;
+  g.flagged = g.p_value < alpha;
+  return g;
+}
+
+// Regression of y on [1, X]: F-test of the slopes.
+StructureTest regress(const std::string& variable, int cable, const Eigen::VectorXd& y,
+                      const Eigen::MatrixXd& X) {
+  StructureTest t;
+  t.variable = variable;
+  t.cable = cable;
+  t.samples = static_cast<int>(y.size());
+  if (t.samples < 3 || X.cols() == 0) return t;
+  Eigen::MatrixXd Xc = X.rowwise() - X.colwise().mean();
+  const Eigen::VectorXd yc = y.array() - y.mean();
+  // Drop constant regressors (relative to their magnitude).
+  for (Eigen::Index c = 0; c < Xc.cols(); ++c) {
+    const double scale = std::max(X.col(c).cwiseAbs().maxCoeff(), 1e-300);
+    if (Xc.col(c).norm() < 1e-9 * scale * std::sqrt(static_cast<double>(Xc.rows()))) {
+      Xc.col(c).setZero();
+    }
+  }
+  const Eigen::MatrixXd Q = column_basis(Xc, 1e-8);
+  t.slopes = static_cast<int>(Q.cols());
+  const double tss = yc.squaredNorm();
+  if (t.slopes == 0 || tss <= 0 || t.samples - t.slopes - 1 <= 0) return t;
+  const double ess = (Q.transpose() * yc).squaredNorm();
+  t.explained_fraction = ess / tss;
+  const double d2 = t.samples - t.slopes - 1;
+  const double rss = std::max(tss - ess, 1e-300);
+  t.f_statistic = (ess / t.slopes) / (rss / d2);
+  t.p_value = f_upper_tail(t.f_statistic, t.slopes, d2);
+  return t;
+}
+
+}  // namespace
+
+double chi2_upper_tail(double x, double dof) {
+  if (!(dof > 0)) return kNaN;
+  if (!(x > 0)) return 1.0;
+  return gamma_q(0.5 * dof, 0.5 * x);
+}
+
+double f_upper_tail(double x, double d1, double d2) {
+  if (!(d1 > 0) || !(d2 > 0)) return kNaN;
+  if (!(x > 0)) return 1.0;
+  return beta_i(0.5 * d2, 0.5 * d1, d2 / (d2 + d1 * x));
+}
+
+const CandidateScreen* MismatchSummary::best() const {
+  if (candidates.empty() || !candidates.front().significant) return nullptr;
+  return &candidates.front();
+}
+
+const CandidateScreen* MismatchSummary::find(const std::string& id) const {
+  for (const auto& c : candidates) {
+    if (c.id == id) return &c;
+  }
+  return nullptr;
+}
+
+std::string MismatchSummary::Text() const {
+  std::string s;
+  for (const auto& f : findings) s += "- " + f + "\n";
+  s += format("\n%-34s %5s %10s %10s %9s %8s %10s\n", "candidate", "k", "T", "p(F)", "p(Holm)",
+              "explains", "dBIC");
+  for (const auto& c : candidates) {
+    s += format("%-34s %5d %10.2f %10.3g %9.3g %7.1f%% %10.1f%s\n", c.id.c_str(), c.rank,
+                c.statistic, c.p_value, c.p_adjusted, 100.0 * c.explained_fraction, c.bic_delta,
+                c.modelled ? " (already modelled)" : (c.significant ? " *" : ""));
+  }
+  s += format("\n%-22s %6s %10s %10s %10s\n", "channel", "n", "RMS/sigma", "ratio", "p");
+  for (const auto& g : channels) {
+    s += format("%-22s %6d %10.3f %10.3f %10.3g%s\n", g.name.c_str(), g.count, g.rms_normalized,
+                g.ratio, g.p_value, g.flagged ? " *" : "");
+  }
+  for (const auto& g : cables) {
+    s += format("%-22s %6d %10.3f %10.3f %10.3g%s\n", g.name.c_str(), g.count, g.rms_normalized,
+                g.ratio, g.p_value, g.flagged ? " *" : "");
+  }
+  return s;
+}
+
+Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
+                                        const MeasurementSet& set,
+                                        const IdentificationOptions& options,
+                                        const MismatchOptions& mopt) {
+  const RobotModel& robot = report.estimate.robot;
+  const int m = robot.num_cables();
+  const int nl = static_cast<int>(robot.lasers.size());
+  const int np = set.num_poses();
+  if (static_cast<int>(report.residuals.size()) != np ||
+      static_cast<int>(report.poses.size()) != np) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "mismatch: the report has %d residual sets and %d poses, the measurement "
+                         "set %d poses",
+                         static_cast<int>(report.residuals.size()),
+                         static_cast<int>(report.poses.size()), np);
+  }
+  if (Status st = validate(set, robot); !st.ok()) return st;
+
+  // --- Jacobians at the estimate: the identification's, and one with every candidate parameter
+  // switched on (its extra columns are candidate effects).
+  auto base = geometry_information(report.estimate, set, report.poses, options, true);
+  if (!base) return base.status();
+  IdentificationOptions ext_opt = options;
+  ext_opt.estimate_length_scales = true;
+  ext_opt.estimate_platform_anchors = true;
+  ext_opt.platform_anchor_mask = AnchorMask();
+  ext_opt.estimate_force_gains = mopt.force_sensor_candidates || options.estimate_force_gains;
+  ext_opt.estimate_force_offsets = mopt.force_sensor_candidates || options.estimate_force_offsets;
+  ext_opt.estimate_laser_origin = nl > 0 || options.estimate_laser_origin;
+  ext_opt.estimate_laser_direction = nl > 0 || options.estimate_laser_direction;
+  ext_opt.estimate_laser_plane = nl > 0 || options.estimate_laser_plane;
+  auto ext = geometry_information(report.estimate, set, report.poses, ext_opt, true);
+  if (!ext) return ext.status();
+
+  // --- Row layout, residual vector, row sigmas.
+  std::vector<Row> rows;
+  std::vector<double> si;  // SI residual per row (NaN where mixed)
+  std::vector<std::vector<int>> length_row(static_cast<std::size_t>(np),
+                                           std::vector<int>(static_cast<std::size_t>(m), -1));
+  std::vector<int> pose_start(static_cast<std::size_t>(np) + 1, 0);
+  for (int j = 0; j < np; ++j) {
+    const auto uj = static_cast<std::size_t>(j);
+    const PoseMeasurement& pm = set.poses[uj];
+    const bool have_t = pm.tensions.size() == m;
+    pose_start[uj] = static_cast<int>(rows.size());
+    if (options.use_lengths) {
+      for (int i = 0; i < m; ++i) {
+        if (std::isnan(pm.cable_lengths(i))) continue;
+        if (have_t && !std::isnan(pm.tensions(i)) &&
+            pm.tensions(i) < options.slack_tension_threshold) {
+          continue;
+        }
+        length_row[uj][static_cast<std::size_t>(i)] = static_cast<int>(rows.size());
+        rows.push_back({RowKind::kLength, j, i});
+        si.push_back(report.residuals[uj].length_m(i));
+      }
+    }
+    if (options.use_laser) {
+      for (int l = 0; l < std::min<int>(nl, static_cast<int>(pm.laser_distances.size())); ++l) {
+        if (std::isnan(pm.laser_distances(l))) continue;
+        rows.push_back({RowKind::kLaser, j, l});
+        si.push_back(report.residuals[uj].laser_m(l));
+      }
+    }
+    if (options.use_equilibrium && have_t && pm.tensions.allFinite()) {
+      for (int q = 0; q < 6; ++q) {
+        rows.push_back({RowKind::kWrench, j, q});
+        si.push_back(q < 3 ? report.residuals[uj].wrench_si(q) : kNaN);
+      }
+    }
+    const int have = static_cast<int>(rows.size()) - pose_start[uj];
+    const int jac_rows = static_cast<int>(base->jacobian_geometry[uj].rows());
+    if (jac_rows == have + 6 && options.use_reference && pm.reference) {
+      for (int q = 0; q < 6; ++q) {
+        rows.push_back({RowKind::kReference, j, q});
+        si.push_back(kNaN);
+      }
+    } else if (jac_rows != have) {
+      return Status::Error(ErrorCode::kInternal,
+                           "mismatch: pose %d has %d Jacobian rows, the residual layout %d", j,
+                           jac_rows, have);
+    }
+    if (ext->jacobian_geometry[uj].rows() != jac_rows) {
+      return Status::Error(ErrorCode::kInternal,
+                           "mismatch: pose %d: the extended Jacobian has a different row count", j);
+    }
+  }
+  pose_start[static_cast<std::size_t>(np)] = static_cast<int>(rows.size());
+  const int n = static_cast<int>(rows.size());
+  Eigen::VectorXd r(n);
+  Eigen::VectorXd sigma_len = Eigen::VectorXd::Constant(n, kNaN);
+  for (int k = 0; k < n; ++k) {
+    const Row& row = rows[static_cast<std::size_t>(k)];
+    const PoseResiduals& pr = report.residuals[static_cast<std::size_t>(row.pose)];
+    switch (row.kind) {
+      case RowKind::kLength: {
+        r(k) = pr.length_normalized(row.index);
+        const double rm = pr.length_m(row.index);
+        if (std::isfinite(rm) && std::abs(r(k)) > 1e-300) {
+          sigma_len(k) = rm / r(k);
+        } else {
+          sigma_len(k) = set.noise.sigma_length;
+        }
+        if (!(sigma_len(k) > 0)) sigma_len(k) = set.noise.sigma_length;
+        break;
+      }
+      case RowKind::kLaser:
+        r(k) = pr.laser_normalized(row.index);
+        break;
+      case RowKind::kWrench:
+        r(k) = pr.wrench_normalized(row.index);
+        break;
+      case RowKind::kReference:
+        r(k) = pr.reference_normalized(row.index);
+        break;
+    }
+    if (!std::isfinite(r(k))) {
+      return Status::Error(
+          ErrorCode::kInternal,
+          "mismatch: pose %d: a residual the Jacobian has is missing in the report", row.pose);
+    }
+  }
+
+  // --- Full Jacobian J (geometry + free poses) and its column-space basis.
+  const int P = static_cast<int>(base->names.size());
+  std::vector<int> pose_col(static_cast<std::size_t>(np), -1);
+  int cols = P;
+  for (int j = 0; j < np; ++j) {
+    if (base->jacobian_pose[static_cast<std::size_t>(j)].norm() > 0) {
+      pose_col[static_cast<std::size_t>(j)] = cols;
+      cols += 6;
+    }
+  }
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(n, cols);
+  for (int j = 0; j < np; ++j) {
+    const auto uj = static_cast<std::size_t>(j);
+    const int r0 = pose_start[uj];
+    const int nr = pose_start[uj + 1] - r0;
+    J.block(r0, 0, nr, P) = base->jacobian_geometry[uj];
+    if (pose_col[uj] >= 0) J.block(r0, pose_col[uj], nr, 6) = base->jacobian_pose[uj];
+  }
+  const Eigen::MatrixXd Q1 = column_basis(J, mopt.rank_tolerance);
+  const int rankJ = static_cast<int>(Q1.cols());
+  const Eigen::VectorXd leverage = Q1.rowwise().squaredNorm();
+  auto project = [&](const Eigen::MatrixXd& X) -> Eigen::MatrixXd {
+    return X - Q1 * (Q1.transpose() * X);
+  };
+
+  MismatchSummary out;
+  out.num_residuals = n;
+  out.chi2 = r.squaredNorm();
+  out.jacobian_rank = rankJ;
+  out.dof = n - rankJ;
+  if (n == 0 || out.dof <= 0) {
+    return Status::Error(ErrorCode::kFailedPrecondition,
+                         "mismatch: %d residuals and %d fitted quantities leave no degrees of "
+                         "freedom",
+                         n, rankJ);
+  }
+  out.p_value = chi2_upper_tail(out.chi2, out.dof);
+  const double alpha = mopt.alpha;
+
+  // --- LOCATE: misfit per channel, cable and pose.
+  {
+    std::vector<int> len, wr, ref;
+    std::vector<std::vector<int>> las(static_cast<std::size_t>(nl));
+    std::vector<std::vector<int>> cab(static_cast<std::size_t>(m));
+    for (int k = 0; k < n; ++k) {
+      const Row& row = rows[static_cast<std::size_t>(k)];
+      switch (row.kind) {
+        case RowKind::kLength:
+          len.push_back(k);
+          cab[static_cast<std::size_t>(row.index)].push_back(k);
+          break;
+        case RowKind::kLaser:
+          las[static_cast<std::size_t>(row.index)].push_back(k);
+          break;
+        case RowKind::kWrench:
+          wr.push_back(k);
+          break;
+        case RowKind::kReference:
+          ref.push_back(k);
+          break;
+      }
+    }
+    if (!len.empty()) {
+      out.channels.push_back(make_group("cable lengths", len, r, leverage, si, "m", alpha));
+    }
+    for (int l = 0; l < nl; ++l) {
+      if (las[static_cast<std::size_t>(l)].empty()) continue;
+      out.channels.push_back(make_group("laser " + std::to_string(l + 1),
+                                        las[static_cast<std::size_t>(l)], r, leverage, si, "m",
+                                        alpha));
+    }
+    if (!wr.empty()) {
+      out.channels.push_back(make_group("equilibrium", wr, r, leverage, si, "", alpha));
+    }
+    if (!ref.empty()) {
+      out.channels.push_back(make_group("reference pose", ref, r, leverage, si, "", alpha));
+    }
+    for (int i = 0; i < m; ++i) {
+      if (cab[static_cast<std::size_t>(i)].empty()) continue;
+      out.cables.push_back(make_group("cable " + std::to_string(i + 1),
+                                      cab[static_cast<std::size_t>(i)], r, leverage, si, "m",
+                                      alpha));
+    }
+    for (int j = 0; j < np; ++j) {
+      std::vector<int> pr;
+      for (int k = pose_start[static_cast<std::size_t>(j)];
+           k < pose_start[static_cast<std::size_t>(j) + 1]; ++k) {
+        pr.push_back(k);
+      }
+      out.poses.push_back(make_group("pose " + std::to_string(j), pr, r, leverage, si, "", alpha));
+    }
+  }
+
+  // --- Explanatory variables per length row.
+  KinematicsData kin(robot);
+  const Eigen::VectorXd nan_n = Eigen::VectorXd::Constant(n, kNaN);
+  Eigen::VectorXd tension = nan_n, kin_len = nan_n, loaded = nan_n, reading = nan_n, time = nan_n,
+                  tilt = nan_n, horizontal = nan_n;
+  Eigen::MatrixXd direction = Eigen::MatrixXd::Constant(n, 3, kNaN);
+  for (int j = 0; j < np; ++j) {
+    const auto uj = static_cast<std::size_t>(j);
+    const PoseMeasurement& pm = set.poses[uj];
+    if (!inverse_kinematics(robot, report.poses[uj], kin)) {
+      return Status::Error(ErrorCode::kNumericalFailure,
+                           "mismatch: pose %d: cable %d is degenerate at the estimated pose", j,
+                           kin.invalid_cable + 1);
+    }
+    for (int i = 0; i < m; ++i) {
+      const int k = length_row[uj][static_cast<std::size_t>(i)];
+      if (k < 0) continue;
+      const auto ui = static_cast<std::size_t>(i);
+      // Tension readings are in N through the nominal sensor calibration; the estimate's sensor
+      // correction is second order for a regressor.
+      if (pm.tensions.size() == m) tension(k) = pm.tensions(i);
+      kin_len(k) = kin.lengths(i);
+      loaded(k) = robot.cables[ui].routing_length + kin.lengths(i);
+      reading(k) = pm.cable_lengths(i);
+      time(k) = pm.time;
+      tilt(k) = std::acos(std::clamp(kin.rotation(2, 2), -1.0, 1.0));
+      const Eigen::Vector3d u = kin.unit_vectors.col(i);
+      direction.row(k) = (robot.pulleys[ui].frame.transpose() * (-u)).transpose();
+      horizontal(k) = kin.free_lengths(i) * std::hypot(u.x(), u.y());
+    }
+  }
+
+  // --- LOCATE: structure tests of the normalised length residuals.
+  {
+    struct Variable {
+      std::string name;
+      Eigen::MatrixXd values;  // n x q
+    };
+    std::vector<Variable> vars;
+    vars.push_back({"tension x length", tension.cwiseProduct(loaded)});
+    vars.push_back({"tension", tension});
+    vars.push_back({"cable length", kin_len});
+    vars.push_back({"time", time});
+    vars.push_back({"platform tilt", tilt});
+    vars.push_back({"cable direction in the pulley frame", direction});
+    std::vector<StructureTest> tests;
+    for (int i = -1; i < m; ++i) {
+      for (const Variable& v : vars) {
+        std::vector<int> idx;
+        for (int k = 0; k < n; ++k) {
+          const Row& row = rows[static_cast<std::size_t>(k)];
+          if (row.kind != RowKind::kLength || (i >= 0 && row.index != i)) continue;
+          if (!v.values.row(k).allFinite()) continue;
+          idx.push_back(k);
+        }
+        if (static_cast<int>(idx.size()) < 4) continue;
+        Eigen::VectorXd y(static_cast<Eigen::Index>(idx.size()));
+        Eigen::MatrixXd X(static_cast<Eigen::Index>(idx.size()), v.values.cols());
+        for (std::size_t q = 0; q < idx.size(); ++q) {
+          y(static_cast<Eigen::Index>(q)) = r(idx[q]);
+          X.row(static_cast<Eigen::Index>(q)) = v.values.row(idx[q]);
+        }
+        StructureTest t = regress(v.name, i, y, X);
+        if (t.slopes > 0) tests.push_back(t);
+      }
+    }
+    const double bonferroni = alpha / std::max<double>(1.0, static_cast<double>(tests.size()));
+    for (auto& t : tests) t.significant = t.p_value < bonferroni;
+    out.structure = std::move(tests);
+  }
+
+  // --- NAME: the candidate library.
+  std::vector<Candidate> lib;
+  auto per_length_row = [&](const std::string& id, const std::string& name,
+                            const std::string& family, bool per_cable, auto value) {
+    Candidate c{id, name, family, Eigen::MatrixXd::Zero(n, per_cable ? m : 1)};
+    bool any = false;
+    for (int k = 0; k < n; ++k) {
+      const Row& row = rows[static_cast<std::size_t>(k)];
+      if (row.kind != RowKind::kLength) continue;
+      const double v = value(k);
+      if (!std::isfinite(v)) continue;
+      c.X(k, per_cable ? row.index : 0) = v / sigma_len(k);
+      any = any || v != 0.0;
+    }
+    if (any) lib.push_back(std::move(c));
+  };
+  const bool have_time = time.array().isFinite().count() > 0;
+  auto fl = [&](int k) { return tension(k) * loaded(k); };
+  auto f = [&](int k) { return tension(k); };
+  per_length_row("hooke_shared", "cable elasticity (Hooke, ~F*L), one EA for all cables",
+                 "elasticity", false, fl);
+  per_length_row("hooke_per_cable", "cable elasticity (Hooke, ~F*L), EA per cable", "elasticity",
+                 true, fl);
+  per_length_row("compliance_shared", "winch/sensor compliance (~F), the same for all winches",
+                 "compliance", false, f);
+  per_length_row("compliance_per_cable", "winch/sensor compliance (~F), per winch", "compliance",
+                 true, f);
+  per_length_row("encoder_offset_per_cable", "encoder zero offset (~1), per cable",
+                 "encoder offset", true, [](int) { return 1.0; });
+  if (have_time) {
+    per_length_row("encoder_drift_per_cable", "encoder drift over time (~t), per cable",
+                   "encoder drift", true, [&](int k) { return time(k); });
+    per_length_row("transmission_drift_shared",
+                   "transmission drift over time (~t*L, e.g. drum heating), all cables",
+                   "transmission drift", false, [&](int k) { return time(k) * reading(k); });
+  }
+  per_length_row("sag_shared", "cable sag (catenary, ~Lh^2 L / F^2)", "sag", false, [&](int k) {
+    return horizontal(k) * horizontal(k) * kin_len(k) / (tension(k) * tension(k));
+  });
+  per_length_row("nonlinear_elasticity_shared", "nonlinear cable elasticity (~F^2 L)",
+                 "nonlinear elasticity", false,
+                 [&](int k) { return tension(k) * tension(k) * loaded(k); });
+
+  // Candidates from parameters the identification did not estimate (exact Jacobian columns).
+  {
+    std::map<std::string, int> base_cols;
+    for (int q = 0; q < P; ++q) base_cols[base->names[static_cast<std::size_t>(q)]] = q;
+    Eigen::MatrixXd Jx = Eigen::MatrixXd::Zero(n, static_cast<Eigen::Index>(ext->names.size()));
+    for (int j = 0; j < np; ++j) {
+      const auto uj = static_cast<std::size_t>(j);
+      Jx.middleRows(pose_start[uj], pose_start[uj + 1] - pose_start[uj]) =
+          ext->jacobian_geometry[uj];
+    }
+    auto group = [&](const std::string& id, const std::string& name, const std::string& family,
+                     auto select) {
+      std::vector<int> picked;
+      for (int q = 0; q < static_cast<int>(ext->names.size()); ++q) {
+        const std::string& nm = ext->names[static_cast<std::size_t>(q)];
+        if (base_cols.count(nm) || !select(nm)) continue;
+        picked.push_back(q);
+      }
+      if (picked.empty()) return;
+      Candidate c{id, name, family, Eigen::MatrixXd(n, static_cast<Eigen::Index>(picked.size()))};
+      for (std::size_t q = 0; q < picked.size(); ++q) {
+        c.X.col(static_cast<Eigen::Index>(q)) = Jx.col(picked[q]);
+      }
+      if (c.X.norm() > 0) lib.push_back(std::move(c));
+    };
+    auto starts = [](const std::string& s, const char* p) { return s.rfind(p, 0) == 0; };
+    group("drum_scale_per_cable", "drum/transmission scale error (~L), per cable", "drum scale",
+          [&](const std::string& s) { return starts(s, "s_"); });
+    group("platform_anchors", "platform anchor positions (b_i)", "platform anchors",
+          [&](const std::string& s) { return starts(s, "b_"); });
+    group("force_gain_per_cable", "force sensor gain error (~F in the equilibrium), per cable",
+          "force sensor gain", [&](const std::string& s) { return starts(s, "force_gain"); });
+    group("force_offset_per_cable", "force sensor offset (~1 in the equilibrium), per cable",
+          "force sensor offset", [&](const std::string& s) { return starts(s, "force_offset"); });
+    group("laser_mounting", "laser mounting (origin and beam direction on the platform)",
+          "laser mounting", [&](const std::string& s) {
+            return starts(s, "laser_") && (s.find(".origin.") != std::string::npos ||
+                                           s.find(".direction.") != std::string::npos);
+          });
+    group("laser_plane", "laser target plane (offset and tilt)", "laser plane",
+          [&](const std::string& s) {
+            return starts(s, "laser_") && s.find(".plane.") != std::string::npos;
+          });
+    // The shared drum scale: the sum of the per-cable columns.
+    for (const Candidate& c : lib) {
+      if (c.id == "drum_scale_per_cable") {
+        Candidate s{"drum_scale_shared", "drum/transmission scale error (~L), all drums alike",
+                    "drum scale", c.X.rowwise().sum()};
+        lib.push_back(std::move(s));
+        break;
+      }
+    }
+  }
+
+  // --- Screen every candidate.
+  const double rss = out.chi2;
+  std::vector<Eigen::MatrixXd> bases(lib.size());
+  for (std::size_t c = 0; c < lib.size(); ++c) {
+    CandidateScreen s;
+    s.id = lib[c].id;
+    s.name = lib[c].name;
+    s.family = lib[c].family;
+    s.columns = static_cast<int>(lib[c].X.cols());
+    const Eigen::MatrixXd Xp = project(lib[c].X);
+    // Rank relative to the unprojected column norms: a column that loses (almost) all of its
+    // length in the projection is already modelled by the identification.
+    Eigen::MatrixXd Xs = Xp;
+    for (Eigen::Index q = 0; q < Xs.cols(); ++q) {
+      const double nx = lib[c].X.col(q).norm();
+      Xs.col(q) = nx > 0 ? Eigen::VectorXd(Xs.col(q) / nx) : Eigen::VectorXd::Zero(n);
+    }
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(Xs, Eigen::ComputeThinU);
+    int rk = 0;
+    for (Eigen::Index q = 0; q < svd.singularValues().size(); ++q) {
+      if (svd.singularValues()(q) > std::sqrt(mopt.rank_tolerance)) ++rk;
+    }
+    bases[c] = svd.matrixU().leftCols(rk);
+    s.rank = rk;
+    s.modelled = rk == 0;
+    if (rk > 0 && out.dof - rk > 0) {
+      s.statistic = (bases[c].transpose() * r).squaredNorm();
+      s.p_score = chi2_upper_tail(s.statistic, rk);
+      s.explained_fraction = rss > 0 ? s.statistic / rss : 0.0;
+      const double rest = std::max(rss - s.statistic, 1e-300);
+      s.f_statistic = (s.statistic / rk) / (rest / (out.dof - rk));
+      s.p_value = f_upper_tail(s.f_statistic, rk, out.dof - rk);
+      s.bic_delta = n * std::log(rest / rss) + rk * std::log(static_cast<double>(n));
+      s.coefficients = Xp.completeOrthogonalDecomposition().solve(r);
+    }
+    out.candidates.push_back(std::move(s));
+  }
+  // Holm over the screened candidates.
+  {
+    std::vector<std::size_t> order;
+    for (std::size_t c = 0; c < out.candidates.size(); ++c) {
+      if (out.candidates[c].rank > 0) order.push_back(c);
+    }
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      return out.candidates[a].p_value < out.candidates[b].p_value;
+    });
+    double running = 0.0;
+    const double K = static_cast<double>(order.size());
+    for (std::size_t q = 0; q < order.size(); ++q) {
+      CandidateScreen& s = out.candidates[order[q]];
+      running = std::max(running, std::min(1.0, (K - static_cast<double>(q)) * s.p_value));
+      s.p_adjusted = running;
+      s.significant = s.p_adjusted < alpha;
+    }
+  }
+  // Confounded pairs (different families, both screened).
+  for (std::size_t a = 0; a < lib.size(); ++a) {
+    for (std::size_t b = a + 1; b < lib.size(); ++b) {
+      if (lib[a].family == lib[b].family || bases[a].cols() == 0 || bases[b].cols() == 0) continue;
+      const Eigen::MatrixXd M = bases[a].transpose() * bases[b];
+      const double rho = Eigen::JacobiSVD<Eigen::MatrixXd>(M).singularValues()(0);
+      if (rho <= mopt.confound_threshold) continue;
+      ConfoundedPair p;
+      p.first = lib[a].id;
+      p.second = lib[b].id;
+      p.correlation = rho;
+      p.description = format(
+          "%s and %s are confounded on this pose set (canonical correlation %.2f after the "
+          "identification is projected out): the data cannot tell them apart; separate them with "
+          "poses that excite one without the other%s, or a bench test",
+          lib[a].name.c_str(), lib[b].name.c_str(), rho,
+          (lib[a].family == "elasticity" && lib[b].family == "compliance")
+              ? " (equal tension at very different free lengths)"
+              : "");
+      out.confounded.push_back(std::move(p));
+    }
+  }
+  std::stable_sort(out.candidates.begin(), out.candidates.end(),
+                   [](const CandidateScreen& a, const CandidateScreen& b) {
+                     if ((a.rank == 0) != (b.rank == 0)) return b.rank == 0;
+                     return a.bic_delta < b.bic_delta;
+                   });
+  std::sort(out.confounded.begin(), out.confounded.end(),
+            [](const ConfoundedPair& a, const ConfoundedPair& b) {
+              return a.correlation > b.correlation;
+            });
+
+  // --- Findings in words.
+  if (out.p_value < alpha) {
+    out.findings.push_back(
+        format("The model does not explain the recording: chi^2 = %.1f for %d degrees of freedom "
+               "(%.2f times the noise, p = %.3g).",
+               out.chi2, out.dof, std::sqrt(out.chi2 / out.dof), out.p_value));
+  } else {
+    out.findings.push_back(format(
+        "The residuals are consistent with the stated sensor noise: chi^2 = %.1f for %d degrees "
+        "of freedom (p = %.3g).",
+        out.chi2, out.dof, out.p_value));
+  }
+  for (const auto& g : out.channels) {
+    if (!g.flagged) continue;
+    out.findings.push_back(
+        format("Channel '%s' misfits: %.2f times its expected noise (chi^2 = %.1f against %.1f, "
+               "p = %.3g).",
+               g.name.c_str(), g.ratio, g.chi2, g.expected_chi2, g.p_value));
+  }
+  for (const auto& g : out.cables) {
+    if (!g.flagged) continue;
+    out.findings.push_back(format("Cable %s misfits: %.2f times its expected noise (p = %.3g).",
+                                  g.name.c_str() + 6, g.ratio, g.p_value));
+  }
+  for (const auto& t : out.structure) {
+    if (!t.significant) continue;
+    out.findings.push_back(
+        format("The length residuals of %s follow %s (F = %.1f, p = %.3g, explains %.0f %%).",
+               t.cable < 0 ? "all cables" : ("cable " + std::to_string(t.cable + 1)).c_str(),
+               t.variable.c_str(), t.f_statistic, t.p_value, 100.0 * t.explained_fraction));
+  }
+  if (const CandidateScreen* b = out.best()) {
+    out.findings.push_back(
+        format("Most likely missing physics: %s; it explains %.0f %% of the misfit (p = %.3g after "
+               "Holm's correction).",
+               b->name.c_str(), 100.0 * b->explained_fraction, b->p_adjusted));
+  } else {
+    out.findings.push_back(format("No candidate effect is significant at alpha = %.3g.", alpha));
+  }
+  for (const auto& p : out.confounded) out.findings.push_back(p.description + ".");
+  return out;
+}
+
+}  // namespace cdpr
