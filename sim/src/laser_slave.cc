@@ -315,7 +315,9 @@ void LaserSlave::handle(int fd) {
     return;
   }
   fill_registers();
-  if (modbus_reply(ctx_, query.data(), rc, mapping_) >= 0) answered_.fetch_add(1);
+  // Counted before the reply leaves: a client that has its answer must see the count include it.
+  answered_.fetch_add(1);
+  if (modbus_reply(ctx_, query.data(), rc, mapping_) < 0) answered_.fetch_sub(1);
 }
 
 void LaserSlave::serve() {
