@@ -60,6 +60,43 @@ inline Scenario mini_scenario() {
   return s;
 }
 
+// The laser of the shipped MINI configs: at the centre of the platform's bottom face, pointing
+// down at the floor plane z = -0.6 m, range 0.1..1.0 m.
+inline LaserModel mini_config_laser() {
+  LaserModel laser;
+  laser.origin = Eigen::Vector3d(0.0, 0.0, -0.03);
+  laser.direction = -Eigen::Vector3d::UnitZ();
+  laser.plane_point = Eigen::Vector3d(0.0, 0.0, -0.6);
+  laser.plane_normal = Eigen::Vector3d::UnitZ();
+  laser.range_min = 0.1;
+  laser.range_max = 1.0;
+  return laser;
+}
+
+// MINI exactly as shipped: nominal = config/mini.yaml, truth = config/mini-measured.yaml (the
+// measured frame anchors with pulley frames pointing from them to the centre line, the same
+// laser and floor plane in both), encoders homed with the nominal model (homed_truth), as
+// `cdpr-fit simulate --nominal config/mini.yaml` does. tests/fit checks that these models equal
+// the configs loaded by cdpr_config, so the benchmark figures are those of the shipped robot.
+inline Scenario mini_config_scenario() {
+  Scenario s;
+  RobotModel nominal = testing::mini_robot();
+  nominal.platform.inertia = Eigen::Vector3d(0.00435, 0.003, 0.00615).asDiagonal();
+  nominal.lasers = {mini_config_laser()};
+  RobotModel truth = nominal;
+  truth.name = "MINI (measured)";
+  truth.frame_anchors = mini_measured_anchors();
+  for (int i = 0; i < truth.num_cables(); ++i) {
+    truth.pulleys[static_cast<std::size_t>(i)].frame =
+        testing::vertical_swivel_frame(truth.frame_anchors.col(i), /*cable_goes_up=*/i < 4);
+  }
+  s.nominal = CalibratedModel::FromRobot(nominal);
+  auto homed = homed_truth(truth, nominal);
+  s.truth = homed ? *homed : CalibratedModel::FromRobot(truth);
+  s.box = testing::mini_workspace();
+  return s;
+}
+
 // LARGE: anchors perturbed by up to `perturbation` m per coordinate (seeded).
 inline Scenario large_scenario(double perturbation = 0.03, unsigned seed = 7) {
   Scenario s;

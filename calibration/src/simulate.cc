@@ -193,6 +193,22 @@ Result<Eigen::VectorXd> homing_offsets(const RobotModel& truth, const RobotModel
   return Eigen::VectorXd(*ut - *un);
 }
 
+Result<CalibratedModel> homed_truth(const RobotModel& truth, const RobotModel& nominal,
+                                    double reference_tension) {
+  if (truth.num_cables() != nominal.num_cables()) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "homing: the true robot has %d cables, the nominal one %d",
+                         truth.num_cables(), nominal.num_cables());
+  }
+  const double f_ref =
+      std::isnan(reference_tension) ? default_reference_tension(nominal) : reference_tension;
+  CalibratedModel out = CalibratedModel::FromRobot(truth);
+  auto off = homing_offsets(truth, nominal, f_ref);
+  if (!off) return Status(off.status().code(), "homing: " + std::string(off.status().message()));
+  out.readings.length_offsets = *off;
+  return out;
+}
+
 Result<SimulatedMeasurements> simulate_measurements(const CalibratedModel& truth,
                                                     const std::vector<Pose>& poses,
                                                     const SensorNoise& noise, std::uint64_t seed,

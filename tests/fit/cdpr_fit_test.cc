@@ -386,6 +386,103 @@ TEST_F(CdprFit, DesignedPosesStartAtHomeAndMoreNoisePredictsLessAccuracy) {
   EXPECT_GT(high.at("position_rms_m").get<double>(), low.at("position_rms_m").get<double>());
 }
 
+// The shipped robot end to end, as the benchmark and a real calibration see it: poses designed
+// on the nominal config, the TRUE robot (mini-measured.yaml) commanded through the nominal model
+// with elastic cables and encoders homed with it, default noise (laser 1 mm, encoder 0.1 mm,
+// force 1 N), calibrated from the nominal config with the default parameter set and gauge.
+TEST_F(CdprFit, ElasticRecordingOfTheMeasuredRobotCalibratesFromTheNominalConfig) {
+  const std::string rec = path("elastic.csv");
+  ProcessResult r = fit({"simulate", "--config", kTruth, "--nominal", kNominal, "--physics",
+                         "elastic", "--design", "25", "--seed", "3", "--out", rec});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const std::string cal = path("calibrated.yaml"), report = path("report.json");
+  r = fit({"calibrate", "--config", kNominal, "--recording", rec, "--truth", kTruth, "--out", cal,
+           "--report", report});
+  ASSERT_EQ(r.status, 0) << r.err << r.out;
+
+  auto nominal = cdpr::config::load_robot_config(kNominal);
+  auto truth = cdpr::config::load_robot_config(kTruth);
+  auto calibrated = cdpr::config::load_robot_config(cal);
+  ASSERT_TRUE(nominal.ok() && truth.ok());
+  ASSERT_TRUE(calibrated.ok()) << calibrated.status().to_string();
+  const double before = anchor_rms(*nominal, *truth);
+  const double after = anchor_rms(*calibrated, *truth);
+  EXPECT_GT(before, 0.010);  // 14.5 mm between the SolidWorks and the measured anchors
+  EXPECT_LT(after, 0.3 * before) << "anchor RMS error " << before << " m -> " << after << " m";
+
+  const nlohmann::json j = nlohmann::json::parse(slurp(report));
+  EXPECT_TRUE(j.at("converged").get<bool>());
+  EXPECT_NEAR(j.at("anchor_error_vs_truth").at("calibrated_rms_m").get<double>(), after, 1e-9);
+  // The model explains the data: chi-square within 4 sigma of its dof (sigma = sqrt(2 dof)).
+  const double chi2 = j.at("chi2").get<double>();
+  const int dof = j.at("dof").get<int>();
+  ASSERT_GT(dof, 100);
+  EXPECT_LT(std::abs(chi2 - dof), 4.0 * std::sqrt(2.0 * dof)) << "chi2 " << chi2 << " dof " << dof;
+  for (const auto& w : j.at("warnings")) EXPECT_THAT(w.get<std::string>(), Not(HasSubstr("chi")));
+  // The identified encoder offsets are folded into the winches exactly once.
+  const auto& offsets = j.at("length_offsets_m");
+  ASSERT_EQ(offsets.size(), 8u);
+  for (std::size_t i = 0; i < 8; ++i) {
+    EXPECT_NEAR(calibrated->winches[i].length_offset,
+                nominal->winches[i].length_offset + offsets[i].get<double>(), 1e-12)
+        << "cable " << i + 1;
+  }
+}
+
+// The paper's method on the same kind of recording. From the nominal config it must stop by
+// itself (not at the iteration limit) and reduce its error norm. It cannot be expected to improve
+// the anchors there: the 8 coordinates outside V stay at their nominal values (z of the bottom
+// anchors is 11.7 mm off) and V absorbs that error. Given those 8 coordinates at their true values
+// (the paper's set-up: measured with a Faro arm), it must improve V (squared error by >25 %;
+// the benchmark gets 8.0 -> 5.6 mm RMS over V on MINI).
+TEST_F(CdprFit, PaperMethodConvergesOnAnElasticRecording) {
+  const std::string rec = path("elastic.csv");
+  ProcessResult r = fit({"simulate", "--config", kTruth, "--nominal", kNominal, "--physics",
+                         "elastic", "--design", "25", "--seed", "4", "--out", rec});
+  ASSERT_EQ(r.status, 0) << r.err;
+  auto nominal = cdpr::config::load_robot_config(kNominal);
+  auto truth = cdpr::config::load_robot_config(kTruth);
+  ASSERT_TRUE(nominal.ok() && truth.ok());
+  auto in_v = [](int q, int i) { return (q < 2 && i >= 1 && i <= 6) || (q == 2 && i >= 4); };
+  // The nominal config with the coordinates outside V set to the truth.
+  cdpr::RobotModel rest_known = *nominal;
+  for (int i = 0; i < 8; ++i) {
+    for (int q = 0; q < 3; ++q) {
+      if (!in_v(q, i)) rest_known.frame_anchors(q, i) = truth->frame_anchors(q, i);
+    }
+  }
+  const std::string start = path("rest-known.yaml");
+  {
+    std::ofstream f(start);
+    f << cdpr::config::save_robot_config(rest_known);
+  }
+  for (const std::string& config : {kNominal, start}) {
+    SCOPED_TRACE(config);
+    const std::string cal = path("paper.yaml");
+    r = fit({"calibrate", "--method", "paper", "--config", config, "--recording", rec, "--out", cal,
+             "--json"});
+    ASSERT_EQ(r.status, 0) << r.err;
+    const nlohmann::json j = nlohmann::json::parse(r.out);
+    EXPECT_TRUE(j.at("converged").get<bool>()) << j.at("termination");
+    EXPECT_LT(j.at("iterations").get<int>(), 100);
+    EXPECT_LT(j.at("error_norm_m").at("final").get<double>(),
+              0.5 * j.at("error_norm_m").at("initial").get<double>());
+    if (config != start) continue;
+    auto calibrated = cdpr::config::load_robot_config(cal);
+    ASSERT_TRUE(calibrated.ok()) << calibrated.status().to_string();
+    double before = 0.0, after = 0.0;  // over V = [x2..x7, y2..y7, z5..z8]
+    for (int i = 0; i < 8; ++i) {
+      for (int q = 0; q < 3; ++q) {
+        if (!in_v(q, i)) continue;
+        before += std::pow(nominal->frame_anchors(q, i) - truth->frame_anchors(q, i), 2);
+        after += std::pow(calibrated->frame_anchors(q, i) - truth->frame_anchors(q, i), 2);
+      }
+    }
+    EXPECT_LT(after, 0.75 * before)
+        << "V error " << std::sqrt(before / 16) << " -> " << std::sqrt(after / 16) << " m RMS";
+  }
+}
+
 TEST_F(CdprFit, PaperMethodRunsAndReportsItsIterations) {
   const std::string rec = simulate(25);
   const std::string out = path("paper.yaml");

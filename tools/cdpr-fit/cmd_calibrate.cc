@@ -21,22 +21,6 @@ const std::vector<std::string>& estimate_names() {
   return names;
 }
 
-RobotModel fold_reading_model(const CalibratedModel& model) {
-  RobotModel robot = model.robot;
-  const Eigen::Index m = robot.num_cables();
-  for (Eigen::Index i = 0; i < m && i < static_cast<Eigen::Index>(robot.winches.size()); ++i) {
-    WinchModel& w = robot.winches[static_cast<std::size_t>(i)];
-    const double s =
-        i < model.readings.length_scales.size() ? model.readings.length_scales(i) : 0.0;
-    const double o =
-        i < model.readings.length_offsets.size() ? model.readings.length_offsets(i) : 0.0;
-    w.length_offset = (1.0 + s) * w.length_offset + o;
-    w.drum_diameter *= 1.0 + s;
-    w.drum_pitch *= 1.0 + s;
-  }
-  return robot;
-}
-
 Status apply_estimate(const std::vector<std::string>& names, int num_cables,
                       IdentificationOptions* o) {
   if (names.empty()) return Status::Ok();  // the defaults of IdentificationOptions
@@ -285,7 +269,9 @@ Result<Output> calibrate_paper(const CalibrateArgs& args, const RobotModel& nomi
   }
   const PaperMethodReport& r = *report;
   if (!r.converged) warnings.push_back("the paper's iteration did not converge: " + r.termination);
-  const RobotModel calibrated = fold_reading_model(r.estimate);
+  // identify() and paper_method() already fold the identified reading model into the winches
+  // (IdentificationReport::estimate); folding it again would double the offsets.
+  const RobotModel& calibrated = r.estimate.robot;
   nlohmann::json poses = nlohmann::json::array();
   for (std::size_t j = 0; j < r.poses.size(); ++j) {
     poses.push_back({{"pose", rec.poses[j].index},
@@ -414,7 +400,9 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   }
   const IdentificationReport& r = *report;
   for (const std::string& w : r.warnings) warnings.push_back(w);
-  const RobotModel calibrated = fold_reading_model(r.estimate);
+  // identify() and paper_method() already fold the identified reading model into the winches
+  // (IdentificationReport::estimate); folding it again would double the offsets.
+  const RobotModel& calibrated = r.estimate.robot;
 
   // ---- JSON report ------------------------------------------------------------------------
   nlohmann::json params = nlohmann::json::array();

@@ -64,7 +64,14 @@ Result<Output> simulate(const SimulateArgs& args) {
     }
     options.reference_pose_indices.push_back(j);
   }
-  const CalibratedModel truth_model = CalibratedModel::FromRobot(*truth);
+  // Homing: the true robot's encoders are zeroed at the home pose with the controller's model
+  // (the nominal one, else the truth), so length_i has the meaning the recording format states
+  // (docs/recording-format.md) and an elastic platform commanded home settles at home, where the
+  // home-pose gauge of `calibrate` puts row 0.
+  const RobotModel& controller = nominal ? nominal->robot : *truth;
+  auto homed = homed_truth(*truth, controller, args.reference_tension);
+  if (!homed.ok()) return with_context(homed.status(), "simulating " + args.config);
+  const CalibratedModel& truth_model = *homed;
   auto sim = simulate_measurements(truth_model, list->poses, args.noise, args.seed, options);
   if (!sim.ok()) {
     return Status::Error(sim.status().code(), "simulating %s at the poses of %s: %.*s",
@@ -89,6 +96,7 @@ Result<Output> simulate(const SimulateArgs& args) {
   md.set(recording::key::kSeed, std::to_string(args.seed));
   md.set("physics", args.elastic ? "elastic" : "rigid");
   md.set("noise_added", args.add_noise ? "yes" : "no");
+  md.set("homing", "encoder zero at the home pose of " + config_file);
   auto rec = recording::from_measurement_set(sim->set, md);
   if (!rec.ok()) return rec.status();
   if (Status s = recording::write_recording(*rec, args.out); !s.ok()) return s;

@@ -61,11 +61,10 @@ Result<Output> calibrate(const CalibrateArgs& args);
 // The names --estimate accepts, in the order of the help text.
 const std::vector<std::string>& estimate_names();
 
-// The calibrated robot with the reading model folded into the winches: the calibrated reading
-// is unstretched = (1 + s_i) reading + o_i with reading = length_offset + dir counts mpc, so the
-// winch gets length_offset' = (1 + s_i) length_offset + o_i and drum diameter and pitch scaled by
-// (1 + s_i) (metres per count scale by 1 + s_i).
-RobotModel fold_reading_model(const CalibratedModel& model);
+// The calibrated config is IdentificationReport::estimate.robot (or the paper method's): the
+// identified reading model unstretched = (1 + s_i) reading + o_i is already folded into each
+// winch there (length_offset' = (1 + s_i) length_offset + o_i, drum diameter and pitch scaled by
+// 1 + s_i), so it must not be folded a second time.
 
 // ---------------------------------------------------------------------------------------------
 // design-poses, predict-accuracy

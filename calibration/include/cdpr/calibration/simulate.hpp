@@ -63,6 +63,18 @@ double laser_distance(const RobotModel& model, int laser, const Pose& pose);
 Result<Eigen::VectorXd> homing_offsets(const RobotModel& truth, const RobotModel& nominal,
                                        double reference_tension);
 
+// The true reading model a real robot has after homing with the controller's model `nominal`:
+// zero scale errors and the encoder-zero offsets of homing_offsets(truth, nominal,
+// reference_tension) (NaN: default_reference_tension(nominal)). Simulating with it gives
+// readings with the meaning measurement.hpp states (the reading at the home pose is the nominal
+// model's length there), and with elastic physics the platform settles exactly at the home pose
+// when the home pose is commanded, which is what the home-pose gauge of the identification and
+// the paper's method assume. With zero offsets instead the encoders would read absolute true
+// lengths and the platform would settle away from home (by up to the anchor errors).
+Result<CalibratedModel> homed_truth(
+    const RobotModel& truth, const RobotModel& nominal,
+    double reference_tension = std::numeric_limits<double>::quiet_NaN());
+
 struct SimulationOptions {
   enum class Physics { kRigid, kElastic };
   Physics physics = Physics::kRigid;
