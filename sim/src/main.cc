@@ -1,13 +1,14 @@
 // cdpr-sim: the virtual robot (docs/sim-scenarios.md).
 //
 //   cdpr-sim --config nominal.yaml --scenario scenario.yaml --modbus rtu[:/link]|tcp:PORT
-//            [--can vcan0] [--seed N] [--lockstep poses.csv --out rec.csv]
+//            [--can vcan0 --canopen network.yaml] [--seed N] [--lockstep poses.csv --out rec.csv]
 //
 // Lock-step mode (--lockstep): commands the poses as the daemon would, steps the physics to the
 // equilibrium at each and writes a recording (drivers/recording format); no bus, no wall clock.
-// Real-time mode: the physics runs at --rate Hz on the wall clock and the laser is served over
-// Modbus; without CANopen slaves the winches hold their home counts (the nominal model's commands
-// for its home pose). The CANopen slaves (--can) are not built yet: the program refuses --can.
+// Real-time mode: the laser is served over Modbus (--modbus) and/or the winch drives and force
+// sensors of the CANopen network (--canopen) over SocketCAN (--can, sim/can_robot.hpp). With
+// --can the physics steps at every SYNC of the master, starting at the nominal model's home
+// counts; without it the physics runs at --rate Hz and the winches hold their home counts.
 // GCC 12 reports a false "potential null pointer dereference" in std::string code that CLI11's
 // CLI::detail::split inlines at -O2; the warning is not about this file's code.
 #pragma GCC diagnostic ignored "-Wnull-dereference"
@@ -16,12 +17,16 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <memory>
 #include <string>
 #include <thread>
 
+#include "cdpr/can/socketcan_bus.hpp"
+#include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/modbus/register_map.hpp"
 #include "cdpr/recording/recording.hpp"
+#include "cdpr/sim/can_robot.hpp"
 #include "cdpr/sim/laser_slave.hpp"
 #include "cdpr/sim/lockstep_io.hpp"
 #include "cdpr/sim/physics.hpp"
@@ -44,8 +49,8 @@ int fail(const std::string& what) {
 
 int main(int argc, char** argv) {
   CLI::App app{"cdpr-sim: the virtual cable robot (physics with hidden effects, Modbus laser)"};
-  std::string config_path, scenario_path, modbus_spec, can_if, lockstep_path, out_path,
-      laser_map_path;
+  std::string config_path, scenario_path, modbus_spec, can_if, canopen_path, lockstep_path,
+      out_path, laser_map_path;
   std::uint64_t seed = 1;
   double rate_hz = 100.0, duration_s = 0.0, dwell_s = 2.0;
   int laser_samples = 1, substeps = 10;
@@ -55,7 +60,9 @@ int main(int argc, char** argv) {
       ->required();
   app.add_option("--modbus", modbus_spec,
                  "serve the laser: rtu (a new pty), rtu:/path (pty + symlink at path), tcp:PORT");
-  app.add_option("--can", can_if, "CAN interface for the CANopen slaves (not built yet)");
+  app.add_option("--can", can_if, "CAN interface (SocketCAN) for the CANopen slaves");
+  app.add_option("--canopen", canopen_path,
+                 "CANopen network (drivers/canopen YAML, e.g. config/canopen-mini.yaml) for --can");
   app.add_option("--seed", seed, "noise seed (std::mt19937_64)");
   app.add_option("--lockstep", lockstep_path, "pose list CSV: run offline, faster than real time");
   app.add_option("--out", out_path, "recording CSV written by --lockstep");
@@ -71,14 +78,6 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 100000));
   CLI11_PARSE(app, argc, argv);
 
-  if (!can_if.empty()) {
-    std::fprintf(stderr,
-                 "cdpr-sim: --can %s: CANopen slaves not built yet (the virtual drives and force "
-                 "sensors on the bus are a later step); refusing to start without them\n",
-                 can_if.c_str());
-    return 2;
-  }
-
   cdpr::Result<cdpr::RobotModel> nominal = cdpr::config::load_robot_config(config_path);
   if (!nominal.ok()) return fail(nominal.status().to_string());
   cdpr::Result<cdpr::sim::Scenario> scenario = cdpr::sim::load_scenario(scenario_path);
@@ -92,7 +91,9 @@ int main(int argc, char** argv) {
   // ---- lock-step -------------------------------------------------------------------------
   if (!lockstep_path.empty()) {
     if (out_path.empty()) return fail("--lockstep needs --out (the recording to write)");
-    if (!modbus_spec.empty()) return fail("--lockstep runs offline: drop --modbus");
+    if (!modbus_spec.empty() || !can_if.empty()) {
+      return fail("--lockstep runs offline: drop --modbus and --can");
+    }
     cdpr::Result<cdpr::recording::PoseList> poses = cdpr::recording::read_pose_list(lockstep_path);
     if (!poses.ok()) return fail(poses.status().to_string());
     cdpr::sim::LockstepOptions lo;
@@ -115,101 +116,151 @@ int main(int argc, char** argv) {
   }
 
   // ---- real time -------------------------------------------------------------------------
-  if (modbus_spec.empty()) {
-    return fail("nothing to serve: give --modbus (and later --can), or --lockstep");
+  if (modbus_spec.empty() && can_if.empty()) {
+    return fail("nothing to serve: give --modbus and/or --can, or --lockstep");
   }
-  cdpr::sim::LaserSlaveConfig lc;
-  if (modbus_spec == "rtu" || modbus_spec.rfind("rtu:", 0) == 0) {
-    lc.transport = cdpr::sim::LaserSlaveConfig::Transport::kRtuPty;
-    if (modbus_spec.size() > 4) lc.pty_link = modbus_spec.substr(4);
-  } else if (modbus_spec.rfind("tcp:", 0) == 0) {
-    lc.transport = cdpr::sim::LaserSlaveConfig::Transport::kTcp;
-    try {
-      lc.port = std::stoi(modbus_spec.substr(4));
-    } catch (...) {
-      lc.port = -1;
-    }
-    if (lc.port < 0 || lc.port > 65535) return fail("--modbus tcp:PORT: bad port");
-  } else {
-    return fail("--modbus: expected rtu, rtu:/path or tcp:PORT, got '" + modbus_spec + "'");
+  if (!can_if.empty() && canopen_path.empty()) {
+    return fail("--can needs --canopen (the CANopen network: node ids and PDOs)");
   }
-  if (laser_map_path.empty()) laser_map_path = scenario->laser.register_map_path;
-  if (laser_map_path.empty()) {
-    return fail("no laser register map: set laser.register_map in the scenario or --laser-map");
-  }
-  auto map = cdpr::modbus::load_register_map(laser_map_path);
-  if (!map.ok()) return fail(map.status().to_string());
-  lc.map = *map;
-  lc.slave_id = scenario->laser.slave_id;
-  lc.baud = scenario->laser.baud;
-  lc.parity = scenario->laser.parity;
-  lc.noise_sigma_m = scenario->noise.laser;
-  lc.seed = seed ^ 0x9E3779B97F4A7C15ULL;
-  if (physics->true_lasers().empty()) return fail("the true robot has no laser to serve");
-
   auto home = cdpr::sim::nominal_counts(*nominal, nominal->home);
   if (!home.ok()) return fail("home counts: " + home.status().to_string());
   const Eigen::VectorXd counts = home->array().round().matrix();
   cdpr::Status st = physics->step(counts, 0.0);
   if (!st.ok()) return fail(st.to_string());
 
-  auto slave = cdpr::sim::LaserSlave::start(lc);
-  if (!slave.ok()) return fail(slave.status().to_string());
-  const cdpr::sim::LaserChannel l0 = physics->state().lasers.front();
-  (*slave)->set_distance(l0.true_distance, l0.status);
+  std::unique_ptr<cdpr::sim::LaserSlave> laser;
+  if (!modbus_spec.empty()) {
+    cdpr::sim::LaserSlaveConfig lc;
+    if (modbus_spec == "rtu" || modbus_spec.rfind("rtu:", 0) == 0) {
+      lc.transport = cdpr::sim::LaserSlaveConfig::Transport::kRtuPty;
+      if (modbus_spec.size() > 4) lc.pty_link = modbus_spec.substr(4);
+    } else if (modbus_spec.rfind("tcp:", 0) == 0) {
+      lc.transport = cdpr::sim::LaserSlaveConfig::Transport::kTcp;
+      try {
+        lc.port = std::stoi(modbus_spec.substr(4));
+      } catch (...) {
+        lc.port = -1;
+      }
+      if (lc.port < 0 || lc.port > 65535) return fail("--modbus tcp:PORT: bad port");
+    } else {
+      return fail("--modbus: expected rtu, rtu:/path or tcp:PORT, got '" + modbus_spec + "'");
+    }
+    if (laser_map_path.empty()) laser_map_path = scenario->laser.register_map_path;
+    if (laser_map_path.empty()) {
+      return fail("no laser register map: set laser.register_map in the scenario or --laser-map");
+    }
+    auto map = cdpr::modbus::load_register_map(laser_map_path);
+    if (!map.ok()) return fail(map.status().to_string());
+    lc.map = *map;
+    lc.slave_id = scenario->laser.slave_id;
+    lc.baud = scenario->laser.baud;
+    lc.parity = scenario->laser.parity;
+    lc.noise_sigma_m = scenario->noise.laser;
+    lc.seed = seed ^ 0x9E3779B97F4A7C15ULL;
+    if (physics->true_lasers().empty()) return fail("the true robot has no laser to serve");
+    auto slave = cdpr::sim::LaserSlave::start(lc);
+    if (!slave.ok()) return fail(slave.status().to_string());
+    laser = std::move(*slave);
+    const cdpr::sim::LaserChannel l0 = physics->state().lasers.front();
+    laser->set_distance(l0.true_distance, l0.status);
+    std::printf("cdpr-sim: laser slave %s\n", laser->describe().c_str());
+    if (lc.transport == cdpr::sim::LaserSlaveConfig::Transport::kRtuPty) {
+      std::printf("cdpr-sim: laser pty %s\n", laser->pty_path().c_str());
+    } else {
+      std::printf("cdpr-sim: laser tcp port %d\n", laser->port());
+    }
+    std::printf("cdpr-sim: true laser distance %.9f m (%s)\n", l0.true_distance,
+                std::string(cdpr::sim::to_string(l0.status)).c_str());
+  }
+
+  // The CANopen slaves: the drives and force sensors of the network description on --can.
+  std::unique_ptr<cdpr::can::SocketCanBus> can_bus;
+  std::unique_ptr<cdpr::sim::CanRobot> robot;
+  if (!can_if.empty()) {
+    auto network = cdpr::canopen::load_config(canopen_path);
+    if (!network.ok()) return fail(network.status().to_string());
+    auto bus = cdpr::can::SocketCanBus::open(can_if);
+    if (!bus.ok()) return fail(bus.status().to_string());
+    can_bus = std::move(*bus);
+    cdpr::sim::CanRobotOptions ro;
+    for (int i = 0; i < counts.size(); ++i) {
+      ro.initial_counts.push_back(static_cast<std::int32_t>(counts(i)));
+    }
+    ro.report = [](double t, const std::string& what) {
+      std::printf("cdpr-sim: t = %.3f s: %s\n", t, what.c_str());
+      std::fflush(stdout);
+    };
+    auto r = cdpr::sim::CanRobot::create(*can_bus, *network, *physics, std::move(ro));
+    if (!r.ok()) return fail(r.status().to_string());
+    robot = std::move(*r);
+    std::string ids;
+    for (const auto& n : network->nodes) {
+      ids += (ids.empty() ? "" : ", ") + std::to_string(n.id) + " " + n.name;
+    }
+    std::printf("cdpr-sim: CANopen on %s: nodes %s\n", can_if.c_str(), ids.c_str());
+  } else {
+    std::printf("cdpr-sim: no --can: the winches hold their home counts\n");
+  }
+  std::fflush(stdout);
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
-  std::printf("cdpr-sim: laser slave %s\n", (*slave)->describe().c_str());
-  if (lc.transport == cdpr::sim::LaserSlaveConfig::Transport::kRtuPty) {
-    std::printf("cdpr-sim: laser pty %s\n", (*slave)->pty_path().c_str());
-  } else {
-    std::printf("cdpr-sim: laser tcp port %d\n", (*slave)->port());
-  }
-  std::printf(
-      "cdpr-sim: winches hold their home counts (no CANopen slaves yet); true laser "
-      "distance %.9f m (%s)\n",
-      l0.true_distance, std::string(cdpr::sim::to_string(l0.status)).c_str());
-  std::fflush(stdout);
 
   const auto start = std::chrono::steady_clock::now();
+  auto mono = [] {
+    return std::chrono::duration_cast<cdpr::can::Timestamp>(
+        std::chrono::steady_clock::now().time_since_epoch());
+  };
+  if (robot) robot->power_on(mono());
   const auto period = std::chrono::duration<double>(1.0 / rate_hz);
   auto next = start;
   cdpr::sim::LaserFaultMode last_fault = cdpr::sim::LaserFaultMode::kNone;
-  std::vector<bool> reported(counts.size(), false);
+  std::vector<bool> reported(static_cast<std::size_t>(counts.size()), false);
   while (!g_stop.load()) {
-    next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
-    std::this_thread::sleep_until(next);
+    if (robot) {
+      // The physics steps at every SYNC of the master (inside the robot).
+      robot->wait(std::chrono::milliseconds(1));
+      robot->step(mono());
+    } else {
+      next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
+      std::this_thread::sleep_until(next);
+    }
     const double t =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     if (duration_s > 0.0 && t >= duration_s) break;
-    st = physics->step(counts, t);
-    if (!st.ok()) {
-      std::fprintf(stderr, "cdpr-sim: %s\n", st.to_string().c_str());
-      continue;
+    if (!robot) {
+      st = physics->step(counts, t);
+      if (!st.ok()) {
+        std::fprintf(stderr, "cdpr-sim: %s\n", st.to_string().c_str());
+        continue;
+      }
     }
-    const cdpr::sim::LaserChannel l = physics->state().lasers.front();
-    (*slave)->set_distance(l.true_distance, l.status);
-    const cdpr::sim::LaserFaultMode f = cdpr::sim::laser_fault_mode(scenario->laser_fault_at(t));
-    if (f != last_fault) {
-      std::printf("cdpr-sim: t = %.3f s: laser fault mode %s\n", t,
-                  std::string(cdpr::sim::to_string(f)).c_str());
-      std::fflush(stdout);
-      last_fault = f;
+    if (laser) {
+      const cdpr::sim::LaserChannel l = physics->state().lasers.front();
+      laser->set_distance(l.true_distance, l.status);
+      const cdpr::sim::LaserFaultMode f = cdpr::sim::laser_fault_mode(scenario->laser_fault_at(t));
+      if (f != last_fault) {
+        std::printf("cdpr-sim: t = %.3f s: laser fault mode %s\n", t,
+                    std::string(cdpr::sim::to_string(f)).c_str());
+        std::fflush(stdout);
+        last_fault = f;
+      }
+      laser->set_fault(f);
     }
-    (*slave)->set_fault(f);
+    if (robot) continue;  // the robot reports overloads (and faults the drive)
     for (std::size_t i = 0; i < reported.size(); ++i) {
       if (physics->state().overloaded[i] && !reported[i]) {
         std::printf(
-            "cdpr-sim: t = %.3f s: cable %zu overloaded (%.1f N): its drive faults once "
-            "the CANopen slaves exist\n",
+            "cdpr-sim: t = %.3f s: cable %zu overloaded (%.1f N): no --can, no drive to "
+            "fault\n",
             t, i + 1, physics->state().tensions(static_cast<int>(i)));
         std::fflush(stdout);
         reported[i] = true;
       }
     }
   }
-  (*slave)->stop();
-  std::printf("cdpr-sim: stopped (%llu laser requests answered)\n",
-              static_cast<unsigned long long>((*slave)->answered()));
+  if (laser) laser->stop();
+  std::printf("cdpr-sim: stopped (%llu laser requests answered, %llu SYNCs)\n",
+              static_cast<unsigned long long>(laser ? laser->answered() : 0),
+              static_cast<unsigned long long>(robot ? robot->stats().syncs : 0));
   return 0;
 }
