@@ -464,7 +464,10 @@ TEST(CanopenInteropBus, BootEnableStreamShutdown) {
   const double periods = stream_s / std::chrono::duration<double>(period).count();
   const double accounted =
       static_cast<double>(syncs_streamed + master.sync().overruns() - overruns_before);
-  EXPECT_NEAR(accounted, periods, 3.0) << "SYNCs sent plus periods skipped";
+  // User-mode-linux wakes the master late by whole periods at random (timing is measured on the
+  // in-process bus, not here): allow 10 % of the periods, at least 3.
+  EXPECT_NEAR(accounted, periods, std::max(3.0, 0.1 * periods))
+      << "SYNCs sent plus periods skipped";
   EXPECT_GE(syncs_streamed, 10u);
 
   // The drives followed: actual positions are earlier targets (lag of at least one cycle),
@@ -923,7 +926,10 @@ TEST_F(CanopenInterop, SyncAtThePeriodAndPdosFlow) {
       std::count_if(gaps.begin(), gaps.end(), [&](double g) { return g < 0.5 * period; });
   const auto long_gaps =
       std::count_if(gaps.begin(), gaps.end(), [&](double g) { return g > 1.5 * period; });
-  EXPECT_LE(short_gaps, long_gaps) << "SYNC bursts";
+  // dumpcap inside user-mode-linux stamps frames when it gets to read them, so a few short gaps
+  // appear without a late SYNC before them; a burst would make short gaps the rule.
+  const auto jitter_allowance = static_cast<std::ptrdiff_t>(gaps.size() / 10 + 2);
+  EXPECT_LE(short_gaps, long_gaps + jitter_allowance) << "SYNC bursts";
   // No SYNC before the last NMT start.
   const auto starts = select([](const Decoded& f) { return f.function == 0 && f.nmt_cs == 1; });
   ASSERT_FALSE(starts.empty());
