@@ -47,6 +47,7 @@
 #include "cdpr/can/socketcan_bus.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/canopen/master.hpp"
+#include "subprocess.hpp"
 
 extern char** environ;
 
@@ -56,6 +57,7 @@ namespace {
 using std::chrono::milliseconds;
 using std::chrono::seconds;
 using Clock = std::chrono::steady_clock;
+using Process = cdpr::test::Subprocess;
 
 // --- what the test sets up
 // ------------------------------------------------------------------------
@@ -155,71 +157,6 @@ std::vector<Record> parse_records(const std::string& text) {
 
 // A child process started with posix_spawn (no shell); stdout+stderr go to `out_path` (or are
 // inherited when it is empty). It is killed on every exit path by the destructor.
-class Process {
- public:
-  Process(const std::vector<std::string>& argv, const std::string& out_path) : argv0_(argv[0]) {
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    if (!out_path.empty()) {
-      posix_spawn_file_actions_addopen(&fa, STDOUT_FILENO, out_path.c_str(),
-                                       O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      posix_spawn_file_actions_adddup2(&fa, STDOUT_FILENO, STDERR_FILENO);
-    }
-    posix_spawn_file_actions_addopen(&fa, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
-    std::vector<char*> args;
-    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
-    const int rc = posix_spawnp(&pid_, args[0], &fa, nullptr, args.data(), environ);
-    if (rc != 0) {
-      pid_ = -1;
-      error_ = std::strerror(rc);
-    }
-    posix_spawn_file_actions_destroy(&fa);
-  }
-  // Every exit path ends the child: SIGTERM first (the peer then still writes its log, dumpcap
-  // closes its file), SIGKILL after 20 s.
-  ~Process() { stop(SIGTERM, seconds(20)); }
-  Process(const Process&) = delete;
-  Process& operator=(const Process&) = delete;
-
-  bool started() const { return pid_ > 0; }
-  const std::string& error() const { return error_; }
-  // True while it runs; collects the exit status when it ended.
-  bool running() {
-    if (pid_ <= 0 || status_) return false;
-    int st = 0;
-    const pid_t r = ::waitpid(pid_, &st, WNOHANG);
-    if (r == pid_) {
-      status_ = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-      return false;
-    }
-    return r == 0;
-  }
-  // Waits up to `timeout` for the exit; the exit status (128 + signal when killed) or nullopt.
-  std::optional<int> wait(std::chrono::nanoseconds timeout) {
-    const auto end = Clock::now() + timeout;
-    while (running()) {
-      if (Clock::now() >= end) return std::nullopt;
-      std::this_thread::sleep_for(milliseconds(10));
-    }
-    return status_;
-  }
-  // Sends `sig` and waits up to `timeout`; then SIGKILL. Returns the exit status.
-  std::optional<int> stop(int sig, std::chrono::nanoseconds timeout) {
-    if (!running()) return status_;
-    ::kill(pid_, sig);
-    if (auto s = wait(timeout)) return s;
-    ::kill(pid_, SIGKILL);
-    return wait(seconds(10));
-  }
-  std::optional<int> status() const { return status_; }
-
- private:
-  std::string argv0_;
-  pid_t pid_ = -1;
-  std::optional<int> status_;
-  std::string error_;
-};
 
 // Polls `done` every 20 ms until it holds or `timeout` passes.
 bool wait_until(const std::function<bool()>& done, std::chrono::nanoseconds timeout) {

@@ -35,6 +35,7 @@
 #include "cdpr/can/socketcan_bus.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/canopen/master.hpp"
+#include "subprocess.hpp"
 
 extern char** environ;
 
@@ -43,6 +44,11 @@ namespace {
 
 using namespace std::chrono_literals;
 using Clock = std::chrono::steady_clock;
+// SIGTERM, then SIGKILL after 5 s.
+struct Process : cdpr::test::Subprocess {
+  Process(const std::vector<std::string>& argv, const std::string& out)
+      : Subprocess(argv, out, std::chrono::seconds(5)) {}
+};
 
 // Kept in step with tests/sim/sim-master-fault.yaml.
 constexpr double kFaultAt = 40.0;  // s after the slaves powered on
@@ -101,57 +107,6 @@ class TempDir {
 
 // A child started with posix_spawn (no shell), stdout+stderr to `out_path`. The destructor ends
 // it on every exit path: SIGTERM, SIGKILL after 5 s.
-class Process {
- public:
-  Process(const std::vector<std::string>& argv, const std::string& out_path) {
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, STDOUT_FILENO, out_path.c_str(),
-                                     O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&fa, STDOUT_FILENO, STDERR_FILENO);
-    posix_spawn_file_actions_addopen(&fa, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
-    std::vector<char*> args;
-    for (const auto& a : argv) args.push_back(const_cast<char*>(a.c_str()));
-    args.push_back(nullptr);
-    const int rc = posix_spawn(&pid_, args[0], &fa, nullptr, args.data(), environ);
-    if (rc != 0) {
-      pid_ = -1;
-      error_ = std::strerror(rc);
-    }
-    posix_spawn_file_actions_destroy(&fa);
-  }
-  ~Process() { stop(); }
-  Process(const Process&) = delete;
-  Process& operator=(const Process&) = delete;
-
-  bool started() const { return pid_ > 0; }
-  const std::string& error() const { return error_; }
-  bool running() {
-    if (pid_ <= 0 || status_) return false;
-    int st = 0;
-    const pid_t r = ::waitpid(pid_, &st, WNOHANG);
-    if (r == pid_) {
-      status_ = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-      return false;
-    }
-    return r == 0;
-  }
-  // SIGTERM, then SIGKILL if it has not ended within 5 s; always reaped.
-  void stop() {
-    if (!running()) return;
-    ::kill(pid_, SIGTERM);
-    if (wait_until([&] { return !running(); }, 5s)) return;
-    ::kill(pid_, SIGKILL);
-    int st = 0;
-    ::waitpid(pid_, &st, 0);
-    status_ = 128 + SIGKILL;
-  }
-
- private:
-  pid_t pid_ = -1;
-  std::optional<int> status_;
-  std::string error_;
-};
 
 class SimMasterVcan : public ::testing::Test {
  protected:
@@ -352,7 +307,7 @@ TEST_F(SimMasterVcan, BootsEnablesMovesReadsForcesAndSeesTheInjectedDriveFault) 
   const std::string log = sim_log();
   std::printf("[sim-master] cdpr-sim said:\n%s", log.c_str());
   master.reset();
-  sim.stop();
+  sim.stop(SIGTERM, 5s);
 }
 
 }  // namespace
