@@ -66,11 +66,13 @@ T true_tension(const CableConstants& k, double reading, const T& g, const T& c) 
   return (T(raw) - T(k.sensor_offset) - c) / (T(k.sensor_gain) * (T(1) + g));
 }
 
-// Unstretched length U = L_k - dL at pose; false when the geometry is degenerate.
+// Unstretched length U = L_k - dL at pose; false when the geometry is degenerate. With
+// `compliance` non-null also d(dL)/dF there (m/N; 0 without a tension reading).
 template <typename T>
 bool unstretched_length(const CableConstants& k, const T* a, const T* b, const T* pose,
                         double tension_reading, const T& e, const T& g, const T& c, T& U,
-                        Vec3<T>* unit = nullptr, Vec3<T>* arm = nullptr, T* force = nullptr) {
+                        Vec3<T>* unit = nullptr, Vec3<T>* arm = nullptr, T* force = nullptr,
+                        T* compliance = nullptr) {
   Vec3<T> r;
   Mat3<T> R;
   pose_from_block(pose, r, R);
@@ -80,14 +82,22 @@ bool unstretched_length(const CableConstants& k, const T* a, const T* b, const T
       cable_geometry<T>(Vec3<T>(a[0], a[1], a[2]), k.pulley_frame, T(k.pulley_radius), P);
   if (!geom.valid) return false;
   U = geom.length;
+  if (compliance) *compliance = T(0);
   if (!std::isnan(tension_reading)) {
     const T F = true_tension(k, tension_reading, g, c);
     const T loaded = ident_detail::loaded_length<T>(k.cable, geom.length);
     if (k.estimated_stiffness) {
       const T ea = T(k.cable.ea) * (T(1) + e);
       U -= F * loaded / (ea + F);
+      if (compliance) *compliance = loaded * ea / ((ea + F) * (ea + F));
     } else {
       U -= cable_elongation<T>(k.cable, loaded, F);
+      if (compliance && k.cable.elongation != ElongationKind::kRigid) {
+        const double h = 1e-3 * std::max(1.0, std::abs(tension_reading));
+        *compliance = (cable_elongation<T>(k.cable, loaded, F + T(h)) -
+                       cable_elongation<T>(k.cable, loaded, F - T(h))) /
+                      T(2.0 * h);
+      }
     }
     if (force) *force = F;
   } else if (force) {
@@ -99,17 +109,27 @@ bool unstretched_length(const CableConstants& k, const T* a, const T* b, const T
 }
 
 // Cable length residual. Blocks: a(3), b(3), pose(6), o(1), s(1), e(1), g(1), c(1).
+// Its sigma combines the encoder noise and the force noise through the cable compliance at the
+// CURRENT geometry and tension, sqrt(sigma_length^2 + (d(dL)/dF sigma_force)^2), so that, like the
+// equilibrium residual, the objective does not depend on where the solver started.
 struct LengthCost {
   CableConstants k;
   double reading = 0.0;
   double tension = kNaN;
-  double sigma = 1.0;
+  double sigma_length = 1.0;
+  double sigma_force = 0.0;  // 0: the force noise is not propagated
   template <typename T>
   bool operator()(const T* a, const T* b, const T* pose, const T* o, const T* s, const T* e,
                   const T* g, const T* c, T* residual) const {
     T U;
-    if (!unstretched_length(k, a, b, pose, tension, e[0], g[0], c[0], U)) return false;
-    residual[0] = (U - ((T(1) + s[0]) * T(reading) + o[0])) / T(sigma);
+    T compliance;
+    if (!unstretched_length<T>(k, a, b, pose, tension, e[0], g[0], c[0], U, nullptr, nullptr,
+                               nullptr, &compliance)) {
+      return false;
+    }
+    const T force_part = compliance * T(sigma_force);
+    const T sigma = sqrt(T(sigma_length * sigma_length) + force_part * force_part);
+    residual[0] = (U - ((T(1) + s[0]) * T(reading) + o[0])) / sigma;
     return true;
   }
 };
@@ -141,24 +161,34 @@ struct LaserCost {
 };
 
 // Static equilibrium (6 residuals). Blocks: pose, a_1..a_m, b_1..b_m, g_1..g_m, c_1..c_m.
+//
+// The residual w = A^T F + w_gravity carries the force noise linearly: cov(w) = sigma_F^2 A^T A.
+// It is whitened with that covariance evaluated at the CURRENT pose and geometry (not frozen at the
+// start): minimising w^T (A^T A)^-1 w / sigma_F^2 is then the profile likelihood of the
+// errors-in-variables problem with the true tensions as nuisance parameters (the closest tensions
+// to the readings that balance the platform). A covariance frozen at the start leaves the expected
+// noise term tr(W A^T A W^T) sigma_F^2 depending on the geometry, which biases the anchors; with
+// 1 N of force noise on MINI the bias was about twice its standard error.
 struct EquilibriumCost {
   std::vector<CableConstants> k;
   Eigen::VectorXd tensions;
-  Eigen::Matrix<double, 6, 6> whitening;  // L^{-1}, with L L^T = covariance of the wrench
+  double sigma_force = 1.0;
   double mass = 1.0;
   double gravity = 9.81;
   Eigen::Vector3d com = Eigen::Vector3d::Zero();
+
+  // Net wrench and A^T A (the sum of a_i a_i^T over the cables) at the parameters.
   template <typename T>
-  bool operator()(T const* const* p, T* residual) const {
+  bool wrench(T const* const* p, Eigen::Matrix<T, 6, 1>& w, Eigen::Matrix<T, 6, 6>& gram) const {
     const int m = static_cast<int>(k.size());
     const T* pose = p[0];
     Vec3<T> r;
     Mat3<T> R;
     pose_from_block(pose, r, R);
-    Eigen::Matrix<T, 6, 1> w;
     const Vec3<T> weight(T(0), T(0), T(-mass * gravity));
     w.template head<3>() = weight;
     w.template tail<3>() = (R * com.cast<T>()).cross(weight);
+    gram.setZero();
     for (int i = 0; i < m; ++i) {
       const T* a = p[1 + i];
       const T* b = p[1 + m + i];
@@ -170,10 +200,27 @@ struct EquilibriumCost {
                             T(k[static_cast<std::size_t>(i)].pulley_radius), r + rb);
       if (!geom.valid) return false;
       const T F = true_tension(k[static_cast<std::size_t>(i)], tensions(i), g[0], c[0]);
-      w.template head<3>() += geom.unit * F;
-      w.template tail<3>() += rb.cross(geom.unit) * F;
+      Eigen::Matrix<T, 6, 1> col;
+      col.template head<3>() = geom.unit;
+      col.template tail<3>() = rb.cross(geom.unit);
+      w += col * F;
+      gram += col * col.transpose();
     }
-    const Eigen::Matrix<T, 6, 1> out = whitening.cast<T>() * w;
+    return true;
+  }
+
+  template <typename T>
+  bool operator()(T const* const* p, T* residual) const {
+    Eigen::Matrix<T, 6, 1> w;
+    Eigen::Matrix<T, 6, 6> gram;
+    if (!wrench(p, w, gram)) return false;
+    Eigen::Matrix<T, 6, 6> cov = T(sigma_force * sigma_force) * gram;
+    // A tiny ridge keeps the factorisation defined at a (refused elsewhere) singular geometry.
+    const T ridge = T(1e-12) * cov.trace();
+    for (int q = 0; q < 6; ++q) cov(q, q) += ridge;
+    const Eigen::LLT<Eigen::Matrix<T, 6, 6>> llt(cov);
+    if (llt.info() != Eigen::Success) return false;
+    const Eigen::Matrix<T, 6, 1> out = llt.matrixL().solve(w);
     for (int q = 0; q < 6; ++q) residual[q] = out(q);
     return true;
   }
@@ -224,8 +271,10 @@ struct Built {
 
   std::vector<std::vector<ceres::ResidualBlockId>> blocks_per_pose;
   std::vector<std::vector<RowInfo>> rows_per_pose;
-  std::vector<Eigen::Matrix<double, 6, 6>> wrench_whitening;  // per pose (for SI residuals)
-  std::vector<std::string> notes;                             // warnings found while building
+  // The equilibrium functor of each pose (owned by its cost function; nullptr when none).
+  std::vector<const EquilibriumCost*> equilibrium;
+  std::vector<std::vector<double*>> equilibrium_blocks;  // its parameter blocks
+  std::vector<std::string> notes;                        // warnings found while building
   int num_residuals = 0;
   bool shared_stiffness = false;
 };
@@ -422,7 +471,8 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
   // Residuals, pose by pose.
   B->blocks_per_pose.resize(static_cast<std::size_t>(n));
   B->rows_per_pose.resize(static_cast<std::size_t>(n));
-  B->wrench_whitening.assign(static_cast<std::size_t>(n), Eigen::Matrix<double, 6, 6>::Zero());
+  B->equilibrium.assign(static_cast<std::size_t>(n), nullptr);
+  B->equilibrium_blocks.assign(static_cast<std::size_t>(n), {});
   auto make_loss = [&]() -> ceres::LossFunction* {
     switch (opt.loss) {
       case RobustLoss::kHuber:
@@ -464,14 +514,9 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
           B->notes.push_back("some tensions are missing: their cables are taken as unstretched");
           missing_tension_warned = true;
         }
-        // Force noise propagated through the elongation: dU/dF ~ -L / EA.
-        const double compliance =
-            robot.cables[ui].elongation == ElongationKind::kRigid && !ea_estimated
-                ? 0.0
-                : ident_detail::loaded_length<double>(robot.cables[ui], kin.lengths(i)) /
-                      robot.cables[ui].ea;
-        f->sigma = std::hypot(noise.sigma_length,
-                              std::isnan(f->tension) ? 0.0 : compliance * noise.sigma_force);
+        // Force noise propagated through the elongation (at the current geometry, LengthCost).
+        f->sigma_length = noise.sigma_length;
+        f->sigma_force = std::isnan(f->tension) ? 0.0 : noise.sigma_force;
         double* e_ptr = opt.estimate_stiffness == StiffnessEstimate::kShared ? &B->e[0] : &B->e[ui];
         auto id = B->problem.AddResidualBlock(
             new ceres::AutoDiffCostFunction<LengthCost, 1, 3, 3, 6, 1, 1, 1, 1, 1>(f), make_loss(),
@@ -508,13 +553,9 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       f->mass = robot.platform.mass;
       f->gravity = robot.gravity;
       f->com = robot.platform.center_of_mass;
-      const Eigen::MatrixXd At = kin.structure_matrix;
-      Eigen::Matrix<double, 6, 6> cov = noise.sigma_force * noise.sigma_force * At * At.transpose();
-      cov += 1e-12 * cov.trace() * Eigen::Matrix<double, 6, 6>::Identity();
-      const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cov);
-      f->whitening = llt.matrixL().solve(Eigen::Matrix<double, 6, 6>::Identity());
-      B->wrench_whitening[uj] = f->whitening;
-      auto* cost = new ceres::DynamicAutoDiffCostFunction<EquilibriumCost, 8>(f);
+      f->sigma_force = noise.sigma_force;
+      B->equilibrium[uj] = f;
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<EquilibriumCost, 32>(f);
       std::vector<double*> blocks;
       cost->AddParameterBlock(6);
       blocks.push_back(pose);
@@ -535,6 +576,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
         blocks.push_back(&B->c[static_cast<std::size_t>(i)]);
       }
       cost->SetNumResiduals(6);
+      B->equilibrium_blocks[uj] = blocks;
       auto id = B->problem.AddResidualBlock(cost, make_loss(), blocks);
       B->blocks_per_pose[uj].push_back(id);
       for (int q = 0; q < 6; ++q) B->rows_per_pose[uj].push_back({Channel::kWrench, q});
@@ -913,9 +955,12 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
       sl += pr.length_m(i) * pr.length_m(i);
       ++nlen;
     }
-    if (!std::isnan(pr.wrench_normalized(0))) {
-      const Eigen::Matrix<double, 6, 6> W = B.wrench_whitening[j];
-      pr.wrench_si = W.triangularView<Eigen::Lower>().solve(pr.wrench_normalized);
+    if (!std::isnan(pr.wrench_normalized(0)) && B.equilibrium[j] != nullptr) {
+      Eigen::Matrix<double, 6, 1> w;
+      Eigen::Matrix<double, 6, 6> gram;
+      if (B.equilibrium[j]->wrench<double>(B.equilibrium_blocks[j].data(), w, gram)) {
+        pr.wrench_si = w;
+      }
       sw += pr.wrench_si.head<3>().squaredNorm();
       nw += 3;
     }

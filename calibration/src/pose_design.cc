@@ -42,6 +42,52 @@ std::vector<Pose> candidate_grid(const PoseDesignOptions& o) {
   return out;
 }
 
+// Mean squared position error over the box for the information M (normalised parameters):
+// tr(Wn M^-1); infinity when M is not positive definite.
+double i_value(const Eigen::MatrixXd& M, const Eigen::MatrixXd& Wn) {
+  const Eigen::LLT<Eigen::MatrixXd> llt(M);
+  if (llt.info() != Eigen::Success) return std::numeric_limits<double>::infinity();
+  return llt.solve(Wn).trace();
+}
+
+// W = (1 / grid points) sum over the feasible box grid of G^T G (P x P, unnormalised parameters),
+// G = top three rows of -pinv(J_pose) J_geometry of the cable lengths at the grid point: the
+// position error a parameter error causes when the controller commands that point.
+Result<Eigen::MatrixXd> position_weight(const CalibratedModel& model,
+                                        const PoseDesignOptions& options, double f_ref,
+                                        const GeometryInformation& gi) {
+  std::vector<Pose> grid;
+  for (const Pose& p : options.accuracy_box.grid()) {
+    if (simple_tension_distribution(model.robot, p, f_ref)) grid.push_back(p);
+  }
+  const auto P = static_cast<Eigen::Index>(gi.names.size());
+  if (grid.empty()) return Eigen::MatrixXd(Eigen::MatrixXd::Zero(0, 0));
+  SimulationOptions so;
+  so.add_noise = false;
+  so.reference_tension = f_ref;
+  auto gsim = simulate_measurements(model, grid, options.noise, 0, so);
+  if (!gsim) return gsim.status();
+  IdentificationOptions go = options.identification;
+  go.use_laser = false;
+  go.use_equilibrium = false;
+  go.use_reference = false;
+  if (go.gauge == Gauge::kHomePose) go.gauge = Gauge::kNone;
+  if (go.gauge == Gauge::kHomePoseAndLaserPlane) go.gauge = Gauge::kLaserPlane;
+  auto gg = geometry_information(model, gsim->set, grid, go, /*keep_jacobians=*/true);
+  if (!gg) return gg.status();
+  if (gg->names != gi.names) {
+    return Status(ErrorCode::kInternal, "pose design: parameter lists differ");
+  }
+  Eigen::MatrixXd W = Eigen::MatrixXd::Zero(P, P);
+  for (std::size_t k = 0; k < grid.size(); ++k) {
+    const Eigen::MatrixXd G =
+        -gg->jacobian_pose[k].completeOrthogonalDecomposition().pseudoInverse() *
+        gg->jacobian_geometry[k];
+    W += G.topRows<3>().transpose() * G.topRows<3>();
+  }
+  return Eigen::MatrixXd(W / static_cast<double>(grid.size()));
+}
+
 // Ordered tour: nearest neighbour from index 0, then 2-opt (index 0 stays first).
 std::vector<Pose> order_path(std::vector<Pose> poses, double w, double* length) {
   const std::size_t n = poses.size();
@@ -89,6 +135,14 @@ std::vector<Pose> order_path(std::vector<Pose> poses, double w, double* length) 
 }
 
 }  // namespace
+
+void fit_design_box_to_robot(const RobotModel& robot, PoseDesignOptions& options, double fraction) {
+  options.center = robot.home.position;
+  if (robot.frame_anchors.cols() == 0) return;
+  const Eigen::Vector3d lo = robot.frame_anchors.rowwise().minCoeff();
+  const Eigen::Vector3d hi = robot.frame_anchors.rowwise().maxCoeff();
+  options.half_extent = 0.5 * fraction * (hi - lo);
+}
 
 Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOptions& options) {
   if (options.num_poses < 2) {
@@ -148,32 +202,49 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
   }
   PoseDesign out;
   out.candidates = C;
-  double current = log_det(M);
-  for (int pass = 0; pass < options.exchange_passes; ++pass) {
-    bool any = false;
-    for (std::size_t s = 0; s < sel.size(); ++s) {
-      const Eigen::MatrixXd without = M - S[static_cast<std::size_t>(sel[s])];
-      int best = -1;
-      double bv = current;
-      for (int c = 1; c <= C; ++c) {
-        if (chosen(c)) continue;
-        const double v = log_det(without + S[static_cast<std::size_t>(c)]);
-        if (v > bv + 1e-9) {
-          bv = v;
-          best = c;
+  // Fedorov exchange: swap a selected pose (never home) for an unused candidate while the
+  // criterion (larger is better) improves by more than `margin` (relative); returns the final
+  // value.
+  auto exchange = [&](auto&& criterion, double margin) {
+    double current = criterion(M);
+    for (int pass = 0; pass < options.exchange_passes; ++pass) {
+      bool any = false;
+      for (std::size_t s = 0; s < sel.size(); ++s) {
+        const Eigen::MatrixXd without = M - S[static_cast<std::size_t>(sel[s])];
+        int best = -1;
+        double bv = current;
+        for (int c = 1; c <= C; ++c) {
+          if (chosen(c)) continue;
+          const double v = criterion(without + S[static_cast<std::size_t>(c)]);
+          if (v > bv + margin * std::abs(bv)) {
+            bv = v;
+            best = c;
+          }
+        }
+        if (best >= 0) {
+          chosen(sel[s]) = 0;
+          chosen(best) = 1;
+          M = without + S[static_cast<std::size_t>(best)];
+          sel[s] = best;
+          current = bv;
+          ++out.exchanges;
+          any = true;
         }
       }
-      if (best >= 0) {
-        chosen(sel[s]) = 0;
-        chosen(best) = 1;
-        M = without + S[static_cast<std::size_t>(best)];
-        sel[s] = best;
-        current = bv;
-        ++out.exchanges;
-        any = true;
-      }
+      if (!any) break;
     }
-    if (!any) break;
+    return current;
+  };
+  exchange([](const Eigen::MatrixXd& X) { return log_det(X); }, 1e-9);
+  if (options.criterion == DesignCriterion::kPositionAccuracy) {
+    auto W = position_weight(model, options, f_ref, *gi);
+    if (!W) return W.status();
+    if (W->size() > 0) {
+      const Eigen::MatrixXd Wn = d.asDiagonal() * (*W) * d.asDiagonal();
+      auto neg_i = [&Wn](const Eigen::MatrixXd& X) { return -i_value(X, Wn); };
+      out.position_rms_d_optimal_m = std::sqrt(std::max(0.0, -neg_i(M)));
+      out.position_rms_m = std::sqrt(std::max(0.0, -exchange(neg_i, 1e-9)));
+    }
   }
   out.log_det = log_det(M - R);
   std::vector<Pose> poses{cands[0]};

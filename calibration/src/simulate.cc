@@ -5,7 +5,9 @@
 #include <cmath>
 #include <random>
 
+#include "cdpr/calibration/elastostatics.hpp"
 #include "cdpr/calibration/elongation.hpp"
+#include "cdpr/calibration/force_distribution.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "identification_internal.hpp"
 
@@ -37,42 +39,25 @@ double default_reference_tension(const RobotModel& model) {
 
 Result<Eigen::VectorXd> simple_tension_distribution(const RobotModel& model, const Pose& pose,
                                                     double reference_tension) {
-  KinematicsData data(model);
-  if (!inverse_kinematics(model, pose, data)) {
-    return Status::Error(ErrorCode::kNumericalFailure,
-                         "tension distribution: cable %d is degenerate at the pose",
-                         data.invalid_cable + 1);
-  }
-  const int m = model.num_cables();
-  const Eigen::MatrixXd At = data.structure_matrix;
-  const Eigen::VectorXd f0 = Eigen::VectorXd::Constant(m, reference_tension);
-  const Eigen::Matrix<double, 6, 1> w = platform_weight_wrench(model, pose);
-  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(At, Eigen::ComputeThinU | Eigen::ComputeThinV);
-  if (svd.singularValues()(5) < 1e-9 * svd.singularValues()(0)) {
-    return Status(ErrorCode::kNumericalFailure,
-                  "tension distribution: the structure matrix is singular at the pose");
-  }
+  ForceDistributionData data(model);
   // Retry with 2x and 4x the reference pretension before giving up (more internal force often
-  // lifts the slackest cable above f_min).
-  int bad = -1;
-  double bad_f = 0.0;
+  // lifts the slackest cable above f_min while the nearest feasible point at the lower
+  // reference would sit on a limit).
+  ForceDistributionResult last;
   for (double scale : {1.0, 2.0, 4.0}) {
-    const Eigen::VectorXd fs = scale * f0;
-    const Eigen::VectorXd f = fs - svd.solve(At * fs + w);
-    bad = -1;
-    for (int i = 0; i < m && bad < 0; ++i) {
-      const CableModel& c = model.cables[static_cast<std::size_t>(i)];
-      if (f(i) < c.f_min || f(i) > c.f_max) {
-        bad = i;
-        bad_f = f(i);
-      }
+    ForceDistributionOptions options;
+    options.reference_tension = scale * reference_tension;
+    last = distribute_forces(model, pose, options, data);
+    if (last.feasible() && last.cables_at_limits == 0) return Eigen::VectorXd(last.tensions);
+    if (last.outcome == ForceDistributionOutcome::kDegenerate ||
+        last.outcome == ForceDistributionOutcome::kInvalidInput) {
+      return Status(ErrorCode::kNumericalFailure,
+                    "tension distribution: " + std::string(last.status.message()));
     }
-    if (bad < 0) return f;
   }
-  const CableModel& c = model.cables[static_cast<std::size_t>(bad)];
-  return Status::Error(ErrorCode::kOutOfRange,
-                       "tension distribution: cable %d needs %.1f N, outside [%.1f, %.1f] N",
-                       bad + 1, bad_f, c.f_min, c.f_max);
+  if (last.feasible()) return Eigen::VectorXd(last.tensions);
+  return Status(ErrorCode::kOutOfRange,
+                "tension distribution: " + std::string(last.status.message()));
 }
 
 Result<Eigen::VectorXd> unstretched_lengths(const RobotModel& model, const Pose& pose,
@@ -93,22 +78,6 @@ Result<Eigen::VectorXd> unstretched_lengths(const RobotModel& model, const Pose&
 
 namespace {
 
-// Hooke tensions at a pose for given unstretched lengths, and the net wrench on the platform.
-bool net_wrench(const RobotModel& model, const Eigen::VectorXd& unstretched, const Pose& pose,
-                KinematicsData& data, Eigen::VectorXd& f, Eigen::Matrix<double, 6, 1>& g) {
-  if (!inverse_kinematics(model, pose, data)) return false;
-  for (int i = 0; i < model.num_cables(); ++i) {
-    // Hooke over the loaded length (routing part included, see elongation.hpp):
-    // L_k - F (L_k + route) / (EA + F) = U  <=>  F = EA (L_k - U) / (U + route).
-    const CableModel& c = model.cables[static_cast<std::size_t>(i)];
-    const double route = ident_detail::loaded_length<double>(c, 0.0);
-    const double stretch = data.lengths(i) - unstretched(i);
-    f(i) = stretch > 0.0 ? c.ea * stretch / (unstretched(i) + route) : 0.0;
-  }
-  g = data.structure_matrix * f + platform_weight_wrench(model, pose);
-  return true;
-}
-
 Status at_pose(const Status& s, std::size_t j) {
   return Status(s.code(), "simulate: pose " + std::to_string(j) + ": " + std::string(s.message()));
 }
@@ -117,54 +86,34 @@ Status at_pose(const Status& s, std::size_t j) {
 
 Result<Pose> settle_platform(const RobotModel& model, const Eigen::VectorXd& unstretched,
                              const Pose& start, Eigen::VectorXd* tensions) {
-  const int m = model.num_cables();
-  KinematicsData data(model);
-  Eigen::VectorXd f(m);
-  Eigen::Matrix<double, 6, 1> g, gt;
-  Pose x = start;
-  if (!net_wrench(model, unstretched, x, data, f, g)) {
-    return Status(ErrorCode::kNumericalFailure, "settle: degenerate cable at the start pose");
-  }
-  const double force_scale = std::max(1.0, model.platform.mass * model.gravity);
-  for (int it = 0; it < 100; ++it) {
-    if (g.norm() < 1e-10 * force_scale) break;
-    Eigen::Matrix<double, 6, 6> J;
-    const double h = 1e-7;
-    for (int k = 0; k < 6; ++k) {
-      Eigen::Matrix<double, 6, 1> v = x.vector();
-      v(k) += h;
-      if (!net_wrench(model, unstretched, Pose::from_vector(v), data, f, gt)) {
-        return Status(ErrorCode::kNumericalFailure, "settle: degenerate cable");
-      }
-      J.col(k) = (gt - g) / h;
+  // Rigid cables have no elasto-static solution: they settle as Hooke cables with their EA.
+  const bool any_rigid =
+      std::any_of(model.cables.begin(), model.cables.end(),
+                  [](const CableModel& c) { return c.elongation == ElongationKind::kRigid; });
+  RobotModel hooke;
+  if (any_rigid) {
+    hooke = model;
+    for (CableModel& c : hooke.cables) {
+      if (c.elongation == ElongationKind::kRigid) c.elongation = ElongationKind::kHooke;
     }
-    Eigen::Matrix<double, 6, 1> step = -J.colPivHouseholderQr().solve(g);
-    if (!step.allFinite()) return Status(ErrorCode::kNumericalFailure, "settle: singular");
-    const double cap = 0.01;  // m or rad per step
-    const double big = step.cwiseAbs().maxCoeff();
-    if (big > cap) step *= cap / big;
-    // Backtracking on |g|.
-    double alpha = 1.0;
-    bool accepted = false;
-    for (int ls = 0; ls < 30; ++ls) {
-      const Pose trial = Pose::from_vector(x.vector() + alpha * step);
-      if (net_wrench(model, unstretched, trial, data, f, gt) && gt.norm() < g.norm()) {
-        x = trial;
-        g = gt;
-        accepted = true;
-        break;
-      }
-      alpha *= 0.5;
-    }
-    if (!accepted) break;
   }
-  net_wrench(model, unstretched, x, data, f, g);
-  if (g.norm() > 1e-6 * force_scale) {
-    return Status::Error(ErrorCode::kNumericalFailure,
-                         "settle: no equilibrium found (net wrench %.3g N)", g.norm());
+  const RobotModel& physics = any_rigid ? hooke : model;
+  ElastostaticData data(physics);
+  ElastostaticOptions options;
+  options.initial_pose = start;
+  ElastostaticSummary s = solve_elastostatics(physics, unstretched, options, data);
+  if (!s.success()) {
+    // From `start` every cable may be slack (stiff cables, a start a few mm off): start again
+    // from the rigid forward kinematics of the commands, where the cables just reach.
+    options.initial_pose.reset();
+    s = solve_elastostatics(physics, unstretched, options, data);
   }
-  if (tensions) *tensions = f;
-  return x;
+  if (!s.success()) {
+    return Status(s.status.ok() ? ErrorCode::kNumericalFailure : s.status.code(),
+                  "settle: " + std::string(s.status.message()));
+  }
+  if (tensions) *tensions = data.tensions;
+  return s.pose;
 }
 
 double laser_distance(const RobotModel& model, int laser, const Pose& pose) {

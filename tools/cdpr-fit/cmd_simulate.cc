@@ -41,6 +41,7 @@ Result<Output> simulate(const SimulateArgs& args) {
     design.num_poses = args.design;
     design.noise = args.noise;
     const CalibratedModel planner = nominal ? *nominal : CalibratedModel::FromRobot(*truth);
+    fit_design_box_to_robot(planner.robot, design);
     auto d = cdpr::design_poses(planner, design);
     if (!d.ok()) return with_context(d.status(), "--design " + std::to_string(args.design));
     list->poses = d->poses;

@@ -5,11 +5,12 @@
 //
 // Algorithm: candidate grid (positions on a grid over the box x a set of orientations: zero and
 // +-max_angle about each axis), filtered by the tension distribution (simulate.hpp
-// simple_tension_distribution; the force_distribution of statics replaces it when available);
+// simple_tension_distribution, i.e. force_distribution.hpp's QP);
 // greedy D-optimal selection (log det of the column-normalised information, with a small ridge
 // until it is full rank), then Fedorov exchange passes (swap a selected pose for a candidate while
-// log det increases); finally a nearest-neighbour tour from home improved by 2-opt (distance =
-// position distance + angle_weight * angle distance).
+// log det increases), optionally followed by exchanges for position accuracy over a test box
+// (DesignCriterion::kPositionAccuracy); finally a nearest-neighbour tour from home improved by
+// 2-opt (distance = position distance + angle_weight * angle distance).
 #pragma once
 
 #include <Eigen/Core>
@@ -25,8 +26,20 @@
 
 namespace cdpr {
 
+// What the design maximises.
+enum class DesignCriterion {
+  kDOptimal,  // log det of the (column-normalised) information about the parameters
+  // D-optimal start, then exchanges that minimise the predicted mean squared platform position
+  // error over `accuracy_box` (I-optimality: tr(W I^-1), W = sum over the box grid of G^T G,
+  // G = d(position error)/d(parameters) through the controller's inverse kinematics). This is
+  // what the robot's user sees; the anchors are then slightly less well determined.
+  kPositionAccuracy,
+};
+
 struct PoseDesignOptions {
   int num_poses = 25;  // including the home pose
+  DesignCriterion criterion = DesignCriterion::kDOptimal;
+  AccuracyBox accuracy_box;  // for kPositionAccuracy (default: MINI's ISO 9283 cube)
   Eigen::Vector3d center = Eigen::Vector3d::Zero();
   Eigen::Vector3d half_extent = Eigen::Vector3d::Constant(0.156);  // m
   int points_per_axis = 5;
@@ -43,8 +56,20 @@ struct PoseDesign {
   double log_det = 0.0;      // of the column-normalised information of the selection
   double path_length = 0.0;  // m (+ angle_weight * rad)
   int candidates = 0;        // feasible candidates
-  int exchanges = 0;         // accepted Fedorov swaps
+  int exchanges = 0;         // accepted Fedorov swaps (both criteria)
+  // kPositionAccuracy: predicted RMS position error over the box (m) of the D-optimal start and
+  // of the final selection (the same figure as PredictedAccuracy::position_rms_m, up to the
+  // ridge); 0 for kDOptimal.
+  double position_rms_d_optimal_m = 0.0;
+  double position_rms_m = 0.0;
 };
+
+// Scales the candidate cube to the robot: centred at the home position, half sides
+// `fraction` times the half size of the frame anchors' bounding box per axis (the wrench
+// feasibility filter then trims it to the workspace). MINI: about 0.20 x 0.15 x 0.18 m;
+// IPAnema 3: about 3.4 x 2.2 x 0.8 m. Used when the user gives no box.
+void fit_design_box_to_robot(const RobotModel& robot, PoseDesignOptions& options,
+                             double fraction = 0.4);
 
 Result<PoseDesign> design_poses(const CalibratedModel& model,
                                 const PoseDesignOptions& options = {});

@@ -7,7 +7,8 @@
 //   model; force sensors and the laser at that pose.
 // - kElastic: the given poses are COMMANDS. The controller model (the nominal one) computes the
 //   unstretched length commands from its IK and its planned tensions; the true robot settles
-//   where its elastic cables balance the platform weight (settle_platform). The encoder reads the
+//   where its elastic cables balance the platform weight (settle_platform, i.e.
+//   solve_elastostatics). The encoder reads the
 //   command (plus noise), the force sensors the true tensions, the laser the true pose. This is the
 //   paper's measuring stage (Section 5.1).
 //
@@ -31,11 +32,12 @@ Eigen::Vector3d rpy_from_rotation_matrix(const Eigen::Matrix3d& R);
 // Gravity wrench on the platform at `pose` (force and moment about the platform origin), world.
 Eigen::Matrix<double, 6, 1> platform_weight_wrench(const RobotModel& model, const Pose& pose);
 
-// A simple tension distribution: the tensions closest (least squares) to the uniform
-// `reference_tension` that balance the weight, f = f_ref 1 - pinv(A^T) (A^T f_ref 1 + w).
-// When a tension leaves [f_min, f_max], retries with 2 and 4 times the reference; then returns
-// kOutOfRange (not wrench-feasible with this distribution). kNumericalFailure when the geometry is
-// degenerate. (A stand-in until statics' force_distribution.hpp is used.)
+// The tensions the controller plans at `pose`: distribute_forces (force_distribution.hpp, exact
+// QP) nearest to the uniform `reference_tension`; when that solution has a cable on a limit, the
+// reference is raised to 2 and 4 times (more pretension lifts the slackest cable off f_min) and
+// the first distribution with no cable on a limit is taken, else the last feasible one.
+// kOutOfRange when the pose is outside the wrench-feasible workspace, kNumericalFailure when the
+// geometry is degenerate.
 Result<Eigen::VectorXd> simple_tension_distribution(const RobotModel& model, const Pose& pose,
                                                     double reference_tension);
 
@@ -48,9 +50,11 @@ double default_reference_tension(const RobotModel& model);
 Result<Eigen::VectorXd> unstretched_lengths(const RobotModel& model, const Pose& pose,
                                             const Eigen::VectorXd& tensions);
 
-// Where an elastic robot with unstretched cable lengths `unstretched` settles (Hooke cables,
-// CableModel::ea, slack cables carry nothing): Newton on the 6 wrench-balance equations from
-// `start`. Returns the pose and, in *tensions, the cable tensions there.
+// Where an elastic robot with unstretched cable lengths `unstretched` settles (solve_elastostatics
+// of elastostatics.hpp from `start`, then from the rigid forward kinematics if that fails: the
+// cable laws of the model, slack cables carry nothing; rigid cables are taken as Hooke cables with
+// their EA). Returns the pose and, in *tensions, the cable tensions there; the solver's reason when
+// no equilibrium is found.
 Result<Pose> settle_platform(const RobotModel& model, const Eigen::VectorXd& unstretched,
                              const Pose& start, Eigen::VectorXd* tensions = nullptr);
 
