@@ -112,7 +112,7 @@ std::string format(const char* fmt, auto... args) {
 // reference).
 // ------------------------------------------------------------------------------------------
 
-enum class RowKind { kLength, kLaser, kWrench, kReference };
+using RowKind = ResidualKind;
 
 struct Row {
   RowKind kind;
@@ -138,10 +138,7 @@ Eigen::MatrixXd column_basis(const Eigen::MatrixXd& X, double tol) {
   return svd.matrixU().leftCols(r);
 }
 
-struct Candidate {
-  std::string id, name, family;
-  Eigen::MatrixXd X;  // n x k, whitened
-};
+using Candidate = CandidateColumns;
 
 MisfitGroup make_group(std::string name, const std::vector<int>& rows, const Eigen::VectorXd& r,
                        const Eigen::VectorXd& leverage, const std::vector<double>& si,
@@ -197,6 +194,295 @@ StructureTest regress(const std::string& variable, int cable, const Eigen::Vecto
   return t;
 }
 
+// Everything the screen needs, in residual space.
+struct DesignData {
+  std::vector<Row> rows;
+  std::vector<double> si;  // SI residual per row (NaN where mixed or unknown)
+  std::vector<std::vector<int>> length_row;
+  std::vector<int> pose_start;
+  Eigen::VectorXd r, sigma_len;
+  Eigen::VectorXd tension, kin_len, loaded, reading, time, tilt, horizontal;
+  Eigen::MatrixXd direction;
+  GeometryInformation base;
+  std::vector<Candidate> lib;
+};
+
+Result<DesignData> build_design(const CalibratedModel& model, const MeasurementSet& set,
+                                const std::vector<Pose>& poses,
+                                const std::vector<PoseResiduals>* residuals,
+                                const IdentificationOptions& options, const MismatchOptions& mopt) {
+  const RobotModel& robot = model.robot;
+  const int m = robot.num_cables();
+  const int nl = static_cast<int>(robot.lasers.size());
+  const int np = set.num_poses();
+  if ((residuals != nullptr && static_cast<int>(residuals->size()) != np) ||
+      static_cast<int>(poses.size()) != np) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "mismatch: %d residual sets and %d poses for a measurement set of %d "
+                         "poses",
+                         residuals != nullptr ? static_cast<int>(residuals->size()) : np,
+                         static_cast<int>(poses.size()), np);
+  }
+  if (Status st = validate(set, robot); !st.ok()) return st;
+
+  // --- Jacobians at the estimate: the identification's, and one with every candidate parameter
+  // switched on (its extra columns are candidate effects).
+  auto base = geometry_information(model, set, poses, options, true);
+  if (!base) return base.status();
+  IdentificationOptions ext_opt = options;
+  ext_opt.estimate_length_scales = true;
+  ext_opt.estimate_platform_anchors = true;
+  ext_opt.platform_anchor_mask = AnchorMask();
+  ext_opt.estimate_force_gains = mopt.force_sensor_candidates || options.estimate_force_gains;
+  ext_opt.estimate_force_offsets = mopt.force_sensor_candidates || options.estimate_force_offsets;
+  ext_opt.estimate_laser_origin = nl > 0 || options.estimate_laser_origin;
+  ext_opt.estimate_laser_direction = nl > 0 || options.estimate_laser_direction;
+  ext_opt.estimate_laser_plane = nl > 0 || options.estimate_laser_plane;
+  auto ext = geometry_information(model, set, poses, ext_opt, true);
+  if (!ext) return ext.status();
+
+  // --- Row layout, residual vector, row sigmas.
+  std::vector<Row> rows;
+  std::vector<double> si;  // SI residual per row (NaN where mixed)
+  std::vector<std::vector<int>> length_row(static_cast<std::size_t>(np),
+                                           std::vector<int>(static_cast<std::size_t>(m), -1));
+  std::vector<int> pose_start(static_cast<std::size_t>(np) + 1, 0);
+  for (int j = 0; j < np; ++j) {
+    const auto uj = static_cast<std::size_t>(j);
+    const PoseMeasurement& pm = set.poses[uj];
+    const bool have_t = pm.tensions.size() == m;
+    pose_start[uj] = static_cast<int>(rows.size());
+    if (options.use_lengths) {
+      for (int i = 0; i < m; ++i) {
+        if (std::isnan(pm.cable_lengths(i))) continue;
+        if (have_t && !std::isnan(pm.tensions(i)) &&
+            pm.tensions(i) < options.slack_tension_threshold) {
+          continue;
+        }
+        length_row[uj][static_cast<std::size_t>(i)] = static_cast<int>(rows.size());
+        rows.push_back({RowKind::kLength, j, i});
+        si.push_back(residuals ? (*residuals)[uj].length_m(i) : kNaN);
+      }
+    }
+    if (options.use_laser) {
+      for (int l = 0; l < std::min<int>(nl, static_cast<int>(pm.laser_distances.size())); ++l) {
+        if (std::isnan(pm.laser_distances(l))) continue;
+        rows.push_back({RowKind::kLaser, j, l});
+        si.push_back(residuals ? (*residuals)[uj].laser_m(l) : kNaN);
+      }
+    }
+    if (options.use_equilibrium && have_t && pm.tensions.allFinite()) {
+      for (int q = 0; q < 6; ++q) {
+        rows.push_back({RowKind::kWrench, j, q});
+        si.push_back(q < 3 && residuals ? (*residuals)[uj].wrench_si(q) : kNaN);
+      }
+    }
+    const int have = static_cast<int>(rows.size()) - pose_start[uj];
+    const int jac_rows = static_cast<int>(base->jacobian_geometry[uj].rows());
+    if (jac_rows == have + 6 && options.use_reference && pm.reference) {
+      for (int q = 0; q < 6; ++q) {
+        rows.push_back({RowKind::kReference, j, q});
+        si.push_back(kNaN);
+      }
+    } else if (jac_rows != have) {
+      return Status::Error(ErrorCode::kInternal,
+                           "mismatch: pose %d has %d Jacobian rows, the residual layout %d", j,
+                           jac_rows, have);
+    }
+    if (ext->jacobian_geometry[uj].rows() != jac_rows) {
+      return Status::Error(ErrorCode::kInternal,
+                           "mismatch: pose %d: the extended Jacobian has a different row count", j);
+    }
+  }
+  pose_start[static_cast<std::size_t>(np)] = static_cast<int>(rows.size());
+  const int n = static_cast<int>(rows.size());
+  Eigen::VectorXd r = Eigen::VectorXd::Zero(n);
+  Eigen::VectorXd sigma_len = Eigen::VectorXd::Constant(n, kNaN);
+  for (int k = 0; k < n; ++k) {
+    const Row& row = rows[static_cast<std::size_t>(k)];
+    if (residuals == nullptr) {
+      if (row.kind == RowKind::kLength) sigma_len(k) = set.noise.sigma_length;
+      continue;
+    }
+    const PoseResiduals& pr = (*residuals)[static_cast<std::size_t>(row.pose)];
+    switch (row.kind) {
+      case RowKind::kLength: {
+        r(k) = pr.length_normalized(row.index);
+        const double rm = pr.length_m(row.index);
+        if (std::isfinite(rm) && std::abs(r(k)) > 1e-300) {
+          sigma_len(k) = rm / r(k);
+        } else {
+          sigma_len(k) = set.noise.sigma_length;
+        }
+        if (!(sigma_len(k) > 0)) sigma_len(k) = set.noise.sigma_length;
+        break;
+      }
+      case RowKind::kLaser:
+        r(k) = pr.laser_normalized(row.index);
+        break;
+      case RowKind::kWrench:
+        r(k) = pr.wrench_normalized(row.index);
+        break;
+      case RowKind::kReference:
+        r(k) = pr.reference_normalized(row.index);
+        break;
+    }
+    if (!std::isfinite(r(k))) {
+      return Status::Error(
+          ErrorCode::kInternal,
+          "mismatch: pose %d: a residual the Jacobian has is missing in the report", row.pose);
+    }
+  }
+
+  // --- Explanatory variables per length row.
+  KinematicsData kin(robot);
+  const Eigen::VectorXd nan_n = Eigen::VectorXd::Constant(n, kNaN);
+  Eigen::VectorXd tension = nan_n, kin_len = nan_n, loaded = nan_n, reading = nan_n, time = nan_n,
+                  tilt = nan_n, horizontal = nan_n;
+  Eigen::MatrixXd direction = Eigen::MatrixXd::Constant(n, 3, kNaN);
+  for (int j = 0; j < np; ++j) {
+    const auto uj = static_cast<std::size_t>(j);
+    const PoseMeasurement& pm = set.poses[uj];
+    if (!inverse_kinematics(robot, poses[uj], kin)) {
+      return Status::Error(ErrorCode::kNumericalFailure,
+                           "mismatch: pose %d: cable %d is degenerate at the estimated pose", j,
+                           kin.invalid_cable + 1);
+    }
+    for (int i = 0; i < m; ++i) {
+      const int k = length_row[uj][static_cast<std::size_t>(i)];
+      if (k < 0) continue;
+      const auto ui = static_cast<std::size_t>(i);
+      // Tension readings are in N through the nominal sensor calibration; the estimate's sensor
+      // correction is second order for a regressor.
+      if (pm.tensions.size() == m) tension(k) = pm.tensions(i);
+      kin_len(k) = kin.lengths(i);
+      loaded(k) = robot.cables[ui].routing_length + kin.lengths(i);
+      reading(k) = pm.cable_lengths(i);
+      time(k) = pm.time;
+      tilt(k) = std::acos(std::clamp(kin.rotation(2, 2), -1.0, 1.0));
+      const Eigen::Vector3d u = kin.unit_vectors.col(i);
+      direction.row(k) = (robot.pulleys[ui].frame.transpose() * (-u)).transpose();
+      horizontal(k) = kin.free_lengths(i) * std::hypot(u.x(), u.y());
+    }
+  }
+  // --- NAME: the candidate library.
+  std::vector<Candidate> lib;
+  auto per_length_row = [&](const std::string& id, const std::string& name,
+                            const std::string& family, bool per_cable, auto value) {
+    Candidate c{id, name, family, Eigen::MatrixXd::Zero(n, per_cable ? m : 1)};
+    bool any = false;
+    for (int k = 0; k < n; ++k) {
+      const Row& row = rows[static_cast<std::size_t>(k)];
+      if (row.kind != RowKind::kLength) continue;
+      const double v = value(k);
+      if (!std::isfinite(v)) continue;
+      c.X(k, per_cable ? row.index : 0) = v / sigma_len(k);
+      any = any || v != 0.0;
+    }
+    if (any) lib.push_back(std::move(c));
+  };
+  const bool have_time = time.array().isFinite().count() > 0;
+  auto fl = [&](int k) { return tension(k) * loaded(k); };
+  auto f = [&](int k) { return tension(k); };
+  per_length_row("hooke_shared", "cable elasticity (Hooke, ~F*L), one EA for all cables",
+                 "elasticity", false, fl);
+  per_length_row("hooke_per_cable", "cable elasticity (Hooke, ~F*L), EA per cable", "elasticity",
+                 true, fl);
+  per_length_row("compliance_shared", "winch/sensor compliance (~F), the same for all winches",
+                 "compliance", false, f);
+  per_length_row("compliance_per_cable", "winch/sensor compliance (~F), per winch", "compliance",
+                 true, f);
+  per_length_row("encoder_offset_per_cable", "encoder zero offset (~1), per cable",
+                 "encoder offset", true, [](int) { return 1.0; });
+  if (have_time) {
+    per_length_row("encoder_drift_per_cable", "encoder drift over time (~t), per cable",
+                   "encoder drift", true, [&](int k) { return time(k); });
+    per_length_row("transmission_drift_shared",
+                   "transmission drift over time (~t*L, e.g. drum heating), all cables",
+                   "transmission drift", false, [&](int k) { return time(k) * reading(k); });
+  }
+  per_length_row("sag_shared", "cable sag (catenary, ~Lh^2 L / F^2)", "sag", false, [&](int k) {
+    return horizontal(k) * horizontal(k) * kin_len(k) / (tension(k) * tension(k));
+  });
+  per_length_row("nonlinear_elasticity_shared", "nonlinear cable elasticity (~F^2 L)",
+                 "nonlinear elasticity", false,
+                 [&](int k) { return tension(k) * tension(k) * loaded(k); });
+
+  // Candidates from parameters the identification did not estimate (exact Jacobian columns).
+  {
+    std::map<std::string, int> base_cols;
+    for (int q = 0; q < static_cast<int>(base->names.size()); ++q)
+      base_cols[base->names[static_cast<std::size_t>(q)]] = q;
+    Eigen::MatrixXd Jx = Eigen::MatrixXd::Zero(n, static_cast<Eigen::Index>(ext->names.size()));
+    for (int j = 0; j < np; ++j) {
+      const auto uj = static_cast<std::size_t>(j);
+      Jx.middleRows(pose_start[uj], pose_start[uj + 1] - pose_start[uj]) =
+          ext->jacobian_geometry[uj];
+    }
+    auto group = [&](const std::string& id, const std::string& name, const std::string& family,
+                     auto select) {
+      std::vector<int> picked;
+      for (int q = 0; q < static_cast<int>(ext->names.size()); ++q) {
+        const std::string& nm = ext->names[static_cast<std::size_t>(q)];
+        if (base_cols.count(nm) || !select(nm)) continue;
+        picked.push_back(q);
+      }
+      if (picked.empty()) return;
+      Candidate c{id, name, family, Eigen::MatrixXd(n, static_cast<Eigen::Index>(picked.size()))};
+      for (std::size_t q = 0; q < picked.size(); ++q) {
+        c.X.col(static_cast<Eigen::Index>(q)) = Jx.col(picked[q]);
+      }
+      if (c.X.norm() > 0) lib.push_back(std::move(c));
+    };
+    auto starts = [](const std::string& s, const char* p) { return s.rfind(p, 0) == 0; };
+    group("drum_scale_per_cable", "drum/transmission scale error (~L), per cable", "drum scale",
+          [&](const std::string& s) { return starts(s, "s_"); });
+    group("platform_anchors", "platform anchor positions (b_i)", "platform anchors",
+          [&](const std::string& s) { return starts(s, "b_"); });
+    group("force_gain_per_cable", "force sensor gain error (~F in the equilibrium), per cable",
+          "force sensor gain", [&](const std::string& s) { return starts(s, "force_gain"); });
+    group("force_offset_per_cable", "force sensor offset (~1 in the equilibrium), per cable",
+          "force sensor offset", [&](const std::string& s) { return starts(s, "force_offset"); });
+    group("laser_mounting", "laser mounting (origin and beam direction on the platform)",
+          "laser mounting", [&](const std::string& s) {
+            return starts(s, "laser_") && (s.find(".origin.") != std::string::npos ||
+                                           s.find(".direction.") != std::string::npos);
+          });
+    group("laser_plane", "laser target plane (offset and tilt)", "laser plane",
+          [&](const std::string& s) {
+            return starts(s, "laser_") && s.find(".plane.") != std::string::npos;
+          });
+    // The shared drum scale: the sum of the per-cable columns.
+    for (const Candidate& c : lib) {
+      if (c.id == "drum_scale_per_cable") {
+        Candidate s{"drum_scale_shared", "drum/transmission scale error (~L), all drums alike",
+                    "drum scale", c.X.rowwise().sum()};
+        lib.push_back(std::move(s));
+        break;
+      }
+    }
+  }
+
+  DesignData D;
+  D.rows = std::move(rows);
+  D.si = std::move(si);
+  D.length_row = std::move(length_row);
+  D.pose_start = std::move(pose_start);
+  D.r = std::move(r);
+  D.sigma_len = std::move(sigma_len);
+  D.tension = std::move(tension);
+  D.kin_len = std::move(kin_len);
+  D.loaded = std::move(loaded);
+  D.reading = std::move(reading);
+  D.time = std::move(time);
+  D.tilt = std::move(tilt);
+  D.horizontal = std::move(horizontal);
+  D.direction = std::move(direction);
+  D.base = std::move(*base);
+  D.lib = std::move(lib);
+  return D;
+}
+
 }  // namespace
 
 double chi2_upper_tail(double x, double dof) {
@@ -245,128 +531,51 @@ std::string MismatchSummary::Text() const {
   return s;
 }
 
+Result<MismatchDesign> mismatch_design(const CalibratedModel& model, const MeasurementSet& set,
+                                       const std::vector<Pose>& poses,
+                                       const std::vector<PoseResiduals>* residuals,
+                                       const IdentificationOptions& options,
+                                       const MismatchOptions& mismatch) {
+  auto dd = build_design(model, set, poses, residuals, options, mismatch);
+  if (!dd) return dd.status();
+  DesignData& D = *dd;
+  MismatchDesign out;
+  for (const Row& row : D.rows) {
+    out.kind.push_back(row.kind);
+    out.pose.push_back(row.pose);
+    out.index.push_back(row.index);
+  }
+  out.pose_start = std::move(D.pose_start);
+  out.residuals = std::move(D.r);
+  out.sigma_length = std::move(D.sigma_len);
+  out.geometry_names = D.base.names;
+  out.jacobian_geometry = std::move(D.base.jacobian_geometry);
+  out.jacobian_pose = std::move(D.base.jacobian_pose);
+  out.candidates = std::move(D.lib);
+  return out;
+}
+
 Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
                                         const MeasurementSet& set,
                                         const IdentificationOptions& options,
                                         const MismatchOptions& mopt) {
+  auto dd = build_design(report.estimate, set, report.poses, &report.residuals, options, mopt);
+  if (!dd) return dd.status();
+  const DesignData& D = *dd;
   const RobotModel& robot = report.estimate.robot;
   const int m = robot.num_cables();
   const int nl = static_cast<int>(robot.lasers.size());
   const int np = set.num_poses();
-  if (static_cast<int>(report.residuals.size()) != np ||
-      static_cast<int>(report.poses.size()) != np) {
-    return Status::Error(ErrorCode::kInvalidArgument,
-                         "mismatch: the report has %d residual sets and %d poses, the measurement "
-                         "set %d poses",
-                         static_cast<int>(report.residuals.size()),
-                         static_cast<int>(report.poses.size()), np);
-  }
-  if (Status st = validate(set, robot); !st.ok()) return st;
-
-  // --- Jacobians at the estimate: the identification's, and one with every candidate parameter
-  // switched on (its extra columns are candidate effects).
-  auto base = geometry_information(report.estimate, set, report.poses, options, true);
-  if (!base) return base.status();
-  IdentificationOptions ext_opt = options;
-  ext_opt.estimate_length_scales = true;
-  ext_opt.estimate_platform_anchors = true;
-  ext_opt.platform_anchor_mask = AnchorMask();
-  ext_opt.estimate_force_gains = mopt.force_sensor_candidates || options.estimate_force_gains;
-  ext_opt.estimate_force_offsets = mopt.force_sensor_candidates || options.estimate_force_offsets;
-  ext_opt.estimate_laser_origin = nl > 0 || options.estimate_laser_origin;
-  ext_opt.estimate_laser_direction = nl > 0 || options.estimate_laser_direction;
-  ext_opt.estimate_laser_plane = nl > 0 || options.estimate_laser_plane;
-  auto ext = geometry_information(report.estimate, set, report.poses, ext_opt, true);
-  if (!ext) return ext.status();
-
-  // --- Row layout, residual vector, row sigmas.
-  std::vector<Row> rows;
-  std::vector<double> si;  // SI residual per row (NaN where mixed)
-  std::vector<std::vector<int>> length_row(static_cast<std::size_t>(np),
-                                           std::vector<int>(static_cast<std::size_t>(m), -1));
-  std::vector<int> pose_start(static_cast<std::size_t>(np) + 1, 0);
-  for (int j = 0; j < np; ++j) {
-    const auto uj = static_cast<std::size_t>(j);
-    const PoseMeasurement& pm = set.poses[uj];
-    const bool have_t = pm.tensions.size() == m;
-    pose_start[uj] = static_cast<int>(rows.size());
-    if (options.use_lengths) {
-      for (int i = 0; i < m; ++i) {
-        if (std::isnan(pm.cable_lengths(i))) continue;
-        if (have_t && !std::isnan(pm.tensions(i)) &&
-            pm.tensions(i) < options.slack_tension_threshold) {
-          continue;
-        }
-        length_row[uj][static_cast<std::size_t>(i)] = static_cast<int>(rows.size());
-        rows.push_back({RowKind::kLength, j, i});
-        si.push_back(report.residuals[uj].length_m(i));
-      }
-    }
-    if (options.use_laser) {
-      for (int l = 0; l < std::min<int>(nl, static_cast<int>(pm.laser_distances.size())); ++l) {
-        if (std::isnan(pm.laser_distances(l))) continue;
-        rows.push_back({RowKind::kLaser, j, l});
-        si.push_back(report.residuals[uj].laser_m(l));
-      }
-    }
-    if (options.use_equilibrium && have_t && pm.tensions.allFinite()) {
-      for (int q = 0; q < 6; ++q) {
-        rows.push_back({RowKind::kWrench, j, q});
-        si.push_back(q < 3 ? report.residuals[uj].wrench_si(q) : kNaN);
-      }
-    }
-    const int have = static_cast<int>(rows.size()) - pose_start[uj];
-    const int jac_rows = static_cast<int>(base->jacobian_geometry[uj].rows());
-    if (jac_rows == have + 6 && options.use_reference && pm.reference) {
-      for (int q = 0; q < 6; ++q) {
-        rows.push_back({RowKind::kReference, j, q});
-        si.push_back(kNaN);
-      }
-    } else if (jac_rows != have) {
-      return Status::Error(ErrorCode::kInternal,
-                           "mismatch: pose %d has %d Jacobian rows, the residual layout %d", j,
-                           jac_rows, have);
-    }
-    if (ext->jacobian_geometry[uj].rows() != jac_rows) {
-      return Status::Error(ErrorCode::kInternal,
-                           "mismatch: pose %d: the extended Jacobian has a different row count", j);
-    }
-  }
-  pose_start[static_cast<std::size_t>(np)] = static_cast<int>(rows.size());
+  const std::vector<Row>& rows = D.rows;
+  const std::vector<double>& si = D.si;
+  const std::vector<int>& pose_start = D.pose_start;
   const int n = static_cast<int>(rows.size());
-  Eigen::VectorXd r(n);
-  Eigen::VectorXd sigma_len = Eigen::VectorXd::Constant(n, kNaN);
-  for (int k = 0; k < n; ++k) {
-    const Row& row = rows[static_cast<std::size_t>(k)];
-    const PoseResiduals& pr = report.residuals[static_cast<std::size_t>(row.pose)];
-    switch (row.kind) {
-      case RowKind::kLength: {
-        r(k) = pr.length_normalized(row.index);
-        const double rm = pr.length_m(row.index);
-        if (std::isfinite(rm) && std::abs(r(k)) > 1e-300) {
-          sigma_len(k) = rm / r(k);
-        } else {
-          sigma_len(k) = set.noise.sigma_length;
-        }
-        if (!(sigma_len(k) > 0)) sigma_len(k) = set.noise.sigma_length;
-        break;
-      }
-      case RowKind::kLaser:
-        r(k) = pr.laser_normalized(row.index);
-        break;
-      case RowKind::kWrench:
-        r(k) = pr.wrench_normalized(row.index);
-        break;
-      case RowKind::kReference:
-        r(k) = pr.reference_normalized(row.index);
-        break;
-    }
-    if (!std::isfinite(r(k))) {
-      return Status::Error(
-          ErrorCode::kInternal,
-          "mismatch: pose %d: a residual the Jacobian has is missing in the report", row.pose);
-    }
-  }
+  const Eigen::VectorXd& r = D.r;
+  const GeometryInformation* base = &D.base;
+  const std::vector<Candidate>& lib = D.lib;
+  const Eigen::VectorXd &tension = D.tension, &kin_len = D.kin_len, &time = D.time, &tilt = D.tilt;
+  const Eigen::MatrixXd& direction = D.direction;
+  const Eigen::VectorXd& loaded = D.loaded;
 
   // --- Full Jacobian J (geometry + free poses) and its column-space basis.
   const int P = static_cast<int>(base->names.size());
@@ -461,38 +670,6 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
     }
   }
 
-  // --- Explanatory variables per length row.
-  KinematicsData kin(robot);
-  const Eigen::VectorXd nan_n = Eigen::VectorXd::Constant(n, kNaN);
-  Eigen::VectorXd tension = nan_n, kin_len = nan_n, loaded = nan_n, reading = nan_n, time = nan_n,
-                  tilt = nan_n, horizontal = nan_n;
-  Eigen::MatrixXd direction = Eigen::MatrixXd::Constant(n, 3, kNaN);
-  for (int j = 0; j < np; ++j) {
-    const auto uj = static_cast<std::size_t>(j);
-    const PoseMeasurement& pm = set.poses[uj];
-    if (!inverse_kinematics(robot, report.poses[uj], kin)) {
-      return Status::Error(ErrorCode::kNumericalFailure,
-                           "mismatch: pose %d: cable %d is degenerate at the estimated pose", j,
-                           kin.invalid_cable + 1);
-    }
-    for (int i = 0; i < m; ++i) {
-      const int k = length_row[uj][static_cast<std::size_t>(i)];
-      if (k < 0) continue;
-      const auto ui = static_cast<std::size_t>(i);
-      // Tension readings are in N through the nominal sensor calibration; the estimate's sensor
-      // correction is second order for a regressor.
-      if (pm.tensions.size() == m) tension(k) = pm.tensions(i);
-      kin_len(k) = kin.lengths(i);
-      loaded(k) = robot.cables[ui].routing_length + kin.lengths(i);
-      reading(k) = pm.cable_lengths(i);
-      time(k) = pm.time;
-      tilt(k) = std::acos(std::clamp(kin.rotation(2, 2), -1.0, 1.0));
-      const Eigen::Vector3d u = kin.unit_vectors.col(i);
-      direction.row(k) = (robot.pulleys[ui].frame.transpose() * (-u)).transpose();
-      horizontal(k) = kin.free_lengths(i) * std::hypot(u.x(), u.y());
-    }
-  }
-
   // --- LOCATE: structure tests of the normalised length residuals.
   {
     struct Variable {
@@ -530,103 +707,6 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
     const double bonferroni = alpha / std::max<double>(1.0, static_cast<double>(tests.size()));
     for (auto& t : tests) t.significant = t.p_value < bonferroni;
     out.structure = std::move(tests);
-  }
-
-  // --- NAME: the candidate library.
-  std::vector<Candidate> lib;
-  auto per_length_row = [&](const std::string& id, const std::string& name,
-                            const std::string& family, bool per_cable, auto value) {
-    Candidate c{id, name, family, Eigen::MatrixXd::Zero(n, per_cable ? m : 1)};
-    bool any = false;
-    for (int k = 0; k < n; ++k) {
-      const Row& row = rows[static_cast<std::size_t>(k)];
-      if (row.kind != RowKind::kLength) continue;
-      const double v = value(k);
-      if (!std::isfinite(v)) continue;
-      c.X(k, per_cable ? row.index : 0) = v / sigma_len(k);
-      any = any || v != 0.0;
-    }
-    if (any) lib.push_back(std::move(c));
-  };
-  const bool have_time = time.array().isFinite().count() > 0;
-  auto fl = [&](int k) { return tension(k) * loaded(k); };
-  auto f = [&](int k) { return tension(k); };
-  per_length_row("hooke_shared", "cable elasticity (Hooke, ~F*L), one EA for all cables",
-                 "elasticity", false, fl);
-  per_length_row("hooke_per_cable", "cable elasticity (Hooke, ~F*L), EA per cable", "elasticity",
-                 true, fl);
-  per_length_row("compliance_shared", "winch/sensor compliance (~F), the same for all winches",
-                 "compliance", false, f);
-  per_length_row("compliance_per_cable", "winch/sensor compliance (~F), per winch", "compliance",
-                 true, f);
-  per_length_row("encoder_offset_per_cable", "encoder zero offset (~1), per cable",
-                 "encoder offset", true, [](int) { return 1.0; });
-  if (have_time) {
-    per_length_row("encoder_drift_per_cable", "encoder drift over time (~t), per cable",
-                   "encoder drift", true, [&](int k) { return time(k); });
-    per_length_row("transmission_drift_shared",
-                   "transmission drift over time (~t*L, e.g. drum heating), all cables",
-                   "transmission drift", false, [&](int k) { return time(k) * reading(k); });
-  }
-  per_length_row("sag_shared", "cable sag (catenary, ~Lh^2 L / F^2)", "sag", false, [&](int k) {
-    return horizontal(k) * horizontal(k) * kin_len(k) / (tension(k) * tension(k));
-  });
-  per_length_row("nonlinear_elasticity_shared", "nonlinear cable elasticity (~F^2 L)",
-                 "nonlinear elasticity", false,
-                 [&](int k) { return tension(k) * tension(k) * loaded(k); });
-
-  // Candidates from parameters the identification did not estimate (exact Jacobian columns).
-  {
-    std::map<std::string, int> base_cols;
-    for (int q = 0; q < P; ++q) base_cols[base->names[static_cast<std::size_t>(q)]] = q;
-    Eigen::MatrixXd Jx = Eigen::MatrixXd::Zero(n, static_cast<Eigen::Index>(ext->names.size()));
-    for (int j = 0; j < np; ++j) {
-      const auto uj = static_cast<std::size_t>(j);
-      Jx.middleRows(pose_start[uj], pose_start[uj + 1] - pose_start[uj]) =
-          ext->jacobian_geometry[uj];
-    }
-    auto group = [&](const std::string& id, const std::string& name, const std::string& family,
-                     auto select) {
-      std::vector<int> picked;
-      for (int q = 0; q < static_cast<int>(ext->names.size()); ++q) {
-        const std::string& nm = ext->names[static_cast<std::size_t>(q)];
-        if (base_cols.count(nm) || !select(nm)) continue;
-        picked.push_back(q);
-      }
-      if (picked.empty()) return;
-      Candidate c{id, name, family, Eigen::MatrixXd(n, static_cast<Eigen::Index>(picked.size()))};
-      for (std::size_t q = 0; q < picked.size(); ++q) {
-        c.X.col(static_cast<Eigen::Index>(q)) = Jx.col(picked[q]);
-      }
-      if (c.X.norm() > 0) lib.push_back(std::move(c));
-    };
-    auto starts = [](const std::string& s, const char* p) { return s.rfind(p, 0) == 0; };
-    group("drum_scale_per_cable", "drum/transmission scale error (~L), per cable", "drum scale",
-          [&](const std::string& s) { return starts(s, "s_"); });
-    group("platform_anchors", "platform anchor positions (b_i)", "platform anchors",
-          [&](const std::string& s) { return starts(s, "b_"); });
-    group("force_gain_per_cable", "force sensor gain error (~F in the equilibrium), per cable",
-          "force sensor gain", [&](const std::string& s) { return starts(s, "force_gain"); });
-    group("force_offset_per_cable", "force sensor offset (~1 in the equilibrium), per cable",
-          "force sensor offset", [&](const std::string& s) { return starts(s, "force_offset"); });
-    group("laser_mounting", "laser mounting (origin and beam direction on the platform)",
-          "laser mounting", [&](const std::string& s) {
-            return starts(s, "laser_") && (s.find(".origin.") != std::string::npos ||
-                                           s.find(".direction.") != std::string::npos);
-          });
-    group("laser_plane", "laser target plane (offset and tilt)", "laser plane",
-          [&](const std::string& s) {
-            return starts(s, "laser_") && s.find(".plane.") != std::string::npos;
-          });
-    // The shared drum scale: the sum of the per-cable columns.
-    for (const Candidate& c : lib) {
-      if (c.id == "drum_scale_per_cable") {
-        Candidate s{"drum_scale_shared", "drum/transmission scale error (~L), all drums alike",
-                    "drum scale", c.X.rowwise().sum()};
-        lib.push_back(std::move(s));
-        break;
-      }
-    }
   }
 
   // --- Screen every candidate.

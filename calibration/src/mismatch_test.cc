@@ -12,54 +12,15 @@
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "identification_scenario.hpp"
+#include "mismatch_test_data.hpp"
 
 namespace cdpr {
 namespace {
 
-// MINI with rigid cables in both the truth and the model: the identification's model is exact
-// unless a test adds a concealed effect to the readings.
-struct RigidMini {
-  scenario::Scenario s;
-  std::vector<Pose> poses;
-};
-
-RigidMini rigid_mini(int num_poses) {
-  RigidMini d;
-  d.s = scenario::mini_scenario();
-  for (auto* model : {&d.s.nominal, &d.s.truth}) {
-    for (auto& c : model->robot.cables) c.elongation = ElongationKind::kRigid;
-  }
-  auto off = homing_offsets(d.s.truth.robot, d.s.nominal.robot,
-                            default_reference_tension(d.s.nominal.robot));
-  EXPECT_TRUE(off.ok());
-  if (off.ok()) d.s.truth.readings.length_offsets = *off;
-  d.poses =
-      scenario::random_feasible_poses(d.s.nominal.robot, d.s.box, num_poses, 11, &d.s.truth.robot);
-  return d;
-}
-
-SimulatedMeasurements simulate(const RigidMini& d, std::uint64_t seed) {
-  SimulationOptions so;
-  so.controller = &d.s.nominal;
-  auto sim = simulate_measurements(d.s.truth, d.poses, SensorNoise{}, seed, so);
-  EXPECT_TRUE(sim.ok()) << sim.status().to_string();
-  return sim.ok() ? *sim : SimulatedMeasurements{};
-}
-
-// Hooke elongation F L / (EA + F) of the whole loaded cable, hidden in the readings (the encoder
-// pays out the unstretched length, which is shorter than the geometry by the elongation).
-void conceal_hooke(const RigidMini& d, SimulatedMeasurements& sim, double ea) {
-  KinematicsData kin(d.s.truth.robot);
-  for (std::size_t j = 0; j < sim.set.poses.size(); ++j) {
-    ASSERT_TRUE(inverse_kinematics(d.s.truth.robot, sim.true_poses[j], kin));
-    for (int i = 0; i < d.s.truth.robot.num_cables(); ++i) {
-      const double f = sim.true_tensions[j](i);
-      const double loaded =
-          d.s.truth.robot.cables[static_cast<std::size_t>(i)].routing_length + kin.lengths(i);
-      sim.set.poses[j].cable_lengths(i) -= f * loaded / (ea + f);
-    }
-  }
-}
+using testing::conceal_hooke;
+using testing::rigid_mini;
+using testing::RigidMini;
+using testing::simulate;
 
 Result<MismatchSummary> identify_and_locate(const RigidMini& d, const MeasurementSet& set,
                                             const MismatchOptions& mo = {}) {
@@ -215,6 +176,37 @@ TEST(Mismatch, ElasticityAndComplianceAreReportedAsConfounded) {
   auto s2 = identify_and_locate(d, sim.set, strict);
   ASSERT_TRUE(s2.ok());
   EXPECT_FALSE(confounded(*s2, "hooke_shared", "compliance_shared"));
+}
+
+TEST(Mismatch, DesignExposesTheScreensResidualsAndCandidateColumns) {
+  const RigidMini d = rigid_mini(25);
+  const SimulatedMeasurements sim = simulate(d, 6);
+  const IdentificationOptions opt;
+  auto rep = identify(d.s.nominal, sim.set, opt);
+  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+  auto s = locate_mismatch(*rep, sim.set, opt);
+  ASSERT_TRUE(s.ok()) << s.status().to_string();
+  auto des = mismatch_design(rep->estimate, sim.set, rep->poses, &rep->residuals, opt);
+  ASSERT_TRUE(des.ok()) << des.status().to_string();
+  EXPECT_EQ(des->num_rows(), s->num_residuals);
+  EXPECT_EQ(des->num_poses(), sim.set.num_poses());
+  EXPECT_NEAR(des->residuals.squaredNorm(), s->chi2, 1e-9 * s->chi2);
+  ASSERT_EQ(des->jacobian_geometry.size(), sim.set.poses.size());
+  for (const auto& c : des->candidates) {
+    EXPECT_EQ(c.X.rows(), des->num_rows()) << c.id;
+    EXPECT_NE(s->find(c.id), nullptr) << c.id;
+  }
+  // Without residuals (pose design): zero residuals, the stated length sigma, same columns.
+  auto bare = mismatch_design(rep->estimate, sim.set, rep->poses, nullptr, opt);
+  ASSERT_TRUE(bare.ok()) << bare.status().to_string();
+  EXPECT_EQ(bare->num_rows(), des->num_rows());
+  EXPECT_EQ(bare->residuals.squaredNorm(), 0.0);
+  EXPECT_EQ(bare->candidates.size(), des->candidates.size());
+  for (int k = 0; k < bare->num_rows(); ++k) {
+    if (bare->kind[static_cast<std::size_t>(k)] == ResidualKind::kLength) {
+      EXPECT_DOUBLE_EQ(bare->sigma_length(k), sim.set.noise.sigma_length);
+    }
+  }
 }
 
 }  // namespace

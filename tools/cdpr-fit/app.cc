@@ -140,7 +140,17 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
   dp->add_option("--out", design.out, "pose list CSV to write")->required();
   dp->add_option("--estimate", design.estimate, "parameters the design is for (as calibrate)")
       ->delimiter(',');
-  dp->add_option("--half-extent", design.half_extent, "half side of the candidate cube, m")
+  dp->add_option("--half-extent", design.half_extent,
+                 "half side of the candidate cube around home, m (default: 0.4 x the frame's "
+                 "half extent per axis)")
+      ->check(CLI::PositiveNumber);
+  dp->add_option("--criterion", design.criterion,
+                 "d-optimal (information about the parameters) or position (platform position "
+                 "accuracy over the test cube)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"d-optimal", "position"}));
+  dp->add_option("--test-half-extent", design.test_half_extent,
+                 "half side of the test cube for --criterion position and --compare, m")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
   dp->add_option("--points-per-axis", design.points_per_axis, "candidate grid points per axis")
@@ -221,6 +231,59 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
     action = [&] { return fit_force_sensor(force); };
   });
 
+  // ---- diagnose -------------------------------------------------------------------------------
+  DiagnoseArgs diag;
+  std::string diag_json;
+  auto* dg = app.add_subcommand(
+      "diagnose",
+      "find where the model and a recording disagree and name the missing physics (exit status: "
+      "0 no mismatch, 3 mismatch found, 4 inconclusive)");
+  dg->add_option("--config", diag.config, "nominal robot (YAML)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  dg->add_option("--recording", diag.recording, "recording CSV")
+      ->required()
+      ->check(CLI::ExistingFile);
+  dg->add_option("--validate", diag.validate,
+                 "second recording of the same robot for held-out prediction (else K-fold CV)")
+      ->check(CLI::ExistingFile);
+  auto* dg_json = dg->add_option("--json", diag_json,
+                                 "JSON report: to FILE, or on stdout instead of the text when "
+                                 "given without a value or as '-'")
+                      ->expected(0, 1);
+  dg->add_option("--html", diag.html, "HTML report to write (one self-contained file)");
+  dg->add_option("--out", diag.out, "calibrated config carrying the named effects (YAML)");
+  dg->add_option("--estimate", diag.estimate,
+                 "parameters of the standard identification (as calibrate --estimate)")
+      ->delimiter(',');
+  dg->add_option("--noise-length", diag.noise_length,
+                 "length sigma, m (default: the recording's noise_length_m)")
+      ->check(CLI::PositiveNumber);
+  dg->add_option("--noise-laser", diag.noise_laser,
+                 "laser sigma, m (default: the recording's noise_laser_m)")
+      ->check(CLI::PositiveNumber);
+  dg->add_option("--noise-force", diag.noise_force,
+                 "tension sigma, N (default: the recording's noise_force_n)")
+      ->check(CLI::PositiveNumber);
+  dg->add_option("--seed", diag.seed, "seed of the bootstrap and the folds")->capture_default_str();
+  dg->add_option("--bootstrap", diag.bootstrap, "bootstrap resamples over poses")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100000));
+  dg->add_option("--folds", diag.folds, "K of K-fold cross-validation over poses")
+      ->capture_default_str()
+      ->check(CLI::Range(2, 100000));
+  dg->callback([&] {
+    command = "diagnose";
+    if (dg_json->count() > 0) {
+      if (diag_json.empty() || diag_json == "-") {
+        json = true;
+      } else {
+        diag.json_report = diag_json;
+      }
+    }
+    action = [&] { return diagnose(diag); };
+  });
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -258,7 +321,7 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
     out << result->human;
   }
   out.flush();
-  return 0;
+  return result->exit_status;
 }
 
 }  // namespace cdpr::fit

@@ -7,7 +7,9 @@
 namespace cdpr::fit {
 
 // Exit status: 0 success, 1 the input was refused or the work failed (the message on `err` says
-// why, naming the file, line and column where there is one), 2 command-line usage error.
+// why, naming the file, line and column where there is one), 2 command-line usage error; `diagnose`
+// also exits 3 when it found a mismatch (named or not) and 4 when the recording is too small to
+// tell (0 there means "no missing physics found").
 int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err);
 
 }  // namespace cdpr::fit

@@ -1,4 +1,5 @@
 // cdpr-fit design-poses and predict-accuracy: planning a calibration before measuring.
+#include <cmath>
 #include <sstream>
 
 #include "cdpr/calibration/pose_design.hpp"
@@ -24,8 +25,17 @@ Result<Output> design_poses(const DesignArgs& args) {
   if (!model.ok()) return model.status();
   PoseDesignOptions options;
   options.num_poses = args.count;
-  options.center = model->home.position;
-  options.half_extent = Eigen::Vector3d::Constant(args.half_extent);
+  if (std::isnan(args.half_extent)) {
+    fit_design_box_to_robot(*model, options);
+  } else {
+    options.center = model->home.position;
+    options.half_extent = Eigen::Vector3d::Constant(args.half_extent);
+  }
+  AccuracyBox test_box;
+  test_box.center = model->home.position;
+  test_box.half_extent = Eigen::Vector3d::Constant(args.test_half_extent);
+  options.accuracy_box = test_box;
+  if (args.criterion == "position") options.criterion = DesignCriterion::kPositionAccuracy;
   options.points_per_axis = args.points_per_axis;
   options.max_angle = args.max_angle;
   options.noise = args.noise;
@@ -42,7 +52,10 @@ Result<Output> design_poses(const DesignArgs& args) {
   list.metadata.set(recording::key::kDate, recording::utc_timestamp());
   list.metadata.set(recording::key::kConfigFile, args.config);
   list.metadata.set(recording::key::kConfigHash, hash_or_unknown(args.config));
-  list.metadata.set(recording::key::kSource, "cdpr-fit design-poses (D-optimal, home first)");
+  list.metadata.set(recording::key::kSource,
+                    options.criterion == DesignCriterion::kPositionAccuracy
+                        ? "cdpr-fit design-poses (position accuracy, home first)"
+                        : "cdpr-fit design-poses (D-optimal, home first)");
   list.poses = design->poses;
   if (Status s = recording::write_pose_list(list, args.out); !s.ok()) return s;
 
@@ -54,6 +67,8 @@ Result<Output> design_poses(const DesignArgs& args) {
               {"estimate", estimated_items(options.identification)},
               {"candidates", design->candidates},
               {"exchanges", design->exchanges},
+              {"criterion", args.criterion},
+              {"candidate_half_extent_m", to_json(Eigen::VectorXd(options.half_extent))},
               {"log_det", design->log_det},
               {"path_length", design->path_length},
               {"poses", poses_json(design->poses)}};
@@ -62,12 +77,18 @@ Result<Output> design_poses(const DesignArgs& args) {
     << design->candidates << " feasible candidates, " << design->exchanges << " exchanges, log det "
     << fmt(design->log_det, 6) << ", path " << fmt(design->path_length, 4) << " m)\nestimating:";
   for (const std::string& e : estimated_items(options.identification)) h << " " << e;
+  h << "\ncandidate box: +-" << fmt(options.half_extent.x(), 3) << " x "
+    << fmt(options.half_extent.y(), 3) << " x " << fmt(options.half_extent.z(), 3)
+    << " m around home; criterion " << args.criterion;
+  if (options.criterion == DesignCriterion::kPositionAccuracy) {
+    h << " (predicted position RMS over the test cube " << fmt(1e3 * design->position_rms_m, 3)
+      << " mm, D-optimal start " << fmt(1e3 * design->position_rms_d_optimal_m, 3) << " mm)";
+    out.json["position_rms_m"] = design->position_rms_m;
+    out.json["position_rms_d_optimal_m"] = design->position_rms_d_optimal_m;
+  }
   h << "\nwrote " << args.out << "\n";
   if (args.compare) {
-    AccuracyBox box;
-    box.center = model->home.position;
-    box.half_extent = Eigen::Vector3d::Constant(args.half_extent);
-    auto cmp = compare_pose_sets(cm, options, box, args.seed);
+    auto cmp = compare_pose_sets(cm, options, test_box, args.seed);
     if (!cmp.ok()) return with_context(cmp.status(), "comparing pose sets");
     nlohmann::json rows = nlohmann::json::array();
     h << "\npredicted accuracy (same size sets):\n"

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -20,6 +21,9 @@ namespace cdpr::fit {
 struct Output {
   nlohmann::json json;
   std::string human;
+  // The process exit status when the command succeeded: 0, or a finding the command reports
+  // through it (diagnose: 3 mismatch found, 4 inconclusive). 1 and 2 are kept for errors.
+  int exit_status = 0;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -74,7 +78,11 @@ struct DesignArgs {
   int count = 25;
   std::string out;                    // pose list CSV to write
   std::vector<std::string> estimate;  // parameters the design is for (as calibrate --estimate)
-  double half_extent = 0.156;         // m, half side of the cube of candidate positions
+  // m, half side of the cube of candidate positions around home; NaN: scaled to the frame
+  // (fit_design_box_to_robot, 0.4 x the anchors' half extent per axis)
+  double half_extent = std::numeric_limits<double>::quiet_NaN();
+  std::string criterion = "d-optimal";  // or "position": position accuracy over the test cube
+  double test_half_extent = 0.156;      // m, test cube (ISO 9283 style) for position/--compare
   int points_per_axis = 5;
   double max_angle = 0.2618;  // rad
   SensorNoise noise;
@@ -111,5 +119,30 @@ struct FitForceArgs {
   double gravity = std::numeric_limits<double>::quiet_NaN();  // NaN: metadata or 9.81
 };
 Result<Output> fit_force_sensor(const FitForceArgs& args);
+
+// ---------------------------------------------------------------------------------------------
+// diagnose (the mismatch locator, calibration/include/cdpr/calibration/diagnosis.hpp)
+// ---------------------------------------------------------------------------------------------
+struct DiagnoseArgs {
+  std::string config;       // nominal robot (YAML)
+  std::string recording;    // recording CSV
+  std::string validate;     // optional second recording for held-out prediction
+  std::string json_report;  // JSON report file to write (optional)
+  std::string html;         // HTML report file to write (optional)
+  std::string out;          // calibrated config YAML carrying the named effects (optional)
+  std::vector<std::string> estimate;  // as calibrate --estimate; empty = defaults
+  // Sensor sigmas replacing the recording's noise_* metadata; NaN = the recording's (or default).
+  double noise_length = std::numeric_limits<double>::quiet_NaN();  // m
+  double noise_laser = std::numeric_limits<double>::quiet_NaN();   // m
+  double noise_force = std::numeric_limits<double>::quiet_NaN();   // N
+  unsigned seed = 1;
+  int bootstrap = 100;
+  int folds = 5;
+};
+// Exit statuses of diagnose (Output::exit_status).
+inline constexpr int kExitNoMismatch = 0;
+inline constexpr int kExitMismatch = 3;
+inline constexpr int kExitInconclusive = 4;
+Result<Output> diagnose(const DiagnoseArgs& args);
 
 }  // namespace cdpr::fit

@@ -124,6 +124,42 @@ struct MismatchSummary {
   std::string Text() const;  // the findings and the tables as text
 };
 
+// The residual-space view of the screen, exposed for the bootstrap, cross-validation and pose
+// design of diagnosis.hpp. Rows follow the identification's order (per pose: lengths, lasers,
+// equilibrium, reference pose); everything is whitened (divided by the row's sigma).
+enum class ResidualKind { kLength, kLaser, kWrench, kReference };
+
+// One candidate effect of the library as regressor columns in residual space.
+struct CandidateColumns {
+  std::string id, name, family;
+  Eigen::MatrixXd X;  // rows x k, whitened
+};
+
+struct MismatchDesign {
+  std::vector<ResidualKind> kind;  // per row
+  std::vector<int> pose, index;    // per row: pose, and cable / laser / component
+  std::vector<int> pose_start;     // num_poses + 1: first row of each pose
+  Eigen::VectorXd residuals;       // whitened residuals (zero when built without residuals)
+  Eigen::VectorXd sigma_length;    // m, sigma of each length row (NaN elsewhere)
+  std::vector<std::string> geometry_names;
+  std::vector<Eigen::MatrixXd> jacobian_geometry;  // per pose: rows x P (estimated parameters)
+  std::vector<Eigen::MatrixXd> jacobian_pose;      // per pose: rows x 6 (zero for a fixed pose)
+  std::vector<CandidateColumns> candidates;        // the library (unprojected)
+
+  int num_rows() const { return static_cast<int>(kind.size()); }
+  int num_poses() const { return static_cast<int>(pose_start.size()) - 1; }
+};
+
+// The design at `model` and `poses` (e.g. an identification's estimate and poses). `residuals`
+// (optional, e.g. IdentificationReport::residuals) fill MismatchDesign::residuals and the length
+// sigmas; without them the residuals are zero and the length sigma is set.noise.sigma_length
+// (enough for pose design, where only the columns matter).
+Result<MismatchDesign> mismatch_design(const CalibratedModel& model, const MeasurementSet& set,
+                                       const std::vector<Pose>& poses,
+                                       const std::vector<PoseResiduals>* residuals,
+                                       const IdentificationOptions& options,
+                                       const MismatchOptions& mismatch = {});
+
 // Screens `report` (from identify(initial, set, options)) against `set`. Errors: kInvalidArgument
 // (sizes do not match), kFailedPrecondition (no residuals / dof <= 0), kInternal (the residual
 // layout does not match the Jacobian), and whatever geometry_information returns.

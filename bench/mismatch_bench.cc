@@ -1,0 +1,1040 @@
+// The concealed-effect benchmark of the mismatch locator (issue 7). See docs/mismatch-benchmark.md
+// and bench/mismatch.cmake for the command line.
+//
+// Data come from the virtual robot's physics (sim/physics.hpp): the true robot differs from the
+// nominal one in the frame anchors (the standard calibration case) and in ONE hidden effect (or a
+// pair, or none), the encoders are homed with the nominal model, and run_lockstep commands the 25
+// designed poses with the NOMINAL model and reads the channels through the nominal reading models.
+// diagnose(nominal, recording) runs blind; the benchmark maps what it names (effect families) to
+// the effect that was switched on (kEffects below: the one mapping table) and counts.
+//
+// Magnitudes. Every effect is stated by its physical value at a realistic size and by the residual
+// it leaves after the standard identification, in multiples of the sensor noise: noise-free data
+// with the effect, the standard identification, the RMS of the normalised residuals of the most
+// affected channel (cable lengths, laser, equilibrium). The SMALL size scales the effect's
+// parameter so that this residual is about 3 (secant steps on the scale). An effect whose
+// realistic residual is below 0.5 sigma is "absorbed" by the standard calibration.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <numbers>
+#include <optional>
+#include <set>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "cdpr/calibration/diagnosis.hpp"
+#include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/pose_design.hpp"
+#include "cdpr/calibration/simulate.hpp"
+#include "cdpr/calibration/winch.hpp"
+#include "cdpr/recording/recording.hpp"
+#include "cdpr/sim/lockstep_io.hpp"
+#include "cdpr/sim/physics.hpp"
+#include "cdpr/sim/scenario.hpp"
+#include "identification_scenario.hpp"
+
+namespace {
+
+using cdpr::CalibratedModel;
+using cdpr::Diagnosis;
+using cdpr::MeasurementSet;
+using cdpr::Pose;
+using cdpr::RobotModel;
+using cdpr::sim::HiddenEffects;
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+constexpr double kDwellS = 20.0;  // scenario time per pose (settle + record), s: 25 poses = 500 s
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+template <typename T>
+T must(cdpr::Result<T> r, const char* what) {
+  if (!r.ok()) {
+    std::fprintf(stderr, "%s failed: %s\n", what, r.status().to_string().c_str());
+    std::exit(1);
+  }
+  return std::move(r).value();
+}
+
+cdpr::SensorNoise bench_noise() {
+  cdpr::SensorNoise n;
+  n.sigma_laser = 1e-3;
+  n.sigma_length = 1e-4;
+  n.sigma_force = 1.0;
+  return n;
+}
+
+// ------------------------------------------------------------------------------------------------
+// The robots.
+// ------------------------------------------------------------------------------------------------
+
+struct Robot {
+  std::string name;
+  CalibratedModel nominal;
+  RobotModel truth;  // true anchors, encoder zeros homed with the nominal model (winch offsets)
+  std::vector<Pose> poses;
+  double recording_s = 0.0;  // scenario time of the whole recording
+  // Realistic sizes that depend on the robot.
+  double heavy_mass_per_length = 0.0;  // kg/m (sag)
+  double pulley_radius_error = 0.0;    // m
+  double thermal_alpha = 0.0;          // 1/K
+};
+
+// Folds the homing offsets (truth.readings.length_offsets) into the true winches, so that the
+// physics' encoders read what a robot homed with the nominal model reads (the sim has no homing).
+RobotModel physics_truth(const CalibratedModel& homed) {
+  RobotModel t = homed.robot;
+  for (int i = 0; i < t.num_cables(); ++i) {
+    t.winches[static_cast<std::size_t>(i)].length_offset += homed.readings.length_offsets(i);
+  }
+  return t;
+}
+
+Robot make_robot(const std::string& which, bool quick) {
+  Robot r;
+  cdpr::PoseDesignOptions d;
+  d.noise = bench_noise();
+  d.num_poses = 25;
+  if (which == "mini") {
+    const cdpr::scenario::Scenario s = cdpr::scenario::mini_config_scenario();
+    r.name = "MINI";
+    r.nominal = s.nominal;
+    r.truth = physics_truth(s.truth);
+    d.half_extent = Eigen::Vector3d::Constant(0.156);
+    d.exchange_passes = quick ? 1 : 4;
+    r.heavy_mass_per_length = 0.010;  // 1.5 mm steel wire rope
+    r.pulley_radius_error = 0.002;    // 25 mm nominal, 27 mm effective
+    r.thermal_alpha = -1.2e-5;        // Dyneema-like polymer
+  } else {
+    const cdpr::scenario::Scenario s = cdpr::scenario::large_scenario();
+    r.name = "LARGE";
+    r.nominal = s.nominal;
+    r.truth = physics_truth(s.truth);
+    d.half_extent = Eigen::Vector3d(4.0, 2.8, 1.0);
+    d.exchange_passes = quick ? 1 : 2;
+    r.heavy_mass_per_length = 0.10;  // 5 mm steel wire rope
+    r.pulley_radius_error = 0.005;   // 100 mm nominal, 105 mm effective
+    r.thermal_alpha = 1.2e-5;        // steel
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  const cdpr::PoseDesign design = must(cdpr::design_poses(r.nominal, d), "pose design");
+  r.poses = design.poses;
+  r.recording_s = kDwellS * static_cast<double>(r.poses.size());
+  std::printf("[%s] pose design: %zu poses from %d candidates, %.1f s\n", r.name.c_str(),
+              r.poses.size(), design.candidates, seconds_since(t0));
+  return r;
+}
+
+// ------------------------------------------------------------------------------------------------
+// The effects, and THE mapping table: which families named by diagnose() count as the effect.
+// ------------------------------------------------------------------------------------------------
+
+// One true parameter to compare with a fitted one: EffectParameter::name equal to one of `names`
+// (shared) or to one of them + "_" + a 1-based cable number (per cable).
+struct TrueParameter {
+  std::vector<std::string> names;
+  std::function<double(int cable)> value;  // cable -1: shared
+};
+
+// -2: no match; -1: shared; else the 0-based cable.
+int match_parameter(const std::string& fitted, const TrueParameter& tp) {
+  for (const std::string& n : tp.names) {
+    if (fitted == n) return -1;
+    if (fitted.size() > n.size() + 1 && fitted.compare(0, n.size(), n) == 0 &&
+        fitted[n.size()] == '_' && std::isdigit(static_cast<unsigned char>(fitted[n.size() + 1]))) {
+      return std::atoi(fitted.c_str() + n.size() + 1) - 1;
+    }
+  }
+  return -2;
+}
+
+struct Effect {
+  std::string key;                    // command line name
+  std::string title;                  // in words
+  std::vector<std::string> families;  // diagnose() families that name it (mapping table)
+  // Puts the effect at `scale` x its realistic size into the hidden effects / true robot.
+  std::function<void(const Robot&, double scale, HiddenEffects&, RobotModel&)> apply;
+  // The physical value at `scale`, for people.
+  std::function<std::string(const Robot&, double scale)> describe;
+  // The true parameter at `scale` (no names: no comparison).
+  std::function<TrueParameter(const Robot&, double scale)> truth;
+};
+
+// Per-cable sign patterns (fixed, so every seed sees the same truth).
+constexpr double kPattern[8] = {1.0, -1.0, 0.75, -0.5, -1.0, 1.0, -0.75, 0.5};
+double pattern(int i) {
+  return kPattern[i % 8];
+}
+
+std::vector<double> per_cable(int m, double amplitude) {
+  std::vector<double> v(static_cast<std::size_t>(m));
+  for (int i = 0; i < m; ++i) v[static_cast<std::size_t>(i)] = amplitude * pattern(i);
+  return v;
+}
+
+std::string fmt(const char* f, auto... a) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, f, a...);
+  return buf;
+}
+
+const std::vector<Effect>& effects() {
+  static const std::vector<Effect> list = [] {
+    std::vector<Effect> e;
+    // Hooke: the true EA is 25 % below the nominal (data sheet) value.
+    e.push_back({"hooke",
+                 "cable elasticity (Hooke EA)",
+                 {"elasticity"},
+                 [](const Robot&, double s, HiddenEffects& h, RobotModel& t) {
+                   const double ea = t.cables[0].ea;
+                   h.hooke_ea.values = {1.0 / (1.0 / ea + s * (1.0 / (0.75 * ea) - 1.0 / ea))};
+                 },
+                 [](const Robot& r, double s) {
+                   const double ea = r.truth.cables[0].ea;
+                   const double t = 1.0 / (1.0 / ea + s * (1.0 / (0.75 * ea) - 1.0 / ea));
+                   return fmt("EA %.1f kN (nominal %.1f kN)", t / 1e3, ea / 1e3);
+                 },
+                 [](const Robot& r, double s) {
+                   const double ea = r.truth.cables[0].ea;
+                   const double t = 1.0 / (1.0 / ea + s * (1.0 / (0.75 * ea) - 1.0 / ea));
+                   return TrueParameter{{"EA"}, [t](int) { return t; }};
+                 }});
+    // Polynomial (nonlinear) polymer elongation: dL = Hooke + beta F^2 L, the tangent compliance
+    // 20 % higher at f_max than at zero load (beta > 0 keeps the law increasing for every F > 0).
+    e.push_back({"polynomial",
+                 "nonlinear cable elongation (polynomial)",
+                 {"nonlinear elasticity"},
+                 [](const Robot&, double s, HiddenEffects& h, RobotModel& t) {
+                   const double ea = t.cables[0].ea, fmax = t.cables[0].f_max;
+                   cdpr::PolynomialSurface p;
+                   // Hooke's F L / (EA + F) to third order in F / EA (exact to < 2 um on LARGE)
+                   // plus the nonlinear term: no difference from the nominal law at beta = 0.
+                   p.order = 4;
+                   p.coefficients.assign(15, 0.0);
+                   p.coefficients[4] = 1.0 / ea;                                  // L F
+                   p.coefficients[8] = -1.0 / (ea * ea) + s * 0.1 / (ea * fmax);  // L F^2
+                   p.coefficients[13] = 1.0 / (ea * ea * ea);                     // L F^3
+                   h.polynomial = p;
+                 },
+                 [](const Robot& r, double s) {
+                   return fmt("tangent compliance +%.0f %% at %.0f N vs 0 N", 20.0 * s,
+                              r.truth.cables[0].f_max);
+                 },
+                 [](const Robot& r, double s) {
+                   const double k2 = s * 0.1 / (r.truth.cables[0].ea * r.truth.cables[0].f_max);
+                   return TrueParameter{{"k2"}, [k2](int) { return k2; }};
+                 }});
+    // Creep: the compliance grows by 10 % of 1/EA over the recording (log law, tau 10 s).
+    e.push_back({"creep",
+                 "cable creep",
+                 {"creep", "transmission drift", "encoder drift"},
+                 [](const Robot& r, double s, HiddenEffects& h, RobotModel& t) {
+                   const double ea = t.cables[0].ea;
+                   cdpr::sim::CreepEffect c;
+                   c.tau_s = 10.0;
+                   c.coefficient = s * 0.1 / (ea * std::log1p(r.recording_s / c.tau_s));
+                   h.creep = c;
+                 },
+                 [](const Robot&, double s) {
+                   return fmt("compliance +%.1f %% of 1/EA over the recording (tau 10 s)",
+                              10.0 * s);
+                 },
+                 [](const Robot&, double) { return TrueParameter{}; }});
+    // Sag of a heavy (steel) cable: the truth's cables get its mass per length.
+    e.push_back({"sag",
+                 "cable sag (heavy cable)",
+                 {"sag"},
+                 [](const Robot& r, double s, HiddenEffects& h, RobotModel& t) {
+                   h.sag = true;
+                   for (auto& c : t.cables) c.mass_per_length = s * r.heavy_mass_per_length;
+                 },
+                 [](const Robot& r, double s) {
+                   return fmt("%.1f g/m (nominal %.1f g/m)", 1e3 * s * r.heavy_mass_per_length,
+                              1e3 * r.nominal.robot.cables[0].mass_per_length);
+                 },
+                 [](const Robot& r, double s) {
+                   const double v = s * r.heavy_mass_per_length;
+                   return TrueParameter{{"mass_per_length"}, [v](int) { return v; }};
+                 }});
+    e.push_back({"pulley",
+                 "pulley radius",
+                 {"pulley radius", "pulley"},
+                 [](const Robot& r, double s, HiddenEffects& h, RobotModel& t) {
+                   h.pulley_radius.values = {t.pulleys[0].radius + s * r.pulley_radius_error};
+                 },
+                 [](const Robot& r, double s) {
+                   return fmt("%.1f mm (nominal %.1f mm)",
+                              1e3 * (r.truth.pulleys[0].radius + s * r.pulley_radius_error),
+                              1e3 * r.truth.pulleys[0].radius);
+                 },
+                 [](const Robot&, double) { return TrueParameter{}; }});
+    // Drum transmission scale: 0.2 % on every drum, signs and sizes per cable (kPattern).
+    e.push_back(
+        {"drum",
+         "drum transmission scale",
+         {"drum scale"},
+         [](const Robot&, double s, HiddenEffects& h, RobotModel& t) {
+           h.transmission_scale.values = per_cable(t.num_cables(), s * 0.002);
+         },
+         [](const Robot&, double s) { return fmt("up to %.3f %% per drum (pattern +-)", 0.2 * s); },
+         [](const Robot&, double s) {
+           return TrueParameter{{"s"}, [s](int i) { return s * 0.002 * pattern(i); }};
+         }});
+    e.push_back({"encoder",
+                 "encoder zero offsets",
+                 {"encoder offset"},
+                 [](const Robot&, double s, HiddenEffects& h, RobotModel& t) {
+                   h.encoder_zero_offset.values = per_cable(t.num_cables(), s * 0.002);
+                 },
+                 [](const Robot&, double s) { return fmt("up to %.2f mm per cable", 2.0 * s); },
+                 [](const Robot&, double) { return TrueParameter{}; }});
+    e.push_back({"force_gain",
+                 "force sensor gain",
+                 {"force sensor gain"},
+                 [](const Robot&, double s, HiddenEffects& h, RobotModel& t) {
+                   h.force_gain_error.values = per_cable(t.num_cables(), s * 0.02);
+                 },
+                 [](const Robot&, double s) { return fmt("up to %.2f %% per sensor", 2.0 * s); },
+                 [](const Robot&, double s) {
+                   return TrueParameter{{"g", "gain", "force_gain"},
+                                        [s](int i) { return s * 0.02 * pattern(i); }};
+                 }});
+    e.push_back({"laser_offset",
+                 "laser mount offset",
+                 {"laser mounting"},
+                 [](const Robot&, double s, HiddenEffects& h, RobotModel&) {
+                   h.laser_mount_offset = s * Eigen::Vector3d(0.002, -0.002, 0.002);
+                 },
+                 [](const Robot&, double s) { return fmt("%.2f mm on each axis", 2.0 * s); },
+                 [](const Robot&, double) { return TrueParameter{}; }});
+    e.push_back({"laser_tilt",
+                 "laser mount tilt",
+                 {"laser mounting"},
+                 [](const Robot&, double s, HiddenEffects& h, RobotModel&) {
+                   h.laser_mount_tilt = s * Eigen::Vector3d(0.5 * kDeg, -0.5 * kDeg, 0.0);
+                 },
+                 [](const Robot&, double s) { return fmt("%.2f deg about x and y", 0.5 * s); },
+                 [](const Robot&, double) { return TrueParameter{}; }});
+    e.push_back({"plane_tilt",
+                 "target plane tilt",
+                 {"laser plane"},
+                 [](const Robot&, double s, HiddenEffects& h, RobotModel&) {
+                   h.plane_tilt = s * Eigen::Vector3d(0.2 * kDeg, 0.0, 0.0);
+                 },
+                 [](const Robot&, double s) { return fmt("%.2f deg", 0.2 * s); },
+                 [](const Robot&, double) { return TrueParameter{}; }});
+    // Thermal drift: 3 K warming over the recording.
+    e.push_back({"thermal",
+                 "thermal drift",
+                 {"thermal drift", "transmission drift", "encoder drift"},
+                 [](const Robot& r, double s, HiddenEffects& h, RobotModel&) {
+                   cdpr::sim::ThermalEffect th;
+                   th.alpha = r.thermal_alpha;
+                   th.rate_k_per_s = s * 3.0 / r.recording_s;
+                   h.thermal = th;
+                 },
+                 [](const Robot& r, double s) {
+                   return fmt("alpha %.1e /K, %.2f K over the recording", r.thermal_alpha, 3.0 * s);
+                 },
+                 [](const Robot&, double) { return TrueParameter{}; }});
+    return e;
+  }();
+  return list;
+}
+
+const Effect* find_effect(const std::string& key) {
+  for (const Effect& e : effects())
+    if (e.key == key) return &e;
+  return nullptr;
+}
+
+// Which true effect (key) a named family stands for, given the effects that are present; "" when
+// it names none of them.
+std::string true_effect_named(const std::string& family, const std::vector<std::string>& present) {
+  for (const std::string& k : present) {
+    const Effect* e = find_effect(k);
+    if (e && std::find(e->families.begin(), e->families.end(), family) != e->families.end()) {
+      return k;
+    }
+  }
+  return "";
+}
+
+// ------------------------------------------------------------------------------------------------
+// Cases and data.
+// ------------------------------------------------------------------------------------------------
+
+struct Component {
+  std::string key;
+  double scale = 1.0;
+};
+
+struct Case {
+  std::string label;  // "hooke @realistic", "hooke+drum", "null"
+  std::string group;  // "realistic", "3x noise", "pair", "null", "absorbed"
+  std::vector<Component> parts;
+  // Components that the standard calibration absorbs (< 0.5 sigma at this size): naming them is
+  // not a false finding, and not naming them is not a miss.
+  std::vector<std::string> absorbed;
+  std::vector<std::string> keys() const {
+    std::vector<std::string> k;
+    for (const auto& p : parts) k.push_back(p.key);
+    return k;
+  }
+  std::vector<std::string> required() const {
+    std::vector<std::string> k;
+    for (const auto& p : parts)
+      if (std::find(absorbed.begin(), absorbed.end(), p.key) == absorbed.end()) k.push_back(p.key);
+    return k;
+  }
+};
+
+struct TruthSetup {
+  cdpr::sim::Scenario scenario;
+  RobotModel truth;
+};
+
+cdpr::Result<TruthSetup> make_truth(const Robot& r, const std::vector<Component>& parts,
+                                    bool noise) {
+  TruthSetup t;
+  cdpr::sim::Scenario& s = t.scenario;
+  s.name = r.name;
+  if (noise) {
+    const RobotModel& nom = r.nominal.robot;
+    s.noise.encoder_counts =
+        bench_noise().sigma_length / cdpr::winch_metres_per_count(nom.winches[0]);
+    s.noise.force_raw = bench_noise().sigma_force * std::abs(nom.force_sensors[0].gain);
+    s.noise.laser = bench_noise().sigma_laser;
+  }
+  RobotModel base = r.truth;
+  for (const Component& c : parts) find_effect(c.key)->apply(r, c.scale, s.effects, base);
+  auto truth = cdpr::sim::resolve_truth(s, base);
+  if (!truth.ok()) return truth.status();
+  t.truth = std::move(*truth);
+  return t;
+}
+
+cdpr::Result<MeasurementSet> record(const Robot& r, const TruthSetup& t,
+                                    const std::vector<Pose>& poses, std::uint64_t seed) {
+  auto physics = cdpr::sim::Physics::create(t.truth, t.scenario, seed);
+  if (!physics.ok()) return physics.status();
+  cdpr::sim::LockstepOptions lo;
+  lo.dwell_s = kDwellS;
+  auto samples = cdpr::sim::run_lockstep(*physics, r.nominal.robot, poses, lo);
+  if (!samples.ok()) return samples.status();
+  auto rec = cdpr::sim::make_recording(*samples, r.nominal.robot, t.scenario,
+                                       cdpr::sim::RecordingProvenance{});
+  if (!rec.ok()) return rec.status();
+  auto set = cdpr::recording::to_measurement_set(*rec, bench_noise());
+  if (!set.ok()) return set.status();
+  set->noise = bench_noise();  // the stated sensor noise (also for noise-free calibration runs)
+  return set;
+}
+
+// The residual the effect leaves after the standard identification, noise-free, in sigmas: RMS of
+// the normalised residuals of the most affected channel.
+struct Residual {
+  double sigmas = 0.0;
+  std::string channel;
+  bool ok = false;
+  std::string error;
+};
+
+Residual leftover(const Robot& r, const std::vector<Component>& parts) {
+  Residual out;
+  auto t = make_truth(r, parts, /*noise=*/false);
+  if (!t.ok()) {
+    out.error = t.status().to_string();
+    return out;
+  }
+  auto set = record(r, *t, r.poses, 1);
+  if (!set.ok()) {
+    out.error = set.status().to_string();
+    return out;
+  }
+  auto rep = cdpr::identify(r.nominal, *set, cdpr::IdentificationOptions{});
+  if (!rep.ok()) {
+    out.error = rep.status().to_string();
+    return out;
+  }
+  double ss[3] = {0, 0, 0};
+  int n[3] = {0, 0, 0};
+  auto add = [&](int c, const auto& v) {
+    for (Eigen::Index k = 0; k < v.size(); ++k) {
+      if (std::isfinite(v(k))) {
+        ss[c] += v(k) * v(k);
+        ++n[c];
+      }
+    }
+  };
+  for (const auto& p : rep->residuals) {
+    add(0, p.length_normalized);
+    add(1, p.laser_normalized);
+    add(2, p.wrench_normalized);
+  }
+  const char* names[3] = {"lengths", "laser", "equilibrium"};
+  for (int c = 0; c < 3; ++c) {
+    const double rms = n[c] ? std::sqrt(ss[c] / n[c]) : 0.0;
+    if (rms >= out.sigmas) {
+      out.sigmas = rms;
+      out.channel = names[c];
+    }
+  }
+  out.ok = true;
+  return out;
+}
+
+struct Magnitude {
+  std::string key;
+  Residual realistic;
+  double small_scale = 0.0;  // scale at ~3 sigma
+  Residual small;
+  bool absorbed = false;
+};
+
+Magnitude calibrate_magnitude(const Robot& r, const std::string& key) {
+  Magnitude m;
+  m.key = key;
+  m.realistic = leftover(r, {{key, 1.0}});
+  if (!m.realistic.ok) return m;
+  if (m.realistic.sigmas < 0.5) {
+    m.absorbed = true;
+    return m;
+  }
+  // Secant steps on the scale (the residual is close to linear in it for small effects).
+  double scale = 3.0 / m.realistic.sigmas;
+  double prev_scale = 1.0, prev_res = m.realistic.sigmas;
+  for (int it = 0; it < 4; ++it) {
+    m.small = leftover(r, {{key, scale}});
+    m.small_scale = scale;
+    if (!m.small.ok || std::abs(m.small.sigmas - 3.0) < 0.15) break;
+    const double slope = (m.small.sigmas - prev_res) / (scale - prev_scale);
+    double next = (slope > 0 && std::isfinite(slope)) ? scale + (3.0 - m.small.sigmas) / slope
+                                                      : scale * 3.0 / m.small.sigmas;
+    if (!(next > 0)) next = scale * 3.0 / std::max(m.small.sigmas, 1e-6);
+    prev_scale = scale;
+    prev_res = m.small.sigmas;
+    scale = next;
+  }
+  return m;
+}
+
+// ------------------------------------------------------------------------------------------------
+// One blind run.
+// ------------------------------------------------------------------------------------------------
+
+struct RunResult {
+  bool ok = false;
+  std::string error;
+  std::vector<std::string> named_families;   // accepted, after the separation check if any
+  std::vector<std::string> screen_families;  // locate_mismatch's significant top candidate
+  Diagnosis::Verdict verdict = Diagnosis::Verdict::kNoMismatch;
+  bool all_true_named = false, any_true_named = false, extra_named = false;
+  bool confounded = false, separation_tried = false, separated = false;
+  double held_before = 0, held_after = 0;
+  double len_rms_before = 0, len_rms_after = 0;  // "cable lengths" channel, m
+  double param_error = std::nan("");             // RMS relative error of the fitted parameters
+  double seconds = 0;
+  std::string text;  // Diagnosis::Text() (printed with --verbose)
+};
+
+std::vector<std::string> accepted_families(const Diagnosis& d) {
+  std::vector<std::string> f;
+  for (const auto& a : d.accepted)
+    if (std::find(f.begin(), f.end(), a.family) == f.end()) f.push_back(a.family);
+  return f;
+}
+
+double parameter_error(const Diagnosis& d, const Robot& r, const Case& c) {
+  double ss = 0;
+  int n = 0;
+  for (const Component& part : c.parts) {
+    const TrueParameter tp = find_effect(part.key)->truth(r, part.scale);
+    if (tp.names.empty()) continue;
+    for (const auto& a : d.accepted) {
+      for (const auto& p : a.parameters) {
+        const int cable = match_parameter(p.name, tp);
+        if (cable == -2) continue;
+        const double t = tp.value(cable);
+        if (!std::isfinite(t) || t == 0.0) continue;
+        const double e = (p.value - t) / t;
+        ss += e * e;
+        ++n;
+      }
+    }
+  }
+  return n ? std::sqrt(ss / n) : std::nan("");
+}
+
+// Scores the named families against the case: every required (not absorbed) effect named, and
+// nothing named that is not present.
+void score(RunResult& out, const std::vector<std::string>& families, const Case& c) {
+  const std::vector<std::string> present = c.keys(), required = c.required();
+  std::set<std::string> hit;
+  out.extra_named = false;
+  for (const auto& f : families) {
+    const std::string k = true_effect_named(f, present);
+    if (k.empty())
+      out.extra_named = true;
+    else
+      hit.insert(k);
+  }
+  out.any_true_named = !hit.empty();
+  out.all_true_named = !required.empty();
+  for (const auto& k : required) out.all_true_named = out.all_true_named && hit.count(k) > 0;
+}
+
+RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::DiagnosisOptions& dopt) {
+  RunResult out;
+  const auto t0 = std::chrono::steady_clock::now();
+  std::vector<Component> parts;
+  for (const auto& p : c.parts) parts.push_back(p);
+  auto t = make_truth(r, parts, /*noise=*/true);
+  if (!t.ok()) {
+    out.error = t.status().to_string();
+    return out;
+  }
+  const std::uint64_t noise_seed = 1000 + static_cast<std::uint64_t>(seed);
+  auto set = record(r, *t, r.poses, noise_seed);
+  if (!set.ok()) {
+    out.error = "simulation: " + set.status().to_string();
+    return out;
+  }
+  auto d = cdpr::diagnose(r.nominal, *set, nullptr, cdpr::IdentificationOptions{}, dopt);
+  if (!d.ok()) {
+    out.error = "diagnose: " + d.status().to_string();
+    return out;
+  }
+  out.ok = true;
+  out.text = d->Text();
+  out.verdict = d->verdict;
+  out.held_before = d->held_out_rms_before;
+  out.held_after = d->held_out_rms_after;
+  for (const auto& ch : d->channels) {
+    if (ch.channel == "cable lengths") {
+      out.len_rms_before = ch.before;
+      out.len_rms_after = ch.after;
+    }
+  }
+  if (const cdpr::CandidateScreen* b = d->screen.best()) out.screen_families = {b->family};
+  out.named_families = accepted_families(*d);
+  out.param_error = parameter_error(*d, r, c);
+  const std::vector<std::string> present = c.keys();
+  score(out, out.named_families, c);
+
+  // "A or B, confounded": correct only if A or B is true AND the proposed separating poses,
+  // simulated with the same truth and appended, make the re-run name the true one.
+  // Only a finding counts: with the verdict "no mismatch" the listed pairs are not a finding.
+  out.confounded = d->mismatch_found() && !d->confounded.empty();
+  // A pair matters when exactly one side is a present effect: when both are (the two drift families
+  // of thermal drift, or the two effects of a pair case), "A or B" is right either way.
+  auto matters = [&](const cdpr::ConfoundedFinding& cf) {
+    const bool a = !true_effect_named(cf.first_fit.family, present).empty();
+    const bool b = !true_effect_named(cf.second_fit.family, present).empty();
+    return a != b;
+  };
+  for (const cdpr::ConfoundedFinding& cf : d->confounded) {
+    if (!out.confounded) break;
+    if (!matters(cf) || cf.separating_poses.empty()) continue;
+    out.separation_tried = true;
+    std::vector<Pose> more = r.poses;
+    more.insert(more.end(), cf.separating_poses.begin(), cf.separating_poses.end());
+    auto set2 = record(r, *t, more, noise_seed);
+    if (!set2.ok()) break;  // the separating poses cannot be measured: not separated
+    auto d2 = cdpr::diagnose(r.nominal, *set2, nullptr, cdpr::IdentificationOptions{}, dopt);
+    if (!d2.ok()) break;
+    RunResult again;
+    const std::vector<std::string> fam2 = accepted_families(*d2);
+    score(again, fam2, c);
+    out.separated = again.any_true_named && !again.extra_named;
+    out.param_error = parameter_error(*d2, r, c);  // the fit of the re-run names the effect
+    out.named_families = fam2;
+    out.all_true_named = again.all_true_named;
+    out.any_true_named = again.any_true_named;
+    out.extra_named = again.extra_named;
+    break;
+  }
+  if (out.confounded && !out.separated) {
+    // A confounded finding whose separation failed (or was never proposed) is not correct.
+    bool involves_true = false;
+    for (const auto& cf : d->confounded) involves_true = involves_true || matters(cf);
+    if (involves_true) out.all_true_named = out.any_true_named = false;
+  }
+  out.seconds = seconds_since(t0);
+  return out;
+}
+
+// ------------------------------------------------------------------------------------------------
+// A pool of worker threads over a job list.
+// ------------------------------------------------------------------------------------------------
+
+void parallel_for(int n, int workers, const std::function<void(int)>& job) {
+  std::atomic<int> next{0};
+  std::vector<std::thread> pool;
+  for (int w = 0; w < workers; ++w) {
+    pool.emplace_back([&] {
+      for (int i = next++; i < n; i = next++) job(i);
+    });
+  }
+  for (auto& t : pool) t.join();
+}
+
+// ------------------------------------------------------------------------------------------------
+// Printing.
+// ------------------------------------------------------------------------------------------------
+
+struct CaseStats {
+  const Case* c = nullptr;
+  std::vector<RunResult> runs;
+  int ok() const {
+    int n = 0;
+    for (const auto& r : runs) n += r.ok;
+    return n;
+  }
+};
+
+double pct(int a, int b) {
+  return b > 0 ? 100.0 * a / b : std::nan("");
+}
+
+double median(std::vector<double> v) {
+  v.erase(std::remove_if(v.begin(), v.end(), [](double x) { return !std::isfinite(x); }), v.end());
+  if (v.empty()) return std::nan("");
+  std::sort(v.begin(), v.end());
+  const std::size_t h = v.size() / 2;
+  return v.size() % 2 ? v[h] : 0.5 * (v[h - 1] + v[h]);
+}
+
+void print_robot(const Robot& r, const Residual& baseline, const std::vector<Magnitude>& mags,
+                 const std::vector<CaseStats>& stats, double seconds, int seeds) {
+  std::printf(
+      "\n== %s: magnitudes (residual left after the standard identification, noise-free, "
+      "in sigmas of the most affected channel) ==\n",
+      r.name.c_str());
+  std::printf("  %-13s %-52s %9s %-12s %7s %9s\n", "effect", "realistic value", "residual",
+              "channel", "3x scale", "residual");
+  std::printf("  %-13s %-52s %8.2fs %-12s\n", "(none)", "anchors only: the floor of the method",
+              baseline.sigmas, baseline.channel.c_str());
+  for (const Magnitude& m : mags) {
+    const Effect* e = find_effect(m.key);
+    if (!m.realistic.ok) {
+      std::printf("  %-13s %-52s failed: %s\n", m.key.c_str(), e->describe(r, 1.0).c_str(),
+                  m.realistic.error.c_str());
+      continue;
+    }
+    if (m.absorbed) {
+      std::printf("  %-13s %-52s %8.2fs %-12s absorbed\n", m.key.c_str(),
+                  e->describe(r, 1.0).c_str(), m.realistic.sigmas, m.realistic.channel.c_str());
+    } else {
+      std::printf("  %-13s %-52s %8.2fs %-12s %7.3f %8.2fs  (%s)\n", m.key.c_str(),
+                  e->describe(r, 1.0).c_str(), m.realistic.sigmas, m.realistic.channel.c_str(),
+                  m.small_scale, m.small.sigmas, e->describe(r, m.small_scale).c_str());
+    }
+  }
+
+  // Confusion matrix: rows = cases, columns = named families.
+  std::set<std::string> cols;
+  for (const auto& s : stats)
+    for (const auto& run : s.runs)
+      for (const auto& f : run.named_families) cols.insert(f);
+  std::printf("\n== %s: confusion matrix (runs naming each family; a run may name several) ==\n",
+              r.name.c_str());
+  std::printf("  %-38s %4s %5s", "true effect", "runs", "none");
+  std::vector<std::string> colv(cols.begin(), cols.end());
+  for (std::size_t j = 0; j < colv.size(); ++j) std::printf(" %5s", fmt("F%zu", j + 1).c_str());
+  std::printf(" %5s %5s\n", "fail", "conf");
+  for (const auto& s : stats) {
+    int none = 0, fail = 0, conf = 0;
+    std::vector<int> cnt(colv.size(), 0);
+    for (const auto& run : s.runs) {
+      if (!run.ok) {
+        ++fail;
+        continue;
+      }
+      if (run.named_families.empty()) ++none;
+      conf += run.confounded;
+      for (const auto& f : run.named_families) {
+        cnt[static_cast<std::size_t>(std::find(colv.begin(), colv.end(), f) - colv.begin())]++;
+      }
+    }
+    std::printf("  %-38s %4zu %5d", s.c->label.c_str(), s.runs.size(), none);
+    for (int v : cnt) std::printf(" %5d", v);
+    std::printf(" %5d %5d\n", fail, conf);
+  }
+  for (std::size_t j = 0; j < colv.size(); ++j)
+    std::printf("    F%zu = %s\n", j + 1, colv[j].c_str());
+
+  // Per-case detail.
+  std::printf("\n== %s: per case (medians over the runs) ==\n", r.name.c_str());
+  std::printf("  %-38s %7s %7s %7s %7s %5s %7s %9s %9s %9s %9s %7s %8s %6s\n", "case", "named%",
+              "any%", "extra%", "screen%", "conf", "sep ok", "len b mm", "len a mm", "held b mm",
+              "held a mm", "reduc%", "par err%", "s/run");
+  for (const auto& s : stats) {
+    int ok = 0, all = 0, any = 0, extra = 0, scr = 0, conf = 0, tried = 0, sep = 0, unexpl = 0;
+    std::vector<double> lb, la, hb, ha, red, pe, sec;
+    for (const auto& run : s.runs) {
+      if (!run.ok) continue;
+      ++ok;
+      conf += run.confounded;
+      unexpl += run.extra_named || run.verdict == Diagnosis::Verdict::kMismatchUnexplained;
+      tried += run.separation_tried;
+      sep += run.separated;
+      all += run.all_true_named && !run.extra_named;
+      any += run.any_true_named;
+      extra += run.extra_named;
+      RunResult tmp;
+      score(tmp, run.screen_families, *s.c);
+      scr += s.c->parts.empty() ? run.screen_families.empty() : tmp.any_true_named;
+      lb.push_back(1e3 * run.len_rms_before);
+      la.push_back(1e3 * run.len_rms_after);
+      hb.push_back(1e3 * run.held_before);
+      ha.push_back(1e3 * run.held_after);
+      red.push_back(run.held_before > 0 ? 100.0 * (1.0 - run.held_after / run.held_before)
+                                        : std::nan(""));
+      pe.push_back(100.0 * run.param_error);
+      sec.push_back(run.seconds);
+    }
+    // Null data: correct = nothing named and no "mismatch unexplained" verdict.
+    const double named = s.c->parts.empty() ? pct(ok - unexpl, ok) : pct(all, ok);
+    std::printf(
+        "  %-38s %7.0f %7.0f %7.0f %7.0f %5d %7s %9.4f %9.4f %9.4f %9.4f %7.1f %8.1f %6.1f\n",
+        s.c->label.c_str(), named, pct(any, ok), pct(extra, ok), pct(scr, ok), conf,
+        fmt("%d/%d", sep, tried).c_str(), median(lb), median(la), median(hb), median(ha),
+        median(red), median(pe), median(sec));
+  }
+  std::printf(
+      "  named%% = exactly the true effect(s) named (null: nothing named, no unexplained "
+      "mismatch); any%% = a true "
+      "effect among the named; extra%% = a family that is not present named; screen%% = "
+      "locate_mismatch's top significant candidate alone (null: none significant); conf = runs "
+      "with a "
+      "confounded pair; sep ok = separations proven by the appended poses / tried\n");
+
+  // Summary against the targets.
+  auto rate = [&](const std::string& group, bool null_case) {
+    int ok = 0, good = 0;
+    for (const auto& s : stats) {
+      if (s.c->group != group) continue;
+      for (const auto& run : s.runs) {
+        if (!run.ok) continue;
+        ++ok;
+        good += null_case
+                    ? run.extra_named || run.verdict == Diagnosis::Verdict::kMismatchUnexplained
+                    : run.all_true_named && !run.extra_named;
+      }
+    }
+    return std::make_pair(good, ok);
+  };
+  auto reduction = [&]() {
+    std::vector<double> red;
+    for (const auto& s : stats) {
+      if (s.c->group != "realistic" && s.c->group != "pair") continue;
+      for (const auto& run : s.runs)
+        if (run.ok && run.held_before > 0)
+          red.push_back(100.0 * (1.0 - run.held_after / run.held_before));
+    }
+    return median(red);
+  };
+  const auto real = rate("realistic", false), small = rate("3x noise", false),
+             pair = rate("pair", false), null = rate("null", true);
+  std::printf("\n== %s: summary (%d seeds, %.0f s) ==\n", r.name.c_str(), seeds, seconds);
+  std::printf("  named correctly at realistic magnitude  %6.1f %%  (%d/%d)   target >= 95 %%\n",
+              pct(real.first, real.second), real.first, real.second);
+  std::printf("  named correctly at 3x noise             %6.1f %%  (%d/%d)   target >= 80 %%\n",
+              pct(small.first, small.second), small.first, small.second);
+  std::printf("  pairs: both named, nothing else         %6.1f %%  (%d/%d)\n",
+              pct(pair.first, pair.second), pair.first, pair.second);
+  std::printf("  false findings on null data             %6.1f %%  (%d/%d)   target <= 5 %%\n",
+              pct(null.first, null.second), null.first, null.second);
+  std::printf("  held-out RMS reduction (effect present, median) %6.1f %%   target >= 80 %%\n",
+              reduction());
+}
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  int seeds = 20;
+  bool quick = false;
+  std::string robots = "both";
+  std::vector<std::string> only;
+  int workers = 2;
+  bool verbose = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--seeds" && i + 1 < argc) {
+      seeds = std::max(1, std::atoi(argv[++i]));
+    } else if (a == "--quick") {
+      quick = true;
+    } else if (a == "--verbose") {
+      verbose = true;
+    } else if (a == "--robot" && i + 1 < argc) {
+      robots = argv[++i];
+    } else if (a == "--effects" && i + 1 < argc) {
+      only = split(argv[++i]);
+    } else if (a == "--workers" && i + 1 < argc) {
+      workers = std::max(1, std::atoi(argv[++i]));
+    } else {
+      std::fprintf(stderr,
+                   "usage: mismatch_bench [--seeds N] [--quick] [--robot mini|large|both] "
+                   "[--effects a,b,...] [--workers N] [--verbose]\n  effects:");
+      for (const Effect& e : effects()) std::fprintf(stderr, " %s", e.key.c_str());
+      std::fprintf(stderr, " null hooke+drum encoder+force_gain sag+hooke\n");
+      return 2;
+    }
+  }
+  bool seeds_given = false;
+  for (int i = 1; i < argc; ++i) seeds_given = seeds_given || std::strcmp(argv[i], "--seeds") == 0;
+  if (quick && !seeds_given) seeds = 3;
+  if (robots != "mini" && robots != "large" && robots != "both") {
+    std::fprintf(stderr, "--robot must be mini, large or both, got %s\n", robots.c_str());
+    return 2;
+  }
+  const std::vector<std::pair<std::string, std::string>> pairs = {
+      {"hooke", "drum"}, {"encoder", "force_gain"}, {"sag", "hooke"}};
+  auto wanted = [&](const std::string& k) {
+    return only.empty() || std::find(only.begin(), only.end(), k) != only.end();
+  };
+  for (const auto& k : only) {
+    bool known = find_effect(k) != nullptr || k == "null";
+    for (const auto& p : pairs) known = known || k == p.first + "+" + p.second;
+    if (!known) {
+      std::fprintf(stderr, "unknown effect '%s' (see --help)\n", k.c_str());
+      return 2;
+    }
+  }
+
+  std::printf("cdpr concealed-effect benchmark of the mismatch locator (seeds %d%s, %d workers)\n",
+              seeds, quick ? ", quick" : "", workers);
+  std::printf(
+      "noise: laser 1 mm, encoder 0.1 mm, force 1 N; 25 designed poses; lock-step physics "
+      "(cdpr-sim), %.0f s per pose\n",
+      kDwellS);
+  std::printf("mapping (true effect -> families of diagnose() that count as naming it):\n");
+  for (const Effect& e : effects()) {
+    std::string f;
+    for (const auto& x : e.families) f += (f.empty() ? "" : ", ") + x;
+    std::printf("  %-13s %-40s -> %s\n", e.key.c_str(), e.title.c_str(), f.c_str());
+  }
+  std::fflush(stdout);
+
+  const cdpr::DiagnosisOptions dopt;  // the product's defaults: the analysis runs blind
+  const auto t_all = std::chrono::steady_clock::now();
+  std::vector<std::string> which;
+  if (robots != "large") which.push_back("mini");
+  if (robots != "mini") which.push_back("large");
+  for (const std::string& w : which) {
+    const auto t_robot = std::chrono::steady_clock::now();
+    const Robot r = make_robot(w, quick);
+
+    // Magnitudes (pool over effects).
+    std::vector<std::string> keys;
+    for (const Effect& e : effects()) {
+      bool in_pair = false;
+      for (const auto& p : pairs)
+        in_pair = in_pair ||
+                  (wanted(p.first + "+" + p.second) && (p.first == e.key || p.second == e.key));
+      if (wanted(e.key) || in_pair) keys.push_back(e.key);
+    }
+    const Residual baseline = leftover(r, {});
+    if (!baseline.ok)
+      std::printf("[%s] baseline failed: %s\n", r.name.c_str(), baseline.error.c_str());
+    std::vector<Magnitude> mags(keys.size());
+    std::mutex print_mutex;
+    parallel_for(static_cast<int>(keys.size()), workers, [&](int i) {
+      mags[static_cast<std::size_t>(i)] = calibrate_magnitude(r, keys[static_cast<std::size_t>(i)]);
+      std::lock_guard<std::mutex> lock(print_mutex);
+      const Magnitude& m = mags[static_cast<std::size_t>(i)];
+      std::printf("[%s] magnitude %-13s realistic %.2f sigma (%s)%s\n", r.name.c_str(),
+                  m.key.c_str(), m.realistic.sigmas, m.realistic.channel.c_str(),
+                  m.absorbed
+                      ? ", absorbed"
+                      : fmt(", 3x noise at scale %.3f (%.2f sigma)", m.small_scale, m.small.sigmas)
+                            .c_str());
+      if (!m.realistic.ok) std::printf("    error: %s\n", m.realistic.error.c_str());
+      std::fflush(stdout);
+    });
+
+    // Cases.
+    std::vector<Case> cases;
+    for (const Magnitude& m : mags) {
+      if (!wanted(m.key) || !m.realistic.ok) continue;
+      if (m.absorbed) {
+        cases.push_back({m.key + " (absorbed)", "absorbed", {{m.key, 1.0}}, {m.key}});
+        continue;
+      }
+      cases.push_back({m.key + " @realistic", "realistic", {{m.key, 1.0}}, {}});
+      if (m.small.ok)
+        cases.push_back({m.key + " @3x noise", "3x noise", {{m.key, m.small_scale}}, {}});
+    }
+    for (const auto& p : pairs) {
+      if (wanted(p.first + "+" + p.second)) {
+        Case c{p.first + "+" + p.second, "pair", {{p.first, 1.0}, {p.second, 1.0}}, {}};
+        for (const Magnitude& m : mags)
+          if (m.absorbed && (m.key == p.first || m.key == p.second)) c.absorbed.push_back(m.key);
+        if (!c.absorbed.empty()) c.label += " (" + c.absorbed.front() + " absorbed)";
+        cases.push_back(c);
+      }
+    }
+    if (wanted("null")) cases.push_back({"null", "null", {}, {}});
+
+    std::vector<CaseStats> stats(cases.size());
+    struct Job {
+      int c, seed;
+    };
+    std::vector<Job> jobs;
+    for (std::size_t c = 0; c < cases.size(); ++c) {
+      stats[c].c = &cases[c];
+      stats[c].runs.resize(static_cast<std::size_t>(seeds));
+      for (int s = 0; s < seeds; ++s) jobs.push_back({static_cast<int>(c), s});
+    }
+    std::atomic<int> done{0};
+    const auto t_runs = std::chrono::steady_clock::now();
+    parallel_for(static_cast<int>(jobs.size()), workers, [&](int i) {
+      const Job& j = jobs[static_cast<std::size_t>(i)];
+      RunResult res = run_case(r, cases[static_cast<std::size_t>(j.c)], j.seed, dopt);
+      std::lock_guard<std::mutex> lock(print_mutex);
+      const int n = ++done;
+      std::string named;
+      for (const auto& f : res.named_families) named += (named.empty() ? "" : ", ") + f;
+      if (!res.ok) named = "ERROR " + res.error;
+      const double elapsed = seconds_since(t_runs);
+      std::printf("[%s] %4d/%zu %-38s seed %2d: %-20s %s (%.1f s, ETA %.0f s)\n", r.name.c_str(), n,
+                  jobs.size(), cases[static_cast<std::size_t>(j.c)].label.c_str(), j.seed,
+                  res.ok ? cdpr::to_string(res.verdict) : "failed",
+                  named.empty() ? "-" : named.c_str(), res.seconds,
+                  elapsed / n * static_cast<double>(static_cast<int>(jobs.size()) - n));
+      if (res.separation_tried) {
+        std::printf("        confounded: separating poses appended, re-run %s\n",
+                    res.separated ? "separated the true effect" : "did not separate");
+      }
+      if (verbose && res.ok) std::printf("%s\n", res.text.c_str());
+      std::fflush(stdout);
+      stats[static_cast<std::size_t>(j.c)].runs[static_cast<std::size_t>(j.seed)] = std::move(res);
+    });
+    print_robot(r, baseline, mags, stats, seconds_since(t_robot), seeds);
+    std::fflush(stdout);
+  }
+  std::printf("\ntotal runtime %.0f s\n", seconds_since(t_all));
+  return 0;
+}

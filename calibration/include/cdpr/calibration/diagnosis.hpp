@@ -1,0 +1,166 @@
+// The mismatch locator, complete: from a nominal model and a recording to a verdict on the missing
+// physics, the model with it, and the proof that the fit improves (also on held-out data).
+// Pure statistics on top of identification.hpp and mismatch.hpp (no I/O, no logging).
+//
+// diagnose(nominal, set, validation?, ...):
+//  1. Standard identification (IdentificationOptions as given: the "before" model) and the screen
+//     of locate_mismatch (where the misfit is, with what structure, which candidates score).
+//  2. Selection. Bootstrap over poses (resample the N poses with replacement B times, redo the
+//     projected screen on each resample, forward-select candidates by BIC with a family-wise
+//     significance gate): the inclusion probability of every candidate. Candidates whose
+//     inclusion probability exceeds DiagnosisOptions::inclusion_threshold are kept.
+//  3. Refits. For each kept candidate (and each confounded alternative), the model with the effect
+//     added is refitted in full (nonlinear identification with the effect's parameters estimated
+//     where identification.hpp has them, else the Gauss-Newton augmented fit). Ranked by
+//     likelihood-ratio test against the standard model (chi^2 with the extra parameters as
+//     degrees of freedom), BIC change counting only the parameters that differ between the
+//     candidates, and K-fold cross-validation over poses (the geometry from K-1 folds, the held-out
+//     poses re-located from their own readings with the geometry fixed, their residual RMS).
+//  4. Naming. The accepted effects in words with their fitted parameters and standard deviations
+//     ("cable elasticity: EA = 21.4 +- 0.6 kN"). Two candidates that this pose set cannot tell
+//     apart are reported as confounded, with both fits and a set of extra poses (from the
+//     feasible candidate grid) that would separate them.
+//  5. Model it: the calibrated model carries the accepted effects (EA, polynomial surface, drum
+//     scale in the winch model, encoder zero, force sensor gain/offset, laser mount/plane, mass
+//     per length for sag); per-channel residual RMS before/after, held-out RMS before/after.
+//  6. Verdict: kNoMismatch ("no missing physics found": residuals consistent with noise),
+//     kMismatchNamed, kMismatchUnexplained (misfit, but no candidate explains it), or
+//     kInconclusive (too few poses / residuals to tell the effects apart; says so, never guesses).
+//
+// How it is done (diagnosis.cc):
+//  - Bootstrap: per-pose cross products of [geometry Jacobian | candidate columns | residual] with
+//    the pose's own Jacobian projected out (mismatch_design); a resample is a weighted sum of
+//    them (a pose drawn twice counts twice), so no refit per resample. Poses fixed by the gauge
+//    (the home pose) are always kept. Forward selection: F-test p-values, Holm over the
+//    contenders of each step, lowest BIC first, one candidate per family, and within a family the
+//    simplest member (shared before per cable) unless the richer one is significantly better.
+//    A candidate is kept when its family, or a family confounded with it on this pose set, was
+//    selected in at least inclusion_threshold of the resamples (confounded families split the
+//    resamples between them; a strong effect makes the first-order screen pick the richer family
+//    member by its nonlinearity). Every member of a kept family is refitted.
+//  - Refits: identify() with the effect's option on (from the standard estimate), else one
+//    Gauss-Newton step for the effect's coefficients on the projected columns, the effect moved
+//    to the length readings, and identify() redone. Acceptance is sequential: the best passing
+//    refit (Holm-adjusted LRT p < alpha, BIC decrease, CV RMS decrease), then each further kept
+//    candidate refitted jointly with the accepted ones and tested against them (its EffectFit is
+//    then relative to the model with the earlier effects). Two candidates confounded on this pose
+//    set are never accepted together.
+//  - Cross-validation is linearised about each fit: the geometry (and Gauss-Newton effect
+//    coefficients) from one Gauss-Newton step on K-1 folds, held-out poses re-located to first
+//    order; the home pose always stays in the training folds.
+//  - Validation recording: its poses are re-located by identify() with the encoder zeros
+//    re-estimated and everything else fixed (identify() refuses a problem without parameters;
+//    a new recording is homed again anyway).
+//  - Separating poses: a 4 x 4 x 4 grid over the pose-design box (0.156 m half extent, scaled)
+//    x {level, +0.2 rad roll, -0.2 rad pitch}, kept where simple_tension_distribution finds
+//    feasible tensions, each at the planned pretension and at twice it; greedy.
+//  - model_after: identify()'s estimate with the effects it can estimate; Gauss-Newton effects
+//    written where the config has a field (encoder offsets, common drum scale, mass per length,
+//    EA or a polynomial surface when the cables were rigid); otherwise modelled_in_config = false.
+#pragma once
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/mismatch.hpp"
+#include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr {
+
+struct DiagnosisOptions {
+  MismatchOptions screen;                     // alpha, confounding threshold, rank tolerance
+  int bootstrap_samples = 100;                // resamples over poses for inclusion probabilities
+  double inclusion_threshold = 0.6;           // keep candidates selected in at least this fraction
+  int cv_folds = 5;                           // K-fold cross-validation over poses (2 <= K <= N)
+  unsigned seed = 1;                          // bootstrap and fold assignment (deterministic)
+  int max_effects = 3;                        // at most this many effects are accepted together
+  int min_poses = 12;                         // below this the verdict is kInconclusive
+  int separating_poses = 6;                   // extra poses proposed for each confounded pair
+  double separating_half_extent_scale = 1.0;  // of the candidate grid (pose_design.hpp box)
+};
+
+// One fitted effect parameter, in SI units (and as shown to people).
+struct EffectParameter {
+  std::string name;  // "EA", "s_3", "o_2", "mass_per_length", ...
+  std::string unit;  // "N", "-", "m", "kg/m"
+  double value = 0.0;
+  double std_dev = 0.0;
+  std::string text;  // "EA = 21.4 +- 0.6 kN"
+};
+
+// A candidate effect after selection and refit.
+struct EffectFit {
+  std::string id;    // candidate id of mismatch.hpp ("hooke_shared", ...)
+  std::string name;  // plain language
+  std::string family;
+  double inclusion_probability = 0.0;  // bootstrap over poses
+  // Fraction of the resamples that selected any member of the family (shared or per cable).
+  double family_inclusion_probability = 0.0;
+  int extra_parameters = 0;  // parameters the effect adds
+  double chi2_before = 0.0, chi2_after = 0.0;
+  double lrt_statistic = 0.0;  // chi2_before - chi2_after
+  double lrt_p_value = 1.0;    // chi^2(extra_parameters) upper tail
+  double bic_delta = 0.0;      // negative: the effect is worth its parameters
+  double cv_rms_before = 0.0;  // held-out length residual RMS over the folds, m (standard model)
+  double cv_rms_after = 0.0;   // same with the effect modelled
+  bool accepted = false;
+  bool modelled_in_config = false;  // the calibrated config can carry it (else: report only)
+  std::vector<EffectParameter> parameters;
+};
+
+struct ChannelRms {
+  std::string channel;  // "cable lengths", "laser 1", "equilibrium", ...
+  std::string unit;     // "m", "N"
+  double before = 0.0;  // RMS after the standard identification
+  double after = 0.0;   // RMS with the accepted effects modelled
+};
+
+struct ConfoundedFinding {
+  std::string first, second;  // candidate ids
+  double correlation = 0.0;
+  std::string description;  // "cable elasticity (~F*L) or winch compliance (~F): confounded..."
+  EffectFit first_fit, second_fit;
+  std::vector<Pose> separating_poses;          // extra poses that would tell them apart
+  std::vector<double> separating_pretensions;  // N, planned pretension at each of those poses
+  double correlation_with_extra = 0.0;         // canonical correlation with the extra poses added
+};
+
+struct Diagnosis {
+  enum class Verdict { kNoMismatch, kMismatchNamed, kMismatchUnexplained, kInconclusive };
+  Verdict verdict = Verdict::kNoMismatch;
+  std::string headline;               // one sentence: the verdict in words
+  std::vector<std::string> findings;  // plain-language sentences, most important first
+  IdentificationReport before;        // the standard identification
+  MismatchSummary screen;             // locate_mismatch on `before`
+  std::vector<EffectFit> candidates;  // refitted candidates, best first
+  std::vector<EffectFit> accepted;    // the named effects (subset of candidates)
+  std::vector<ConfoundedFinding> confounded;
+  std::optional<IdentificationReport> after;  // identification with the accepted effects
+  CalibratedModel model_after;                // the calibrated model carrying the accepted effects
+  std::vector<ChannelRms> channels;           // residual RMS before/after per channel
+  // Held-out length residual RMS (m): the validation recording when given, else K-fold CV.
+  std::string held_out_source;  // "validation recording" or "5-fold cross-validation"
+  double held_out_rms_before = 0.0, held_out_rms_after = 0.0;
+
+  bool mismatch_found() const {
+    return verdict == Verdict::kMismatchNamed || verdict == Verdict::kMismatchUnexplained;
+  }
+  std::string Text() const;  // the verdict, findings, tables, as text for people
+};
+
+const char* to_string(Diagnosis::Verdict v);
+
+// Diagnoses `set` against `nominal`. `validation` (optional) is a second recording of the same
+// robot used only for held-out prediction. Errors: kInvalidArgument (the set does not match the
+// model: cable count, laser count; bad options), and those of identify().
+Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet& set,
+                           const MeasurementSet* validation,
+                           const IdentificationOptions& identification = {},
+                           const DiagnosisOptions& options = {});
+
+}  // namespace cdpr

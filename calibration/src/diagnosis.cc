@@ -1,0 +1,1212 @@
+#include "cdpr/calibration/diagnosis.hpp"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <limits>
+#include <map>
+#include <optional>
+#include <random>
+#include <set>
+#include <string>
+#include <utility>
+
+#include "cdpr/calibration/simulate.hpp"
+
+namespace cdpr {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+std::string format(const char* fmt, auto... args) {
+  const int len = std::snprintf(nullptr, 0, fmt, args...);
+  if (len <= 0) return std::string();
+  std::string out(static_cast<std::size_t>(len) + 1, '\0');
+  std::snprintf(out.data(), out.size(), fmt, args...);
+  out.resize(static_cast<std::size_t>(len));
+  return out;
+}
+
+bool starts_with(const std::string& s, const char* p) {
+  return s.rfind(p, 0) == 0;
+}
+
+// Symmetric pseudo-inverse with the eigenvalue threshold relative to the largest one (after a
+// diagonal scaling, so that columns of very different units are treated alike).
+Eigen::MatrixXd pinv_sym(const Eigen::MatrixXd& A, double tol = 1e-12) {
+  const Eigen::Index n = A.rows();
+  if (n == 0) return A;
+  Eigen::VectorXd d(n);
+  for (Eigen::Index i = 0; i < n; ++i) d(i) = A(i, i) > 0 ? 1.0 / std::sqrt(A(i, i)) : 0.0;
+  const Eigen::MatrixXd As = d.asDiagonal() * A * d.asDiagonal();
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(As);
+  const Eigen::VectorXd& ev = es.eigenvalues();
+  const double top = std::max(ev.maxCoeff(), 0.0);
+  Eigen::VectorXd inv = Eigen::VectorXd::Zero(n);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    if (ev(i) > tol * top && ev(i) > 0) inv(i) = 1.0 / ev(i);
+  }
+  return d.asDiagonal() * es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose() *
+         d.asDiagonal();
+}
+
+// Orthonormal basis of the column space of X (columns scaled to unit norm first).
+Eigen::MatrixXd column_basis(const Eigen::MatrixXd& X, double tol) {
+  if (X.cols() == 0 || X.norm() == 0) return Eigen::MatrixXd(X.rows(), 0);
+  Eigen::MatrixXd Xs = X;
+  for (Eigen::Index c = 0; c < Xs.cols(); ++c) {
+    const double nrm = Xs.col(c).norm();
+    if (nrm > 0) Xs.col(c) /= nrm;
+  }
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Xs, Eigen::ComputeThinU);
+  int r = 0;
+  for (Eigen::Index k = 0; k < svd.singularValues().size(); ++k) {
+    if (svd.singularValues()(k) > tol) ++r;
+  }
+  return svd.matrixU().leftCols(r);
+}
+
+const CandidateColumns* find_columns(const MismatchDesign& d, const std::string& id) {
+  for (const auto& c : d.candidates) {
+    if (c.id == id) return &c;
+  }
+  return nullptr;
+}
+
+// Per-pose cross products of [geometry | blocks... | residual] with the pose's own Jacobian
+// projected out (Frisch-Waugh: projecting the block-diagonal pose columns pose by pose and then
+// the geometry columns equals projecting the whole identification Jacobian). Weighted sums of
+// these give the screen on any resample of the poses, the fold fits of the cross-validation and
+// the canonical correlations of an augmented pose set without touching the residual vectors.
+struct PoseGrams {
+  int geometry = 0;                // leading columns
+  std::vector<int> block_start;    // first column of each block
+  std::vector<int> block_size;     // columns of each block
+  int total = 0;                   // columns including the residual (last)
+  std::vector<Eigen::MatrixXd> M;  // per pose, total x total
+  std::vector<Eigen::MatrixXd> Z;  // per pose, projected rows (kept only on request)
+};
+
+PoseGrams pose_grams(const MismatchDesign& d, const std::vector<const Eigen::MatrixXd*>& blocks,
+                     bool with_geometry, bool keep_rows) {
+  PoseGrams g;
+  const int np = d.num_poses();
+  g.geometry = with_geometry && np > 0 ? static_cast<int>(d.jacobian_geometry[0].cols()) : 0;
+  int col = g.geometry;
+  for (const Eigen::MatrixXd* b : blocks) {
+    g.block_start.push_back(col);
+    g.block_size.push_back(static_cast<int>(b->cols()));
+    col += static_cast<int>(b->cols());
+  }
+  g.total = col + 1;
+  for (int j = 0; j < np; ++j) {
+    const auto uj = static_cast<std::size_t>(j);
+    const int r0 = d.pose_start[uj];
+    const int nr = d.pose_start[uj + 1] - r0;
+    Eigen::MatrixXd Z(nr, g.total);
+    if (g.geometry > 0) Z.leftCols(g.geometry) = d.jacobian_geometry[uj];
+    for (std::size_t b = 0; b < blocks.size(); ++b) {
+      Z.middleCols(g.block_start[b], g.block_size[b]) = blocks[b]->middleRows(r0, nr);
+    }
+    Z.col(g.total - 1) = d.residuals.segment(r0, nr);
+    const Eigen::MatrixXd Q = column_basis(d.jacobian_pose[uj], 1e-10);
+    if (Q.cols() > 0) Z -= Q * (Q.transpose() * Z);
+    g.M.push_back(Z.transpose() * Z);
+    if (keep_rows) g.Z.push_back(std::move(Z));
+  }
+  return g;
+}
+
+// Gram of the non-geometry columns (blocks and residual) with the geometry projected out.
+Eigen::MatrixXd reduce_geometry(const Eigen::MatrixXd& M, int geometry) {
+  const Eigen::Index rest = M.rows() - geometry;
+  if (geometry == 0) return M;
+  const Eigen::MatrixXd Gi = pinv_sym(M.topLeftCorner(geometry, geometry));
+  const Eigen::MatrixXd B = M.topRightCorner(geometry, rest);
+  return M.bottomRightCorner(rest, rest) - B.transpose() * Gi * B;
+}
+
+// Rank of a candidate's projected columns relative to their unprojected norms.
+int projected_rank(const Eigen::MatrixXd& S, const Eigen::VectorXd& raw_norm2, double tol) {
+  const Eigen::Index k = S.rows();
+  if (k == 0) return 0;
+  Eigen::VectorXd d(k);
+  for (Eigen::Index i = 0; i < k; ++i) d(i) = raw_norm2(i) > 0 ? 1.0 / std::sqrt(raw_norm2(i)) : 0;
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(d.asDiagonal() * S * d.asDiagonal());
+  int r = 0;
+  for (Eigen::Index i = 0; i < k; ++i) {
+    if (es.eigenvalues()(i) > tol) ++r;
+  }
+  return r;
+}
+
+// Largest canonical correlation of two column blocks from their (projected) Gram blocks.
+double canonical_correlation(const Eigen::MatrixXd& Saa, const Eigen::MatrixXd& Sbb,
+                             const Eigen::MatrixXd& Sab) {
+  auto inv_sqrt = [](const Eigen::MatrixXd& A) {
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(A);
+    const double top = std::max(es.eigenvalues().maxCoeff(), 0.0);
+    Eigen::VectorXd s = Eigen::VectorXd::Zero(A.rows());
+    for (Eigen::Index i = 0; i < A.rows(); ++i) {
+      if (es.eigenvalues()(i) > 1e-10 * top && es.eigenvalues()(i) > 0) {
+        s(i) = 1.0 / std::sqrt(es.eigenvalues()(i));
+      }
+    }
+    return Eigen::MatrixXd(es.eigenvectors() * s.asDiagonal() * es.eigenvectors().transpose());
+  };
+  const Eigen::MatrixXd C = inv_sqrt(Saa) * Sab * inv_sqrt(Sbb);
+  if (C.size() == 0) return 0.0;
+  return std::min(1.0, Eigen::JacobiSVD<Eigen::MatrixXd>(C).singularValues()(0));
+}
+
+// Forward selection on a reduced Gram (candidate blocks and residual, geometry projected out).
+struct SelectionInput {
+  std::vector<int> start, size, rank;
+  std::vector<std::string> family;
+  int n = 0, dof = 0;
+  double alpha = 0.01;
+  int max_effects = 3;
+};
+
+std::vector<int> forward_select(const Eigen::MatrixXd& S, const SelectionInput& in) {
+  const Eigen::Index last = S.rows() - 1;
+  const double rss0 = S(last, last);
+  std::vector<int> sel_cols;
+  std::vector<int> chosen;
+  std::set<std::string> families;
+  double rss = rss0;
+  int k_sel = 0;
+  auto rss_with = [&](const std::vector<int>& cols) {
+    const auto q = static_cast<Eigen::Index>(cols.size());
+    Eigen::MatrixXd A(q, q);
+    Eigen::VectorXd b(q);
+    for (Eigen::Index u = 0; u < q; ++u) {
+      b(u) = S(cols[static_cast<std::size_t>(u)], last);
+      for (Eigen::Index v = 0; v < q; ++v) {
+        A(u, v) = S(cols[static_cast<std::size_t>(u)], cols[static_cast<std::size_t>(v)]);
+      }
+    }
+    return rss0 - b.dot(pinv_sym(A, 1e-9) * b);
+  };
+  const double logn = std::log(static_cast<double>(in.n));
+  for (int step = 0; step < in.max_effects; ++step) {
+    struct Option {
+      int c;
+      double p, bic, rss;
+    };
+    std::vector<Option> opts;
+    for (std::size_t c = 0; c < in.start.size(); ++c) {
+      if (in.rank[c] == 0 || families.count(in.family[c])) continue;
+      const int k = in.rank[c];
+      const int d2 = in.dof - k_sel - k;
+      if (d2 <= 0) continue;
+      std::vector<int> cols = sel_cols;
+      for (int q = 0; q < in.size[c]; ++q) cols.push_back(in.start[c] + q);
+      const double rc = std::max(rss_with(cols), 1e-300);
+      const double drop = std::max(rss - rc, 0.0);
+      const double f = (drop / k) / (rc / d2);
+      opts.push_back(
+          {static_cast<int>(c), f_upper_tail(f, k, d2), in.n * std::log(rc / rss) + k * logn, rc});
+    }
+    if (opts.empty()) break;
+    // Holm over the contenders of this step: the adjusted p of each.
+    std::vector<std::size_t> order(opts.size());
+    for (std::size_t q = 0; q < order.size(); ++q) order[q] = q;
+    std::sort(order.begin(), order.end(),
+              [&](std::size_t a, std::size_t b) { return opts[a].p < opts[b].p; });
+    std::vector<double> adj(opts.size());
+    double running = 0.0;
+    for (std::size_t q = 0; q < order.size(); ++q) {
+      running = std::max(running,
+                         std::min(1.0, static_cast<double>(order.size() - q) * opts[order[q]].p));
+      adj[order[q]] = running;
+    }
+    int best = -1;
+    for (std::size_t q = 0; q < opts.size(); ++q) {
+      if (adj[q] >= in.alpha || opts[q].bic >= 0) continue;
+      if (best < 0 || opts[q].bic < opts[static_cast<std::size_t>(best)].bic) {
+        best = static_cast<int>(q);
+      }
+    }
+    if (best < 0) break;
+    // Within a family prefer the simplest eligible member (shared before per cable) unless the
+    // richer one is significantly better than it.
+    for (std::size_t q = 0; q < opts.size(); ++q) {
+      const Option& rich = opts[static_cast<std::size_t>(best)];
+      const auto rc = static_cast<std::size_t>(rich.c);
+      const auto qc = static_cast<std::size_t>(opts[q].c);
+      if (in.family[qc] != in.family[rc] || in.rank[qc] >= in.rank[rc]) continue;
+      if (adj[q] >= in.alpha || opts[q].bic >= 0) continue;
+      const int dk = in.rank[rc] - in.rank[qc];
+      const int d2 = in.dof - k_sel - in.rank[rc];
+      const double f = (std::max(opts[q].rss - rich.rss, 0.0) / dk) / (rich.rss / d2);
+      if (f_upper_tail(f, dk, d2) >= in.alpha) best = static_cast<int>(q);
+    }
+    const Option& o = opts[static_cast<std::size_t>(best)];
+    const auto c = static_cast<std::size_t>(o.c);
+    chosen.push_back(o.c);
+    families.insert(in.family[c]);
+    for (int q = 0; q < in.size[c]; ++q) sel_cols.push_back(in.start[c] + q);
+    k_sel += in.rank[c];
+    rss = o.rss;
+  }
+  return chosen;
+}
+
+// Linearised K-fold cross-validation over poses: the geometry (and the effect columns `extra`)
+// from a Gauss-Newton step on K-1 folds, the held-out poses re-located (their own pose columns
+// projected out); RMS of the held-out length residuals in m.
+double cv_length_rms(const MismatchDesign& d, const Eigen::MatrixXd* extra,
+                     const std::vector<int>& fold, int folds) {
+  std::vector<const Eigen::MatrixXd*> blocks;
+  if (extra != nullptr && extra->cols() > 0) blocks.push_back(extra);
+  const PoseGrams g = pose_grams(d, blocks, true, true);
+  const int np = d.num_poses();
+  const int q = g.total - 1;
+  double sum = 0.0;
+  int count = 0;
+  for (int f = 0; f < folds; ++f) {
+    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
+    for (int j = 0; j < np; ++j) {
+      if (fold[static_cast<std::size_t>(j)] != f) M += g.M[static_cast<std::size_t>(j)];
+    }
+    const Eigen::VectorXd delta = -pinv_sym(M.topLeftCorner(q, q)) * M.topRightCorner(q, 1);
+    for (int j = 0; j < np; ++j) {
+      const auto uj = static_cast<std::size_t>(j);
+      if (fold[uj] != f) continue;
+      const Eigen::MatrixXd& Z = g.Z[uj];
+      const Eigen::VectorXd e = Z.col(q) + Z.leftCols(q) * delta;
+      for (Eigen::Index k = 0; k < e.size(); ++k) {
+        const int row = d.pose_start[uj] + static_cast<int>(k);
+        if (d.kind[static_cast<std::size_t>(row)] != ResidualKind::kLength) continue;
+        const double em = e(k) * d.sigma_length(row);
+        sum += em * em;
+        ++count;
+      }
+    }
+  }
+  return count > 0 ? std::sqrt(sum / count) : 0.0;
+}
+
+// Adds sigma * (X theta) to the length readings (the effect moved to the reading side).
+MeasurementSet corrected_set(const MeasurementSet& set, const MismatchDesign& d,
+                             const Eigen::MatrixXd& X, const Eigen::VectorXd& theta) {
+  MeasurementSet out = set;
+  const Eigen::VectorXd v = X * theta;
+  for (int k = 0; k < d.num_rows(); ++k) {
+    const auto uk = static_cast<std::size_t>(k);
+    if (d.kind[uk] != ResidualKind::kLength) continue;
+    out.poses[static_cast<std::size_t>(d.pose[uk])].cable_lengths(d.index[uk]) +=
+        d.sigma_length(k) * v(k);
+  }
+  return out;
+}
+
+// The identification option that estimates a candidate's parameters, if it has one.
+bool option_for(const std::string& id, IdentificationOptions& o) {
+  if (id == "hooke_shared") {
+    o.estimate_stiffness = StiffnessEstimate::kShared;
+  } else if (id == "hooke_per_cable") {
+    o.estimate_stiffness = StiffnessEstimate::kPerCable;
+  } else if (id == "drum_scale_per_cable") {
+    o.estimate_length_scales = true;
+  } else if (id == "platform_anchors") {
+    o.estimate_platform_anchors = true;
+    o.platform_anchor_mask = AnchorMask();
+  } else if (id == "force_gain_per_cable") {
+    o.estimate_force_gains = true;
+  } else if (id == "force_offset_per_cable") {
+    o.estimate_force_offsets = true;
+  } else if (id == "laser_mounting") {
+    o.estimate_laser_origin = true;
+    o.estimate_laser_direction = true;
+  } else if (id == "laser_plane") {
+    o.estimate_laser_plane = true;
+  } else {
+    return false;
+  }
+  return true;
+}
+
+std::string signed_number(double v, int digits) {
+  return format("%+.*f", digits, v);
+}
+
+// Digits so that the std shows one or two significant figures.
+int digits_for(double std_dev) {
+  if (!(std_dev > 0) || !std::isfinite(std_dev)) return 3;
+  return std::clamp(1 - static_cast<int>(std::floor(std::log10(std_dev))), 0, 6);
+}
+
+// The 1-based cable number at the end of a parameter name ("s_3" -> "3", "ea_scale" -> "").
+std::string cable_suffix(const std::string& name) {
+  std::size_t p = name.size();
+  while (p > 0 && std::isdigit(static_cast<unsigned char>(name[p - 1]))) --p;
+  if (p == name.size() || p == 0 || name[p - 1] != '_') return std::string();
+  return name.substr(p);
+}
+
+// An identification parameter as an effect parameter in engineer words.
+EffectParameter describe_parameter(const ParameterEstimate& p, const CalibratedModel& initial) {
+  EffectParameter e;
+  e.name = p.name;
+  e.unit = p.unit;
+  e.value = p.value;
+  e.std_dev = p.std_dev;
+  const std::string cable = cable_suffix(p.name);
+  if (starts_with(p.name, "ea_scale")) {
+    const int i = cable.empty() ? 0 : std::atoi(cable.c_str()) - 1;
+    const double ea0 = initial.robot.cables[static_cast<std::size_t>(i)].ea;
+    e.name = cable.empty() ? "EA" : "EA_" + cable;
+    e.unit = "N";
+    e.value = ea0 * (1.0 + p.value);
+    e.std_dev = ea0 * p.std_dev;
+    const int dg = digits_for(e.std_dev / 1e3);
+    e.text = (cable.empty() ? std::string("cable elasticity: EA = ")
+                            : "cable elasticity of cable " + cable + ": EA = ") +
+             format("%.*f +- %.*f kN", dg, e.value / 1e3, dg, e.std_dev / 1e3);
+  } else if (starts_with(p.name, "s_")) {
+    const int dg = digits_for(100 * p.std_dev);
+    e.text = "drum scale error of winch " + cable + ": " + signed_number(100 * p.value, dg) +
+             format(" +- %.*f %%", dg, 100 * p.std_dev);
+  } else if (starts_with(p.name, "force_gain")) {
+    const int dg = digits_for(100 * p.std_dev);
+    e.text = "force sensor gain error of cable " + cable + ": " + signed_number(100 * p.value, dg) +
+             format(" +- %.*f %%", dg, 100 * p.std_dev);
+  } else if (starts_with(p.name, "force_offset")) {
+    const int dg = digits_for(p.std_dev);
+    e.text = "force sensor offset of cable " + cable + ": " + signed_number(p.value, dg) +
+             format(" +- %.*f N", dg, p.std_dev);
+  } else if (p.unit == "m") {
+    const double dv = 1e3 * (p.value - p.initial);
+    const int dg = digits_for(1e3 * p.std_dev);
+    e.text =
+        p.name + " moved by " + signed_number(dv, dg) + format(" +- %.*f mm", dg, 1e3 * p.std_dev);
+  } else if (p.unit == "rad") {
+    const int dg = digits_for(1e3 * p.std_dev);
+    e.text = p.name + ": " + signed_number(1e3 * p.value, dg) +
+             format(" +- %.*f mrad", dg, 1e3 * p.std_dev);
+  } else {
+    const int dg = digits_for(p.std_dev);
+    e.text = p.name + " = " + format("%.*f +- %.*f %s", dg, p.value, dg, p.std_dev, p.unit.c_str());
+  }
+  return e;
+}
+
+// A Gauss-Newton coefficient of a library candidate in engineer words.
+EffectParameter describe_coefficient(const std::string& id, int q, int k, double v, double s) {
+  EffectParameter e;
+  const std::string cable = k > 1 ? std::to_string(q + 1) : std::string();
+  const std::string of = k > 1 ? " of cable " + cable : std::string();
+  e.value = v;
+  e.std_dev = s;
+  if (starts_with(id, "hooke")) {
+    e.name = k > 1 ? "EA_" + cable : "EA";
+    e.unit = "N";
+    e.value = 1.0 / v;
+    e.std_dev = s / (v * v);
+    const int dg = digits_for(e.std_dev / 1e3);
+    e.text = "cable elasticity" + of +
+             format(": EA = %.*f +- %.*f kN", dg, e.value / 1e3, dg, e.std_dev / 1e3);
+  } else if (starts_with(id, "compliance")) {
+    e.name = k > 1 ? "c_" + cable : "c";
+    e.unit = "m/N";
+    const int dg = digits_for(1e6 * s);
+    e.text = (k > 1 ? "winch/sensor compliance of winch " + cable
+                    : std::string("winch/sensor compliance")) +
+             ": " + format("%.*f +- %.*f um/N", dg, 1e6 * v, dg, 1e6 * s);
+  } else if (starts_with(id, "encoder_offset")) {
+    e.name = "o_" + cable;
+    e.unit = "m";
+    const int dg = digits_for(1e3 * s);
+    e.text = "encoder zero offset" + of + ": " + signed_number(1e3 * v, dg) +
+             format(" +- %.*f mm", dg, 1e3 * s);
+  } else if (starts_with(id, "encoder_drift")) {
+    e.name = "drift_" + cable;
+    e.unit = "m/s";
+    const int dg = digits_for(6e7 * s);
+    e.text = "encoder drift" + of + ": " + signed_number(6e7 * v, dg) +
+             format(" +- %.*f um/min", dg, 6e7 * s);
+  } else if (starts_with(id, "transmission_drift")) {
+    e.name = "transmission_drift";
+    e.unit = "1/s";
+    const int dg = digits_for(6e7 * s);
+    e.text = "transmission drift: " + signed_number(6e7 * v, dg) +
+             format(" +- %.*f ppm/min", dg, 6e7 * s);
+  } else if (starts_with(id, "sag")) {
+    // Small-sag elongation w^2 Lh^2 L / (24 F^2): v = (mu g)^2 / 24.
+    e.name = "mass_per_length";
+    e.unit = "kg/m";
+    const double mu = std::sqrt(24.0 * std::max(v, 0.0)) / 9.81;
+    e.value = mu;
+    e.std_dev = mu > 0 ? 24.0 * s / (2.0 * 9.81 * 9.81 * mu) : kNaN;
+    const int dg = digits_for(1e3 * e.std_dev);
+    e.text =
+        format("cable sag: mass per length %.*f +- %.*f g/m", dg, 1e3 * mu, dg, 1e3 * e.std_dev);
+  } else if (starts_with(id, "nonlinear_elasticity")) {
+    e.name = "k2";
+    e.unit = "1/N^2";
+    e.text = format("nonlinear cable elongation: dL = k2 F^2 L with k2 = %.3g +- %.2g 1/N^2", v, s);
+  } else if (starts_with(id, "drum_scale")) {
+    // Jacobian columns: the parameter change is -v.
+    e.name = k > 1 ? "s_" + cable : "s";
+    e.unit = "-";
+    e.value = -v;
+    const int dg = digits_for(100 * s);
+    e.text = (k > 1 ? "drum scale error of winch " + cable
+                    : std::string("drum scale error of every winch")) +
+             ": " + signed_number(-100 * v, dg) + format(" +- %.*f %%", dg, 100 * s);
+  } else {
+    e.name = id + "_" + std::to_string(q + 1);
+    e.unit = "";
+    e.text = format("%s coefficient %d: %.4g +- %.2g", id.c_str(), q + 1, v, s);
+  }
+  return e;
+}
+
+// Carries a Gauss-Newton effect into the calibrated model where the config can hold it.
+bool model_effect(const std::string& id, const Eigen::VectorXd& theta, CalibratedModel& model) {
+  const int m = model.robot.num_cables();
+  if (id == "encoder_offset_per_cable" && theta.size() == m) {
+    model.readings.length_offsets += theta;
+    return true;
+  }
+  if (id == "drum_scale_shared" && theta.size() == 1) {
+    for (int i = 0; i < m; ++i) {
+      model.readings.length_scales(i) -= theta(0);
+      model.robot.winches[static_cast<std::size_t>(i)].drum_diameter *= 1.0 - theta(0);
+      model.robot.winches[static_cast<std::size_t>(i)].drum_pitch *= 1.0 - theta(0);
+    }
+    return true;
+  }
+  if (id == "sag_shared" && theta.size() == 1 && theta(0) > 0) {
+    for (auto& c : model.robot.cables) c.mass_per_length = std::sqrt(24.0 * theta(0)) / 9.81;
+    return true;
+  }
+  const bool rigid =
+      std::all_of(model.robot.cables.begin(), model.robot.cables.end(),
+                  [](const CableModel& c) { return c.elongation == ElongationKind::kRigid; });
+  if (starts_with(id, "hooke") && rigid && (theta.array() > 0).all()) {
+    for (int i = 0; i < m; ++i) {
+      auto& c = model.robot.cables[static_cast<std::size_t>(i)];
+      c.ea = 1.0 / theta(theta.size() == 1 ? 0 : i);
+      c.elongation = ElongationKind::kHooke;
+    }
+    return true;
+  }
+  if (starts_with(id, "compliance") && rigid) {
+    // dL = c F as a first-order polynomial surface in the plain variables.
+    for (int i = 0; i < m; ++i) {
+      auto& c = model.robot.cables[static_cast<std::size_t>(i)];
+      c.elongation = ElongationKind::kPolynomial;
+      c.polynomial = PolynomialSurface{};
+      c.polynomial.order = 1;
+      c.polynomial.coefficients = {0.0, 0.0, theta(theta.size() == 1 ? 0 : i)};
+    }
+    return true;
+  }
+  if (id == "nonlinear_elasticity_shared" && rigid) {
+    // dL = k2 L F^2: the (i = 1, j = 2) term of a third-order surface.
+    for (auto& c : model.robot.cables) {
+      c.elongation = ElongationKind::kPolynomial;
+      c.polynomial = PolynomialSurface{};
+      c.polynomial.order = 3;
+      c.polynomial.coefficients.assign(10, 0.0);
+      c.polynomial.coefficients[8] = theta(0);  // degree 3: j = 0, 1, 2, 3 -> L^1 F^2 is 6 + 2
+    }
+    return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+const char* to_string(Diagnosis::Verdict v) {
+  switch (v) {
+    case Diagnosis::Verdict::kNoMismatch:
+      return "no mismatch";
+    case Diagnosis::Verdict::kMismatchNamed:
+      return "mismatch named";
+    case Diagnosis::Verdict::kMismatchUnexplained:
+      return "mismatch unexplained";
+    case Diagnosis::Verdict::kInconclusive:
+      return "inconclusive";
+  }
+  return "unknown";
+}
+
+std::string Diagnosis::Text() const {
+  std::string s = format("Verdict: %s. %s\n", to_string(verdict), headline.c_str());
+  for (const auto& f : findings) s += "- " + f + "\n";
+  if (!candidates.empty()) {
+    s += format("\n%-28s %6s %4s %10s %10s %9s %9s %10s %10s\n", "candidate", "incl", "k", "chi2",
+                "LRT", "p", "dBIC", "CV before", "CV after");
+    for (const auto& c : candidates) {
+      s += format("%-28s %6.2f %4d %10.1f %10.1f %9.3g %9.1f %8.3f mm %7.3f mm%s\n", c.id.c_str(),
+                  c.inclusion_probability, c.extra_parameters, c.chi2_after, c.lrt_statistic,
+                  c.lrt_p_value, c.bic_delta, 1e3 * c.cv_rms_before, 1e3 * c.cv_rms_after,
+                  c.accepted ? " *" : "");
+    }
+  }
+  s += format("\n%-22s %5s %12s %12s\n", "channel", "unit", "RMS before", "RMS after");
+  for (const auto& c : channels) {
+    s += format("%-22s %5s %12.4g %12.4g\n", c.channel.c_str(), c.unit.c_str(), c.before, c.after);
+  }
+  if (!held_out_source.empty()) {
+    s += format("held-out (%s) length RMS: %.4f mm before, %.4f mm after\n",
+                held_out_source.c_str(), 1e3 * held_out_rms_before, 1e3 * held_out_rms_after);
+  }
+  return s;
+}
+
+Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet& set,
+                           const MeasurementSet* validation,
+                           const IdentificationOptions& identification,
+                           const DiagnosisOptions& options) {
+  const RobotModel& robot = nominal.robot;
+  const int m = robot.num_cables();
+  const int nl = static_cast<int>(robot.lasers.size());
+  // --- 1. Refuse what does not match.
+  auto check_set = [&](const MeasurementSet& s, const char* what) -> Status {
+    for (int j = 0; j < s.num_poses(); ++j) {
+      const PoseMeasurement& p = s.poses[static_cast<std::size_t>(j)];
+      if (p.cable_lengths.size() != m) {
+        return Status::Error(ErrorCode::kInvalidArgument,
+                             "diagnose: the %s has %d cable lengths per pose (pose %d), the model "
+                             "has %d cables",
+                             what, static_cast<int>(p.cable_lengths.size()), j, m);
+      }
+      if (p.laser_distances.size() != 0 && p.laser_distances.size() != nl) {
+        return Status::Error(ErrorCode::kInvalidArgument,
+                             "diagnose: the %s has %d laser distances per pose (pose %d), the "
+                             "model has %d lasers",
+                             what, static_cast<int>(p.laser_distances.size()), j, nl);
+      }
+    }
+    Status st = validate(s, robot);
+    if (!st.ok()) st.prepend(std::string("diagnose: ") + what + ": ");
+    return st;
+  };
+  if (Status st = check_set(set, "recording"); !st.ok()) return st;
+  if (validation != nullptr) {
+    if (Status st = check_set(*validation, "validation recording"); !st.ok()) return st;
+  }
+  if (options.bootstrap_samples < 0 || options.cv_folds < 2 || options.max_effects < 0 ||
+      !(options.inclusion_threshold >= 0 && options.inclusion_threshold <= 1)) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "diagnose: options need bootstrap_samples >= 0, cv_folds >= 2, max_effects >= 0 "
+                  "and 0 <= inclusion_threshold <= 1");
+  }
+
+  Diagnosis d;
+  d.model_after = nominal;
+  const int np = set.num_poses();
+  if (np < options.min_poses || np < options.cv_folds) {
+    d.verdict = Diagnosis::Verdict::kInconclusive;
+    d.headline = format(
+        "Inconclusive: %d poses are too few to tell the candidate effects apart (at least %d are "
+        "needed); record more poses.",
+        np, std::max(options.min_poses, options.cv_folds));
+    d.findings.push_back(d.headline);
+    auto rep = identify(nominal, set, identification);
+    if (rep) {
+      d.before = std::move(*rep);
+      d.model_after = d.before.estimate;
+    }
+    return d;
+  }
+
+  // --- 2. Standard identification and screen.
+  auto before = identify(nominal, set, identification);
+  if (!before) return before.status();
+  d.before = std::move(*before);
+  auto screen = locate_mismatch(d.before, set, identification, options.screen);
+  if (!screen) return screen.status();
+  d.screen = std::move(*screen);
+  d.model_after = d.before.estimate;
+  auto design0 = mismatch_design(d.before.estimate, set, d.before.poses, &d.before.residuals,
+                                 identification, options.screen);
+  if (!design0) return design0.status();
+  const MismatchDesign& D0 = *design0;
+  const int n = D0.num_rows();
+  const double alpha = options.screen.alpha;
+
+  // --- 3. Bootstrap over poses with forward selection on the projected columns.
+  std::vector<const Eigen::MatrixXd*> blocks;
+  for (const auto& c : D0.candidates) blocks.push_back(&c.X);
+  const PoseGrams G0 = pose_grams(D0, blocks, true, false);
+  SelectionInput sel;
+  sel.n = n;
+  sel.dof = d.screen.dof;
+  sel.alpha = alpha;
+  sel.max_effects = options.max_effects;
+  Eigen::MatrixXd Mfull = Eigen::MatrixXd::Zero(G0.total, G0.total);
+  for (const auto& M : G0.M) Mfull += M;
+  const Eigen::MatrixXd Sfull = reduce_geometry(Mfull, G0.geometry);
+  for (std::size_t c = 0; c < D0.candidates.size(); ++c) {
+    sel.start.push_back(G0.block_start[c] - G0.geometry);
+    sel.size.push_back(G0.block_size[c]);
+    sel.family.push_back(D0.candidates[c].family);
+    const Eigen::VectorXd raw = Mfull.diagonal().segment(G0.block_start[c], G0.block_size[c]);
+    sel.rank.push_back(projected_rank(
+        Sfull.block(sel.start.back(), sel.start.back(), sel.size.back(), sel.size.back()), raw,
+        options.screen.rank_tolerance));
+  }
+  std::vector<double> inclusion(D0.candidates.size(), 0.0);
+  std::map<std::string, double> family_inclusion;
+  std::vector<std::set<std::string>> selected_families;  // per resample
+  const std::vector<int> full_selection = forward_select(Sfull, sel);
+  std::mt19937 rng(options.seed);
+  std::uniform_int_distribution<int> pick(0, np - 1);
+  for (int b = 0; b < options.bootstrap_samples; ++b) {
+    std::vector<double> w(static_cast<std::size_t>(np), 0.0);
+    for (int q = 0; q < np; ++q) w[static_cast<std::size_t>(pick(rng))] += 1.0;
+    // The poses that fix the gauge (held constant by the identification) are always kept.
+    for (int j = 0; j < np; ++j) {
+      const auto uj = static_cast<std::size_t>(j);
+      if (D0.jacobian_pose[uj].norm() == 0) w[uj] = std::max(w[uj], 1.0);
+    }
+    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(G0.total, G0.total);
+    for (int j = 0; j < np; ++j) {
+      if (w[static_cast<std::size_t>(j)] > 0)
+        M += w[static_cast<std::size_t>(j)] * G0.M[static_cast<std::size_t>(j)];
+    }
+    std::set<std::string> fams;
+    for (int c : forward_select(reduce_geometry(M, G0.geometry), sel)) {
+      inclusion[static_cast<std::size_t>(c)] += 1.0 / options.bootstrap_samples;
+      family_inclusion[sel.family[static_cast<std::size_t>(c)]] += 1.0 / options.bootstrap_samples;
+      fams.insert(sel.family[static_cast<std::size_t>(c)]);
+    }
+    selected_families.push_back(std::move(fams));
+  }
+  if (options.bootstrap_samples == 0) {
+    for (int c : full_selection) {
+      inclusion[static_cast<std::size_t>(c)] = 1.0;
+      family_inclusion[sel.family[static_cast<std::size_t>(c)]] = 1.0;
+    }
+    std::set<std::string> fams;
+    for (int c : full_selection) fams.insert(sel.family[static_cast<std::size_t>(c)]);
+    selected_families.push_back(std::move(fams));
+  }
+
+  // Kept candidates and their confounded partners.
+  // Kept: every member of a family selected (by any of its members) in at least the threshold
+  // fraction of the resamples. A strong effect makes the first-order screen prefer the richer
+  // member of a family by chance of its nonlinearity; the full refits decide within the family.
+  // Two confounded families split the resamples between them, so the support of a family
+  // counts the resamples that selected it or a family confounded with it on this pose set.
+  std::map<std::string, std::set<std::string>> allied;
+  for (const auto& c : D0.candidates) allied[c.family].insert(c.family);
+  for (const auto& p : d.screen.confounded) {
+    const CandidateColumns* a = find_columns(D0, p.first);
+    const CandidateColumns* b = find_columns(D0, p.second);
+    if (a == nullptr || b == nullptr) continue;
+    allied[a->family].insert(b->family);
+    allied[b->family].insert(a->family);
+  }
+  std::vector<std::string> to_refit;
+  std::set<std::string> kept;
+  for (const auto& c : D0.candidates) {
+    int support = 0;
+    for (const auto& fams : selected_families) {
+      bool any = false;
+      for (const std::string& f : allied[c.family]) any = any || fams.count(f) > 0;
+      support += any ? 1 : 0;
+    }
+    const double frac =
+        selected_families.empty() ? 0.0 : support / static_cast<double>(selected_families.size());
+    if (frac >= options.inclusion_threshold && frac > 0) {
+      kept.insert(c.id);
+      to_refit.push_back(c.id);
+    }
+  }
+  const std::vector<ConfoundedPair>& pairs = d.screen.confounded;
+
+  // Fold assignment (deterministic, balanced).
+  const int K = std::min(options.cv_folds, np);
+  std::vector<int> fold(static_cast<std::size_t>(np));
+  {
+    std::vector<int> perm(static_cast<std::size_t>(np));
+    for (int j = 0; j < np; ++j) perm[static_cast<std::size_t>(j)] = j;
+    std::mt19937 frng(options.seed + 7919u);
+    std::shuffle(perm.begin(), perm.end(), frng);
+    // A pose held fixed by the gauge (the home pose) always stays in the training folds.
+    std::erase_if(perm,
+                  [&](int j) { return D0.jacobian_pose[static_cast<std::size_t>(j)].norm() == 0; });
+    for (int j = 0; j < np; ++j) fold[static_cast<std::size_t>(j)] = -1;
+    for (std::size_t q = 0; q < perm.size(); ++q) {
+      fold[static_cast<std::size_t>(perm[q])] = static_cast<int>(q) % K;
+    }
+  }
+  const double cv_before = cv_length_rms(D0, nullptr, fold, K);
+  const double logn = std::log(static_cast<double>(n));
+
+  // --- 4. Full refits, 5. acceptance. A state is a model (identification options, readings with
+  // the Gauss-Newton effects moved to them) and its fit; refit() adds one candidate to a state.
+  struct State {
+    IdentificationOptions opt;
+    MeasurementSet set;
+    IdentificationReport report;
+    MismatchDesign design;
+    std::vector<std::string> gn_ids;  // Gauss-Newton effects (columns in `design`)
+    std::vector<Eigen::VectorXd> gn_theta;
+    double cv = 0.0;
+  };
+  auto state_cv = [&](const State& st) {
+    Eigen::MatrixXd extra(st.design.num_rows(), 0);
+    for (const std::string& id : st.gn_ids) {
+      const CandidateColumns* cc = find_columns(st.design, id);
+      if (cc == nullptr) continue;
+      Eigen::MatrixXd e2(extra.rows(), extra.cols() + cc->X.cols());
+      e2 << extra, cc->X;
+      extra = std::move(e2);
+    }
+    return cv_length_rms(st.design, &extra, fold, K);
+  };
+  State standard{identification, set, d.before, D0, {}, {}, cv_before};
+  auto refit = [&](const State& cur, const std::string& id,
+                   EffectFit& fit) -> std::optional<State> {
+    const CandidateColumns* cc = find_columns(cur.design, id);
+    if (cc == nullptr) return std::nullopt;
+    fit = EffectFit{};
+    fit.id = id;
+    fit.name = cc->name;
+    fit.family = cc->family;
+    for (std::size_t c = 0; c < D0.candidates.size(); ++c) {
+      if (D0.candidates[c].id == id) {
+        fit.inclusion_probability = inclusion[c];
+        fit.family_inclusion_probability = family_inclusion[D0.candidates[c].family];
+      }
+    }
+    fit.chi2_before = cur.report.chi2;
+    fit.cv_rms_before = cur.cv;
+    State next;
+    bool done = false;
+    IdentificationOptions opt = cur.opt;
+    if (option_for(id, opt)) {
+      auto rep = identify(cur.report.estimate, cur.set, opt);
+      if (rep && rep->converged) {
+        auto des = mismatch_design(rep->estimate, cur.set, rep->poses, &rep->residuals, opt,
+                                   options.screen);
+        if (des) {
+          next =
+              State{opt, cur.set, std::move(*rep), std::move(*des), cur.gn_ids, cur.gn_theta, 0.0};
+          fit.extra_parameters =
+              static_cast<int>(next.report.parameters.size() - cur.report.parameters.size());
+          std::set<std::string> old;
+          for (const auto& p : cur.report.parameters) old.insert(p.name);
+          for (const auto& p : next.report.parameters) {
+            if (!old.count(p.name))
+              fit.parameters.push_back(describe_parameter(p, cur.report.estimate));
+          }
+          fit.modelled_in_config = true;
+          done = true;
+        }
+      }
+    }
+    if (!done) {
+      // Gauss-Newton augmented fit: the coefficients from the columns with the identification's
+      // Jacobian projected out, the effect moved to the readings, the identification redone
+      // from its solution.
+      std::vector<const Eigen::MatrixXd*> bl{&cc->X};
+      const PoseGrams g = pose_grams(cur.design, bl, true, false);
+      Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
+      for (const auto& Mj : g.M) M += Mj;
+      const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
+      const int k = static_cast<int>(cc->X.cols());
+      const int rank = projected_rank(S.topLeftCorner(k, k), M.diagonal().segment(g.geometry, k),
+                                      options.screen.rank_tolerance);
+      if (rank == 0) return std::nullopt;
+      const Eigen::MatrixXd Ai = pinv_sym(S.topLeftCorner(k, k), 1e-9);
+      const Eigen::VectorXd theta = Ai * S.block(0, k, k, 1);
+      MeasurementSet corrected = corrected_set(cur.set, cur.design, cc->X, theta);
+      auto rep = identify(cur.report.estimate, corrected, cur.opt);
+      if (!rep) return std::nullopt;
+      auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, cur.opt,
+                                 options.screen);
+      if (!des) return std::nullopt;
+      next = State{
+          cur.opt, std::move(corrected), std::move(*rep), std::move(*des), cur.gn_ids, cur.gn_theta,
+          0.0};
+      next.gn_ids.push_back(id);
+      next.gn_theta.push_back(theta);
+      fit.extra_parameters = rank;
+      const double scale =
+          std::sqrt(std::max(1.0, next.report.chi2 / std::max(1, d.screen.dof - rank)));
+      for (int q = 0; q < k; ++q) {
+        if (Ai(q, q) <= 0) continue;  // a column the data do not fix
+        fit.parameters.push_back(
+            describe_coefficient(id, q, k, theta(q), std::sqrt(Ai(q, q)) * scale));
+      }
+      CalibratedModel probe = next.report.estimate;
+      fit.modelled_in_config = model_effect(id, theta, probe);
+    }
+    next.cv = state_cv(next);
+    fit.chi2_after = next.report.chi2;
+    fit.cv_rms_after = next.cv;
+    fit.lrt_statistic = fit.chi2_before - fit.chi2_after;
+    fit.lrt_p_value =
+        fit.extra_parameters > 0 ? chi2_upper_tail(fit.lrt_statistic, fit.extra_parameters) : 1.0;
+    fit.bic_delta = -fit.lrt_statistic + fit.extra_parameters * logn;
+    return next;
+  };
+
+  struct Trial {
+    EffectFit fit;
+    State state;
+  };
+  std::vector<Trial> trials;
+  for (const std::string& id : to_refit) {
+    EffectFit fit;
+    auto st = refit(standard, id, fit);
+    if (st) trials.push_back({std::move(fit), std::move(*st)});
+  }
+  auto holm = [](const std::vector<double>& p) {
+    std::vector<std::size_t> order(p.size());
+    for (std::size_t q = 0; q < order.size(); ++q) order[q] = q;
+    std::sort(order.begin(), order.end(),
+              [&](std::size_t a, std::size_t b) { return p[a] < p[b]; });
+    std::vector<double> adj(p.size(), 1.0);
+    double running = 0.0;
+    for (std::size_t q = 0; q < order.size(); ++q) {
+      running =
+          std::max(running, std::min(1.0, static_cast<double>(order.size() - q) * p[order[q]]));
+      adj[order[q]] = running;
+    }
+    return adj;
+  };
+  auto passes = [&](const EffectFit& f, double p_adj) {
+    return p_adj < alpha && f.bic_delta < 0 && f.cv_rms_after < f.cv_rms_before;
+  };
+  // Among passing fits, one per family: the simplest, unless a richer member is significantly
+  // better than it (LRT of the difference) and has the lower BIC.
+  auto choose = [&](const std::vector<const Trial*>& pool,
+                    const std::vector<double>& adj) -> const Trial* {
+    std::map<std::string, const Trial*> per_family;
+    std::vector<std::size_t> order(pool.size());
+    for (std::size_t q = 0; q < order.size(); ++q) order[q] = q;
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      return pool[a]->fit.extra_parameters < pool[b]->fit.extra_parameters;
+    });
+    for (std::size_t q : order) {
+      const Trial* t = pool[q];
+      if (!passes(t->fit, adj[q])) continue;
+      auto it = per_family.find(t->fit.family);
+      if (it == per_family.end()) {
+        per_family[t->fit.family] = t;
+        continue;
+      }
+      const EffectFit& simple = it->second->fit;
+      const int dk = t->fit.extra_parameters - simple.extra_parameters;
+      const double gain = simple.chi2_after - t->fit.chi2_after;
+      if (dk > 0 && chi2_upper_tail(gain, dk) < alpha && t->fit.bic_delta < simple.bic_delta) {
+        it->second = t;
+      }
+    }
+    const Trial* best = nullptr;
+    for (const auto& [fam, t] : per_family) {
+      if (best == nullptr || t->fit.bic_delta < best->fit.bic_delta) best = t;
+    }
+    return best;
+  };
+  State current = standard;
+  std::set<std::string> families_taken, ids_taken;
+  auto confounded_with_taken = [&](const std::string& id) {
+    for (const auto& p : pairs) {
+      if ((p.first == id && ids_taken.count(p.second)) ||
+          (p.second == id && ids_taken.count(p.first))) {
+        return true;
+      }
+    }
+    return false;
+  };
+  {
+    std::vector<const Trial*> pool;
+    std::vector<double> p;
+    for (const auto& t : trials) {
+      pool.push_back(&t);
+      p.push_back(t.fit.lrt_p_value);
+    }
+    const std::vector<double> adj = holm(p);
+    if (const Trial* best = choose(pool, adj); best != nullptr && options.max_effects > 0) {
+      EffectFit f = best->fit;
+      f.accepted = true;
+      d.accepted.push_back(f);
+      families_taken.insert(f.family);
+      ids_taken.insert(f.id);
+      current = best->state;
+    }
+    for (const auto& t : trials) {
+      d.candidates.push_back(t.fit);
+      if (ids_taken.count(t.fit.id)) d.candidates.back().accepted = true;
+    }
+  }
+  // Further effects: each remaining kept candidate refitted jointly with the accepted ones and
+  // tested against them.
+  while (!d.accepted.empty() && static_cast<int>(d.accepted.size()) < options.max_effects) {
+    std::vector<Trial> more;
+    for (const std::string& id : to_refit) {
+      const CandidateColumns* cc = find_columns(D0, id);
+      if (cc == nullptr || !kept.count(id) || families_taken.count(cc->family) ||
+          confounded_with_taken(id)) {
+        continue;
+      }
+      EffectFit fit;
+      auto st = refit(current, id, fit);
+      if (st) more.push_back({std::move(fit), std::move(*st)});
+    }
+    std::vector<const Trial*> pool;
+    std::vector<double> p;
+    for (const auto& t : more) {
+      pool.push_back(&t);
+      p.push_back(t.fit.lrt_p_value);
+    }
+    const Trial* best = choose(pool, holm(p));
+    if (best == nullptr) break;
+    EffectFit f = best->fit;
+    f.accepted = true;
+    d.accepted.push_back(f);
+    for (auto& c : d.candidates) {
+      if (c.id == f.id) c = f;
+    }
+    families_taken.insert(f.family);
+    ids_taken.insert(f.id);
+    current = best->state;
+  }
+  std::stable_sort(d.candidates.begin(), d.candidates.end(),
+                   [](const EffectFit& a, const EffectFit& b) {
+                     if (a.accepted != b.accepted) return a.accepted;
+                     return a.bic_delta < b.bic_delta;
+                   });
+  auto trial_fit = [&](const std::string& id) -> const EffectFit* {
+    for (const auto& t : trials) {
+      if (t.fit.id == id) return &t.fit;
+    }
+    return nullptr;
+  };
+
+  // --- 6. Confounded pairs: both fits and separating poses.
+  std::vector<ConfoundedPair> found;
+  for (const auto& p : pairs) {
+    if (!ids_taken.count(p.first) && !ids_taken.count(p.second)) continue;
+    found.push_back(p);
+    for (const std::string& id : {p.first, p.second}) {
+      if (trial_fit(id) != nullptr) continue;
+      EffectFit fit;
+      auto st = refit(standard, id, fit);
+      if (!st) continue;
+      trials.push_back({fit, std::move(*st)});
+      d.candidates.push_back(std::move(fit));
+    }
+  }
+  if (!found.empty()) {
+    // Feasible candidate grid around home.
+    const double he = 0.156 * options.separating_half_extent_scale;
+    const double f_ref = default_reference_tension(d.before.estimate.robot);
+    std::vector<Pose> grid;
+    const int ppa = 4;
+    const std::vector<Eigen::Vector3d> rpys = {Eigen::Vector3d::Zero(), Eigen::Vector3d(0.2, 0, 0),
+                                               Eigen::Vector3d(0, -0.2, 0)};
+    for (int ix = 0; ix < ppa; ++ix) {
+      for (int iy = 0; iy < ppa; ++iy) {
+        for (int iz = 0; iz < ppa; ++iz) {
+          for (const auto& rpy : rpys) {
+            Pose p;
+            p.position = robot.home.position + he * Eigen::Vector3d(-1.0 + 2.0 * ix / (ppa - 1),
+                                                                    -1.0 + 2.0 * iy / (ppa - 1),
+                                                                    -1.0 + 2.0 * iz / (ppa - 1));
+            p.rpy = robot.home.rpy + rpy;
+            if (simple_tension_distribution(d.before.estimate.robot, p, f_ref)) grid.push_back(p);
+          }
+        }
+      }
+    }
+    // Each grid pose at the planned pretension and at twice it: equal tensions at different free
+    // lengths are what tells a ~F*L effect from a ~F one.
+    std::vector<Pose> cand;
+    std::vector<double> cand_pretension;
+    MeasurementSet all = set;
+    std::vector<Pose> all_poses = d.before.poses;
+    for (const double level : {f_ref, 2.0 * f_ref}) {
+      std::vector<Pose> ok;
+      for (const Pose& p : grid) {
+        if (level == f_ref || simple_tension_distribution(d.before.estimate.robot, p, level)) {
+          ok.push_back(p);
+        }
+      }
+      SimulationOptions so;
+      so.add_noise = false;
+      so.reference_tension = level;
+      auto sim = simulate_measurements(d.before.estimate, ok, set.noise, 1, so);
+      if (!sim) continue;
+      for (std::size_t g = 0; g < ok.size(); ++g) {
+        all.poses.push_back(sim->set.poses[g]);
+        all_poses.push_back(ok[g]);
+        cand.push_back(ok[g]);
+        cand_pretension.push_back(level);
+      }
+    }
+    std::optional<MismatchDesign> aug;
+    if (!cand.empty()) {
+      auto des = mismatch_design(d.before.estimate, all, all_poses, nullptr, identification,
+                                 options.screen);
+      if (des) aug = std::move(*des);
+    }
+    for (const auto& p : found) {
+      ConfoundedFinding cf;
+      cf.first = p.first;
+      cf.second = p.second;
+      cf.correlation = p.correlation;
+      cf.correlation_with_extra = p.correlation;
+      cf.description = p.description;
+      if (const EffectFit* f = trial_fit(p.first)) cf.first_fit = *f;
+      if (const EffectFit* f = trial_fit(p.second)) cf.second_fit = *f;
+      const CandidateColumns* ca = aug ? find_columns(*aug, p.first) : nullptr;
+      const CandidateColumns* cb = aug ? find_columns(*aug, p.second) : nullptr;
+      if (ca != nullptr && cb != nullptr) {
+        const PoseGrams g = pose_grams(*aug, {&ca->X, &cb->X}, true, false);
+        const int ka = g.block_size[0], kb = g.block_size[1];
+        auto corr = [&](const Eigen::MatrixXd& M) {
+          const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
+          return canonical_correlation(S.topLeftCorner(ka, ka), S.block(ka, ka, kb, kb),
+                                       S.block(0, ka, ka, kb));
+        };
+        Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
+        for (int j = 0; j < np; ++j) M += g.M[static_cast<std::size_t>(j)];
+        std::vector<bool> used(cand.size(), false);
+        double rho = corr(M);
+        for (int step = 0; step < options.separating_poses; ++step) {
+          int best = -1;
+          double best_corr = rho;
+          for (std::size_t q = 0; q < cand.size(); ++q) {
+            if (used[q]) continue;
+            const double cq = corr(M + g.M[static_cast<std::size_t>(np) + q]);
+            if (cq < best_corr) {
+              best_corr = cq;
+              best = static_cast<int>(q);
+            }
+          }
+          if (best < 0) break;
+          used[static_cast<std::size_t>(best)] = true;
+          M += g.M[static_cast<std::size_t>(np + best)];
+          cf.separating_poses.push_back(cand[static_cast<std::size_t>(best)]);
+          cf.separating_pretensions.push_back(cand_pretension[static_cast<std::size_t>(best)]);
+          rho = best_corr;
+        }
+        cf.correlation_with_extra = rho;
+      }
+      d.confounded.push_back(std::move(cf));
+    }
+  }
+
+  // --- 7. The model with the accepted effects, `after`, channels, held-out RMS.
+  d.held_out_source =
+      validation != nullptr ? "validation recording" : format("%d-fold cross-validation", K);
+  d.held_out_rms_before = cv_before;
+  d.held_out_rms_after = cv_before;
+  if (!d.accepted.empty()) {
+    d.after = current.report;
+    d.model_after = current.report.estimate;
+    for (std::size_t q = 0; q < current.gn_ids.size(); ++q) {
+      model_effect(current.gn_ids[q], current.gn_theta[q], d.model_after);
+    }
+    d.held_out_rms_after = current.cv;
+  }
+  if (validation != nullptr) {
+    // Held-out = the validation recording: its poses re-located with the geometry fixed.
+    IdentificationOptions fixed = identification;
+    fixed.estimate_frame_anchors = false;
+    fixed.estimate_platform_anchors = false;
+    // identify() needs at least one estimated parameter: the encoder zeros are re-estimated on
+    // the validation recording (a new recording is homed again), everything else is fixed.
+    fixed.estimate_length_offsets = true;
+    fixed.estimate_length_scales = false;
+    fixed.estimate_stiffness = StiffnessEstimate::kFixed;
+    fixed.estimate_force_gains = false;
+    fixed.estimate_force_offsets = false;
+    fixed.estimate_laser_origin = false;
+    fixed.estimate_laser_direction = false;
+    fixed.estimate_laser_plane = false;
+    fixed.gauge = Gauge::kNone;
+    fixed.compute_covariance = false;
+    auto vb = identify(d.before.estimate, *validation, fixed);
+    if (!vb) {
+      Status st = vb.status();
+      st.prepend("diagnose: re-locating the validation poses: ");
+      return st;
+    }
+    d.held_out_rms_before = vb->rms_length_m;
+    d.held_out_rms_after = vb->rms_length_m;
+    if (d.after) {
+      auto va = identify(d.model_after, *validation, fixed);
+      if (va) d.held_out_rms_after = va->rms_length_m;
+    }
+  }
+  const IdentificationReport& aft = d.after ? *d.after : d.before;
+  d.channels.push_back({"cable lengths", "m", d.before.rms_length_m, aft.rms_length_m});
+  if (nl > 0 && identification.use_laser) {
+    d.channels.push_back({"laser", "m", d.before.rms_laser_m, aft.rms_laser_m});
+  }
+  if (identification.use_equilibrium && d.before.rms_wrench_n > 0) {
+    d.channels.push_back({"equilibrium (force)", "N", d.before.rms_wrench_n, aft.rms_wrench_n});
+  }
+
+  // --- 8. Verdict and findings.
+  const bool misfit = d.screen.p_value < alpha;
+  if (!d.accepted.empty()) {
+    d.verdict = Diagnosis::Verdict::kMismatchNamed;
+    std::string names;
+    for (const auto& f : d.accepted) {
+      if (!names.empty()) names += "; ";
+      names += f.name;
+    }
+    d.headline = "Missing physics found: " + names + ".";
+  } else if (misfit) {
+    d.verdict = Diagnosis::Verdict::kMismatchUnexplained;
+    d.headline = format(
+        "The model does not explain the recording (chi^2 = %.1f for %d degrees of freedom), and "
+        "no candidate effect explains the misfit.",
+        d.screen.chi2, d.screen.dof);
+  } else {
+    d.verdict = Diagnosis::Verdict::kNoMismatch;
+    d.headline = format(
+        "No missing physics found: the residuals are consistent with the sensor noise (chi^2 = "
+        "%.1f for %d degrees of freedom, p = %.3g).",
+        d.screen.chi2, d.screen.dof, d.screen.p_value);
+  }
+  d.findings.push_back(d.headline);
+  for (const auto& f : d.accepted) {
+    std::string s = f.name + ": ";
+    for (std::size_t q = 0; q < f.parameters.size(); ++q) {
+      if (q > 0) s += "; ";
+      s += f.parameters[q].text;
+    }
+    s += format(
+        " (LRT %.1f on %d parameters, p = %.3g; BIC %+.1f; held-out RMS %.3f -> %.3f mm; "
+        "selected in %.0f %% of the bootstrap resamples)%s.",
+        f.lrt_statistic, f.extra_parameters, f.lrt_p_value, f.bic_delta, 1e3 * f.cv_rms_before,
+        1e3 * f.cv_rms_after, 100 * f.inclusion_probability,
+        f.modelled_in_config ? "" : "; the config cannot carry it (report only)");
+    d.findings.push_back(s);
+  }
+  for (const auto& c : d.confounded) {
+    d.findings.push_back(format(
+        "%s. Both fits: %s (chi^2 %.1f) and %s (chi^2 %.1f). %d extra poses would lower their "
+        "canonical correlation from %.4f to %.4f.",
+        c.description.c_str(), c.first.c_str(), c.first_fit.chi2_after, c.second.c_str(),
+        c.second_fit.chi2_after, static_cast<int>(c.separating_poses.size()), c.correlation,
+        c.correlation_with_extra));
+  }
+  if (d.verdict != Diagnosis::Verdict::kNoMismatch) {
+    d.findings.push_back(format("Held-out length residual RMS (%s): %.3f mm before, %.3f mm after.",
+                                d.held_out_source.c_str(), 1e3 * d.held_out_rms_before,
+                                1e3 * d.held_out_rms_after));
+  }
+  for (const auto& f : d.screen.findings) d.findings.push_back(f);
+  return d;
+}
+
+}  // namespace cdpr

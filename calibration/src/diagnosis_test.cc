@@ -1,0 +1,229 @@
+#include "cdpr/calibration/diagnosis.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/simulate.hpp"
+#include "identification_scenario.hpp"
+#include "mismatch_test_data.hpp"
+
+namespace cdpr {
+namespace {
+
+using testing::conceal_hooke;
+using testing::rigid_mini;
+using testing::RigidMini;
+using testing::simulate;
+
+DiagnosisOptions quick_options() {
+  DiagnosisOptions o;
+  o.bootstrap_samples = 40;
+  return o;
+}
+
+const EffectFit* accepted(const Diagnosis& d, const std::string& id) {
+  for (const auto& f : d.accepted) {
+    if (f.id == id) return &f;
+  }
+  return nullptr;
+}
+
+const ConfoundedFinding* confounded(const Diagnosis& d, const std::string& a,
+                                    const std::string& b) {
+  for (const auto& c : d.confounded) {
+    if ((c.first == a && c.second == b) || (c.first == b && c.second == a)) return &c;
+  }
+  return nullptr;
+}
+
+TEST(Diagnosis, NullDataGivesNoMismatchAcrossSeeds) {
+  const RigidMini d = rigid_mini(25);
+  int false_findings = 0;
+  for (int seed = 1; seed <= 4; ++seed) {
+    const SimulatedMeasurements sim = simulate(d, static_cast<std::uint64_t>(seed));
+    auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, quick_options());
+    ASSERT_TRUE(diag.ok()) << diag.status().to_string();
+    if (diag->verdict != Diagnosis::Verdict::kNoMismatch) {
+      ++false_findings;
+      std::printf("seed %d:\n%s\n", seed, diag->Text().c_str());
+    }
+    EXPECT_TRUE(diag->accepted.empty());
+    EXPECT_FALSE(diag->mismatch_found() && !diag->accepted.empty());
+    EXPECT_NE(diag->headline.find("No missing physics found"), std::string::npos) << diag->headline;
+    ASSERT_FALSE(diag->channels.empty());
+    // Nothing accepted: the model after is the standard identification's.
+    EXPECT_DOUBLE_EQ(diag->channels.front().before, diag->channels.front().after);
+  }
+  EXPECT_EQ(false_findings, 0);
+}
+
+TEST(Diagnosis, ConcealedHookeElasticityIsNamedModelledAndPredictsBetter) {
+  const RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim = simulate(d, 3);
+  constexpr double kEa = 5.0e4;  // N: about 0.5-1 mm of stretch at MINI's tensions
+  conceal_hooke(d, sim, kEa);
+  const auto t0 = std::chrono::steady_clock::now();
+  auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, DiagnosisOptions{});
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_TRUE(diag.ok()) << diag.status().to_string();
+  SCOPED_TRACE(diag->Text());
+  std::printf("diagnose (MINI, 25 poses, 100 resamples): %.2f s wall\n", seconds);
+  EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kMismatchNamed);
+  const EffectFit* hooke = accepted(*diag, "hooke_shared");
+  const ConfoundedFinding* pair = confounded(*diag, "hooke_shared", "compliance_shared");
+  // Either named directly, or named with the winch compliance as its confounded alternative.
+  ASSERT_TRUE(hooke != nullptr || (pair != nullptr && accepted(*diag, "compliance_shared")));
+  if (hooke != nullptr) {
+    ASSERT_EQ(hooke->parameters.size(), 1u);
+    EXPECT_EQ(hooke->parameters[0].name, "EA");
+    EXPECT_NEAR(hooke->parameters[0].value, kEa, 0.2 * kEa);
+    EXPECT_NE(hooke->parameters[0].text.find("cable elasticity: EA = "), std::string::npos);
+    EXPECT_TRUE(hooke->modelled_in_config);
+    EXPECT_LT(hooke->lrt_p_value, 0.01);
+    EXPECT_LT(hooke->bic_delta, 0.0);
+    EXPECT_GT(hooke->family_inclusion_probability, 0.6);
+    for (const auto& c : diag->model_after.robot.cables) {
+      EXPECT_EQ(c.elongation, ElongationKind::kHooke);
+      EXPECT_NEAR(c.ea, kEa, 0.2 * kEa);
+    }
+  }
+  EXPECT_LT(diag->held_out_rms_after, 0.3 * diag->held_out_rms_before);
+  ASSERT_TRUE(diag->after.has_value());
+  EXPECT_LT(diag->after->chi2, diag->before.chi2);
+  ASSERT_FALSE(diag->channels.empty());
+  EXPECT_EQ(diag->channels.front().channel, "cable lengths");
+  EXPECT_LT(diag->channels.front().after, 0.5 * diag->channels.front().before);
+}
+
+TEST(Diagnosis, ConfoundedElasticityAndComplianceGetBothFitsAndSeparatingPoses) {
+  const RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim = simulate(d, 5);
+  conceal_hooke(d, sim, 5.0e4);
+  DiagnosisOptions o = quick_options();
+  auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, o);
+  ASSERT_TRUE(diag.ok()) << diag.status().to_string();
+  SCOPED_TRACE(diag->Text());
+  const ConfoundedFinding* pair = confounded(*diag, "hooke_shared", "compliance_shared");
+  ASSERT_NE(pair, nullptr);
+  EXPECT_GT(pair->correlation, o.screen.confound_threshold);
+  // Both fits are there, each explaining most of the misfit.
+  EXPECT_FALSE(pair->first_fit.id.empty());
+  EXPECT_FALSE(pair->second_fit.id.empty());
+  EXPECT_GT(pair->first_fit.lrt_statistic, 0.0);
+  EXPECT_GT(pair->second_fit.lrt_statistic, 0.0);
+  // Extra poses from the feasible grid that make the two effects distinguishable.
+  EXPECT_EQ(static_cast<int>(pair->separating_poses.size()), o.separating_poses);
+  EXPECT_EQ(pair->separating_pretensions.size(), pair->separating_poses.size());
+  EXPECT_LT(pair->correlation_with_extra, pair->correlation);
+  const double f_ref = default_reference_tension(d.s.nominal.robot);
+  for (const Pose& p : pair->separating_poses) {
+    EXPECT_TRUE(simple_tension_distribution(diag->before.estimate.robot, p, f_ref).ok());
+  }
+}
+
+TEST(Diagnosis, ConcealedDrumScaleErrorIsNamedWithItsValue) {
+  const RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim = simulate(d, 4);
+  const std::vector<double> scale = {6e-3, -5e-3, 5e-3, -6e-3, 5e-3, -6e-3, 6e-3, -5e-3};
+  for (auto& p : sim.set.poses) {
+    for (int i = 0; i < p.cable_lengths.size(); ++i) {
+      p.cable_lengths(i) *= 1.0 + scale[static_cast<std::size_t>(i)];
+    }
+  }
+  auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, quick_options());
+  ASSERT_TRUE(diag.ok()) << diag.status().to_string();
+  SCOPED_TRACE(diag->Text());
+  EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kMismatchNamed);
+  const EffectFit* drum = accepted(*diag, "drum_scale_per_cable");
+  ASSERT_NE(drum, nullptr);
+  EXPECT_TRUE(drum->modelled_in_config);
+  ASSERT_EQ(drum->parameters.size(), scale.size());
+  for (std::size_t i = 0; i < scale.size(); ++i) {
+    const EffectParameter& p = drum->parameters[i];
+    EXPECT_EQ(p.name, "s_" + std::to_string(i + 1));
+    // Readings scaled by (1 + e): the identification's s undoes it, s = 1 / (1 + e) - 1.
+    const double expected = 1.0 / (1.0 + scale[i]) - 1.0;
+    EXPECT_NEAR(p.value, expected, std::max(0.1 * std::abs(expected), 4.0 * p.std_dev));
+    EXPECT_NE(p.text.find("drum scale error of winch " + std::to_string(i + 1)), std::string::npos);
+    EXPECT_NEAR(diag->model_after.readings.length_scales(static_cast<Eigen::Index>(i)), p.value,
+                1e-3 * p.std_dev);
+  }
+  // The effect is about twice the noise: held-out prediction improves towards the noise floor.
+  EXPECT_LT(diag->held_out_rms_after, 0.6 * diag->held_out_rms_before);
+  EXPECT_LT(diag->held_out_rms_after, 1.2 * sim.set.noise.sigma_length);
+}
+
+TEST(Diagnosis, ConcealedCommonDrumScaleErrorIsNamedAndModelled) {
+  const RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim = simulate(d, 8);
+  constexpr double kScale = 8e-3;  // every drum 0.8 % off (e.g. the cable diameter misstated)
+  for (auto& p : sim.set.poses) p.cable_lengths *= 1.0 + kScale;
+  auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, quick_options());
+  ASSERT_TRUE(diag.ok()) << diag.status().to_string();
+  SCOPED_TRACE(diag->Text());
+  EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kMismatchNamed);
+  ASSERT_FALSE(diag->accepted.empty());
+  const EffectFit& f = diag->accepted.front();
+  EXPECT_EQ(f.family, "drum scale");
+  EXPECT_TRUE(f.modelled_in_config);
+  // The readings are (1 + e) too long: the scale correction is 1 / (1 + e) - 1 on every winch.
+  const double expected = 1.0 / (1.0 + kScale) - 1.0;
+  for (int i = 0; i < diag->model_after.readings.length_scales.size(); ++i) {
+    EXPECT_NEAR(diag->model_after.readings.length_scales(i), expected, 0.2 * std::abs(expected));
+  }
+  ASSERT_FALSE(f.parameters.empty());
+  EXPECT_NE(f.parameters.front().text.find("drum scale error"), std::string::npos);
+  EXPECT_LT(diag->held_out_rms_after, diag->held_out_rms_before);
+}
+
+TEST(Diagnosis, TooFewPosesIsInconclusive) {
+  const RigidMini d = rigid_mini(8);
+  const SimulatedMeasurements sim = simulate(d, 2);
+  auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, quick_options());
+  ASSERT_TRUE(diag.ok()) << diag.status().to_string();
+  EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kInconclusive);
+  EXPECT_NE(diag->headline.find("8 poses are too few"), std::string::npos) << diag->headline;
+  EXPECT_FALSE(diag->mismatch_found());
+  EXPECT_TRUE(diag->accepted.empty());
+}
+
+TEST(Diagnosis, WrongCableCountIsRefusedNamingTheCounts) {
+  const RigidMini d = rigid_mini(15);
+  SimulatedMeasurements sim = simulate(d, 2);
+  for (auto& p : sim.set.poses) {
+    p.cable_lengths.conservativeResize(6);
+    p.tensions.conservativeResize(6);
+  }
+  auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, quick_options());
+  ASSERT_FALSE(diag.ok());
+  EXPECT_EQ(diag.status().code(), ErrorCode::kInvalidArgument);
+  const std::string msg(diag.status().message());
+  EXPECT_NE(msg.find("6 cable lengths"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("8 cables"), std::string::npos) << msg;
+}
+
+TEST(Diagnosis, ValidationRecordingIsTheHeldOutSet) {
+  const RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim = simulate(d, 6);
+  SimulatedMeasurements val = simulate(d, 7);
+  conceal_hooke(d, sim, 5.0e4);
+  conceal_hooke(d, val, 5.0e4);
+  auto diag = diagnose(d.s.nominal, sim.set, &val.set, {}, quick_options());
+  ASSERT_TRUE(diag.ok()) << diag.status().to_string();
+  SCOPED_TRACE(diag->Text());
+  EXPECT_EQ(diag->held_out_source, "validation recording");
+  EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kMismatchNamed);
+  EXPECT_LT(diag->held_out_rms_after, 0.5 * diag->held_out_rms_before);
+}
+
+}  // namespace
+}  // namespace cdpr

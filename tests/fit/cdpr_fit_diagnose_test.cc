@@ -1,0 +1,303 @@
+// Integration tests of `cdpr-fit diagnose`: the real binary runs as a separate process
+// (CDPR_FIT_BIN) on recordings that `cdpr-fit simulate` makes of the shipped MINI configs
+// (CDPR_SOURCE_DIR/config), some of them altered here through the recording library to conceal an
+// effect or to break them. The exit status, the JSON report (parsed), the HTML report and the
+// calibrated config (loaded with the config library) are checked. The report helpers that need
+// no process (HTML escaping, the explaining variable of an effect) are called directly.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/recording/recording.hpp"
+#include "diagnose_report.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using ::testing::Not;
+
+const std::string kSource = CDPR_SOURCE_DIR;
+const std::string kNominal = kSource + "/config/mini.yaml";
+const std::string kTruth = kSource + "/config/mini-measured.yaml";
+
+// A smaller bootstrap and fewer folds than the defaults (100, 5), for the runs that check the
+// options are taken; the others use the defaults, as an engineer would.
+const std::vector<std::string> kQuick = {"--bootstrap", "20", "--folds", "3", "--seed", "2"};
+
+struct Process {
+  int status = -1;
+  std::string out, err;
+};
+
+std::string read_file(const fs::path& p) {
+  std::ifstream f(p);
+  std::ostringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+std::string shell_quoted(const std::string& s) {
+  std::string q = "'";
+  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return q + "'";
+}
+
+class Diagnose : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("cdpr_fit_diagnose_test_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(dir_);
+  }
+
+  std::string file(const std::string& name) const { return (dir_ / name).string(); }
+
+  Process fit(const std::vector<std::string>& args) const {
+    std::string cmd = shell_quoted(CDPR_FIT_BIN);
+    for (const std::string& a : args) cmd += " " + shell_quoted(a);
+    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
+    cmd += " >" + shell_quoted(out.string()) + " 2>" + shell_quoted(err.string());
+    const int raw = std::system(cmd.c_str());
+    Process r;
+    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+    r.out = read_file(out);
+    r.err = read_file(err);
+    return r;
+  }
+
+  // The measured MINI (or `truth`) commanded through the nominal model with elastic cables,
+  // `poses` designed poses, default noise (encoder 0.1 mm, laser 1 mm, force 1 N). With the
+  // measured MINI this is what the nominal model, once calibrated, explains.
+  std::string simulate(int poses, const std::string& name, int seed = 3,
+                       const std::string& truth = kTruth) const {
+    const std::string rec = file(name);
+    const Process r =
+        fit({"simulate", "--config", truth, "--nominal", kNominal, "--physics", "elastic",
+             "--design", std::to_string(poses), "--seed", std::to_string(seed), "--out", rec});
+    EXPECT_EQ(r.status, 0) << r.err;
+    return rec;
+  }
+
+  // Reads `in`, lets `change` alter it and writes it to `name`.
+  std::string altered(const std::string& in, const std::string& name,
+                      const std::function<void(cdpr::recording::Recording&)>& change) const {
+    auto rec = cdpr::recording::read_recording(in);
+    EXPECT_TRUE(rec.ok()) << rec.status().to_string();
+    change(*rec);
+    const std::string out = file(name);
+    const cdpr::Status s = cdpr::recording::write_recording(*rec, out);
+    EXPECT_TRUE(s.ok()) << s.to_string();
+    return out;
+  }
+
+  Process diagnose(const std::string& recording, std::vector<std::string> extra) const {
+    std::vector<std::string> args = {"diagnose", "--config", kNominal, "--recording", recording};
+    args.insert(args.end(), extra.begin(), extra.end());
+    return fit(args);
+  }
+
+  fs::path dir_;
+};
+
+TEST_F(Diagnose, RecordingOfACorrectModelExitsZeroWithJsonAndHtmlReports) {
+  const std::string rec = simulate(25, "null.csv");
+  const std::string json = file("report.json"), html = file("report.html");
+  std::vector<std::string> args = {"--json", json, "--html", html};
+  args.insert(args.end(), kQuick.begin(), kQuick.end());
+  const Process r = diagnose(rec, args);
+  ASSERT_EQ(r.status, 0) << r.err << r.out;
+  EXPECT_THAT(r.out, HasSubstr("verdict: no_mismatch"));
+  EXPECT_THAT(r.out, HasSubstr("mm"));  // lengths are shown to people in mm
+
+  const nlohmann::json j = nlohmann::json::parse(read_file(json));
+  EXPECT_TRUE(j.at("ok").get<bool>());
+  EXPECT_EQ(j.at("command"), "diagnose");
+  EXPECT_EQ(j.at("verdict"), "no_mismatch");
+  EXPECT_FALSE(j.at("mismatch_found").get<bool>());
+  EXPECT_EQ(j.at("exit_status").get<int>(), 0);
+  EXPECT_TRUE(j.at("named_effects").empty());
+  EXPECT_FALSE(j.at("headline").get<std::string>().empty());
+  EXPECT_EQ(j.at("inputs").at("poses").get<int>(), 25);
+  EXPECT_EQ(j.at("options").at("bootstrap").get<int>(), 20);
+  EXPECT_EQ(j.at("options").at("folds").get<int>(), 3);
+  EXPECT_EQ(j.at("cable_misfit_normalized").at("before").size(), 8u);
+  EXPECT_FALSE(j.at("channels").empty());
+
+  ASSERT_TRUE(fs::exists(html));
+  const std::string page = read_file(html);
+  EXPECT_THAT(page, HasSubstr("<svg"));
+  EXPECT_THAT(page, HasSubstr("</html>"));
+  // Self-contained: no script, no stylesheet or image fetched from anywhere.
+  EXPECT_THAT(page, Not(HasSubstr("<script")));
+  EXPECT_THAT(page, Not(HasSubstr("src=")));
+  EXPECT_THAT(page, Not(HasSubstr("<link")));
+}
+
+// The true cables are twice as soft as the nominal config says (EA 10 kN instead of 20 kN): an
+// elasticity the standard identification (anchors, encoder offsets, laser plane) cannot absorb.
+TEST_F(Diagnose, ConcealedSofterCablesAreNamedAndCarriedByTheCalibratedConfig) {
+  auto truth = cdpr::config::load_robot_config(kTruth);
+  ASSERT_TRUE(truth.ok()) << truth.status().to_string();
+  constexpr double kTrueEa = 10000.0;  // N
+  for (auto& c : truth->cables) {
+    ASSERT_GT(c.ea, 1.5 * kTrueEa) << "the shipped MINI must be stiffer than the concealed truth";
+    c.ea = kTrueEa;
+  }
+  const std::string soft = file("soft.yaml");
+  {
+    std::ofstream f(soft);
+    f << cdpr::config::save_robot_config(*truth);
+  }
+  const std::string rec = simulate(25, "soft.csv", 3, soft);
+  const std::string cal = file("calibrated.yaml"), html = file("report.html");
+  const Process r = diagnose(rec, {"--json", "--out", cal, "--html", html});
+  ASSERT_EQ(r.status, 3) << r.err << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);  // --json without a file: stdout
+  EXPECT_EQ(j.at("verdict"), "mismatch_named");
+  EXPECT_TRUE(j.at("mismatch_found").get<bool>());
+  EXPECT_EQ(j.at("exit_status").get<int>(), 3);
+  ASSERT_FALSE(j.at("accepted").empty());
+  EXPECT_EQ(j.at("accepted")[0].at("family"), "elasticity") << j.at("named_effects").dump();
+  EXPECT_EQ(j.at("named_effects")[0], j.at("accepted")[0].at("id"));
+  // The held-out prediction improves when the effect is modelled.
+  const auto& held = j.at("held_out");
+  EXPECT_LT(held.at("rms_after_m").get<double>(), 0.5 * held.at("rms_before_m").get<double>());
+
+  // The calibrated config loads and carries the softer cables.
+  auto calibrated = cdpr::config::load_robot_config(cal);
+  ASSERT_TRUE(calibrated.ok()) << calibrated.status().to_string();
+  ASSERT_EQ(calibrated->num_cables(), 8);
+  for (std::size_t i = 0; i < 8; ++i) {
+    EXPECT_NEAR(calibrated->cables[i].ea, kTrueEa, 0.05 * kTrueEa) << "cable " << i + 1;
+  }
+  // The plot of an elasticity is against tension x loaded length, before and after.
+  const std::string page = read_file(html);
+  EXPECT_THAT(page, HasSubstr("tension x loaded length"));
+  EXPECT_THAT(page, HasSubstr("class=\"f\""));  // "after" points
+}
+
+TEST_F(Diagnose, RecordingsThatDoNotFitTheConfigAreRefusedWithFileAndReason) {
+  const std::string clean = simulate(20, "clean.csv");
+  struct Case {
+    std::string name;
+    std::function<void(cdpr::recording::Recording&)> change;
+    std::vector<std::string> expected;  // substrings of stderr
+  };
+  const std::vector<Case> cases = {
+      {"seven-cables.csv",
+       [](cdpr::recording::Recording& r) {
+         r.num_cables = 7;
+         for (auto& p : r.poses) {
+           p.lengths.conservativeResize(7);
+           p.tensions.conservativeResize(7);
+         }
+       },
+       {"seven-cables.csv vs", "cable count mismatch", "7 cables", "has 8"}},
+      {"millimetres.csv",
+       [](cdpr::recording::Recording& r) {
+         for (auto& p : r.poses) p.lengths *= 1000.0;
+       },
+       {"millimetres.csv: length_1..length_8: looks like mm, expected m"}},
+      {"laser-mm.csv",
+       [](cdpr::recording::Recording& r) {
+         for (auto& p : r.poses) p.lasers *= 1000.0;
+       },
+       {"laser-mm.csv: laser_1: reading", "looks like mm, expected m"}},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string rec = altered(clean, c.name, c.change);
+    const std::string out = file(c.name + ".yaml"), html = file(c.name + ".html");
+    const Process r = diagnose(rec, {"--out", out, "--html", html});
+    EXPECT_EQ(r.status, 1) << r.out;
+    EXPECT_THAT(r.err, HasSubstr("cdpr-fit diagnose: error: "));
+    for (const std::string& e : c.expected) EXPECT_THAT(r.err, HasSubstr(e));
+    EXPECT_FALSE(fs::exists(out)) << "nothing may be written for a refused recording";
+    EXPECT_FALSE(fs::exists(html));
+  }
+  // A file that says it is in mm is refused by the reader, naming its line.
+  const std::string text = read_file(clean);
+  const std::string from = "# units: SI", to = "# units: mm";
+  const std::size_t at = text.find(from);
+  ASSERT_NE(at, std::string::npos);
+  const std::string mm = file("units-mm.csv");
+  {
+    std::ofstream f(mm);
+    f << text.substr(0, at) << to << text.substr(at + from.size());
+  }
+  const Process r = diagnose(mm, {"--json"});
+  EXPECT_EQ(r.status, 1);
+  EXPECT_THAT(r.err, HasSubstr("units-mm.csv:"));
+  EXPECT_THAT(r.err, HasSubstr("units 'mm' are not supported"));
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_FALSE(j.at("ok").get<bool>());
+}
+
+TEST_F(Diagnose, RecordingTooSmallToTellEffectsApartIsInconclusive) {
+  // Enough poses to calibrate, fewer than DiagnosisOptions::min_poses (12) to compare effects.
+  const std::string rec = simulate(8, "small.csv");
+  const Process r = diagnose(rec, {"--json"});
+  ASSERT_EQ(r.status, 4) << r.err << r.out;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("verdict"), "inconclusive");
+  EXPECT_EQ(j.at("exit_status").get<int>(), 4);
+  EXPECT_EQ(j.at("inputs").at("poses").get<int>(), 8);
+  EXPECT_TRUE(j.at("named_effects").empty());
+  EXPECT_FALSE(j.at("headline").get<std::string>().empty());
+
+  // Too few even for the standard calibration: still inconclusive, and no config is written
+  // because nothing was calibrated.
+  const std::string two =
+      altered(rec, "two.csv", [](cdpr::recording::Recording& x) { x.poses.resize(2); });
+  const std::string out = file("two.yaml");
+  const Process r2 = diagnose(two, {"--out", out});
+  EXPECT_EQ(r2.status, 4) << r2.err << r2.out;
+  EXPECT_THAT(r2.out, HasSubstr("not written"));
+  EXPECT_FALSE(fs::exists(out));
+}
+
+TEST_F(Diagnose, UsageErrorsExitWithTwo) {
+  EXPECT_EQ(fit({"diagnose", "--config", kNominal}).status, 2);  // --recording missing
+  const std::string rec = simulate(12, "rec.csv");
+  EXPECT_EQ(fit({"diagnose", "--config", kNominal, "--recording", rec, "--folds", "1"}).status, 2);
+  EXPECT_EQ(
+      fit({"diagnose", "--config", kNominal, "--recording", rec, "--noise-length", "-1"}).status,
+      2);
+  const Process help = fit({"diagnose", "--help"});
+  EXPECT_EQ(help.status, 0);
+  EXPECT_THAT(help.out, HasSubstr("--validate"));
+}
+
+TEST(DiagnoseReport, HtmlEscapingCoversMarkupAndQuotes) {
+  EXPECT_EQ(cdpr::fit::html_escape("a<b>&\"c'd"), "a&lt;b&gt;&amp;&quot;c&#39;d");
+  EXPECT_EQ(cdpr::fit::html_escape("EA = 21.4 +- 0.6 kN"), "EA = 21.4 +- 0.6 kN");
+}
+
+TEST(DiagnoseReport, EachEffectIsPlottedAgainstItsExplainingVariable) {
+  using cdpr::fit::explaining_variable;
+  EXPECT_EQ(explaining_variable("elasticity").name, "tension x loaded length");
+  EXPECT_EQ(explaining_variable("compliance").name, "tension");
+  EXPECT_EQ(explaining_variable("drum scale").name, "loaded length");
+  EXPECT_EQ(explaining_variable("encoder drift").name, "time");
+  EXPECT_EQ(explaining_variable("laser plane").name, "pose index");
+}
+
+}  // namespace

@@ -1,0 +1,249 @@
+// cdpr-fit diagnose: the mismatch locator's front end (diagnosis.hpp). Loads the config and the
+// recording(s) as calibrate does, refuses recordings that do not fit the config (counts, units),
+// runs cdpr::diagnose and writes the JSON and HTML reports and the calibrated config.
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "cdpr/calibration/diagnosis.hpp"
+#include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/recording/recording.hpp"
+#include "commands.hpp"
+#include "common.hpp"
+#include "diagnose_report.hpp"
+
+namespace cdpr::fit {
+
+namespace {
+
+// Readings above this (m) cannot be a cable length or a laser distance of a cable robot in m.
+constexpr double kImplausibleMetres = 100.0;
+// Mean reading / mean nominal length beyond this factor (either way): the unit is wrong.
+constexpr double kImplausibleRatio = 100.0;
+
+// A unit name for a factor between the readings and what the config expects.
+std::string unit_guess(double ratio) {
+  if (ratio > 300.0 && ratio < 3000.0) return "looks like mm, expected m";
+  if (ratio > 30.0 && ratio < 300.0) return "looks like cm, expected m";
+  if (ratio > 0.0003 && ratio < 0.003) return "looks like km, expected m";
+  return "does not look like m";
+}
+
+// Lengths (and laser distances) that are implausible for the config by orders of magnitude, i.e.
+// a file written in mm (or another unit) under "# units: SI".
+Status check_plausible_units(const recording::Recording& rec, const RobotModel& nominal,
+                             const std::string& file) {
+  KinematicsData kin(nominal.num_cables());
+  double sum_reading = 0.0, sum_nominal = 0.0, largest = 0.0;
+  int largest_cable = 0, count = 0;
+  for (std::size_t j = 0; j < rec.poses.size(); ++j) {
+    const recording::RecordedPose& p = rec.poses[j];
+    const bool ik = inverse_kinematics(nominal, p.commanded, kin);
+    for (Eigen::Index i = 0; i < p.lengths.size() && i < nominal.num_cables(); ++i) {
+      const double v = p.lengths(i);
+      if (!std::isfinite(v)) continue;
+      if (std::abs(v) > largest) {
+        largest = std::abs(v);
+        largest_cable = static_cast<int>(i) + 1;
+      }
+      if (!ik) continue;
+      sum_reading += std::abs(v);
+      sum_nominal += kin.lengths(i);
+      ++count;
+    }
+  }
+  const double ratio = count > 0 && sum_nominal > 0.0 ? sum_reading / sum_nominal : 1.0;
+  if (largest > kImplausibleMetres || ratio > kImplausibleRatio ||
+      ratio < 1.0 / kImplausibleRatio) {
+    // Short enough for Status (240 characters) after a long path.
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "%s: length_1..length_%d: %s (mean %.4g vs %.4g m of the nominal inverse "
+                         "kinematics at the commanded poses; largest %.4g in length_%d)",
+                         file.c_str(), rec.num_cables, unit_guess(ratio).c_str(),
+                         count > 0 ? sum_reading / count : 0.0,
+                         count > 0 ? sum_nominal / count : 0.0, largest, largest_cable);
+  }
+  for (int k = 0; k < rec.num_lasers; ++k) {
+    for (std::size_t j = 0; j < rec.poses.size(); ++j) {
+      const Eigen::VectorXd& l = rec.poses[j].lasers;
+      if (k < l.size() && std::isfinite(l(k)) && std::abs(l(k)) > kImplausibleMetres) {
+        return Status::Error(ErrorCode::kInvalidArgument,
+                             "%s: laser_%d: reading %.6g in data row %zu looks like mm, expected m",
+                             file.c_str(), k + 1, l(k), j + 1);
+      }
+    }
+  }
+  return Status::Ok();
+}
+
+struct Loaded {
+  recording::Recording recording;
+  MeasurementSet set;
+};
+
+// Reads a recording and makes the identification's view of it, refusing what does not fit.
+Result<Loaded> load_recording(const std::string& file, const DiagnoseArgs& args,
+                              const RobotModel& nominal, std::vector<std::string>* warnings) {
+  auto rec = recording::read_recording(file);
+  if (!rec.ok()) return rec.status();  // names the file, line and column
+  if (Status s = recording::check_against_model(*rec, nominal); !s.ok()) {
+    return with_context(s, file + " vs " + args.config);
+  }
+  if (Status s = check_plausible_units(*rec, nominal, file); !s.ok()) return s;
+  const std::string recorded_robot = rec->metadata.get(recording::key::kRobot);
+  if (!recorded_robot.empty() && recorded_robot != nominal.name) {
+    warnings->push_back(file + " is a recording of robot '" + recorded_robot + "' but " +
+                        args.config + " is '" + nominal.name + "'");
+  }
+  const std::pair<const char*, double> overrides[] = {
+      {recording::key::kNoiseLength, args.noise_length},
+      {recording::key::kNoiseLaser, args.noise_laser},
+      {recording::key::kNoiseForce, args.noise_force}};
+  for (const auto& [k, value] : overrides) {
+    if (!rec->metadata.has(k) && !std::isfinite(value)) {
+      warnings->push_back(file + " states no '" + k + "'; the default sigma is used");
+    }
+  }
+  auto set = recording::to_measurement_set(*rec);
+  if (!set.ok()) return with_context(set.status(), file);
+  if (std::isfinite(args.noise_length)) set->noise.sigma_length = args.noise_length;
+  if (std::isfinite(args.noise_laser)) set->noise.sigma_laser = args.noise_laser;
+  if (std::isfinite(args.noise_force)) set->noise.sigma_force = args.noise_force;
+  if (Status s = validate(*set, nominal); !s.ok()) return with_context(s, file);
+  return Loaded{std::move(*rec), std::move(*set)};
+}
+
+Status write_text(const std::string& path, const std::string& text) {
+  std::ofstream f(path, std::ios::trunc);
+  f << text;
+  f.flush();
+  if (!f) return Status::Error(ErrorCode::kIoError, "cannot write %s", path.c_str());
+  return Status::Ok();
+}
+
+int exit_status_of(Diagnosis::Verdict v) {
+  switch (v) {
+    case Diagnosis::Verdict::kNoMismatch:
+      return kExitNoMismatch;
+    case Diagnosis::Verdict::kMismatchNamed:
+    case Diagnosis::Verdict::kMismatchUnexplained:
+      return kExitMismatch;
+    case Diagnosis::Verdict::kInconclusive:
+      return kExitInconclusive;
+  }
+  return kExitMismatch;
+}
+
+}  // namespace
+
+Result<Output> diagnose(const DiagnoseArgs& args) {
+  if (args.bootstrap < 1) {
+    return Status::Error(ErrorCode::kInvalidArgument, "--bootstrap %d: must be at least 1",
+                         args.bootstrap);
+  }
+  if (args.folds < 2) {
+    return Status::Error(ErrorCode::kInvalidArgument, "--folds %d: must be at least 2", args.folds);
+  }
+  auto nominal = load_config(args.config);
+  if (!nominal.ok()) return nominal.status();
+  std::vector<std::string> warnings;
+  auto primary = load_recording(args.recording, args, *nominal, &warnings);
+  if (!primary.ok()) return primary.status();
+  std::optional<Loaded> validation;
+  if (!args.validate.empty()) {
+    auto v = load_recording(args.validate, args, *nominal, &warnings);
+    if (!v.ok()) return v.status();
+    validation = std::move(*v);
+  }
+
+  IdentificationOptions identification;
+  if (Status s = apply_estimate(args.estimate, nominal->num_cables(), &identification); !s.ok()) {
+    return s;
+  }
+  DiagnosisOptions options;
+  options.seed = args.seed;
+  options.bootstrap_samples = args.bootstrap;
+  options.cv_folds = args.folds;
+
+  const CalibratedModel initial = CalibratedModel::FromRobot(*nominal);
+  auto result = cdpr::diagnose(initial, primary->set, validation ? &validation->set : nullptr,
+                               identification, options);
+  if (!result.ok()) {
+    return with_context(result.status(), "diagnosing " + args.recording);
+  }
+  const Diagnosis& d = *result;
+
+  DiagnoseContext c;
+  c.config = args.config;
+  c.config_hash = hash_or_unknown(args.config);
+  c.recording = args.recording;
+  c.recording_hash = hash_or_unknown(args.recording);
+  if (!args.validate.empty()) {
+    c.validation = args.validate;
+    c.validation_hash = hash_or_unknown(args.validate);
+  }
+  c.poses = primary->set.num_poses();
+  c.cables = nominal->num_cables();
+  c.lasers = static_cast<int>(nominal->lasers.size());
+  c.estimated = estimated_items(identification);
+  c.seed = args.seed;
+  c.bootstrap = args.bootstrap;
+  c.folds = args.folds;
+  // Without the standard identification (too few poses) there is nothing calibrated to write.
+  const bool calibrated = !d.before.residuals.empty();
+  if (!args.out.empty() && !calibrated) {
+    warnings.push_back("--out " + args.out +
+                       " not written: no identification was run on this recording");
+  }
+  c.calibrated_config = calibrated ? args.out : std::string();
+  c.warnings = warnings;
+  for (const std::string& w : d.before.warnings) c.warnings.push_back("identification: " + w);
+
+  const CableMisfit misfit = cable_misfit(d, nominal->num_cables());
+  Output out;
+  out.exit_status = exit_status_of(d.verdict);
+  out.json = diagnosis_json(d, c, misfit);
+  out.json["exit_status"] = out.exit_status;
+  out.json["noise"] = {{"length_m", primary->set.noise.sigma_length},
+                       {"laser_m", primary->set.noise.sigma_laser},
+                       {"force_n", primary->set.noise.sigma_force}};
+  out.json["json_report"] =
+      args.json_report.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.json_report);
+  out.json["html_report"] = args.html.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.html);
+
+  if (!c.calibrated_config.empty()) {
+    std::string effects;
+    for (const EffectFit& e : d.accepted) {
+      effects +=
+          (effects.empty() ? "" : ", ") + e.id + (e.modelled_in_config ? "" : " (not carried)");
+    }
+    const std::string yaml =
+        "# Calibrated by cdpr-fit diagnose from " + args.config + " and " + args.recording + " (" +
+        recording::utc_timestamp() + "); verdict " + verdict_key(d.verdict) + ".\n" +
+        "# Named effects: " + (effects.empty() ? std::string("none") : effects) + ".\n" +
+        "# Winch length_offset and drum size include the identified encoder offsets and scales.\n" +
+        config::save_robot_config(d.model_after.robot);
+    if (Status s = write_text(args.out, yaml); !s.ok()) return s;
+  }
+  if (!args.html.empty()) {
+    const std::vector<ResidualPlot> plots = residual_plots(d, primary->set);
+    if (Status s = write_text(args.html, diagnosis_html(d, c, plots, misfit)); !s.ok()) return s;
+  }
+  if (!args.json_report.empty()) {
+    nlohmann::json file = out.json;
+    file["ok"] = true;
+    if (Status s = write_text(args.json_report, file.dump(2) + "\n"); !s.ok()) return s;
+  }
+
+  std::ostringstream h;
+  h << diagnosis_text(d, c) << "\n";
+  if (!c.calibrated_config.empty()) h << "wrote " << args.out << "\n";
+  if (!args.json_report.empty()) h << "wrote " << args.json_report << "\n";
+  if (!args.html.empty()) h << "wrote " << args.html << "\n";
+  h << "exit status " << out.exit_status << " (" << verdict_key(d.verdict) << ")\n";
+  out.human = h.str();
+  return out;
+}
+
+}  // namespace cdpr::fit
