@@ -142,7 +142,8 @@ struct RobotRun {
   double ours_chi2 = 0;
   int ours_dof = 0;
   std::string paper_nom_brief;
-  double ours_ms = 0, paper_ms = 0;
+  double ours_ms = 0, paper_ms = 0, paper_nom_ms = 0;
+  int paper_nom_iterations = 0;
   int ours_iterations = 0, paper_iterations = 0;
   std::string ours_brief, paper_brief;
 };
@@ -210,6 +211,8 @@ RobotRun run_robot(const std::string& name, const cdpr::scenario::Scenario& s,
         must(cdpr::paper_method(paper_start(s, false), sim.set, cdpr::PaperMethodOptions{}),
              "paper method (rest nominal)");
     r.paper_nom_brief = paper_nom.Summary();
+    r.paper_nom_ms = 1e3 * paper_nom.time_s;
+    r.paper_nom_iterations = paper_nom.iterations;
     r.paper_nom_anchor_rms = anchor_rms_error(paper_nom.estimate, s.truth);
     r.paper_nom_anchor_3d = anchor_rms_3d(paper_nom.estimate, s.truth);
     const cdpr::RealizedAccuracy acc_pn = must(
@@ -311,10 +314,16 @@ int main(int argc, char** argv) {
   // ---------------- Speed ----------------
   if (!mc_only) {
     std::printf("\n== Speed (same 25 poses) ==\n");
+    // Both start from the nominal config (what cdpr-fit calibrate does with either method); the
+    // second line gives the paper's method the 8 coordinates outside V at their true values.
     std::printf(
-        "  ours %.1f ms (%d iterations), paper method %.1f ms (%d iterations): ours is %.0fx "
-        "faster\n",
-        rm.ours_ms, rm.ours_iterations, rm.paper_ms, rm.paper_iterations, rm.paper_ms / rm.ours_ms);
+        "  ours %.1f ms (%d iterations), paper method from the same nominal config %.1f ms (%d "
+        "iterations): ours is %.0fx faster\n",
+        rm.ours_ms, rm.ours_iterations, rm.paper_nom_ms, rm.paper_nom_iterations,
+        rm.paper_nom_ms / rm.ours_ms);
+    std::printf(
+        "  paper method given the 8 coordinates outside V: %.1f ms (%d iterations): %.0fx\n",
+        rm.paper_ms, rm.paper_iterations, rm.paper_ms / rm.ours_ms);
     std::printf("  %-10s %14s %14s\n", "poses", "ours (ms)", "per pose (ms)");
     for (int n : {25, 250, 2500}) {
       if (quick && n > 250) break;
@@ -404,8 +413,10 @@ int main(int argc, char** argv) {
     lbox.half_extent = Eigen::Vector3d(2.5, 1.75, 0.6);
     const RobotRun rl = run_robot("LARGE", large, dl, lbox, true, nullptr);
     print_run(rl);
-    std::printf("  speed: ours %.1f ms, paper %.1f ms (%.0fx)\n", rl.ours_ms, rl.paper_ms,
-                rl.paper_ms / rl.ours_ms);
+    std::printf("  speed: ours %.1f ms, paper from nominal %.1f ms (%.0fx)\n", rl.ours_ms,
+                rl.paper_nom_ms, rl.paper_nom_ms / rl.ours_ms);
+    std::printf("  speed: ours %.1f ms, paper given the rest %.1f ms (%.0fx)\n", rl.ours_ms,
+                rl.paper_ms, rl.paper_ms / rl.ours_ms);
   }
   return 0;
 }
