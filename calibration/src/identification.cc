@@ -66,6 +66,31 @@ T true_tension(const CableConstants& k, double reading, const T& g, const T& c) 
   return (T(raw) - T(k.sensor_offset) - c) / (T(k.sensor_gain) * (T(1) + g));
 }
 
+// Elongation dL of a cable with kinematic length `length` under the tension from `tension_reading`
+// (estimated sensor corrections g, c and stiffness scale e), and in *compliance d(dL)/dF.
+template <typename T>
+T elongation_at(const CableConstants& k, const T& length, double tension_reading, const T& e,
+                const T& g, const T& c, T* force, T* compliance) {
+  const T F = true_tension(k, tension_reading, g, c);
+  if (force) *force = F;
+  const T loaded = ident_detail::loaded_length<T>(k.cable, length);
+  if (k.estimated_stiffness) {
+    const T ea = T(k.cable.ea) * (T(1) + e);
+    if (compliance) *compliance = loaded * ea / ((ea + F) * (ea + F));
+    return F * loaded / (ea + F);
+  }
+  if (compliance) {
+    *compliance = T(0);
+    if (k.cable.elongation != ElongationKind::kRigid) {
+      const double h = 1e-3 * std::max(1.0, std::abs(tension_reading));
+      *compliance = (cable_elongation<T>(k.cable, loaded, F + T(h)) -
+                     cable_elongation<T>(k.cable, loaded, F - T(h))) /
+                    T(2.0 * h);
+    }
+  }
+  return cable_elongation<T>(k.cable, loaded, F);
+}
+
 // Unstretched length U = L_k - dL at pose; false when the geometry is degenerate. With
 // `compliance` non-null also d(dL)/dF there (m/N; 0 without a tension reading).
 template <typename T>
@@ -84,22 +109,7 @@ bool unstretched_length(const CableConstants& k, const T* a, const T* b, const T
   U = geom.length;
   if (compliance) *compliance = T(0);
   if (!std::isnan(tension_reading)) {
-    const T F = true_tension(k, tension_reading, g, c);
-    const T loaded = ident_detail::loaded_length<T>(k.cable, geom.length);
-    if (k.estimated_stiffness) {
-      const T ea = T(k.cable.ea) * (T(1) + e);
-      U -= F * loaded / (ea + F);
-      if (compliance) *compliance = loaded * ea / ((ea + F) * (ea + F));
-    } else {
-      U -= cable_elongation<T>(k.cable, loaded, F);
-      if (compliance && k.cable.elongation != ElongationKind::kRigid) {
-        const double h = 1e-3 * std::max(1.0, std::abs(tension_reading));
-        *compliance = (cable_elongation<T>(k.cable, loaded, F + T(h)) -
-                       cable_elongation<T>(k.cable, loaded, F - T(h))) /
-                      T(2.0 * h);
-      }
-    }
-    if (force) *force = F;
+    U -= elongation_at<T>(k, geom.length, tension_reading, e, g, c, force, compliance);
   } else if (force) {
     *force = T(0);
   }
@@ -160,26 +170,38 @@ struct LaserCost {
   }
 };
 
-// Static equilibrium (6 residuals). Blocks: pose, a_1..a_m, b_1..b_m, g_1..g_m, c_1..c_m.
+// Static equilibrium (6 residuals). Blocks: pose, a_1..a_m, b_1..b_m, g_1..g_m, c_1..c_m,
+// o_1..o_m, s_1..s_m, then e (one block when the stiffness is shared, else e_1..e_m).
 //
 // The residual w = A^T F + w_gravity carries the force noise linearly: cov(w) = sigma_F^2 A^T A.
-// It is whitened with that covariance evaluated at the CURRENT pose and geometry (not frozen at the
-// start): minimising w^T (A^T A)^-1 w / sigma_F^2 is then the profile likelihood of the
-// errors-in-variables problem with the true tensions as nuisance parameters (the closest tensions
-// to the readings that balance the platform). A covariance frozen at the start leaves the expected
-// noise term tr(W A^T A W^T) sigma_F^2 depending on the geometry, which biases the anchors; with
-// 1 N of force noise on MINI the bias was about twice its standard error.
+// The same tension readings also enter the cable length residuals of the pose, through the
+// elongation: r_l,i = U_i(F_i) - reading model, with noise -c_i eps_i + encoder noise
+// (c_i = d(dL)/dF). So w is whitened CONDITIONALLY on the length residuals of its pose (the lengths
+// are whitened by themselves, LengthCost; together this is the Cholesky factor of the joint
+// covariance with the lengths first):
+//   w|l   = w + sum_i c_i sigma_F^2 a_i r_l,i / S_i,       S_i = sigma_L^2 + c_i^2 sigma_F^2
+//   cov   = sigma_F^2 sum_i a_i a_i^T (sigma_L^2 / S_i)     (a_i = [u_i; R b_i x u_i])
+// (cables without a length row: no correction, weight 1). Everything is evaluated at the CURRENT
+// pose and geometry (not frozen at the start): the objective is then one fixed function of the
+// parameters, the profile likelihood of the errors-in-variables problem with the true tensions as
+// nuisance parameters. Frozen at the start, the estimate depended on the starting model and the
+// anchors were biased (about 1.7 standard errors of the mean at 1 N on MINI); without the
+// conditioning chi^2/dof was about 1.12 at 1 N on MINI.
 struct EquilibriumCost {
   std::vector<CableConstants> k;
   Eigen::VectorXd tensions;
   double sigma_force = 1.0;
+  double sigma_length = 1.0;
+  std::vector<double> readings;  // cable length readings; NaN: the cable has no length row
+  bool shared_stiffness = false;
   double mass = 1.0;
   double gravity = 9.81;
   Eigen::Vector3d com = Eigen::Vector3d::Zero();
 
-  // Net wrench and A^T A (the sum of a_i a_i^T over the cables) at the parameters.
+  // Net wrench, the whitening covariance of w|l and the correction term at the parameters.
   template <typename T>
-  bool wrench(T const* const* p, Eigen::Matrix<T, 6, 1>& w, Eigen::Matrix<T, 6, 6>& gram) const {
+  bool wrench(T const* const* p, Eigen::Matrix<T, 6, 1>& w, Eigen::Matrix<T, 6, 6>& cov,
+              Eigen::Matrix<T, 6, 1>* correction = nullptr) const {
     const int m = static_cast<int>(k.size());
     const T* pose = p[0];
     Vec3<T> r;
@@ -188,23 +210,39 @@ struct EquilibriumCost {
     const Vec3<T> weight(T(0), T(0), T(-mass * gravity));
     w.template head<3>() = weight;
     w.template tail<3>() = (R * com.cast<T>()).cross(weight);
-    gram.setZero();
+    cov.setZero();
+    if (correction) correction->setZero();
+    const double sf2 = sigma_force * sigma_force;
+    const double sl2 = sigma_length * sigma_length;
     for (int i = 0; i < m; ++i) {
+      const auto ui = static_cast<std::size_t>(i);
       const T* a = p[1 + i];
       const T* b = p[1 + m + i];
       const T* g = p[1 + 2 * m + i];
       const T* c = p[1 + 3 * m + i];
       const Vec3<T> rb = R * Vec3<T>(b[0], b[1], b[2]);
-      const CableGeometry<T> geom =
-          cable_geometry<T>(Vec3<T>(a[0], a[1], a[2]), k[static_cast<std::size_t>(i)].pulley_frame,
-                            T(k[static_cast<std::size_t>(i)].pulley_radius), r + rb);
+      const CableGeometry<T> geom = cable_geometry<T>(Vec3<T>(a[0], a[1], a[2]), k[ui].pulley_frame,
+                                                      T(k[ui].pulley_radius), r + rb);
       if (!geom.valid) return false;
-      const T F = true_tension(k[static_cast<std::size_t>(i)], tensions(i), g[0], c[0]);
+      const T F = true_tension(k[ui], tensions(i), g[0], c[0]);
       Eigen::Matrix<T, 6, 1> col;
       col.template head<3>() = geom.unit;
       col.template tail<3>() = rb.cross(geom.unit);
       w += col * F;
-      gram += col * col.transpose();
+      T weight_i = T(1);
+      if (!readings.empty() && !std::isnan(readings[ui])) {
+        const T* o = p[1 + 4 * m + i];
+        const T* s = p[1 + 5 * m + i];
+        const T* e = p[1 + 6 * m + (shared_stiffness ? 0 : i)];
+        T compliance;
+        const T U = geom.length - elongation_at<T>(k[ui], geom.length, tensions(i), e[0], g[0],
+                                                   c[0], nullptr, &compliance);
+        const T rl = U - ((T(1) + s[0]) * T(readings[ui]) + o[0]);
+        const T S = T(sl2) + compliance * compliance * T(sf2);
+        weight_i = T(sl2) / S;
+        if (correction) *correction += col * (compliance * T(sf2) * rl / S);
+      }
+      cov += (T(sf2) * weight_i) * (col * col.transpose());
     }
     return true;
   }
@@ -212,15 +250,15 @@ struct EquilibriumCost {
   template <typename T>
   bool operator()(T const* const* p, T* residual) const {
     Eigen::Matrix<T, 6, 1> w;
-    Eigen::Matrix<T, 6, 6> gram;
-    if (!wrench(p, w, gram)) return false;
-    Eigen::Matrix<T, 6, 6> cov = T(sigma_force * sigma_force) * gram;
+    Eigen::Matrix<T, 6, 6> cov;
+    Eigen::Matrix<T, 6, 1> correction;
+    if (!wrench(p, w, cov, &correction)) return false;
     // A tiny ridge keeps the factorisation defined at a (refused elsewhere) singular geometry.
     const T ridge = T(1e-12) * cov.trace();
     for (int q = 0; q < 6; ++q) cov(q, q) += ridge;
     const Eigen::LLT<Eigen::Matrix<T, 6, 6>> llt(cov);
     if (llt.info() != Eigen::Success) return false;
-    const Eigen::Matrix<T, 6, 1> out = llt.matrixL().solve(w);
+    const Eigen::Matrix<T, 6, 1> out = llt.matrixL().solve(Eigen::Matrix<T, 6, 1>(w + correction));
     for (int q = 0; q < 6; ++q) residual[q] = out(q);
     return true;
   }
@@ -554,8 +592,19 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       f->gravity = robot.gravity;
       f->com = robot.platform.center_of_mass;
       f->sigma_force = noise.sigma_force;
+      f->sigma_length = noise.sigma_length;
+      f->shared_stiffness = opt.estimate_stiffness == StiffnessEstimate::kShared;
+      if (opt.use_lengths) {
+        // The cables that have a length row at this pose (the same test as above).
+        f->readings.assign(static_cast<std::size_t>(m), kNaN);
+        for (const RowInfo& ri : B->rows_per_pose[uj]) {
+          if (ri.channel == Channel::kLength) {
+            f->readings[static_cast<std::size_t>(ri.index)] = pm.cable_lengths(ri.index);
+          }
+        }
+      }
       B->equilibrium[uj] = f;
-      auto* cost = new ceres::DynamicAutoDiffCostFunction<EquilibriumCost, 32>(f);
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<EquilibriumCost, 40>(f);
       std::vector<double*> blocks;
       cost->AddParameterBlock(6);
       blocks.push_back(pose);
@@ -574,6 +623,18 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       for (int i = 0; i < m; ++i) {
         cost->AddParameterBlock(1);
         blocks.push_back(&B->c[static_cast<std::size_t>(i)]);
+      }
+      for (int i = 0; i < m; ++i) {
+        cost->AddParameterBlock(1);
+        blocks.push_back(&B->o[static_cast<std::size_t>(i)]);
+      }
+      for (int i = 0; i < m; ++i) {
+        cost->AddParameterBlock(1);
+        blocks.push_back(&B->s[static_cast<std::size_t>(i)]);
+      }
+      for (int i = 0; i < (f->shared_stiffness ? 1 : m); ++i) {
+        cost->AddParameterBlock(1);
+        blocks.push_back(&B->e[static_cast<std::size_t>(i)]);
       }
       cost->SetNumResiduals(6);
       B->equilibrium_blocks[uj] = blocks;
@@ -957,8 +1018,8 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
     }
     if (!std::isnan(pr.wrench_normalized(0)) && B.equilibrium[j] != nullptr) {
       Eigen::Matrix<double, 6, 1> w;
-      Eigen::Matrix<double, 6, 6> gram;
-      if (B.equilibrium[j]->wrench<double>(B.equilibrium_blocks[j].data(), w, gram)) {
+      Eigen::Matrix<double, 6, 6> cov;
+      if (B.equilibrium[j]->wrench<double>(B.equilibrium_blocks[j].data(), w, cov)) {
         pr.wrench_si = w;
       }
       sw += pr.wrench_si.head<3>().squaredNorm();
