@@ -22,6 +22,7 @@
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/recording/recording.hpp"
 #include "diagnose_report.hpp"
+#include "fit_process.hpp"
 
 namespace {
 
@@ -37,58 +38,19 @@ const std::string kTruth = kSource + "/config/mini-measured.yaml";
 // options are taken; the others use the defaults, as an engineer would.
 const std::vector<std::string> kQuick = {"--bootstrap", "20", "--folds", "3", "--seed", "2"};
 
-struct Process {
-  int status = -1;
-  std::string out, err;
-};
+using Process = cdpr::fit_test::ProcessResult;
+using cdpr::fit_test::slurp;
 
-std::string read_file(const fs::path& p) {
-  std::ifstream f(p);
-  std::ostringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-std::string shell_quoted(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return q + "'";
-}
-
-class Diagnose : public ::testing::Test {
+class Diagnose : public cdpr::fit_test::FitProcessTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("cdpr_fit_diagnose_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    if (!HasFailure()) fs::remove_all(dir_);
-  }
-
-  std::string file(const std::string& name) const { return (dir_ / name).string(); }
-
-  Process fit(const std::vector<std::string>& args) const {
-    std::string cmd = shell_quoted(CDPR_FIT_BIN);
-    for (const std::string& a : args) cmd += " " + shell_quoted(a);
-    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-    cmd += " >" + shell_quoted(out.string()) + " 2>" + shell_quoted(err.string());
-    const int raw = std::system(cmd.c_str());
-    Process r;
-    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-    r.out = read_file(out);
-    r.err = read_file(err);
-    return r;
-  }
+  Diagnose() : FitProcessTest("cdpr_fit_diagnose_test_") {}
 
   // The measured MINI (or `truth`) commanded through the nominal model with elastic cables,
   // `poses` designed poses, default noise (encoder 0.1 mm, laser 1 mm, force 1 N). With the
   // measured MINI this is what the nominal model, once calibrated, explains.
   std::string simulate(int poses, const std::string& name, int seed = 3,
                        const std::string& truth = kTruth) const {
-    const std::string rec = file(name);
+    const std::string rec = path(name);
     const Process r =
         fit({"simulate", "--config", truth, "--nominal", kNominal, "--physics", "elastic",
              "--design", std::to_string(poses), "--seed", std::to_string(seed), "--out", rec});
@@ -102,7 +64,7 @@ class Diagnose : public ::testing::Test {
     auto rec = cdpr::recording::read_recording(in);
     EXPECT_TRUE(rec.ok()) << rec.status().to_string();
     change(*rec);
-    const std::string out = file(name);
+    const std::string out = path(name);
     const cdpr::Status s = cdpr::recording::write_recording(*rec, out);
     EXPECT_TRUE(s.ok()) << s.to_string();
     return out;
@@ -113,13 +75,11 @@ class Diagnose : public ::testing::Test {
     args.insert(args.end(), extra.begin(), extra.end());
     return fit(args);
   }
-
-  fs::path dir_;
 };
 
 TEST_F(Diagnose, RecordingOfACorrectModelExitsZeroWithJsonAndHtmlReports) {
   const std::string rec = simulate(25, "null.csv");
-  const std::string json = file("report.json"), html = file("report.html");
+  const std::string json = path("report.json"), html = path("report.html");
   std::vector<std::string> args = {"--json", json, "--html", html};
   args.insert(args.end(), kQuick.begin(), kQuick.end());
   const Process r = diagnose(rec, args);
@@ -127,7 +87,7 @@ TEST_F(Diagnose, RecordingOfACorrectModelExitsZeroWithJsonAndHtmlReports) {
   EXPECT_THAT(r.out, HasSubstr("verdict: no_mismatch"));
   EXPECT_THAT(r.out, HasSubstr("mm"));  // lengths are shown to people in mm
 
-  const nlohmann::json j = nlohmann::json::parse(read_file(json));
+  const nlohmann::json j = nlohmann::json::parse(slurp(json));
   EXPECT_TRUE(j.at("ok").get<bool>());
   EXPECT_EQ(j.at("command"), "diagnose");
   EXPECT_EQ(j.at("verdict"), "no_mismatch");
@@ -142,7 +102,7 @@ TEST_F(Diagnose, RecordingOfACorrectModelExitsZeroWithJsonAndHtmlReports) {
   EXPECT_FALSE(j.at("channels").empty());
 
   ASSERT_TRUE(fs::exists(html));
-  const std::string page = read_file(html);
+  const std::string page = slurp(html);
   EXPECT_THAT(page, HasSubstr("<svg"));
   EXPECT_THAT(page, HasSubstr("</html>"));
   // Self-contained: no script, no stylesheet or image fetched from anywhere.
@@ -161,13 +121,13 @@ TEST_F(Diagnose, ConcealedSofterCablesAreNamedAndCarriedByTheCalibratedConfig) {
     ASSERT_GT(c.ea, 1.5 * kTrueEa) << "the shipped MINI must be stiffer than the concealed truth";
     c.ea = kTrueEa;
   }
-  const std::string soft = file("soft.yaml");
+  const std::string soft = path("soft.yaml");
   {
     std::ofstream f(soft);
     f << cdpr::config::save_robot_config(*truth);
   }
   const std::string rec = simulate(25, "soft.csv", 3, soft);
-  const std::string cal = file("calibrated.yaml"), html = file("report.html");
+  const std::string cal = path("calibrated.yaml"), html = path("report.html");
   const Process r = diagnose(rec, {"--json", "--out", cal, "--html", html});
   ASSERT_EQ(r.status, 3) << r.err << r.out;
   const nlohmann::json j = nlohmann::json::parse(r.out);  // --json without a file: stdout
@@ -189,7 +149,7 @@ TEST_F(Diagnose, ConcealedSofterCablesAreNamedAndCarriedByTheCalibratedConfig) {
     EXPECT_NEAR(calibrated->cables[i].ea, kTrueEa, 0.05 * kTrueEa) << "cable " << i + 1;
   }
   // The plot of an elasticity is against tension x loaded length, before and after.
-  const std::string page = read_file(html);
+  const std::string page = slurp(html);
   EXPECT_THAT(page, HasSubstr("tension x loaded length"));
   EXPECT_THAT(page, HasSubstr("class=\"f\""));  // "after" points
 }
@@ -225,7 +185,7 @@ TEST_F(Diagnose, RecordingsThatDoNotFitTheConfigAreRefusedWithFileAndReason) {
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);
     const std::string rec = altered(clean, c.name, c.change);
-    const std::string out = file(c.name + ".yaml"), html = file(c.name + ".html");
+    const std::string out = path(c.name + ".yaml"), html = path(c.name + ".html");
     const Process r = diagnose(rec, {"--out", out, "--html", html});
     EXPECT_EQ(r.status, 1) << r.out;
     EXPECT_THAT(r.err, HasSubstr("cdpr-fit diagnose: error: "));
@@ -234,11 +194,11 @@ TEST_F(Diagnose, RecordingsThatDoNotFitTheConfigAreRefusedWithFileAndReason) {
     EXPECT_FALSE(fs::exists(html));
   }
   // A file that says it is in mm is refused by the reader, naming its line.
-  const std::string text = read_file(clean);
+  const std::string text = slurp(clean);
   const std::string from = "# units: SI", to = "# units: mm";
   const std::size_t at = text.find(from);
   ASSERT_NE(at, std::string::npos);
-  const std::string mm = file("units-mm.csv");
+  const std::string mm = path("units-mm.csv");
   {
     std::ofstream f(mm);
     f << text.substr(0, at) << to << text.substr(at + from.size());
@@ -267,7 +227,7 @@ TEST_F(Diagnose, RecordingTooSmallToTellEffectsApartIsInconclusive) {
   // because nothing was calibrated.
   const std::string two =
       altered(rec, "two.csv", [](cdpr::recording::Recording& x) { x.poses.resize(2); });
-  const std::string out = file("two.yaml");
+  const std::string out = path("two.yaml");
   const Process r2 = diagnose(two, {"--out", out});
   EXPECT_EQ(r2.status, 4) << r2.err << r2.out;
   EXPECT_THAT(r2.out, HasSubstr("not written"));

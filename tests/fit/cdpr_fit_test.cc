@@ -19,6 +19,7 @@
 
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/recording/recording.hpp"
+#include "fit_process.hpp"
 
 namespace {
 
@@ -30,59 +31,13 @@ const std::string kSource = CDPR_SOURCE_DIR;
 const std::string kNominal = kSource + "/config/mini.yaml";
 const std::string kTruth = kSource + "/config/mini-measured.yaml";
 
-struct ProcessResult {
-  int status = -1;
-  std::string out;
-  std::string err;
-};
+using cdpr::fit_test::ProcessResult;
+using cdpr::fit_test::quote;
+using cdpr::fit_test::slurp;
 
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
-std::string quote(const std::string& s) {
-  std::string q = "'";
-  for (char c : s) {
-    if (c == '\'') {
-      q += "'\\''";
-    } else {
-      q += c;
-    }
-  }
-  return q + "'";
-}
-
-class CdprFit : public ::testing::Test {
+class CdprFit : public cdpr::fit_test::FitProcessTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("cdpr_fit_test_" + std::to_string(::getpid()) + "_" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    if (!HasFailure()) fs::remove_all(dir_);
-  }
-
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-
-  // Runs cdpr-fit with `args`; stdout and stderr captured separately.
-  ProcessResult fit(const std::vector<std::string>& args) const {
-    std::string cmd = quote(CDPR_FIT_BIN);
-    for (const std::string& a : args) cmd += " " + quote(a);
-    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-    cmd += " >" + quote(out.string()) + " 2>" + quote(err.string());
-    ProcessResult r;
-    const int raw = std::system(cmd.c_str());
-    r.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-    r.out = slurp(out);
-    r.err = slurp(err);
-    return r;
-  }
+  CdprFit() : FitProcessTest("cdpr_fit_test_") {}
 
   // A simulated recording of the true MINI at `count` designed poses (home first).
   std::string simulate(int count, const std::string& name = "rec.csv", int seed = 5) {
@@ -93,8 +48,6 @@ class CdprFit : public ::testing::Test {
     EXPECT_EQ(r.status, 0) << r.err;
     return rec;
   }
-
-  fs::path dir_;
 };
 
 double anchor_rms(const cdpr::RobotModel& a, const cdpr::RobotModel& b) {
