@@ -34,6 +34,19 @@ TEST(Status, LongMessagesAreTruncatedNotOverflowed) {
   EXPECT_EQ(s.message().substr(0, 5), "ctx: ");
 }
 
+TEST(Status, PrependShortensALongContextInTheMiddleAndKeepsTheReason) {
+  const std::string reason =
+      "cable count mismatch: the recording has 7 cables but config 'MINI' has 8";
+  Status s(ErrorCode::kFailedPrecondition, reason);
+  const std::string dir(2 * Status::kMaxMessage, 'd');
+  s.prepend("/check/" + dir + "/seven-cables.csv vs /check/config/mini.yaml: ");
+  const std::string_view m = s.message();
+  EXPECT_EQ(m.size(), Status::kMaxMessage - 1);
+  EXPECT_EQ(m.substr(0, 7), "/check/");
+  EXPECT_NE(m.find("..."), std::string_view::npos);
+  EXPECT_NE(m.find("mini.yaml: " + reason), std::string_view::npos) << m;
+}
+
 TEST(Result, CarriesValueOrStatus) {
   const Result<int> good(7);
   ASSERT_TRUE(good.ok());

@@ -20,8 +20,9 @@ std::string hash_or_unknown(const std::string& path) {
 }
 
 Status with_context(const Status& s, const std::string& context) {
-  const std::string_view m = s.message();
-  return Status::Error(s.code(), "%s: %.*s", context.c_str(), static_cast<int>(m.size()), m.data());
+  Status out = s;
+  out.prepend(context + ": ");
+  return out;
 }
 
 nlohmann::json number_or_null(double v) {

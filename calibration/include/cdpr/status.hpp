@@ -67,7 +67,7 @@ constexpr std::string_view to_string(ErrorCode c) {
 
 class Status {
  public:
-  static constexpr std::size_t kMaxMessage = 240;
+  static constexpr std::size_t kMaxMessage = 512;
 
   constexpr Status() = default;
   Status(ErrorCode code, std::string_view message) : code_(code) { set(message); }
@@ -97,14 +97,34 @@ class Status {
     }
     return s;
   }
-  // Prefixes context to the message: "reading config.yaml: " + old message.
+  // Prefixes context to the message: "reading config.yaml: " + old message. The reason is what
+  // the reader needs most, so when both do not fit, the context (usually a long path) loses its
+  // middle ("/check/wo...ven-cables.csv: ") before the message loses its end.
   Status& prepend(std::string_view context) {
+    constexpr std::size_t kCap = kMaxMessage - 1;
+    constexpr std::string_view kEllipsis = "...";
+    constexpr std::size_t kMinContext = 24;  // keep at least this much of the context
     const std::size_t old_len = std::strlen(msg_.data());
-    const std::size_t ctx = context.size() < kMaxMessage - 1 ? context.size() : kMaxMessage - 1;
-    const std::size_t keep = old_len < kMaxMessage - 1 - ctx ? old_len : kMaxMessage - 1 - ctx;
-    std::memmove(msg_.data() + ctx, msg_.data(), keep);
-    std::memcpy(msg_.data(), context.data(), ctx);
-    msg_[ctx + keep] = '\0';
+    std::size_t budget = kCap > old_len ? kCap - old_len : 0;
+    if (budget < kMinContext) budget = context.size() < kMinContext ? context.size() : kMinContext;
+    std::array<char, kMaxMessage> ctx{};
+    std::size_t n = 0;
+    if (context.size() <= budget) {
+      n = context.size();
+      std::memcpy(ctx.data(), context.data(), n);
+    } else {  // head + "..." + tail: the file name and the ": " at the end survive
+      const std::size_t keep = budget - kEllipsis.size();
+      const std::size_t head = keep / 3, tail = keep - head;
+      std::memcpy(ctx.data(), context.data(), head);
+      std::memcpy(ctx.data() + head, kEllipsis.data(), kEllipsis.size());
+      std::memcpy(ctx.data() + head + kEllipsis.size(), context.data() + context.size() - tail,
+                  tail);
+      n = budget;
+    }
+    const std::size_t keep = old_len < kCap - n ? old_len : kCap - n;
+    std::memmove(msg_.data() + n, msg_.data(), keep);
+    std::memcpy(msg_.data(), ctx.data(), n);
+    msg_[n + keep] = '\0';
     return *this;
   }
 
