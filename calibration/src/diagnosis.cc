@@ -258,16 +258,23 @@ std::vector<int> forward_select(const Eigen::MatrixXd& S, const SelectionInput& 
 
 // Linearised K-fold cross-validation over poses: the geometry (and the effect columns `extra`)
 // from a Gauss-Newton step on K-1 folds, the held-out poses re-located (their own pose columns
-// projected out); RMS of the held-out length residuals in m.
-double cv_length_rms(const MismatchDesign& d, const Eigen::MatrixXd* extra,
-                     const std::vector<int>& fold, int folds) {
+// projected out). `normalized`: RMS of all held-out residuals in sigmas (every channel: an
+// effect of the laser or of the force sensors may leave the lengths alone); `length_m`: RMS of
+// the held-out length residuals in m (what people read).
+struct CvRms {
+  double normalized = 0.0;
+  double length_m = 0.0;
+};
+
+CvRms cv_rms(const MismatchDesign& d, const Eigen::MatrixXd* extra, const std::vector<int>& fold,
+             int folds) {
   std::vector<const Eigen::MatrixXd*> blocks;
   if (extra != nullptr && extra->cols() > 0) blocks.push_back(extra);
   const PoseGrams g = pose_grams(d, blocks, true, true);
   const int np = d.num_poses();
   const int q = g.total - 1;
-  double sum = 0.0;
-  int count = 0;
+  double sum_len = 0.0, sum_all = 0.0;
+  int count_len = 0, count_all = 0;
   for (int f = 0; f < folds; ++f) {
     Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
     for (int j = 0; j < np; ++j) {
@@ -281,28 +288,45 @@ double cv_length_rms(const MismatchDesign& d, const Eigen::MatrixXd* extra,
       const Eigen::VectorXd e = Z.col(q) + Z.leftCols(q) * delta;
       for (Eigen::Index k = 0; k < e.size(); ++k) {
         const int row = d.pose_start[uj] + static_cast<int>(k);
+        sum_all += e(k) * e(k);
+        ++count_all;
         if (d.kind[static_cast<std::size_t>(row)] != ResidualKind::kLength) continue;
         const double em = e(k) * d.sigma_length(row);
-        sum += em * em;
-        ++count;
+        sum_len += em * em;
+        ++count_len;
       }
     }
   }
-  return count > 0 ? std::sqrt(sum / count) : 0.0;
+  CvRms out;
+  out.normalized = count_all > 0 ? std::sqrt(sum_all / count_all) : 0.0;
+  out.length_m = count_len > 0 ? std::sqrt(sum_len / count_len) : 0.0;
+  return out;
 }
 
-// Adds sigma * (X theta) to the length readings (the effect moved to the reading side).
-MeasurementSet corrected_set(const MeasurementSet& set, const MismatchDesign& d,
-                             const Eigen::MatrixXd& X, const Eigen::VectorXd& theta) {
-  MeasurementSet out = set;
+// Adds sigma * (X theta) to the length and laser readings (the effect moved to the reading
+// side; both residuals are (model - reading) / sigma). False when the effect also acts on rows
+// that have no reading of their own (equilibrium, reference pose): it cannot be moved there.
+bool corrected_set(const MeasurementSet& set, const MismatchDesign& d, const Eigen::MatrixXd& X,
+                   const Eigen::VectorXd& theta, MeasurementSet& out) {
+  out = set;
   const Eigen::VectorXd v = X * theta;
+  const double scale = v.cwiseAbs().maxCoeff();
   for (int k = 0; k < d.num_rows(); ++k) {
     const auto uk = static_cast<std::size_t>(k);
-    if (d.kind[uk] != ResidualKind::kLength) continue;
-    out.poses[static_cast<std::size_t>(d.pose[uk])].cable_lengths(d.index[uk]) +=
-        d.sigma_length(k) * v(k);
+    PoseMeasurement& pm = out.poses[static_cast<std::size_t>(d.pose[uk])];
+    switch (d.kind[uk]) {
+      case ResidualKind::kLength:
+        pm.cable_lengths(d.index[uk]) += d.sigma_length(k) * v(k);
+        break;
+      case ResidualKind::kLaser:
+        pm.laser_distances(d.index[uk]) += set.noise.sigma_laser * v(k);
+        break;
+      default:
+        if (std::abs(v(k)) > 1e-9 * scale) return false;
+        break;
+    }
   }
-  return out;
+  return true;
 }
 
 // The identification option that estimates a candidate's parameters, if it has one.
@@ -436,6 +460,14 @@ EffectParameter describe_coefficient(const std::string& id, int q, int k, double
     const int dg = digits_for(6e7 * s);
     e.text = "transmission drift: " + signed_number(6e7 * v, dg) +
              format(" +- %.*f ppm/min", dg, 6e7 * s);
+  } else if (starts_with(id, "creep")) {
+    // dL = v F L ln(1 + t / 10 s): v is the compliance added per e-fold of time.
+    e.name = "creep";
+    e.unit = "1/N";
+    e.text = format(
+        "cable creep: compliance +%.3g +- %.2g 1/N per e-fold of time (dL = c F L ln(1 + t / 10 "
+        "s))",
+        v, s);
   } else if (starts_with(id, "sag")) {
     // Small-sag elongation w^2 Lh^2 L / (24 F^2): v = (mu g)^2 / 24.
     e.name = "mass_per_length";
@@ -447,9 +479,15 @@ EffectParameter describe_coefficient(const std::string& id, int q, int k, double
     e.text =
         format("cable sag: mass per length %.*f +- %.*f g/m", dg, 1e3 * mu, dg, 1e3 * e.std_dev);
   } else if (starts_with(id, "nonlinear_elasticity")) {
-    e.name = "k2";
-    e.unit = "1/N^2";
-    e.text = format("nonlinear cable elongation: dL = k2 F^2 L with k2 = %.3g +- %.2g 1/N^2", v, s);
+    // dL = (a F + k2 F^2) L added to the model's elongation.
+    e.name = q == 0 ? "a" : "k2";
+    e.unit = q == 0 ? "1/N" : "1/N^2";
+    e.text = q == 0 ? format(
+                          "nonlinear cable elongation (a F + k2 F^2) L: linear part a = %.3g +- "
+                          "%.2g 1/N",
+                          v, s)
+                    : format("nonlinear cable elongation (a F + k2 F^2) L: k2 = %.3g +- %.2g 1/N^2",
+                             v, s);
   } else if (starts_with(id, "drum_scale")) {
     // Jacobian columns: the parameter change is -v.
     e.name = k > 1 ? "s_" + cable : "s";
@@ -508,14 +546,16 @@ bool model_effect(const std::string& id, const Eigen::VectorXd& theta, Calibrate
     }
     return true;
   }
-  if (id == "nonlinear_elasticity_shared" && rigid) {
-    // dL = k2 L F^2: the (i = 1, j = 2) term of a third-order surface.
+  if (id == "nonlinear_elasticity_shared" && rigid && theta.size() == 2) {
+    // dL = (a F + k2 F^2) L: the L F and L F^2 terms of a third-order surface (coefficients by
+    // total degree d, then by the power of F: L^(d-j) F^j is at d (d + 1) / 2 + j).
     for (auto& c : model.robot.cables) {
       c.elongation = ElongationKind::kPolynomial;
       c.polynomial = PolynomialSurface{};
       c.polynomial.order = 3;
       c.polynomial.coefficients.assign(10, 0.0);
-      c.polynomial.coefficients[8] = theta(0);  // degree 3: j = 0, 1, 2, 3 -> L^1 F^2 is 6 + 2
+      c.polynomial.coefficients[4] = theta(0);  // L F   (d = 2, j = 1)
+      c.polynomial.coefficients[8] = theta(1);  // L F^2 (d = 3, j = 2)
     }
     return true;
   }
@@ -649,7 +689,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   for (std::size_t c = 0; c < D0.candidates.size(); ++c) {
     sel.start.push_back(G0.block_start[c] - G0.geometry);
     sel.size.push_back(G0.block_size[c]);
-    sel.family.push_back(D0.candidates[c].family);
+    sel.family.push_back(selection_group(D0.candidates[c].family));
     const Eigen::VectorXd raw = Mfull.diagonal().segment(G0.block_start[c], G0.block_size[c]);
     sel.rank.push_back(projected_rank(
         Sfull.block(sel.start.back(), sel.start.back(), sel.size.back(), sel.size.back()), raw,
@@ -699,13 +739,15 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   // Two confounded families split the resamples between them, so the support of a family
   // counts the resamples that selected it or a family confounded with it on this pose set.
   std::map<std::string, std::set<std::string>> allied;
-  for (const auto& c : D0.candidates) allied[c.family].insert(c.family);
+  for (const auto& c : D0.candidates) {
+    allied[selection_group(c.family)].insert(selection_group(c.family));
+  }
   for (const auto& p : d.screen.confounded) {
     const CandidateColumns* a = find_columns(D0, p.first);
     const CandidateColumns* b = find_columns(D0, p.second);
     if (a == nullptr || b == nullptr) continue;
-    allied[a->family].insert(b->family);
-    allied[b->family].insert(a->family);
+    allied[selection_group(a->family)].insert(selection_group(b->family));
+    allied[selection_group(b->family)].insert(selection_group(a->family));
   }
   std::vector<std::string> to_refit;
   std::set<std::string> kept;
@@ -713,7 +755,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     int support = 0;
     for (const auto& fams : selected_families) {
       bool any = false;
-      for (const std::string& f : allied[c.family]) any = any || fams.count(f) > 0;
+      for (const std::string& f : allied[selection_group(c.family)]) any = any || fams.count(f) > 0;
       support += any ? 1 : 0;
     }
     const double frac =
@@ -741,8 +783,9 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       fold[static_cast<std::size_t>(perm[q])] = static_cast<int>(q) % K;
     }
   }
-  const double cv_before = cv_length_rms(D0, nullptr, fold, K);
+  const CvRms cv_before = cv_rms(D0, nullptr, fold, K);
   const double logn = std::log(static_cast<double>(n));
+  const double log_det0 = d.before.log_det_covariance;  // deviances relative to the standard fit
 
   // --- 4. Full refits, 5. acceptance. A state is a model (identification options, readings with
   // the Gauss-Newton effects moved to them) and its fit; refit() adds one candidate to a state.
@@ -753,7 +796,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     MismatchDesign design;
     std::vector<std::string> gn_ids;  // Gauss-Newton effects (columns in `design`)
     std::vector<Eigen::VectorXd> gn_theta;
-    double cv = 0.0;
+    CvRms cv;
   };
   auto state_cv = [&](const State& st) {
     Eigen::MatrixXd extra(st.design.num_rows(), 0);
@@ -764,7 +807,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       e2 << extra, cc->X;
       extra = std::move(e2);
     }
-    return cv_length_rms(st.design, &extra, fold, K);
+    return cv_rms(st.design, &extra, fold, K);
   };
   State standard{identification, set, d.before, D0, {}, {}, cv_before};
   auto refit = [&](const State& cur, const std::string& id,
@@ -778,22 +821,31 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     for (std::size_t c = 0; c < D0.candidates.size(); ++c) {
       if (D0.candidates[c].id == id) {
         fit.inclusion_probability = inclusion[c];
-        fit.family_inclusion_probability = family_inclusion[D0.candidates[c].family];
+        fit.family_inclusion_probability =
+            family_inclusion[selection_group(D0.candidates[c].family)];
       }
     }
     fit.chi2_before = cur.report.chi2;
-    fit.cv_rms_before = cur.cv;
+    fit.deviance_before = cur.report.chi2 + cur.report.log_det_covariance - log_det0;
+    fit.cv_rms_before = cur.cv.length_m;
+    fit.cv_normalized_before = cur.cv.normalized;
     State next;
     bool done = false;
     IdentificationOptions opt = cur.opt;
     if (option_for(id, opt)) {
       auto rep = identify(cur.report.estimate, cur.set, opt);
+      if (!rep && id == "laser_mounting") {
+        // The origin's component along the target plane's normal trades against the plane
+        // offset (both estimated): the beam direction alone is the identifiable mounting error.
+        opt.estimate_laser_origin = false;
+        rep = identify(cur.report.estimate, cur.set, opt);
+      }
       if (rep && rep->converged) {
         auto des = mismatch_design(rep->estimate, cur.set, rep->poses, &rep->residuals, opt,
                                    options.screen);
         if (des) {
           next =
-              State{opt, cur.set, std::move(*rep), std::move(*des), cur.gn_ids, cur.gn_theta, 0.0};
+              State{opt, cur.set, std::move(*rep), std::move(*des), cur.gn_ids, cur.gn_theta, {}};
           fit.extra_parameters =
               static_cast<int>(next.report.parameters.size() - cur.report.parameters.size());
           std::set<std::string> old;
@@ -810,29 +862,57 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     if (!done) {
       // Gauss-Newton augmented fit: the coefficients from the columns with the identification's
       // Jacobian projected out, the effect moved to the readings, the identification redone
-      // from its solution.
-      std::vector<const Eigen::MatrixXd*> bl{&cc->X};
-      const PoseGrams g = pose_grams(cur.design, bl, true, false);
-      Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
-      for (const auto& Mj : g.M) M += Mj;
-      const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
+      // from its solution; repeated (the columns re-evaluated at the new estimate) until the
+      // deviance settles, so that a strong effect is fitted to its optimum, not to first order.
       const int k = static_cast<int>(cc->X.cols());
-      const int rank = projected_rank(S.topLeftCorner(k, k), M.diagonal().segment(g.geometry, k),
-                                      options.screen.rank_tolerance);
-      if (rank == 0) return std::nullopt;
-      const Eigen::MatrixXd Ai = pinv_sym(S.topLeftCorner(k, k), 1e-9);
-      const Eigen::VectorXd theta = Ai * S.block(0, k, k, 1);
-      MeasurementSet corrected = corrected_set(cur.set, cur.design, cc->X, theta);
-      auto rep = identify(cur.report.estimate, corrected, cur.opt);
-      if (!rep) return std::nullopt;
-      auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, cur.opt,
-                                 options.screen);
-      if (!des) return std::nullopt;
-      next = State{
-          cur.opt, std::move(corrected), std::move(*rep), std::move(*des), cur.gn_ids, cur.gn_theta,
-          0.0};
-      next.gn_ids.push_back(id);
-      next.gn_theta.push_back(theta);
+      Eigen::VectorXd theta = Eigen::VectorXd::Zero(k);
+      Eigen::MatrixXd Ai;
+      int rank = 0;
+      const MismatchDesign* at = &cur.design;
+      const CandidateColumns* cols = cc;
+      std::optional<State> best;
+      double best_dev = std::numeric_limits<double>::infinity();
+      for (int it = 0; it < 4; ++it) {
+        std::vector<const Eigen::MatrixXd*> bl{&cols->X};
+        const PoseGrams g = pose_grams(*at, bl, true, false);
+        Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
+        for (const auto& Mj : g.M) M += Mj;
+        const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
+        const int r = projected_rank(S.topLeftCorner(k, k), M.diagonal().segment(g.geometry, k),
+                                     options.screen.rank_tolerance);
+        if (r == 0) break;
+        if (it == 0) rank = r;
+        Ai = pinv_sym(S.topLeftCorner(k, k), 1e-9);
+        theta += Ai * S.block(0, k, k, 1);
+        MeasurementSet corrected;
+        if (!corrected_set(cur.set, *at, cols->X, theta, corrected)) break;
+        auto rep = identify(best ? best->report.estimate : cur.report.estimate, corrected, cur.opt);
+        if (!rep) break;
+        auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, cur.opt,
+                                   options.screen);
+        if (!des) break;
+        const double dev = rep->chi2 + rep->log_det_covariance;
+        const bool settled = best && best_dev - dev < 1e-3 * std::max(1.0, std::abs(dev));
+        if (dev < best_dev) {
+          best = State{cur.opt,
+                       std::move(corrected),
+                       std::move(*rep),
+                       std::move(*des),
+                       cur.gn_ids,
+                       cur.gn_theta,
+                       {}};
+          best->gn_ids.push_back(id);
+          best->gn_theta.push_back(theta);
+          best_dev = dev;
+        }
+        if (settled) break;
+        at = &best->design;
+        cols = find_columns(*at, id);
+        if (cols == nullptr || cols->X.cols() != k) break;
+      }
+      if (!best || rank == 0) return std::nullopt;
+      next = std::move(*best);
+      theta = next.gn_theta.back();
       fit.extra_parameters = rank;
       const double scale =
           std::sqrt(std::max(1.0, next.report.chi2 / std::max(1, d.screen.dof - rank)));
@@ -846,8 +926,10 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     }
     next.cv = state_cv(next);
     fit.chi2_after = next.report.chi2;
-    fit.cv_rms_after = next.cv;
-    fit.lrt_statistic = fit.chi2_before - fit.chi2_after;
+    fit.cv_rms_after = next.cv.length_m;
+    fit.cv_normalized_after = next.cv.normalized;
+    fit.deviance_after = next.report.chi2 + next.report.log_det_covariance - log_det0;
+    fit.lrt_statistic = fit.deviance_before - fit.deviance_after;
     fit.lrt_p_value =
         fit.extra_parameters > 0 ? chi2_upper_tail(fit.lrt_statistic, fit.extra_parameters) : 1.0;
     fit.bic_delta = -fit.lrt_statistic + fit.extra_parameters * logn;
@@ -879,7 +961,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     return adj;
   };
   auto passes = [&](const EffectFit& f, double p_adj) {
-    return p_adj < alpha && f.bic_delta < 0 && f.cv_rms_after < f.cv_rms_before;
+    return p_adj < alpha && f.bic_delta < 0 && f.cv_normalized_after < f.cv_normalized_before;
   };
   // Among passing fits, one per family: the simplest, unless a richer member is significantly
   // better than it (LRT of the difference) and has the lower BIC.
@@ -894,14 +976,15 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     for (std::size_t q : order) {
       const Trial* t = pool[q];
       if (!passes(t->fit, adj[q])) continue;
-      auto it = per_family.find(t->fit.family);
+      const std::string group = selection_group(t->fit.family);
+      auto it = per_family.find(group);
       if (it == per_family.end()) {
-        per_family[t->fit.family] = t;
+        per_family[group] = t;
         continue;
       }
       const EffectFit& simple = it->second->fit;
       const int dk = t->fit.extra_parameters - simple.extra_parameters;
-      const double gain = simple.chi2_after - t->fit.chi2_after;
+      const double gain = simple.deviance_after - t->fit.deviance_after;
       if (dk > 0 && chi2_upper_tail(gain, dk) < alpha && t->fit.bic_delta < simple.bic_delta) {
         it->second = t;
       }
@@ -935,7 +1018,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       EffectFit f = best->fit;
       f.accepted = true;
       d.accepted.push_back(f);
-      families_taken.insert(f.family);
+      families_taken.insert(selection_group(f.family));
       ids_taken.insert(f.id);
       current = best->state;
     }
@@ -950,7 +1033,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     std::vector<Trial> more;
     for (const std::string& id : to_refit) {
       const CandidateColumns* cc = find_columns(D0, id);
-      if (cc == nullptr || !kept.count(id) || families_taken.count(cc->family) ||
+      if (cc == nullptr || !kept.count(id) || families_taken.count(selection_group(cc->family)) ||
           confounded_with_taken(id)) {
         continue;
       }
@@ -972,7 +1055,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     for (auto& c : d.candidates) {
       if (c.id == f.id) c = f;
     }
-    families_taken.insert(f.family);
+    families_taken.insert(selection_group(f.family));
     ids_taken.insert(f.id);
     current = best->state;
   }
@@ -989,10 +1072,14 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   };
 
   // --- 6. Confounded pairs: both fits and separating poses.
+  // A pair of the screen (canonical correlation above the threshold) is reported as confounded
+  // only when this recording cannot tell its two fits apart: a BIC difference of more than
+  // DiagnosisOptions::decisive_bic between them (both fitted from the standard model) is very
+  // strong evidence for the better one (Kass and Raftery), and then it is named alone.
   std::vector<ConfoundedPair> found;
   for (const auto& p : pairs) {
-    if (!ids_taken.count(p.first) && !ids_taken.count(p.second)) continue;
-    found.push_back(p);
+    const bool taken_a = ids_taken.count(p.first) > 0, taken_b = ids_taken.count(p.second) > 0;
+    if (!taken_a && !taken_b) continue;
     for (const std::string& id : {p.first, p.second}) {
       if (trial_fit(id) != nullptr) continue;
       EffectFit fit;
@@ -1001,6 +1088,15 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       trials.push_back({fit, std::move(*st)});
       d.candidates.push_back(std::move(fit));
     }
+    const EffectFit* fa = trial_fit(p.first);
+    const EffectFit* fb = trial_fit(p.second);
+    if (taken_a != taken_b) {
+      const EffectFit* taken = taken_a ? fa : fb;
+      const EffectFit* other = taken_a ? fb : fa;
+      if (other == nullptr) continue;  // the other cannot be fitted at all: nothing to confuse
+      if (taken != nullptr && other->bic_delta - taken->bic_delta > options.decisive_bic) continue;
+    }
+    found.push_back(p);
   }
   if (!found.empty()) {
     // Feasible candidate grid around home.
@@ -1105,15 +1201,15 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   // --- 7. The model with the accepted effects, `after`, channels, held-out RMS.
   d.held_out_source =
       validation != nullptr ? "validation recording" : format("%d-fold cross-validation", K);
-  d.held_out_rms_before = cv_before;
-  d.held_out_rms_after = cv_before;
+  d.held_out_rms_before = cv_before.length_m;
+  d.held_out_rms_after = cv_before.length_m;
   if (!d.accepted.empty()) {
     d.after = current.report;
     d.model_after = current.report.estimate;
     for (std::size_t q = 0; q < current.gn_ids.size(); ++q) {
       model_effect(current.gn_ids[q], current.gn_theta[q], d.model_after);
     }
-    d.held_out_rms_after = current.cv;
+    d.held_out_rms_after = current.cv.length_m;
   }
   if (validation != nullptr) {
     // Held-out = the validation recording: its poses re-located with the geometry fixed.

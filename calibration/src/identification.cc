@@ -980,6 +980,7 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
         case Channel::kLaser:
           pr.laser_normalized(ri.index) = r;
           pr.laser_m(ri.index) = r * noise.sigma_laser;
+          rep.log_det_covariance += 2.0 * std::log(noise.sigma_laser);
           sla += pr.laser_m(ri.index) * pr.laser_m(ri.index);
           ++nlas;
           break;
@@ -1012,6 +1013,18 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
           U -= cable_elongation<double>(k.cable, loaded, F);
         }
       }
+      // The row's variance as LengthCost has it: encoder noise plus the force noise through the
+      // compliance d(dL)/dF at the estimate (elongation_at, as in LengthCost).
+      double compliance = 0.0;
+      if (!std::isnan(tr)) {
+        const double e =
+            options.estimate_stiffness == StiffnessEstimate::kShared ? B.e[0] : B.e[ui];
+        elongation_at<double>(B.constants[ui], kin.lengths(i), tr, e, B.g[ui], B.c[ui], nullptr,
+                              &compliance);
+      }
+      rep.log_det_covariance +=
+          std::log(noise.sigma_length * noise.sigma_length +
+                   compliance * compliance * noise.sigma_force * noise.sigma_force);
       pr.length_m(i) = U - ((1.0 + B.s[ui]) * pm.cable_lengths(i) + B.o[ui]);
       sl += pr.length_m(i) * pr.length_m(i);
       ++nlen;
@@ -1021,6 +1034,13 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
       Eigen::Matrix<double, 6, 6> cov;
       if (B.equilibrium[j]->wrench<double>(B.equilibrium_blocks[j].data(), w, cov)) {
         pr.wrench_si = w;
+        const double ridge = 1e-12 * cov.trace();
+        for (int q = 0; q < 6; ++q) cov(q, q) += ridge;
+        const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cov);
+        if (llt.info() == Eigen::Success) {
+          rep.log_det_covariance +=
+              2.0 * llt.matrixL().toDenseMatrix().diagonal().array().log().sum();
+        }
       }
       sw += pr.wrench_si.head<3>().squaredNorm();
       nw += 3;

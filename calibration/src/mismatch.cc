@@ -15,6 +15,7 @@ namespace cdpr {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kCreepTimeConstant = 10.0;  // s, the creep candidate's tau
 
 // ------------------------------------------------------------------------------------------
 // Distributions (Numerical Recipes style: series and Lentz continued fractions).
@@ -397,6 +398,15 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   if (have_time) {
     per_length_row("encoder_drift_per_cable", "encoder drift over time (~t), per cable",
                    "encoder drift", true, [&](int k) { return time(k); });
+    // Creep of a polymer cable under load, time-hardening logarithmic law: the compliance grows
+    // by c ln(1 + t / tau) with t the time since the recording (and the load) started. Once t is
+    // several tau the shape is ln(t) whatever tau is, and a constant part is elasticity's, so one
+    // tau (typical of primary creep of polymer fibre ropes) serves as the regressor.
+    per_length_row("creep_shared",
+                   "cable creep (~F*L*ln(1 + t/10 s): compliance growing with time under load)",
+                   "creep", false, [&](int k) {
+                     return fl(k) * std::log1p(std::max(time(k), 0.0) / kCreepTimeConstant);
+                   });
     per_length_row("transmission_drift_shared",
                    "transmission drift over time (~t*L, e.g. drum heating), all cables",
                    "transmission drift", false, [&](int k) { return time(k) * reading(k); });
@@ -404,9 +414,22 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   per_length_row("sag_shared", "cable sag (catenary, ~Lh^2 L / F^2)", "sag", false, [&](int k) {
     return horizontal(k) * horizontal(k) * kin_len(k) / (tension(k) * tension(k));
   });
-  per_length_row("nonlinear_elasticity_shared", "nonlinear cable elasticity (~F^2 L)",
-                 "nonlinear elasticity", false,
-                 [&](int k) { return tension(k) * tension(k) * loaded(k); });
+  // Nonlinear elongation (a F + k2 F^2) L: a refinement of elasticity (selection_group), so its
+  // linear part moves with the curvature instead of being a second effect.
+  {
+    Candidate c{"nonlinear_elasticity_shared",
+                "nonlinear cable elasticity ((a F + k2 F^2) L, a polynomial elongation)",
+                "nonlinear elasticity", Eigen::MatrixXd::Zero(n, 2)};
+    bool any = false;
+    for (int k = 0; k < n; ++k) {
+      if (rows[static_cast<std::size_t>(k)].kind != RowKind::kLength) continue;
+      if (!std::isfinite(fl(k))) continue;
+      c.X(k, 0) = fl(k) / sigma_len(k);
+      c.X(k, 1) = tension(k) * fl(k) / sigma_len(k);
+      any = any || fl(k) != 0.0;
+    }
+    if (any) lib.push_back(std::move(c));
+  }
 
   // Candidates from parameters the identification did not estimate (exact Jacobian columns).
   {
@@ -484,6 +507,11 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
 }
 
 }  // namespace
+
+std::string selection_group(const std::string& family) {
+  if (family == "nonlinear elasticity") return "elasticity";
+  return family;
+}
 
 double chi2_upper_tail(double x, double dof) {
   if (!(dof > 0)) return kNaN;
@@ -767,7 +795,10 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
   // Confounded pairs (different families, both screened).
   for (std::size_t a = 0; a < lib.size(); ++a) {
     for (std::size_t b = a + 1; b < lib.size(); ++b) {
-      if (lib[a].family == lib[b].family || bases[a].cols() == 0 || bases[b].cols() == 0) continue;
+      if (selection_group(lib[a].family) == selection_group(lib[b].family) ||
+          bases[a].cols() == 0 || bases[b].cols() == 0) {
+        continue;  // refinements of one effect are compared by nested tests, not confounded
+      }
       const Eigen::MatrixXd M = bases[a].transpose() * bases[b];
       const double rho = Eigen::JacobiSVD<Eigen::MatrixXd>(M).singularValues()(0);
       if (rho <= mopt.confound_threshold) continue;

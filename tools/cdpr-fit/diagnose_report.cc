@@ -86,6 +86,10 @@ nlohmann::json effect_json(const EffectFit& e) {
           {"bic_delta", number_or_null(e.bic_delta)},
           {"cv_rms_before_m", number_or_null(e.cv_rms_before)},
           {"cv_rms_after_m", number_or_null(e.cv_rms_after)},
+          {"deviance_before", number_or_null(e.deviance_before)},
+          {"deviance_after", number_or_null(e.deviance_after)},
+          {"cv_normalized_before", number_or_null(e.cv_normalized_before)},
+          {"cv_normalized_after", number_or_null(e.cv_normalized_after)},
           {"accepted", e.accepted},
           {"modelled_in_config", e.modelled_in_config},
           {"parameters", params}};
@@ -382,7 +386,9 @@ ExplainingVariable explaining_variable(const std::string& family) {
     return {"tension", "N"};
   }
   if (family == "drum scale") return {"loaded length", "m"};
-  if (family == "encoder drift" || family == "transmission drift") return {"time", "s"};
+  if (family == "encoder drift" || family == "transmission drift" || family == "creep") {
+    return {"time", "s"};
+  }
   return {"pose index", ""};
 }
 

@@ -15,11 +15,13 @@
 //     likelihood-ratio test against the standard model (chi^2 with the extra parameters as
 //     degrees of freedom), BIC change counting only the parameters that differ between the
 //     candidates, and K-fold cross-validation over poses (the geometry from K-1 folds, the held-out
-//     poses re-located from their own readings with the geometry fixed, their residual RMS).
+//     poses re-located from their own readings with the geometry fixed, the RMS of their
+//     residuals in sigmas over every channel).
 //  4. Naming. The accepted effects in words with their fitted parameters and standard deviations
 //     ("cable elasticity: EA = 21.4 +- 0.6 kN"). Two candidates that this pose set cannot tell
-//     apart are reported as confounded, with both fits and a set of extra poses (from the
-//     feasible candidate grid) that would separate them.
+//     apart (highly correlated projected columns AND full fits within
+//     DiagnosisOptions::decisive_bic of each other) are reported as confounded, with both fits
+//     and a set of extra poses (from the feasible candidate grid) that would separate them.
 //  5. Model it: the calibrated model carries the accepted effects (EA, polynomial surface, drum
 //     scale in the winch model, encoder zero, force sensor gain/offset, laser mount/plane, mass
 //     per length for sag); per-channel residual RMS before/after, held-out RMS before/after.
@@ -73,13 +75,17 @@
 namespace cdpr {
 
 struct DiagnosisOptions {
-  MismatchOptions screen;                     // alpha, confounding threshold, rank tolerance
-  int bootstrap_samples = 100;                // resamples over poses for inclusion probabilities
-  double inclusion_threshold = 0.6;           // keep candidates selected in at least this fraction
-  int cv_folds = 5;                           // K-fold cross-validation over poses (2 <= K <= N)
-  unsigned seed = 1;                          // bootstrap and fold assignment (deterministic)
-  int max_effects = 3;                        // at most this many effects are accepted together
-  int min_poses = 12;                         // below this the verdict is kInconclusive
+  MismatchOptions screen;            // alpha, confounding threshold, rank tolerance
+  int bootstrap_samples = 100;       // resamples over poses for inclusion probabilities
+  double inclusion_threshold = 0.6;  // keep candidates selected in at least this fraction
+  int cv_folds = 5;                  // K-fold cross-validation over poses (2 <= K <= N)
+  unsigned seed = 1;                 // bootstrap and fold assignment (deterministic)
+  int max_effects = 3;               // at most this many effects are accepted together
+  int min_poses = 12;                // below this the verdict is kInconclusive
+  // Two candidates that the screen finds confounded (canonical correlation above
+  // screen.confound_threshold) are reported as "A or B" only when their full fits differ by less
+  // than this in BIC; a larger difference is very strong evidence for the better one.
+  double decisive_bic = 10.0;
   int separating_poses = 6;                   // extra poses proposed for each confounded pair
   double separating_half_extent_scale = 1.0;  // of the candidate grid (pose_design.hpp box)
 };
@@ -103,11 +109,18 @@ struct EffectFit {
   double family_inclusion_probability = 0.0;
   int extra_parameters = 0;  // parameters the effect adds
   double chi2_before = 0.0, chi2_after = 0.0;
-  double lrt_statistic = 0.0;  // chi2_before - chi2_after
+  // chi2 + IdentificationReport::log_det_covariance (-2 log likelihood up to one constant): the
+  // sigmas of the length and equilibrium rows depend on the compliance, so an elongation effect
+  // also changes the normalisation.
+  double deviance_before = 0.0, deviance_after = 0.0;
+  double lrt_statistic = 0.0;  // deviance_before - deviance_after
   double lrt_p_value = 1.0;    // chi^2(extra_parameters) upper tail
   double bic_delta = 0.0;      // negative: the effect is worth its parameters
   double cv_rms_before = 0.0;  // held-out length residual RMS over the folds, m (standard model)
   double cv_rms_after = 0.0;   // same with the effect modelled
+  // Held-out RMS of all residuals (every channel) in sigmas over the folds, before/after: the
+  // acceptance test (an effect of the laser or the force sensors may leave the lengths alone).
+  double cv_normalized_before = 0.0, cv_normalized_after = 0.0;
   bool accepted = false;
   bool modelled_in_config = false;  // the calibrated config can carry it (else: report only)
   std::vector<EffectParameter> parameters;

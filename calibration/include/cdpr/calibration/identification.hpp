@@ -145,6 +145,11 @@ struct IdentificationReport {
   double initial_cost = 0.0;  // 0.5 sum r^2 (normalised residuals, loss applied)
   double final_cost = 0.0;
   double chi2 = 0.0;  // sum of squared normalised residuals, no loss
+  // log det of the residuals' covariance (SI units) over the length, laser and equilibrium rows:
+  // the length sigmas and the equilibrium whitening depend on the cable compliance, so models
+  // with different elongation laws are compared by the deviance chi2 + log_det_covariance
+  // (-2 log likelihood up to a constant), not by chi2 alone (a softer cable inflates its sigmas).
+  double log_det_covariance = 0.0;
   int num_residuals = 0;
   int num_parameters = 0;  // geometry + free pose coordinates
   int dof = 0;             // num_residuals - num_parameters

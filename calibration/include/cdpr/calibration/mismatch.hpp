@@ -43,14 +43,20 @@ double chi2_upper_tail(double x, double dof);
 // Upper tail P(X > x) of an F distribution with (d1, d2) degrees of freedom (> 0, real).
 double f_upper_tail(double x, double d1, double d2);
 
+// Candidate families that refine each other (a richer member nests the simpler one) share a
+// selection group: "nonlinear elasticity" refines "elasticity". Within a group the candidates are
+// compared by nested tests (the richer one only when significantly better), never reported as
+// confounded, and at most one of the group is accepted.
+std::string selection_group(const std::string& family);
+
 struct MismatchOptions {
   double alpha = 0.01;              // significance level (family-wise for the candidates)
   double confound_threshold = 0.8;  // canonical correlation above which a pair is confounded
   double rank_tolerance = 1e-9;     // relative, for the rank of J and of projected candidates
-  // Screen force-sensor gain and offset (equilibrium rows). Off by default: on null data (MINI,
-  // 25 poses, 20 seeds) the gain candidate's statistic averages 17.9 instead of its 8 degrees of
-  // freedom, i.e. its null distribution is not chi^2 yet (cause not found; see mismatch_test.cc).
-  bool force_sensor_candidates = false;
+  // Screen force-sensor gain and offset (equilibrium rows). On since the equilibrium rows are
+  // whitened conditionally on the length rows (identification.hpp): before, the gain
+  // candidate's statistic on null data averaged 17.9 instead of its 8 degrees of freedom.
+  bool force_sensor_candidates = true;
 };
 
 // Misfit of one group of residuals (a channel, a cable or a pose).
