@@ -303,13 +303,16 @@ CvRms cv_rms(const MismatchDesign& d, const Eigen::MatrixXd* extra, const std::v
   return out;
 }
 
-// Adds sigma * (X theta) to the length and laser readings (the effect moved to the reading
-// side; both residuals are (model - reading) / sigma). False when the effect also acts on rows
-// that have no reading of their own (equilibrium, reference pose): it cannot be moved there.
-bool corrected_set(const MeasurementSet& set, const MismatchDesign& d, const Eigen::MatrixXd& X,
+// Moves a fitted effect into the data: sigma * (X theta) added to the length and laser readings
+// (both residuals are (model - reading) / sigma), and the effect on the equilibrium rows, in SI
+// (CandidateColumns::si), taken off the pose's external wrench. False when the effect acts on
+// rows that cannot take it (equilibrium rows without SI columns, reference-pose rows).
+bool corrected_set(const MeasurementSet& set, const MismatchDesign& d, const CandidateColumns& c,
                    const Eigen::VectorXd& theta, MeasurementSet& out) {
   out = set;
-  const Eigen::VectorXd v = X * theta;
+  const Eigen::VectorXd v = c.X * theta;
+  const bool have_si = c.si.rows() == c.X.rows() && c.si.cols() == c.X.cols();
+  const Eigen::VectorXd v_si = have_si ? Eigen::VectorXd(c.si * theta) : Eigen::VectorXd();
   const double scale = v.cwiseAbs().maxCoeff();
   for (int k = 0; k < d.num_rows(); ++k) {
     const auto uk = static_cast<std::size_t>(k);
@@ -320,6 +323,13 @@ bool corrected_set(const MeasurementSet& set, const MismatchDesign& d, const Eig
         break;
       case ResidualKind::kLaser:
         pm.laser_distances(d.index[uk]) += set.noise.sigma_laser * v(k);
+        break;
+      case ResidualKind::kWrench:
+        if (have_si) {
+          pm.external_wrench(d.index[uk]) -= v_si(k);
+        } else if (std::abs(v(k)) > 1e-9 * scale) {
+          return false;
+        }
         break;
       default:
         if (std::abs(v(k)) > 1e-9 * scale) return false;
@@ -468,16 +478,23 @@ EffectParameter describe_coefficient(const std::string& id, int q, int k, double
         "cable creep: compliance +%.3g +- %.2g 1/N per e-fold of time (dL = c F L ln(1 + t / 10 "
         "s))",
         v, s);
-  } else if (starts_with(id, "sag")) {
+  } else if (starts_with(id, "sag") && q == 0) {
     // Small-sag elongation w^2 Lh^2 L / (24 F^2): v = (mu g)^2 / 24.
-    e.name = "mass_per_length";
+    e.name = "mass_per_length_from_arc";
     e.unit = "kg/m";
     const double mu = std::sqrt(24.0 * std::max(v, 0.0)) / 9.81;
     e.value = mu;
     e.std_dev = mu > 0 ? 24.0 * s / (2.0 * 9.81 * 9.81 * mu) : kNaN;
     const int dg = digits_for(1e3 * e.std_dev);
-    e.text =
-        format("cable sag: mass per length %.*f +- %.*f g/m", dg, 1e3 * mu, dg, 1e3 * e.std_dev);
+    e.text = format("cable sag: mass per length %.*f +- %.*f g/m from the arc length", dg, 1e3 * mu,
+                    dg, 1e3 * e.std_dev);
+  } else if (starts_with(id, "sag")) {
+    // The weight the platform carries: v = mu directly.
+    e.name = "mass_per_length";
+    e.unit = "kg/m";
+    const int dg = digits_for(1e3 * s);
+    e.text = format("cable sag: mass per length %.*f +- %.*f g/m from the weight on the platform",
+                    dg, 1e3 * v, dg, 1e3 * s);
   } else if (starts_with(id, "nonlinear_elasticity")) {
     // dL = (a F + k2 F^2) L added to the model's elongation.
     e.name = q == 0 ? "a" : "k2";
@@ -520,8 +537,9 @@ bool model_effect(const std::string& id, const Eigen::VectorXd& theta, Calibrate
     }
     return true;
   }
-  if (id == "sag_shared" && theta.size() == 1 && theta(0) > 0) {
-    for (auto& c : model.robot.cables) c.mass_per_length = std::sqrt(24.0 * theta(0)) / 9.81;
+  if (id == "sag_shared" && theta.size() == 2 && theta(1) > 0) {
+    // The equilibrium's estimate (first order in the mass; the arc term is second order).
+    for (auto& c : model.robot.cables) c.mass_per_length = theta(1);
     return true;
   }
   const bool rigid =
@@ -883,9 +901,16 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         if (r == 0) break;
         if (it == 0) rank = r;
         Ai = pinv_sym(S.topLeftCorner(k, k), 1e-9);
-        theta += Ai * S.block(0, k, k, 1);
+        Eigen::VectorXd step = Ai * S.block(0, k, k, 1);
+        if (id == "sag_shared" && k == 2 && theta(0) + step(0) < 0) {
+          // The arc-length coefficient is (mu g)^2 / 24 >= 0: at the bound, the weight column
+          // alone takes the rest of the residual.
+          step(0) = -theta(0);
+          if (S(1, 1) > 0) step(1) = (S(1, k) - S(1, 0) * step(0)) / S(1, 1);
+        }
+        theta += step;
         MeasurementSet corrected;
-        if (!corrected_set(cur.set, *at, cols->X, theta, corrected)) break;
+        if (!corrected_set(cur.set, *at, *cols, theta, corrected)) break;
         auto rep = identify(best ? best->report.estimate : cur.report.estimate, corrected, cur.opt);
         if (!rep) break;
         auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, cur.opt,
@@ -997,15 +1022,21 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   };
   State current = standard;
   std::set<std::string> families_taken, ids_taken;
-  auto confounded_with_taken = [&](const std::string& id) {
+  auto is_confounded = [&](const std::string& a, const std::string& b) {
     for (const auto& p : pairs) {
-      if ((p.first == id && ids_taken.count(p.second)) ||
-          (p.second == id && ids_taken.count(p.first))) {
-        return true;
-      }
+      if ((p.first == a && p.second == b) || (p.first == b && p.second == a)) return true;
     }
     return false;
   };
+  auto joint_bic = [&](const State& st, int k) {
+    return st.report.chi2 + st.report.log_det_covariance - log_det0 + k * logn;
+  };
+  // Forward selection, started from each of the (up to four) best first effects that pass: the
+  // greedy path from the single best may begin with a per-cable effect that also absorbs part of
+  // a second one (winch compliance per winch for elasticity + drum scale). Each path adds
+  // further effects refitted jointly with the accepted ones and tested against them; the path
+  // with the lowest joint BIC wins.
+  std::vector<const Trial*> firsts;
   {
     std::vector<const Trial*> pool;
     std::vector<double> p;
@@ -1014,50 +1045,148 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       p.push_back(t.fit.lrt_p_value);
     }
     const std::vector<double> adj = holm(p);
-    if (const Trial* best = choose(pool, adj); best != nullptr && options.max_effects > 0) {
+    if (const Trial* b = choose(pool, adj)) firsts.push_back(b);
+    std::vector<std::size_t> order(pool.size());
+    for (std::size_t q = 0; q < order.size(); ++q) order[q] = q;
+    std::sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) {
+      return pool[x]->fit.bic_delta < pool[y]->fit.bic_delta;
+    });
+    for (std::size_t q : order) {
+      if (firsts.size() >= 4) break;
+      if (!passes(pool[q]->fit, adj[q])) continue;
+      if (std::find(firsts.begin(), firsts.end(), pool[q]) == firsts.end()) {
+        firsts.push_back(pool[q]);
+      }
+    }
+    for (const auto& t : trials) d.candidates.push_back(t.fit);
+  }
+  struct Path {
+    std::vector<EffectFit> accepted;
+    State state;
+    double bic = 0.0;
+  };
+  auto forward_from = [&](const Trial& first) {
+    Path path{{first.fit}, first.state, 0.0};
+    path.accepted.front().accepted = true;
+    std::set<std::string> groups{selection_group(first.fit.family)};
+    std::set<std::string> ids{first.fit.id};
+    while (static_cast<int>(path.accepted.size()) < options.max_effects) {
+      std::vector<Trial> more;
+      for (const std::string& id : to_refit) {
+        const CandidateColumns* cc = find_columns(D0, id);
+        if (cc == nullptr || !kept.count(id) || groups.count(selection_group(cc->family))) continue;
+        bool clash = false;
+        for (const std::string& t : ids) clash = clash || is_confounded(t, id);
+        if (clash) continue;
+        EffectFit fit;
+        auto st = refit(path.state, id, fit);
+        if (st) more.push_back({std::move(fit), std::move(*st)});
+      }
+      std::vector<const Trial*> pool;
+      std::vector<double> p;
+      for (const auto& t : more) {
+        pool.push_back(&t);
+        p.push_back(t.fit.lrt_p_value);
+      }
+      const Trial* best = choose(pool, holm(p));
+      if (best == nullptr) break;
       EffectFit f = best->fit;
       f.accepted = true;
-      d.accepted.push_back(f);
-      families_taken.insert(selection_group(f.family));
-      ids_taken.insert(f.id);
-      current = best->state;
+      path.accepted.push_back(f);
+      groups.insert(selection_group(f.family));
+      ids.insert(f.id);
+      path.state = best->state;
     }
-    for (const auto& t : trials) {
-      d.candidates.push_back(t.fit);
-      if (ids_taken.count(t.fit.id)) d.candidates.back().accepted = true;
+    int k = 0;
+    for (const auto& f : path.accepted) k += f.extra_parameters;
+    path.bic = joint_bic(path.state, k);
+    return path;
+  };
+  if (options.max_effects > 0 && !firsts.empty()) {
+    std::optional<Path> best_path;
+    for (const Trial* t : firsts) {
+      Path path = forward_from(*t);
+      if (!best_path || path.bic < best_path->bic) best_path = std::move(path);
+    }
+    d.accepted = std::move(best_path->accepted);
+    current = std::move(best_path->state);
+    for (const auto& f : d.accepted) {
+      ids_taken.insert(f.id);
+      families_taken.insert(selection_group(f.family));
     }
   }
-  // Further effects: each remaining kept candidate refitted jointly with the accepted ones and
-  // tested against them.
-  while (!d.accepted.empty() && static_cast<int>(d.accepted.size()) < options.max_effects) {
-    std::vector<Trial> more;
-    for (const std::string& id : to_refit) {
-      const CandidateColumns* cc = find_columns(D0, id);
-      if (cc == nullptr || !kept.count(id) || families_taken.count(selection_group(cc->family)) ||
-          confounded_with_taken(id)) {
-        continue;
+  // Swaps. The forward steps are greedy: a per-cable effect may take the first place by also
+  // absorbing part of a second effect (winch compliance per winch for elasticity + drum scale).
+  // With two or more accepted effects, each one is replaced in turn by every other kept
+  // candidate, the set refitted jointly from the standard model, and the best swap that lowers
+  // the joint BIC is made (repeated while one helps).
+  for (int pass = 0; pass < 3 && d.accepted.size() >= 2; ++pass) {
+    int k_now = 0;
+    for (const auto& f : d.accepted) k_now += f.extra_parameters;
+    const double bic_now = joint_bic(current, k_now);
+    double best_bic = bic_now - 2.0;  // a swap must gain clearly
+    std::optional<State> best_state;
+    std::vector<EffectFit> best_set;
+    for (std::size_t pos = 0; pos < d.accepted.size(); ++pos) {
+      for (const std::string& id : to_refit) {
+        const CandidateColumns* cc = find_columns(D0, id);
+        if (cc == nullptr || ids_taken.count(id)) continue;
+        bool clash = false;
+        for (std::size_t q = 0; q < d.accepted.size(); ++q) {
+          if (q == pos) continue;
+          clash = clash || selection_group(d.accepted[q].family) == selection_group(cc->family) ||
+                  is_confounded(d.accepted[q].id, id);
+        }
+        if (clash) continue;
+        std::vector<std::string> ids;
+        for (std::size_t q = 0; q < d.accepted.size(); ++q) {
+          ids.push_back(q == pos ? id : d.accepted[q].id);
+        }
+        State st = standard;
+        std::vector<EffectFit> fits;
+        int k = 0;
+        bool ok = true;
+        for (const std::string& e : ids) {
+          EffectFit f;
+          auto nx = refit(st, e, f);
+          if (!nx) {
+            ok = false;
+            break;
+          }
+          st = std::move(*nx);
+          k += f.extra_parameters;
+          f.accepted = true;
+          fits.push_back(std::move(f));
+        }
+        if (!ok) continue;
+        const double b = joint_bic(st, k);
+        if (b < best_bic) {
+          best_bic = b;
+          best_state = std::move(st);
+          best_set = std::move(fits);
+        }
       }
-      EffectFit fit;
-      auto st = refit(current, id, fit);
-      if (st) more.push_back({std::move(fit), std::move(*st)});
     }
-    std::vector<const Trial*> pool;
-    std::vector<double> p;
-    for (const auto& t : more) {
-      pool.push_back(&t);
-      p.push_back(t.fit.lrt_p_value);
+    if (!best_state) break;
+    current = std::move(*best_state);
+    d.accepted = std::move(best_set);
+    ids_taken.clear();
+    families_taken.clear();
+    for (const auto& f : d.accepted) {
+      ids_taken.insert(f.id);
+      families_taken.insert(selection_group(f.family));
     }
-    const Trial* best = choose(pool, holm(p));
-    if (best == nullptr) break;
-    EffectFit f = best->fit;
-    f.accepted = true;
-    d.accepted.push_back(f);
-    for (auto& c : d.candidates) {
+  }
+  for (auto& c : d.candidates) {
+    c.accepted = false;
+    for (const auto& f : d.accepted) {
       if (c.id == f.id) c = f;
     }
-    families_taken.insert(selection_group(f.family));
-    ids_taken.insert(f.id);
-    current = best->state;
+  }
+  for (const auto& f : d.accepted) {
+    const bool listed = std::any_of(d.candidates.begin(), d.candidates.end(),
+                                    [&](const EffectFit& c) { return c.id == f.id; });
+    if (!listed) d.candidates.push_back(f);
   }
   std::stable_sort(d.candidates.begin(), d.candidates.end(),
                    [](const EffectFit& a, const EffectFit& b) {

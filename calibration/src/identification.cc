@@ -197,6 +197,7 @@ struct EquilibriumCost {
   double mass = 1.0;
   double gravity = 9.81;
   Eigen::Vector3d com = Eigen::Vector3d::Zero();
+  Eigen::Matrix<double, 6, 1> external = Eigen::Matrix<double, 6, 1>::Zero();  // world, N, N m
 
   // Net wrench, the whitening covariance of w|l and the correction term at the parameters.
   template <typename T>
@@ -210,6 +211,7 @@ struct EquilibriumCost {
     const Vec3<T> weight(T(0), T(0), T(-mass * gravity));
     w.template head<3>() = weight;
     w.template tail<3>() = (R * com.cast<T>()).cross(weight);
+    w += external.cast<T>();
     cov.setZero();
     if (correction) correction->setZero();
     const double sf2 = sigma_force * sigma_force;
@@ -591,6 +593,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       f->mass = robot.platform.mass;
       f->gravity = robot.gravity;
       f->com = robot.platform.center_of_mass;
+      f->external = pm.external_wrench;
       f->sigma_force = noise.sigma_force;
       f->sigma_length = noise.sigma_length;
       f->shared_stiffness = opt.estimate_stiffness == StiffnessEstimate::kShared;

@@ -370,7 +370,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   std::vector<Candidate> lib;
   auto per_length_row = [&](const std::string& id, const std::string& name,
                             const std::string& family, bool per_cable, auto value) {
-    Candidate c{id, name, family, Eigen::MatrixXd::Zero(n, per_cable ? m : 1)};
+    Candidate c{id, name, family, Eigen::MatrixXd::Zero(n, per_cable ? m : 1), {}};
     bool any = false;
     for (int k = 0; k < n; ++k) {
       const Row& row = rows[static_cast<std::size_t>(k)];
@@ -411,15 +411,74 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
                    "transmission drift over time (~t*L, e.g. drum heating), all cables",
                    "transmission drift", false, [&](int k) { return time(k) * reading(k); });
   }
-  per_length_row("sag_shared", "cable sag (catenary, ~Lh^2 L / F^2)", "sag", false, [&](int k) {
-    return horizontal(k) * horizontal(k) * kin_len(k) / (tension(k) * tension(k));
-  });
+  // Sag of a heavy cable (mass per length mu), to first order in the sag. The encoder pays out
+  // the arc, longer than the chord by (mu g)^2 Lh^2 L / (24 F^2) (column 0, coefficient
+  // (mu g)^2 / 24). And the platform carries part of each cable's weight W = mu g L off the
+  // chord: with the tension T read at the frame end, the cable pulls the platform with
+  // T u - (W / 2)(e_z + (e_z . u) u), so the modelled net wrench is off by
+  // sum_i (W_i / 2)(e_z + (e_z . u_i) u_i) and its moment (column 1, coefficient mu), whitened
+  // with the equilibrium rows' covariance (conditional on the length rows, as identify() has it).
+  {
+    Candidate c{"sag_shared",
+                "cable sag (catenary: the arc is longer than the chord, ~Lh^2 L / F^2, and the "
+                "platform carries part of each cable's weight)",
+                "sag", Eigen::MatrixXd::Zero(n, 2), Eigen::MatrixXd::Zero(n, 2)};
+    bool any = false;
+    for (int k = 0; k < n; ++k) {
+      if (rows[static_cast<std::size_t>(k)].kind != RowKind::kLength) continue;
+      const double v = horizontal(k) * horizontal(k) * kin_len(k) / (tension(k) * tension(k));
+      if (!std::isfinite(v)) continue;
+      c.X(k, 0) = v / sigma_len(k);
+      c.si(k, 0) = v;
+      any = any || v != 0.0;
+    }
+    const double sf2 = set.noise.sigma_force * set.noise.sigma_force;
+    const double sl2 = set.noise.sigma_length * set.noise.sigma_length;
+    const Eigen::Vector3d ez = Eigen::Vector3d::UnitZ();
+    for (int j = 0; j < np; ++j) {
+      const auto uj = static_cast<std::size_t>(j);
+      int kw = -1;
+      for (int k = pose_start[uj]; k < pose_start[uj + 1]; ++k) {
+        if (rows[static_cast<std::size_t>(k)].kind == RowKind::kWrench) {
+          kw = k;
+          break;
+        }
+      }
+      if (kw < 0 || !inverse_kinematics(robot, poses[uj], kin)) continue;
+      Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Zero();
+      Eigen::Matrix<double, 6, 1> delta = Eigen::Matrix<double, 6, 1>::Zero();
+      for (int i = 0; i < m; ++i) {
+        const Eigen::Vector3d u = kin.unit_vectors.col(i);
+        const Eigen::Vector3d rb = kin.rotation * robot.platform_anchors.col(i);
+        Eigen::Matrix<double, 6, 1> a;
+        a << u, rb.cross(u);
+        const int kl = length_row[uj][static_cast<std::size_t>(i)];
+        const double s2 = kl >= 0 ? sigma_len(kl) * sigma_len(kl) : sl2;
+        cov += sf2 * (sl2 / s2) * a * a.transpose();
+        const Eigen::Vector3d v = 0.5 * robot.gravity * kin.lengths(i) * (ez + ez.dot(u) * u);
+        delta.head<3>() += v;
+        delta.tail<3>() += rb.cross(v);
+      }
+      cov.diagonal().array() += 1e-12 * cov.trace();
+      const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cov);
+      if (llt.info() != Eigen::Success) continue;
+      const Eigen::Matrix<double, 6, 1> col = llt.matrixL().solve(delta);
+      for (int q = 0; q < 6; ++q) {
+        c.X(kw + q, 1) = col(q);
+        c.si(kw + q, 1) = delta(q);
+      }
+      any = true;
+    }
+    if (any) lib.push_back(std::move(c));
+  }
   // Nonlinear elongation (a F + k2 F^2) L: a refinement of elasticity (selection_group), so its
   // linear part moves with the curvature instead of being a second effect.
   {
     Candidate c{"nonlinear_elasticity_shared",
                 "nonlinear cable elasticity ((a F + k2 F^2) L, a polynomial elongation)",
-                "nonlinear elasticity", Eigen::MatrixXd::Zero(n, 2)};
+                "nonlinear elasticity",
+                Eigen::MatrixXd::Zero(n, 2),
+                {}};
     bool any = false;
     for (int k = 0; k < n; ++k) {
       if (rows[static_cast<std::size_t>(k)].kind != RowKind::kLength) continue;
@@ -451,7 +510,8 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
         picked.push_back(q);
       }
       if (picked.empty()) return;
-      Candidate c{id, name, family, Eigen::MatrixXd(n, static_cast<Eigen::Index>(picked.size()))};
+      Candidate c{
+          id, name, family, Eigen::MatrixXd(n, static_cast<Eigen::Index>(picked.size())), {}};
       for (std::size_t q = 0; q < picked.size(); ++q) {
         c.X.col(static_cast<Eigen::Index>(q)) = Jx.col(picked[q]);
       }
@@ -478,8 +538,11 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
     // The shared drum scale: the sum of the per-cable columns.
     for (const Candidate& c : lib) {
       if (c.id == "drum_scale_per_cable") {
-        Candidate s{"drum_scale_shared", "drum/transmission scale error (~L), all drums alike",
-                    "drum scale", c.X.rowwise().sum()};
+        Candidate s{"drum_scale_shared",
+                    "drum/transmission scale error (~L), all drums alike",
+                    "drum scale",
+                    c.X.rowwise().sum(),
+                    {}};
         lib.push_back(std::move(s));
         break;
       }

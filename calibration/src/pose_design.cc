@@ -6,6 +6,7 @@
 #include <random>
 
 #include "cdpr/calibration/identifiability.hpp"
+#include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/calibration/simulate.hpp"
 
 namespace cdpr {
@@ -56,36 +57,14 @@ double i_value(const Eigen::MatrixXd& M, const Eigen::MatrixXd& Wn) {
 Result<Eigen::MatrixXd> position_weight(const CalibratedModel& model,
                                         const PoseDesignOptions& options, double f_ref,
                                         const GeometryInformation& gi) {
-  std::vector<Pose> grid;
-  for (const Pose& p : options.accuracy_box.grid()) {
-    if (simple_tension_distribution(model.robot, p, f_ref)) grid.push_back(p);
-  }
+  auto sens = pose_sensitivities(model, options.accuracy_box, f_ref, options.noise,
+                                 options.identification, gi.names);
+  if (!sens) return sens.status();
+  if (sens->empty()) return Eigen::MatrixXd(Eigen::MatrixXd::Zero(0, 0));
   const auto P = static_cast<Eigen::Index>(gi.names.size());
-  if (grid.empty()) return Eigen::MatrixXd(Eigen::MatrixXd::Zero(0, 0));
-  SimulationOptions so;
-  so.add_noise = false;
-  so.reference_tension = f_ref;
-  auto gsim = simulate_measurements(model, grid, options.noise, 0, so);
-  if (!gsim) return gsim.status();
-  IdentificationOptions go = options.identification;
-  go.use_laser = false;
-  go.use_equilibrium = false;
-  go.use_reference = false;
-  if (go.gauge == Gauge::kHomePose) go.gauge = Gauge::kNone;
-  if (go.gauge == Gauge::kHomePoseAndLaserPlane) go.gauge = Gauge::kLaserPlane;
-  auto gg = geometry_information(model, gsim->set, grid, go, /*keep_jacobians=*/true);
-  if (!gg) return gg.status();
-  if (gg->names != gi.names) {
-    return Status(ErrorCode::kInternal, "pose design: parameter lists differ");
-  }
   Eigen::MatrixXd W = Eigen::MatrixXd::Zero(P, P);
-  for (std::size_t k = 0; k < grid.size(); ++k) {
-    const Eigen::MatrixXd G =
-        -gg->jacobian_pose[k].completeOrthogonalDecomposition().pseudoInverse() *
-        gg->jacobian_geometry[k];
-    W += G.topRows<3>().transpose() * G.topRows<3>();
-  }
-  return Eigen::MatrixXd(W / static_cast<double>(grid.size()));
+  for (const Eigen::MatrixXd& G : *sens) W += G.topRows<3>().transpose() * G.topRows<3>();
+  return Eigen::MatrixXd(W / static_cast<double>(sens->size()));
 }
 
 // Ordered tour: nearest neighbour from index 0, then 2-opt (index 0 stays first).

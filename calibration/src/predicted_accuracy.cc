@@ -49,6 +49,41 @@ Eigen::MatrixXd normalized_pinv(const Eigen::MatrixXd& S, double tol, int* rank)
 
 }  // namespace
 
+Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& model,
+                                                        const AccuracyBox& box, double f_ref,
+                                                        const SensorNoise& noise,
+                                                        const IdentificationOptions& identification,
+                                                        const std::vector<std::string>& names) {
+  std::vector<Pose> grid;
+  for (const Pose& p : box.grid()) {
+    if (simple_tension_distribution(model.robot, p, f_ref)) grid.push_back(p);
+  }
+  std::vector<Eigen::MatrixXd> out;
+  if (grid.empty()) return out;
+  SimulationOptions so;
+  so.add_noise = false;
+  so.reference_tension = f_ref;
+  auto gsim = simulate_measurements(model, grid, noise, 0, so);
+  if (!gsim) return gsim.status();
+  // Lengths only, and no pose held by the gauge: every grid pose is free.
+  IdentificationOptions go = identification;
+  go.use_laser = false;
+  go.use_equilibrium = false;
+  go.use_reference = false;
+  if (go.gauge == Gauge::kHomePose) go.gauge = Gauge::kNone;
+  if (go.gauge == Gauge::kHomePoseAndLaserPlane) go.gauge = Gauge::kLaserPlane;
+  auto gg = geometry_information(model, gsim->set, grid, go, /*keep_jacobians=*/true);
+  if (!gg) return gg.status();
+  if (gg->names != names) {
+    return Status(ErrorCode::kInternal, "pose sensitivities: parameter lists differ");
+  }
+  for (std::size_t k = 0; k < grid.size(); ++k) {
+    out.push_back(-gg->jacobian_pose[k].completeOrthogonalDecomposition().pseudoInverse() *
+                  gg->jacobian_geometry[k]);
+  }
+  return out;
+}
+
 Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
                                            const std::vector<Pose>& poses, const SensorNoise& noise,
                                            const PredictedAccuracyOptions& options) {
@@ -74,39 +109,22 @@ Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
   out.anchor_rms_std_m = count ? std::sqrt(sum / count) : 0.0;
 
   // Sensitivity of the commanded lengths at the grid.
-  std::vector<Pose> grid;
   const double f_ref = std::isnan(options.reference_tension)
                            ? default_reference_tension(model.robot)
                            : options.reference_tension;
-  for (const Pose& p : options.box.grid()) {
-    if (simple_tension_distribution(model.robot, p, f_ref)) grid.push_back(p);
-  }
-  if (grid.empty()) return out;
-  auto gsim = simulate_measurements(model, grid, noise, 0, so);
-  if (!gsim) return gsim.status();
-  IdentificationOptions go = options.identification;
-  go.use_laser = false;
-  go.use_equilibrium = false;
-  go.use_reference = false;
-  if (go.gauge == Gauge::kHomePose) go.gauge = Gauge::kNone;
-  if (go.gauge == Gauge::kHomePoseAndLaserPlane) go.gauge = Gauge::kLaserPlane;
-  auto gg = geometry_information(model, gsim->set, grid, go, /*keep_jacobians=*/true);
-  if (!gg) return gg.status();
-  if (gg->names != gi->names) {
-    return Status(ErrorCode::kInternal, "predicted accuracy: parameter lists differ");
-  }
+  auto sens =
+      pose_sensitivities(model, options.box, f_ref, noise, options.identification, gi->names);
+  if (!sens) return sens.status();
+  if (sens->empty()) return out;
   double total = 0.0;
-  for (std::size_t k = 0; k < grid.size(); ++k) {
-    const Eigen::MatrixXd& Jp = gg->jacobian_pose[k];
-    const Eigen::MatrixXd& Jg = gg->jacobian_geometry[k];
-    const Eigen::MatrixXd G = -Jp.completeOrthogonalDecomposition().pseudoInverse() * Jg;
+  for (const Eigen::MatrixXd& G : *sens) {
     const Eigen::MatrixXd cx = G * out.covariance * G.transpose();
     const double v = cx.topLeftCorner<3, 3>().trace();
     total += v;
     out.position_max_m = std::max(out.position_max_m, std::sqrt(std::max(0.0, v)));
   }
-  out.grid_points = static_cast<int>(grid.size());
-  out.position_rms_m = std::sqrt(total / static_cast<double>(grid.size()));
+  out.grid_points = static_cast<int>(sens->size());
+  out.position_rms_m = std::sqrt(total / static_cast<double>(sens->size()));
   return out;
 }
 

@@ -12,9 +12,11 @@
 //  3. Refits. For each kept candidate (and each confounded alternative), the model with the effect
 //     added is refitted in full (nonlinear identification with the effect's parameters estimated
 //     where identification.hpp has them, else the Gauss-Newton augmented fit). Ranked by
-//     likelihood-ratio test against the standard model (chi^2 with the extra parameters as
-//     degrees of freedom), BIC change counting only the parameters that differ between the
-//     candidates, and K-fold cross-validation over poses (the geometry from K-1 folds, the held-out
+//     likelihood-ratio test against the standard model (the drop of the deviance chi^2 + log det
+//     of the residual covariance, chi^2-distributed with the extra parameters as degrees of
+//     freedom: the length and equilibrium sigmas depend on the compliance), BIC change counting
+//     only the parameters that differ between the candidates, and K-fold cross-validation over
+//     poses (the geometry from K-1 folds, the held-out
 //     poses re-located from their own readings with the geometry fixed, the RMS of their
 //     residuals in sigmas over every channel).
 //  4. Naming. The accepted effects in words with their fitted parameters and standard deviations
@@ -40,12 +42,20 @@
 //    selected in at least inclusion_threshold of the resamples (confounded families split the
 //    resamples between them; a strong effect makes the first-order screen pick the richer family
 //    member by its nonlinearity). Every member of a kept family is refitted.
-//  - Refits: identify() with the effect's option on (from the standard estimate), else one
-//    Gauss-Newton step for the effect's coefficients on the projected columns, the effect moved
-//    to the length readings, and identify() redone. Acceptance is sequential: the best passing
-//    refit (Holm-adjusted LRT p < alpha, BIC decrease, CV RMS decrease), then each further kept
-//    candidate refitted jointly with the accepted ones and tested against them (its EffectFit is
-//    then relative to the model with the earlier effects). Two candidates confounded on this pose
+//  - Refits: identify() with the effect's option on (from the standard estimate; the laser
+//    mounting falls back to the beam direction alone when the origin trades against the target
+//    plane), else Gauss-Newton: the effect's coefficients from the projected columns, the effect
+//    moved into the data (length and laser readings; on the equilibrium rows through
+//    PoseMeasurement::external_wrench and the SI columns), identify() redone, repeated until the
+//    deviance settles. Families that refine each other share a selection group
+//    (mismatch.hpp: nonlinear elasticity refines elasticity) and are compared by nested tests.
+//  - Acceptance: forward selection started from each of the (up to four) best passing first
+//    effects (Holm-adjusted LRT p < alpha, BIC decrease, held-out RMS in sigmas decrease); each
+//    path adds further kept candidates refitted jointly with the accepted ones and tested
+//    against them (their EffectFit is then relative to the model with the earlier effects); the
+//    path with the lowest joint BIC wins. Then swaps: with two or more effects, each is replaced
+//    in turn by every other kept candidate and the set refitted from the standard model; a swap
+//    that lowers the joint BIC by more than 2 is made. Two candidates confounded on this pose
 //    set are never accepted together.
 //  - Cross-validation is linearised about each fit: the geometry (and Gauss-Newton effect
 //    coefficients) from one Gauss-Newton step on K-1 folds, held-out poses re-located to first
@@ -58,7 +68,8 @@
 //    feasible tensions, each at the planned pretension and at twice it; greedy.
 //  - model_after: identify()'s estimate with the effects it can estimate; Gauss-Newton effects
 //    written where the config has a field (encoder offsets, common drum scale, mass per length,
-//    EA or a polynomial surface when the cables were rigid); otherwise modelled_in_config = false.
+//    EA or a polynomial surface when the cables were rigid); otherwise modelled_in_config = false
+//    (creep, drifts: report only).
 #pragma once
 
 #include <Eigen/Core>

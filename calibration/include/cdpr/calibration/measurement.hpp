@@ -75,6 +75,11 @@ struct PoseMeasurement {
   std::optional<Pose> reference;    // known pose, if any
   double time = std::numeric_limits<double>::quiet_NaN();         // s
   double temperature = std::numeric_limits<double>::quiet_NaN();  // degC
+  // A known wrench on the platform besides gravity and the cables (force N, moment N m about the
+  // platform's reference point, world axes), added to the static equilibrium: a payload, or a
+  // modelled effect such as the cable weight the platform carries (diagnosis.hpp). Zero in
+  // recordings.
+  Eigen::Matrix<double, 6, 1> external_wrench = Eigen::Matrix<double, 6, 1>::Zero();
 };
 
 struct MeasurementSet {

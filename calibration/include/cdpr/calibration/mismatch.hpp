@@ -23,9 +23,15 @@
 //    estimated from the remaining misfit (used for significance; robust to a misstated sigma),
 //    a Holm-adjusted p-value over the library, the explained fraction T / |r|^2 and a BIC change
 //    n ln((RSS - T) / RSS) + k ln n (ranking: lowest first). A candidate whose columns lie in the
-//    span of J is "already modelled" (k = 0). Two candidates of different families whose
+//    span of J is "already modelled" (k = 0). Two candidates of different selection groups whose
 //    projected column spaces have a canonical correlation above a threshold are confounded: the
 //    pose set cannot tell them apart.
+//    The library (mismatch.cc): Hooke elasticity ~F L (shared, per cable); winch/sensor
+//    compliance ~F (shared, per winch); nonlinear elasticity (a F + k2 F^2) L; creep
+//    ~F L ln(1 + t / 10 s); encoder offsets and drifts ~t; transmission drift ~t L; sag (arc
+//    length ~Lh^2 L / F^2 and the cable weight the platform carries, on the equilibrium rows);
+//    from the identification's Jacobian: drum scale (per cable, shared), platform anchors,
+//    force-sensor gain and offset, laser mounting, laser target plane.
 #pragma once
 
 #include <Eigen/Core>
@@ -139,6 +145,10 @@ enum class ResidualKind { kLength, kLaser, kWrench, kReference };
 struct CandidateColumns {
   std::string id, name, family;
   Eigen::MatrixXd X;  // rows x k, whitened
+  // The same columns in SI units (m on length and laser rows; N and N m of the platform's net
+  // wrench, world axes, on the six equilibrium rows of a pose) for a candidate that acts on the
+  // equilibrium rows (so that a fitted effect can be moved into the data); else empty.
+  Eigen::MatrixXd si;
 };
 
 struct MismatchDesign {

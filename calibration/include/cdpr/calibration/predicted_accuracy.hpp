@@ -56,6 +56,16 @@ Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
                                            const std::vector<Pose>& poses, const SensorNoise& noise,
                                            const PredictedAccuracyOptions& options = {});
 
+// The sensitivity of the pose the platform reaches to the geometry parameters, at each point of
+// `box` where the tensions are feasible at f_ref: G = -pinv(dL/dx) (dL/dp) (rows: position m,
+// then orientation rad; columns: the parameters `identification` estimates, whose names must be
+// `names`, else kInternal). Shared by predict_accuracy and the position-accuracy pose design.
+Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& model,
+                                                        const AccuracyBox& box, double f_ref,
+                                                        const SensorNoise& noise,
+                                                        const IdentificationOptions& identification,
+                                                        const std::vector<std::string>& names);
+
 struct RealizedAccuracy {
   double position_rms_m = 0.0;
   double position_max_m = 0.0;
