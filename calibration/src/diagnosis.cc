@@ -479,10 +479,11 @@ EffectParameter describe_coefficient(const std::string& id, int q, int k, double
         "s))",
         v, s);
   } else if (starts_with(id, "sag") && q == 0) {
-    // Small-sag elongation w^2 Lh^2 L / (24 F^2): v = (mu g)^2 / 24.
+    // Small-sag arc excess w^2 Lh^2 L / (24 F^2), read by the encoder beyond the chord: the
+    // residual (model - reading) has the coefficient v = -(mu g)^2 / 24.
     e.name = "mass_per_length_from_arc";
     e.unit = "kg/m";
-    const double mu = std::sqrt(24.0 * std::max(v, 0.0)) / 9.81;
+    const double mu = std::sqrt(24.0 * std::max(-v, 0.0)) / 9.81;
     e.value = mu;
     e.std_dev = mu > 0 ? 24.0 * s / (2.0 * 9.81 * 9.81 * mu) : kNaN;
     const int dg = digits_for(1e3 * e.std_dev);
@@ -902,8 +903,9 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         if (it == 0) rank = r;
         Ai = pinv_sym(S.topLeftCorner(k, k), 1e-9);
         Eigen::VectorXd step = Ai * S.block(0, k, k, 1);
-        if (id == "sag_shared" && k == 2 && theta(0) + step(0) < 0) {
-          // The arc-length coefficient is (mu g)^2 / 24 >= 0: at the bound, the weight column
+        if (id == "sag_shared" && k == 2 && theta(0) + step(0) > 0) {
+          // The arc is longer than the chord: the encoder reads more than the model's length, so
+          // the arc column's coefficient is -(mu g)^2 / 24 <= 0. At the bound, the weight column
           // alone takes the rest of the residual.
           step(0) = -theta(0);
           if (S(1, 1) > 0) step(1) = (S(1, k) - S(1, 0) * step(0)) / S(1, 1);

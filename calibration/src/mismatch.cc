@@ -412,10 +412,10 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
                    "transmission drift", false, [&](int k) { return time(k) * reading(k); });
   }
   // Sag of a heavy cable (mass per length mu), to first order in the sag. The encoder pays out
-  // the arc, longer than the chord by (mu g)^2 Lh^2 L / (24 F^2) (column 0, coefficient
-  // (mu g)^2 / 24). And the platform carries part of each cable's weight W = mu g L off the
-  // chord: with the tension T read at the frame end, the cable pulls the platform with
-  // T u - (W / 2)(e_z + (e_z . u) u), so the modelled net wrench is off by
+  // the arc, longer than the chord by (mu g)^2 Lh^2 L / (24 F^2) (column 0; its coefficient in
+  // the residual model - reading is -(mu g)^2 / 24 <= 0). And the platform carries part of each
+  // cable's weight W = mu g L off the chord: with the tension T read at the frame end, the cable
+  // pulls the platform with T u - (W / 2)(e_z + (e_z . u) u), so the modelled net wrench is off by
   // sum_i (W_i / 2)(e_z + (e_z . u_i) u_i) and its moment (column 1, coefficient mu), whitened
   // with the equilibrium rows' covariance (conditional on the length rows, as identify() has it).
   {
