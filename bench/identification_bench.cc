@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "bench_util.hpp"
 #include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/paper_method.hpp"
@@ -47,14 +48,7 @@ double anchor_rms_3d(const CalibratedModel& est, const CalibratedModel& truth) {
   return std::sqrt(d.squaredNorm() / static_cast<double>(d.cols()));
 }
 
-template <typename T>
-T must(cdpr::Result<T> r, const char* what) {
-  if (!r.ok()) {
-    std::fprintf(stderr, "%s failed: %s\n", what, r.status().to_string().c_str());
-    std::exit(1);
-  }
-  return std::move(r).value();
-}
+using cdpr::bench::must;
 
 // The noise levels; --sigma-force and --rigid change them for diagnosis runs.
 double g_sigma_force = 1.0;

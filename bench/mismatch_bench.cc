@@ -32,6 +32,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench_util.hpp"
 #include "cdpr/calibration/diagnosis.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/pose_design.hpp"
@@ -59,14 +60,7 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-template <typename T>
-T must(cdpr::Result<T> r, const char* what) {
-  if (!r.ok()) {
-    std::fprintf(stderr, "%s failed: %s\n", what, r.status().to_string().c_str());
-    std::exit(1);
-  }
-  return std::move(r).value();
-}
+using cdpr::bench::must;
 
 cdpr::SensorNoise bench_noise() {
   cdpr::SensorNoise n;
