@@ -84,6 +84,8 @@ struct Robot {
   double heavy_mass_per_length = 0.0;  // kg/m (sag)
   double pulley_radius_error = 0.0;    // m
   double thermal_alpha = 0.0;          // 1/K
+  // Encoder counts the nominal controller commands at the home pose (where the robot is homed).
+  Eigen::VectorXd home_counts;
 };
 
 // Folds the homing offsets (truth.readings.length_offsets) into the true winches, so that the
@@ -122,6 +124,8 @@ Robot make_robot(const std::string& which, bool quick) {
     r.pulley_radius_error = 0.005;   // 100 mm nominal, 105 mm effective
     r.thermal_alpha = 1.2e-5;        // steel
   }
+  r.home_counts = must(cdpr::sim::nominal_counts(r.nominal.robot, r.nominal.robot.home),
+                       "nominal counts at home");
   const auto t0 = std::chrono::steady_clock::now();
   const cdpr::PoseDesign design = must(cdpr::design_poses(r.nominal, d), "pose design");
   r.poses = design.poses;
@@ -279,8 +283,16 @@ const std::vector<Effect>& effects() {
         {"drum",
          "drum transmission scale",
          {"drum scale"},
-         [](const Robot&, double s, HiddenEffects& h, RobotModel& t) {
+         [](const Robot& r, double s, HiddenEffects& h, RobotModel& t) {
            h.transmission_scale.values = per_cable(t.num_cables(), s * 0.002);
+           // Homing zeroes the encoders at the home pose, so a transmission error scales the
+           // length paid out FROM home: without this the platform would settle away from home
+           // when home is commanded (by s L_home, ~10 mm on LARGE), which no homed robot does.
+           for (int i = 0; i < t.num_cables(); ++i) {
+             auto& w = t.winches[static_cast<std::size_t>(i)];
+             w.length_offset -= h.transmission_scale.at(i) *
+                                cdpr::winch_length_change<double>(w, r.home_counts(i));
+           }
          },
          [](const Robot&, double s) { return fmt("up to %.3f %% per drum (pattern +-)", 0.2 * s); },
          [](const Robot&, double s) {
