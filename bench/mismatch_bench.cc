@@ -429,6 +429,23 @@ cdpr::Result<TruthSetup> make_truth(const Robot& r, const std::vector<Component>
   auto truth = cdpr::sim::resolve_truth(s, base);
   if (!truth.ok()) return truth.status();
   t.truth = std::move(*truth);
+  // Homing with the effects in place: a real robot is homed on the robot as it is, so the reading
+  // at the home pose is the nominal length there whatever the cables' law, mass or pulleys
+  // (r.truth was homed without them). Without this, an effect that changes the unstretched
+  // length at home (a softer cable: 5 mm on LARGE) makes the platform settle away from home,
+  // which breaks the home-pose gauge that every calibration here assumes.
+  cdpr::sim::Scenario plain;
+  plain.name = r.name;
+  auto anchors_only = cdpr::sim::resolve_truth(plain, r.truth);
+  if (!anchors_only.ok()) return anchors_only.status();
+  const double f_ref = cdpr::default_reference_tension(r.nominal.robot);
+  auto homed = cdpr::homing_offsets(t.truth, r.nominal.robot, f_ref);
+  if (!homed.ok()) return homed.status();
+  auto before = cdpr::homing_offsets(*anchors_only, r.nominal.robot, f_ref);
+  if (!before.ok()) return before.status();
+  for (int i = 0; i < t.truth.num_cables(); ++i) {
+    t.truth.winches[static_cast<std::size_t>(i)].length_offset += (*homed)(i) - (*before)(i);
+  }
   return t;
 }
 
