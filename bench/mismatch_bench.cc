@@ -566,6 +566,8 @@ struct RunResult {
   Diagnosis::Verdict verdict = Diagnosis::Verdict::kNoMismatch;
   bool all_true_named = false, any_true_named = false, extra_named = false;
   bool confounded = false, separation_tried = false, separated = false;
+  // A suspect with no effect named: its follow-up poses appended, the re-run decides.
+  bool follow_up = false, follow_up_named = false;
   double held_before = 0, held_after = 0;
   double len_rms_before = 0, len_rms_after = 0;  // "cable lengths" channel, m
   double param_error = std::nan("");             // RMS relative error of the fitted parameters
@@ -695,6 +697,39 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     for (const auto& cf : d->confounded) involves_true = involves_true || matters(cf);
     if (involves_true) out.all_true_named = out.any_true_named = false;
   }
+
+  // "Suspected, not proven": the proposed follow-up poses are measured (same truth, same noise
+  // seed, appended) and the re-run's verdict and naming replace the first ones, as the operator
+  // would do. One round only.
+  if (d->accepted.empty() && d->follow_up && !d->follow_up->poses.empty()) {
+    std::vector<Pose> more = r.poses;
+    more.insert(more.end(), d->follow_up->poses.begin(), d->follow_up->poses.end());
+    auto set2 = record(r, *t, more, noise_seed);
+    cdpr::DiagnosisOptions once = dopt;
+    once.follow_up_poses = 0;
+    auto d2 = set2.ok()
+                  ? cdpr::diagnose(r.nominal, *set2, nullptr, cdpr::IdentificationOptions{}, once)
+                  : cdpr::Result<Diagnosis>(set2.status());
+    if (d2.ok()) {
+      out.follow_up = true;
+      RunResult again;
+      const std::vector<std::string> fam2 = accepted_families(*d2);
+      score(again, fam2, c);
+      out.named_families = fam2;
+      out.all_true_named = again.all_true_named;
+      out.any_true_named = again.any_true_named;
+      out.extra_named = again.extra_named;
+      out.follow_up_named = !fam2.empty();
+      out.verdict = d2->verdict;
+      out.param_error = parameter_error(*d2, r, c);
+      if (!d2->accepted.empty()) {
+        // The held-out figures of the run that named the effect (on the longer recording).
+        out.held_before = d2->held_out_rms_before;
+        out.held_after = d2->held_out_rms_after;
+      }
+      out.text += "\n--- after the follow-up poses ---\n" + d2->Text();
+    }
+  }
   out.seconds = seconds_since(t0);
   return out;
 }
@@ -819,11 +854,12 @@ void print_robot(const Robot& r, const Residual& baseline, const std::vector<Mag
 
   // Per-case detail.
   std::printf("\n== %s: per case (medians over the runs) ==\n", r.name.c_str());
-  std::printf("  %-38s %7s %7s %7s %7s %5s %7s %9s %9s %9s %9s %7s %7s %8s %6s\n", "case", "named%",
-              "any%", "extra%", "screen%", "conf", "sep ok", "len b mm", "len a mm", "held b mm",
-              "held a mm", "reduc%", "xs red%", "par err%", "s/run");
+  std::printf("  %-38s %7s %7s %7s %7s %5s %7s %7s %9s %9s %9s %9s %7s %7s %8s %6s\n", "case",
+              "named%", "any%", "extra%", "screen%", "conf", "sep ok", "fu nmd", "len b mm",
+              "len a mm", "held b mm", "held a mm", "reduc%", "xs red%", "par err%", "s/run");
   for (const auto& s : stats) {
     int ok = 0, all = 0, any = 0, extra = 0, scr = 0, conf = 0, tried = 0, sep = 0, unexpl = 0;
+    int fu = 0, fu_named = 0;
     std::vector<double> lb, la, hb, ha, red, xred, pe, sec;
     for (std::size_t seed = 0; seed < s.runs.size(); ++seed) {
       const RunResult& run = s.runs[seed];
@@ -834,6 +870,8 @@ void print_robot(const Robot& r, const Residual& baseline, const std::vector<Mag
       unexpl += run.extra_named || run.verdict == Diagnosis::Verdict::kMismatchUnexplained;
       tried += run.separation_tried;
       sep += run.separated;
+      fu += run.follow_up;
+      fu_named += run.follow_up_named;
       all += run.all_true_named && !run.extra_named;
       any += run.any_true_named;
       extra += run.extra_named;
@@ -852,11 +890,11 @@ void print_robot(const Robot& r, const Residual& baseline, const std::vector<Mag
     // Null data: correct = nothing named and no "mismatch unexplained" verdict.
     const double named = s.c->parts.empty() ? pct(ok - unexpl, ok) : pct(all, ok);
     std::printf(
-        "  %-38s %7.0f %7.0f %7.0f %7.0f %5d %7s %9.4f %9.4f %9.4f %9.4f %7.1f %7.1f %8.1f "
+        "  %-38s %7.0f %7.0f %7.0f %7.0f %5d %7s %7s %9.4f %9.4f %9.4f %9.4f %7.1f %7.1f %8.1f "
         "%6.1f\n",
         s.c->label.c_str(), named, pct(any, ok), pct(extra, ok), pct(scr, ok), conf,
-        fmt("%d/%d", sep, tried).c_str(), median(lb), median(la), median(hb), median(ha),
-        median(red), median(xred), median(pe), median(sec));
+        fmt("%d/%d", sep, tried).c_str(), fmt("%d/%d", fu_named, fu).c_str(), median(lb),
+        median(la), median(hb), median(ha), median(red), median(xred), median(pe), median(sec));
   }
   std::printf(
       "  named%% = exactly the true effect(s) named (null: nothing named, no unexplained "
@@ -864,7 +902,9 @@ void print_robot(const Robot& r, const Residual& baseline, const std::vector<Mag
       "effect among the named; extra%% = a family that is not present named; screen%% = "
       "locate_mismatch's top significant candidate alone (null: none significant); conf = runs "
       "with a "
-      "confounded pair; sep ok = separations proven by the appended poses / tried; reduc%% = "
+      "confounded pair; sep ok = separations proven by the appended poses / tried; fu nmd = runs "
+      "whose re-run with the proposed follow-up poses named an effect / runs with a suspect; "
+      "reduc%% = "
       "held-out RMS reduction; xs red%% = reduction of the held-out misfit in excess of the noise "
       "(the null run of the same seed: same poses and noise, no effect)\n");
 
@@ -1084,6 +1124,10 @@ int main(int argc, char** argv) {
       if (res.separation_tried) {
         std::printf("        confounded: separating poses appended, re-run %s\n",
                     res.separated ? "separated the true effect" : "did not separate");
+      }
+      if (res.follow_up) {
+        std::printf("        suspect: follow-up poses appended, re-run %s\n",
+                    res.follow_up_named ? "named an effect" : "named nothing");
       }
       if (verbose && res.ok) std::printf("%s\n", res.text.c_str());
       std::fflush(stdout);

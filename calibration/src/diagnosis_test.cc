@@ -134,6 +134,48 @@ TEST(Diagnosis, ConfoundedElasticityAndComplianceGetBothFitsAndSeparatingPoses) 
   }
 }
 
+TEST(Diagnosis, SuspectWithoutANamedEffectGetsFeasibleFollowUpPosesThatAddInformation) {
+  const RigidMini d = rigid_mini(25);
+  const SimulatedMeasurements sim = simulate(d, 2);
+  DiagnosisOptions o = quick_options();
+  o.suspect_p = 1.0;  // every unnamed candidate is a suspect: the lowest p-value is taken
+  auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, o);
+  ASSERT_TRUE(diag.ok()) << diag.status().to_string();
+  SCOPED_TRACE(diag->Text());
+  ASSERT_TRUE(diag->accepted.empty());
+  ASSERT_TRUE(diag->follow_up.has_value());
+  const FollowUp& fu = *diag->follow_up;
+  // The suspect is the screen's candidate with the lowest p-value.
+  const CandidateScreen* s = diag->screen.find(fu.suspect);
+  ASSERT_NE(s, nullptr);
+  for (const auto& c : diag->screen.candidates) {
+    if (!c.modelled && c.rank > 0) {
+      EXPECT_LE(s->p_value, c.p_value) << c.id;
+    }
+  }
+  EXPECT_EQ(static_cast<int>(fu.poses.size()), o.follow_up_poses);
+  EXPECT_EQ(fu.pretensions.size(), fu.poses.size());
+  EXPECT_GT(fu.information_after, fu.information_before);
+  const double f_ref = default_reference_tension(d.s.nominal.robot);
+  for (const Pose& p : fu.poses) {
+    EXPECT_TRUE(simple_tension_distribution(d.s.nominal.robot, p, f_ref).ok());
+    EXPECT_TRUE(simple_tension_distribution(diag->before.estimate.robot, p, f_ref).ok());
+  }
+  // The text says what to do.
+  EXPECT_NE(diag->Text().find("follow-up poses"), std::string::npos);
+
+  // No suspect below the threshold, or follow-up switched off: nothing proposed.
+  o.suspect_p = 0.0;
+  auto none = diagnose(d.s.nominal, sim.set, nullptr, {}, o);
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(none->follow_up.has_value());
+  o.suspect_p = 1.0;
+  o.follow_up_poses = 0;
+  auto off = diagnose(d.s.nominal, sim.set, nullptr, {}, o);
+  ASSERT_TRUE(off.ok());
+  EXPECT_FALSE(off->follow_up.has_value());
+}
+
 TEST(Diagnosis, CorrelatedCandidateThatFitsDecisivelyWorseIsNotReportedAsConfounded) {
   const RigidMini d = rigid_mini(25);
   SimulatedMeasurements sim = simulate(d, 5);

@@ -20,6 +20,11 @@
 
 namespace cdpr {
 
+double slack_threshold(const IdentificationOptions& options, const SensorNoise& noise) {
+  return std::max(options.slack_tension_threshold,
+                  options.slack_tension_sigmas * noise.sigma_force);
+}
+
 AnchorMask paper_anchor_mask() {
   AnchorMask mask = AnchorMask::Constant(3, 8, false);
   for (int c = 1; c <= 6; ++c) {  // x2..x7, y2..y7 (0-based 1..6)
@@ -525,6 +530,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     return nullptr;
   };
   const SensorNoise& noise = set.noise;
+  const double slack = slack_threshold(opt, noise);
   bool missing_tension_warned = false;
   KinematicsData kin(robot);
   for (int j = 0; j < n; ++j) {
@@ -541,8 +547,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
         // A slack cable (tension reading below the threshold) sags: its length says nothing
         // exact about the geometry, so it is left out (its zero tension still enters the
         // equilibrium).
-        if (have_tensions && !std::isnan(pm.tensions(i)) &&
-            pm.tensions(i) < opt.slack_tension_threshold) {
+        if (have_tensions && !std::isnan(pm.tensions(i)) && pm.tensions(i) < slack) {
           continue;
         }
         auto* f = new LengthCost;

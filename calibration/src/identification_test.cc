@@ -144,6 +144,30 @@ TEST(Identification, EstimateDoesNotDependOnTheStartingModel) {
   EXPECT_NEAR(a->chi2, b->chi2, 1e-6 * a->chi2);
 }
 
+TEST(Identification, ATensionReadingWithinFourSigmasOfZeroIsASlackCable) {
+  SensorNoise noise;
+  noise.sigma_force = 1.0;
+  IdentificationOptions opt;
+  EXPECT_DOUBLE_EQ(slack_threshold(opt, noise), 4.0);  // 4 sigma above the 3 N floor
+  noise.sigma_force = 0.25;
+  EXPECT_DOUBLE_EQ(slack_threshold(opt, noise), 3.0);  // the floor
+  // A slack cable whose reading came out at 3.5 N (sigma 1 N) has no length row: its length,
+  // longer than the chord by the slack, would otherwise misfit.
+  Data d = make_data(25, SensorNoise{}, 3, true);
+  d.sim.set.poses[4].tensions(2) = 3.5;
+  d.sim.set.poses[4].cable_lengths(2) += 0.01;  // 10 mm of slack
+  auto rep = identify(d.s.nominal, d.sim.set, opt);
+  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+  EXPECT_TRUE(std::isnan(rep->residuals[4].length_normalized(2)));
+  EXPECT_LT(rep->chi2, rep->dof + 4.0 * std::sqrt(2.0 * rep->dof));
+  // With the old 3 N threshold alone it is fitted as taut and wrecks the fit.
+  opt.slack_tension_sigmas = 0.0;
+  auto taut = identify(d.s.nominal, d.sim.set, opt);
+  ASSERT_TRUE(taut.ok()) << taut.status().to_string();
+  EXPECT_FALSE(std::isnan(taut->residuals[4].length_normalized(2)));
+  EXPECT_GT(taut->chi2, rep->chi2 + 100.0);
+}
+
 TEST(Identification, TooFewPosesAreRefused) {
   const Data d = make_data(3, SensorNoise{}, 1, false);
   auto rep = identify(d.s.nominal, d.sim.set, IdentificationOptions{});

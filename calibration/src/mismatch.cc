@@ -9,6 +9,7 @@
 #include <numeric>
 #include <utility>
 
+#include "cdpr/calibration/catenary.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 
 namespace cdpr {
@@ -257,7 +258,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
       for (int i = 0; i < m; ++i) {
         if (std::isnan(pm.cable_lengths(i))) continue;
         if (have_t && !std::isnan(pm.tensions(i)) &&
-            pm.tensions(i) < options.slack_tension_threshold) {
+            pm.tensions(i) < slack_threshold(options, set.noise)) {
           continue;
         }
         length_row[uj][static_cast<std::size_t>(i)] = static_cast<int>(rows.size());
@@ -643,6 +644,121 @@ Result<MismatchDesign> mismatch_design(const CalibratedModel& model, const Measu
   out.jacobian_geometry = std::move(D.base.jacobian_geometry);
   out.jacobian_pose = std::move(D.base.jacobian_pose);
   out.candidates = std::move(D.lib);
+  return out;
+}
+
+Result<CandidateColumns> sag_effect(const CalibratedModel& model, const MeasurementSet& set,
+                                    const std::vector<Pose>& poses, const MismatchDesign& d,
+                                    const IdentificationOptions& options, double mass_per_length) {
+  const RobotModel& robot = model.robot;
+  const int m = robot.num_cables();
+  const int np = d.num_poses();
+  if (static_cast<int>(poses.size()) != np || set.num_poses() != np ||
+      d.sigma_length.size() != d.num_rows()) {
+    return Status(ErrorCode::kInvalidArgument, "sag effect: poses, recording and design differ");
+  }
+  CandidateColumns out;
+  out.id = "sag_shared";
+  out.family = "sag";
+  out.X = Eigen::MatrixXd::Zero(d.num_rows(), 1);
+  out.si = Eigen::MatrixXd::Zero(d.num_rows(), 1);
+  if (!(mass_per_length > 0.0)) return out;
+  const double w = mass_per_length * robot.gravity;
+  const double slack = slack_threshold(options, set.noise);
+  const double sf2 = set.noise.sigma_force * set.noise.sigma_force;
+  const double sl2 = set.noise.sigma_length * set.noise.sigma_length;
+  KinematicsData kin(robot);
+  for (int j = 0; j < np; ++j) {
+    const auto uj = static_cast<std::size_t>(j);
+    const PoseMeasurement& pm = set.poses[uj];
+    if (pm.tensions.size() != m || !inverse_kinematics(robot, poses[uj], kin)) continue;
+    std::vector<int> length_row(static_cast<std::size_t>(m), -1);
+    int kw = -1;
+    for (int k = d.pose_start[uj]; k < d.pose_start[uj + 1]; ++k) {
+      const auto uk = static_cast<std::size_t>(k);
+      if (d.kind[uk] == ResidualKind::kLength)
+        length_row[static_cast<std::size_t>(d.index[uk])] = k;
+      if (d.kind[uk] == ResidualKind::kWrench && kw < 0) kw = k;
+    }
+    Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Zero();
+    Eigen::Matrix<double, 6, 1> delta = Eigen::Matrix<double, 6, 1>::Zero();
+    for (int i = 0; i < m; ++i) {
+      const auto ui = static_cast<std::size_t>(i);
+      const Eigen::Vector3d u = kin.unit_vectors.col(i);
+      const Eigen::Vector3d rb = kin.platform_points.col(i) - poses[uj].position;
+      Eigen::Matrix<double, 6, 1> a;
+      a << u, rb.cross(u);
+      const int kl = length_row[ui];
+      const double s2 = kl >= 0 ? d.sigma_length(kl) * d.sigma_length(kl) : sl2;
+      cov += sf2 * (sl2 / s2) * a * a.transpose();
+      const double T = pm.tensions(i);
+      if (!(T >= slack) || !std::isfinite(T)) continue;
+      const double free = kin.free_lengths(i);
+      const Eigen::Vector3d chord = free * u;  // platform anchor -> exit point
+      const double span = std::hypot(chord.x(), chord.y());
+      if (!(span > 1e-6) || !(free > 0.0)) continue;
+      const CableModel& c = robot.cables[ui];
+      // A rigid model cable: stiff enough that the stretch is negligible, not so stiff that the
+      // catenary's tension cannot be resolved in double precision.
+      const double ea = c.elongation == ElongationKind::kRigid || !(c.ea > 0.0) ? 1e8 : c.ea;
+      const double l_straight = free * ea / (ea + T);
+      // Unstretched free span whose catenary has the tension T at the exit point: secant on L0
+      // (the tension falls as L0 grows).
+      auto tension_at = [&](double l0, CatenarySolution* sol) {
+        auto r = solve_elastic_catenary(span, chord.z(), l0, w, ea);
+        if (!r.ok()) return std::numeric_limits<double>::quiet_NaN();
+        if (sol != nullptr) *sol = *r;
+        return r->tension_b - T;
+      };
+      // Start from the small-sag arc (catenary.hpp), a second point close by.
+      const double arc = sag_arc_minus_chord(w, span, free, T) * ea / (ea + T);
+      double x0 = l_straight + arc, x1 = x0 + 1e-3 * arc + 1e-12 * x0;
+      double f0 = tension_at(x0, nullptr), f1 = tension_at(x1, nullptr);
+      bool found = false;
+      CatenarySolution sol;
+      for (int it = 0; it < 40 && std::isfinite(f0) && std::isfinite(f1); ++it) {
+        if (std::abs(f1) <= 1e-10 * (1.0 + T)) {
+          found = std::isfinite(tension_at(x1, &sol));
+          break;
+        }
+        if (f1 == f0) break;
+        double x2 = x1 - f1 * (x1 - x0) / (f1 - f0);
+        if (!(x2 > 0.0)) x2 = 0.5 * x1;
+        if (std::abs(x2 - x1) <= 1e-14 * x1) {
+          // Converged in L0 (a stiff cable: the tension cannot be matched closer in double).
+          x1 = x2;
+          found = std::isfinite(tension_at(x1, &sol));
+          break;
+        }
+        x0 = x1;
+        f0 = f1;
+        x1 = x2;
+        f1 = tension_at(x1, nullptr);
+      }
+      if (!found) continue;
+      if (kl >= 0) {
+        out.si(kl, 0) = l_straight - x1;
+        out.X(kl, 0) = (l_straight - x1) / d.sigma_length(kl);
+      }
+      // The sagging cable pulls the platform with (H e_h, V_a) (catenary.hpp: end A); the model
+      // has T u. The residual (model - truth) of the net wrench gets T u - F.
+      const Eigen::Vector3d e_h(chord.x() / span, chord.y() / span, 0.0);
+      const Eigen::Vector3d f =
+          sol.horizontal_force * e_h + sol.vertical_force_a * Eigen::Vector3d::UnitZ();
+      const Eigen::Vector3d v = T * u - f;
+      delta.head<3>() += v;
+      delta.tail<3>() += rb.cross(v);
+    }
+    if (kw < 0) continue;
+    cov.diagonal().array() += 1e-12 * cov.trace();
+    const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cov);
+    if (llt.info() != Eigen::Success) continue;
+    const Eigen::Matrix<double, 6, 1> col = llt.matrixL().solve(delta);
+    for (int q = 0; q < 6; ++q) {
+      out.X(kw + q, 0) = col(q);
+      out.si(kw + q, 0) = delta(q);
+    }
+  }
   return out;
 }
 

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "cdpr/calibration/catenary.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
@@ -182,6 +183,59 @@ TEST(Mismatch, ElasticityAndComplianceAreReportedAsConfounded) {
   auto s2 = identify_and_locate(d, sim.set, strict);
   ASSERT_TRUE(s2.ok());
   EXPECT_FALSE(confounded(*s2, "hooke_shared", "compliance_shared"));
+}
+
+TEST(Mismatch, ExactSagEffectAgreesWithTheSmallSagArcAndTheWeightOnThePlatform) {
+  const RigidMini d = rigid_mini(25);
+  const SimulatedMeasurements sim = simulate(d, 7);
+  const IdentificationOptions opt;
+  auto rep = identify(d.s.nominal, sim.set, opt);
+  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+  auto des = mismatch_design(rep->estimate, sim.set, rep->poses, &rep->residuals, opt);
+  ASSERT_TRUE(des.ok()) << des.status().to_string();
+  // No weight, no effect.
+  auto zero = sag_effect(rep->estimate, sim.set, rep->poses, *des, opt, 0.0);
+  ASSERT_TRUE(zero.ok());
+  EXPECT_EQ(zero->X.cols(), 1);
+  EXPECT_EQ(zero->X.squaredNorm(), 0.0);
+  // A 10 g/m cable at tens of newtons (small sag): on every length row the encoder pays out the
+  // arc, so (model - reading) is minus the small-sag arc excess; and the platform carries about
+  // half of each cable's weight (the equilibrium rows).
+  const double mu = 0.010;
+  auto e = sag_effect(rep->estimate, sim.set, rep->poses, *des, opt, mu);
+  ASSERT_TRUE(e.ok()) << e.status().to_string();
+  const RobotModel& robot = rep->estimate.robot;
+  const double w = mu * robot.gravity;
+  KinematicsData kin(robot);
+  int checked = 0;
+  for (int j = 0; j < des->num_poses(); ++j) {
+    const auto uj = static_cast<std::size_t>(j);
+    ASSERT_TRUE(inverse_kinematics(robot, rep->poses[uj], kin));
+    Eigen::Vector3d weight_share = Eigen::Vector3d::Zero();
+    for (int i = 0; i < robot.num_cables(); ++i) {
+      const Eigen::Vector3d u = kin.unit_vectors.col(i);
+      weight_share += 0.5 * w * kin.free_lengths(i) * (Eigen::Vector3d::UnitZ() + u.z() * u);
+    }
+    for (int k = des->pose_start[uj]; k < des->pose_start[uj + 1]; ++k) {
+      const auto uk = static_cast<std::size_t>(k);
+      if (des->kind[uk] == ResidualKind::kLength) {
+        const int i = des->index[uk];
+        const double T = sim.set.poses[uj].tensions(i);
+        const Eigen::Vector3d chord = kin.free_lengths(i) * kin.unit_vectors.col(i);
+        const double arc =
+            sag_arc_minus_chord(w, std::hypot(chord.x(), chord.y()), kin.free_lengths(i), T);
+        EXPECT_LT(e->si(k, 0), 0.0);
+        EXPECT_NEAR(-e->si(k, 0), arc, 0.05 * arc + 1e-9) << "pose " << j << " cable " << i + 1;
+        ++checked;
+      } else if (des->kind[uk] == ResidualKind::kWrench && des->index[uk] == 2) {
+        // The vertical force: the straight model misses the weight the platform carries (the
+        // first-order share (W / 2)(1 + u_z^2) per cable; the catenary differs by up to ~15 %
+        // where the platform sits low).
+        EXPECT_NEAR(e->si(k, 0), weight_share.z(), 0.2 * weight_share.z()) << "pose " << j;
+      }
+    }
+  }
+  EXPECT_GT(checked, 100);
 }
 
 TEST(Mismatch, DesignExposesTheScreensResidualsAndCandidateColumns) {

@@ -100,6 +100,18 @@ TEST_F(Diagnose, RecordingOfACorrectModelExitsZeroWithJsonAndHtmlReports) {
   EXPECT_EQ(j.at("options").at("folds").get<int>(), 3);
   EXPECT_EQ(j.at("cable_misfit_normalized").at("before").size(), 8u);
   EXPECT_FALSE(j.at("channels").empty());
+  // No effect named: a suspect with its follow-up poses, or null.
+  ASSERT_TRUE(j.contains("follow_up"));
+  const nlohmann::json& fu = j.at("follow_up");
+  if (!fu.is_null()) {
+    EXPECT_FALSE(fu.at("suspect").get<std::string>().empty());
+    EXPECT_LT(fu.at("p_value").get<double>(), 0.2);
+    ASSERT_FALSE(fu.at("poses").empty());
+    for (const auto& p : fu.at("poses")) EXPECT_EQ(p.size(), 6u);
+    EXPECT_EQ(fu.at("pretensions_n").size(), fu.at("poses").size());
+    EXPECT_THAT(r.out, HasSubstr("Follow-up poses"));
+    EXPECT_THAT(slurp(html), HasSubstr("Suspected, not proven"));
+  }
 
   ASSERT_TRUE(fs::exists(html));
   const std::string page = slurp(html);

@@ -318,6 +318,32 @@ std::string th(const std::string& text) {
   return "<th>" + html_escape(text) + "</th>";
 }
 
+// Extra poses to measure (separating or follow-up) as an HTML table / text lines.
+std::string pose_table_html(const std::vector<Pose>& poses,
+                            const std::vector<double>& pretensions) {
+  std::ostringstream h;
+  h << "<table>\n<tr>" << th("x (m)") << th("y (m)") << th("z (m)") << th("roll (rad)")
+    << th("pitch (rad)") << th("yaw (rad)") << th("pretension (N)") << "</tr>\n";
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    h << "<tr>";
+    const auto v = poses[k].vector();
+    for (int q = 0; q < 6; ++q) h << td(printf_string("%.4f", v(q)), true);
+    h << td(k < pretensions.size() ? num(pretensions[k]) : "-", true) << "</tr>\n";
+  }
+  h << "</table>\n";
+  return h.str();
+}
+
+std::string pose_list_text(const std::vector<Pose>& poses, const std::vector<double>& pretensions) {
+  std::string out;
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    out += "    " + pose_text(poses[k]);
+    if (k < pretensions.size()) out += ", pretension " + num(pretensions[k]) + " N";
+    out += "\n";
+  }
+  return out;
+}
+
 std::string p_text(double p) {
   return std::isfinite(p) ? fmt(p, 3) : "-";
 }
@@ -514,6 +540,21 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const DiagnoseContext& c,
                           {"separating_pretensions_n", vector_json(f.separating_pretensions)},
                           {"correlation_with_extra", number_or_null(f.correlation_with_extra)}});
   }
+  nlohmann::json follow_up = nullptr;
+  if (d.follow_up) {
+    const FollowUp& f = *d.follow_up;
+    nlohmann::json poses = nlohmann::json::array();
+    for (const Pose& p : f.poses) poses.push_back(to_json(Eigen::VectorXd(p.vector())));
+    follow_up = {{"suspect", f.suspect},
+                 {"name", f.name},
+                 {"parameters", f.parameters},
+                 {"p_value", number_or_null(f.p_value)},
+                 {"p_adjusted", number_or_null(f.p_adjusted)},
+                 {"poses", poses},
+                 {"pretensions_n", vector_json(f.pretensions)},
+                 {"log_det_information_before", number_or_null(f.information_before)},
+                 {"log_det_information_after", number_or_null(f.information_after)}};
+  }
   nlohmann::json channels = nlohmann::json::array();
   for (const ChannelRms& ch : d.channels) {
     channels.push_back({{"channel", ch.channel},
@@ -578,6 +619,7 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const DiagnoseContext& c,
       {"accepted", accepted},
       {"candidates", candidates},
       {"confounded", confounded},
+      {"follow_up", follow_up},
       {"channels", channels},
       {"held_out",
        {{"source", d.held_out_source},
@@ -668,14 +710,14 @@ std::string diagnosis_text(const Diagnosis& d, const DiagnoseContext& c) {
     if (!f.separating_poses.empty()) {
       h << "  poses that would separate them (correlation " << num(f.correlation_with_extra, 3)
         << " with them):\n";
-      for (std::size_t k = 0; k < f.separating_poses.size(); ++k) {
-        h << "    " << pose_text(f.separating_poses[k]);
-        if (k < f.separating_pretensions.size()) {
-          h << ", pretension " << num(f.separating_pretensions[k]) << " N";
-        }
-        h << "\n";
-      }
+      h << pose_list_text(f.separating_poses, f.separating_pretensions);
     }
+  }
+  if (d.follow_up) {
+    h << "\nSuspected, not proven: " << d.follow_up->suspect << " (p "
+      << num(d.follow_up->p_value, 3) << " alone, " << num(d.follow_up->p_adjusted, 3)
+      << " after Holm). Follow-up poses that would decide it:\n"
+      << pose_list_text(d.follow_up->poses, d.follow_up->pretensions);
   }
   if (!c.warnings.empty()) {
     h << "\nWarnings:\n";
@@ -786,21 +828,18 @@ std::string diagnosis_html(const Diagnosis& d, const DiagnoseContext& c,
         << html_escape(f.description) << "</p>\n";
       if (!f.separating_poses.empty()) {
         h << "<p>Extra poses that would separate them (correlation "
-          << html_escape(num(f.correlation_with_extra, 3))
-          << " with them added):</p>\n<table>\n<tr>" << th("x (m)") << th("y (m)") << th("z (m)")
-          << th("roll (rad)") << th("pitch (rad)") << th("yaw (rad)") << th("pretension (N)")
-          << "</tr>\n";
-        for (std::size_t k = 0; k < f.separating_poses.size(); ++k) {
-          h << "<tr>";
-          const auto v = f.separating_poses[k].vector();
-          for (int q = 0; q < 6; ++q) h << td(printf_string("%.4f", v(q)), true);
-          h << td(k < f.separating_pretensions.size() ? num(f.separating_pretensions[k]) : "-",
-                  true)
-            << "</tr>\n";
-        }
-        h << "</table>\n";
+          << html_escape(num(f.correlation_with_extra, 3)) << " with them added):</p>\n"
+          << pose_table_html(f.separating_poses, f.separating_pretensions);
       }
     }
+  }
+  if (d.follow_up) {
+    h << "<h2>Suspected, not proven</h2>\n<p><b>" << html_escape(d.follow_up->name)
+      << "</b>: p = " << html_escape(num(d.follow_up->p_value, 3)) << " alone, "
+      << html_escape(num(d.follow_up->p_adjusted, 3))
+      << " after Holm's correction over the candidates. Measure these poses, append them to the "
+         "recording and diagnose again to decide:</p>\n"
+      << pose_table_html(d.follow_up->poses, d.follow_up->pretensions);
   }
   if (!c.warnings.empty()) {
     h << "<h2>Warnings</h2>\n<ul>\n";

@@ -63,9 +63,11 @@
 //  - Validation recording: its poses are re-located by identify() with the encoder zeros
 //    re-estimated and everything else fixed (identify() refuses a problem without parameters;
 //    a new recording is homed again anyway).
-//  - Separating poses: a 4 x 4 x 4 grid over the pose-design box (0.156 m half extent, scaled)
-//    x {level, +0.2 rad roll, -0.2 rad pitch}, kept where simple_tension_distribution finds
-//    feasible tensions, each at the planned pretension and at twice it; greedy.
+//  - Separating and follow-up poses: a 4 x 4 x 4 grid over the pose-design box of the robot
+//    (fit_design_box_to_robot, scaled by separating_half_extent_scale) x {level, +-0.2 rad roll,
+//    +-0.2 rad pitch}, kept where simple_tension_distribution finds feasible tensions, each at the
+//    planned pretension and at twice it; greedy (separating: lowest canonical correlation of the
+//    pair; follow-up: largest log det of the suspect's projected information).
 //  - model_after: identify()'s estimate with the effects it can estimate; Gauss-Newton effects
 //    written where the config has a field (encoder offsets, common drum scale, mass per length,
 //    EA or a polynomial surface when the cables were rigid); otherwise modelled_in_config = false
@@ -99,6 +101,16 @@ struct DiagnosisOptions {
   double decisive_bic = 10.0;
   int separating_poses = 6;                   // extra poses proposed for each confounded pair
   double separating_half_extent_scale = 1.0;  // of the candidate grid (pose_design.hpp box)
+  // With no effect named, the candidate with the lowest screen p-value (before Holm's
+  // correction) is a suspect when that p-value is below suspect_p; follow_up_poses extra poses
+  // that add the most information on it are then proposed (Diagnosis::follow_up). 0: never.
+  double suspect_p = 0.2;
+  int follow_up_poses = 12;
+  // The first accepted effect must also be seen by the linear screen: its screen p-value
+  // (after Holm's correction over the library) below this. On noise, a nonlinear refit can reach a
+  // far minimum whose likelihood ratio overstates its significance (chi^2 with the nominal degrees
+  // of freedom assumes the linear regime).
+  double screen_gate_p = 0.05;
 };
 
 // One fitted effect parameter, in SI units (and as shown to people).
@@ -154,6 +166,18 @@ struct ConfoundedFinding {
   double correlation_with_extra = 0.0;         // canonical correlation with the extra poses added
 };
 
+// A suspect (an effect visible in the screen but not proven) and the poses that would decide it.
+struct FollowUp {
+  std::string suspect;                     // candidate id
+  std::string name;                        // plain language
+  int parameters = 0;                      // of the candidate
+  double p_value = 1.0, p_adjusted = 1.0;  // screen, before / after Holm's correction
+  std::vector<Pose> poses;                 // extra poses to measure, in this order
+  std::vector<double> pretensions;         // N, planned pretension at each of them
+  // log det of the projected information on the suspect's parameters, without / with the poses.
+  double information_before = 0.0, information_after = 0.0;
+};
+
 struct Diagnosis {
   enum class Verdict { kNoMismatch, kMismatchNamed, kMismatchUnexplained, kInconclusive };
   Verdict verdict = Verdict::kNoMismatch;
@@ -164,6 +188,7 @@ struct Diagnosis {
   std::vector<EffectFit> candidates;  // refitted candidates, best first
   std::vector<EffectFit> accepted;    // the named effects (subset of candidates)
   std::vector<ConfoundedFinding> confounded;
+  std::optional<FollowUp> follow_up;  // with no effect named: a suspect and poses to decide it
   std::optional<IdentificationReport> after;  // identification with the accepted effects
   CalibratedModel model_after;                // the calibrated model carrying the accepted effects
   std::vector<ChannelRms> channels;           // residual RMS before/after per channel

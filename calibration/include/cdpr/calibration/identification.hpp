@@ -78,8 +78,12 @@ struct IdentificationOptions {
   bool use_laser = true;
   bool use_equilibrium = true;
   bool use_reference = true;
-  // Cables whose tension reading is below this (N) are slack: their length residual is skipped.
+  // Cables whose tension reading is below this (N), or below slack_tension_sigmas times the
+  // force noise (SensorNoise::sigma_force), are slack: their length residual is skipped. A slack
+  // cable reads 0 +- sigma_force, so at 3 sigma about one slack reading in 740 passes as taut, and
+  // its length is then off by the slack (several sigma); at 4 sigma one in 30000.
   double slack_tension_threshold = 3.0;
+  double slack_tension_sigmas = 4.0;
 
   // --- Gauge and robustness ------------------------------------------------------------------
   Gauge gauge = Gauge::kHomePose;
@@ -106,6 +110,9 @@ struct IdentificationOptions {
   double huge_std_anchor = 0.01;     // m: warn when a length-like parameter's std exceeds it
   double chi2_warning_sigmas = 4.0;  // warn when |chi2 - dof| > this * sqrt(2 dof)
 };
+
+// The tension (N) below which a cable counts as slack: the larger of the two thresholds above.
+double slack_threshold(const IdentificationOptions& options, const SensorNoise& noise);
 
 // One estimated scalar (a tangent coordinate).
 struct ParameterEstimate {

@@ -176,6 +176,21 @@ Result<MismatchDesign> mismatch_design(const CalibratedModel& model, const Measu
                                        const IdentificationOptions& options,
                                        const MismatchOptions& mismatch = {});
 
+// The exact effect of cable sag on the rows of `d` (Irvine's elastic catenary, catenary.hpp):
+// every cable weighs `mass_per_length` (kg/m), its tension reading is taken at the frame end (the
+// pulley exit), where the force sensors measure it, and the model of `d` has straight cables.
+// Column 0 of X is the effect on the whitened residuals (model - reading): on a length row
+// (L0_straight - L0_catenary) / sigma, the unstretched free span a straight cable needs at the
+// reading minus the one the sagging cable needs (< 0: the encoder pays out the arc); on the six
+// equilibrium rows of a pose the straight cables' wrench minus the sagging cables' (the platform
+// carries part of each cable's weight, and the force leaves the platform along the catenary's
+// tangent), whitened as the screen whitens the equilibrium rows. `si` holds the same in SI units.
+// A cable without a catenary solution (very slack) or below the slack threshold contributes 0.
+// mass_per_length = 0 gives zero columns. Errors: kInvalidArgument (sizes).
+Result<CandidateColumns> sag_effect(const CalibratedModel& model, const MeasurementSet& set,
+                                    const std::vector<Pose>& poses, const MismatchDesign& d,
+                                    const IdentificationOptions& options, double mass_per_length);
+
 // Screens `report` (from identify(initial, set, options)) against `set`. Errors: kInvalidArgument
 // (sizes do not match), kFailedPrecondition (no residuals / dof <= 0), kInternal (the residual
 // layout does not match the Jacobian), and whatever geometry_information returns.
