@@ -132,7 +132,8 @@ struct LengthCost {
   double reading = 0.0;
   double tension = kNaN;
   double sigma_length = 1.0;
-  double sigma_force = 0.0;  // 0: the force noise is not propagated
+  double sigma_force = 0.0;       // 0: the force noise is not propagated
+  double extra_compliance = 0.0;  // PoseMeasurement::extra_compliance, m/N
   template <typename T>
   bool operator()(const T* a, const T* b, const T* pose, const T* o, const T* s, const T* e,
                   const T* g, const T* c, T* residual) const {
@@ -142,7 +143,7 @@ struct LengthCost {
                                nullptr, &compliance)) {
       return false;
     }
-    const T force_part = compliance * T(sigma_force);
+    const T force_part = (compliance + T(extra_compliance)) * T(sigma_force);
     const T sigma = sqrt(T(sigma_length * sigma_length) + force_part * force_part);
     residual[0] = (U - ((T(1) + s[0]) * T(reading) + o[0])) / sigma;
     return true;
@@ -197,7 +198,8 @@ struct EquilibriumCost {
   Eigen::VectorXd tensions;
   double sigma_force = 1.0;
   double sigma_length = 1.0;
-  std::vector<double> readings;  // cable length readings; NaN: the cable has no length row
+  std::vector<double> readings;          // cable length readings; NaN: the cable has no length row
+  std::vector<double> extra_compliance;  // PoseMeasurement::extra_compliance (empty: none)
   bool shared_stiffness = false;
   double mass = 1.0;
   double gravity = 9.81;
@@ -245,6 +247,7 @@ struct EquilibriumCost {
         const T U = geom.length - elongation_at<T>(k[ui], geom.length, tensions(i), e[0], g[0],
                                                    c[0], nullptr, &compliance);
         const T rl = U - ((T(1) + s[0]) * T(readings[ui]) + o[0]);
+        if (!extra_compliance.empty()) compliance += T(extra_compliance[ui]);
         const T S = T(sl2) + compliance * compliance * T(sf2);
         weight_i = T(sl2) / S;
         if (correction) *correction += col * (compliance * T(sf2) * rl / S);
@@ -562,6 +565,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
         // Force noise propagated through the elongation (at the current geometry, LengthCost).
         f->sigma_length = noise.sigma_length;
         f->sigma_force = std::isnan(f->tension) ? 0.0 : noise.sigma_force;
+        f->extra_compliance = pm.extra_compliance.size() == m ? pm.extra_compliance(i) : 0.0;
         double* e_ptr = opt.estimate_stiffness == StiffnessEstimate::kShared ? &B->e[0] : &B->e[ui];
         auto id = B->problem.AddResidualBlock(
             new ceres::AutoDiffCostFunction<LengthCost, 1, 3, 3, 6, 1, 1, 1, 1, 1>(f), make_loss(),
@@ -602,6 +606,9 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       f->sigma_force = noise.sigma_force;
       f->sigma_length = noise.sigma_length;
       f->shared_stiffness = opt.estimate_stiffness == StiffnessEstimate::kShared;
+      if (pm.extra_compliance.size() == m) {
+        f->extra_compliance.assign(pm.extra_compliance.data(), pm.extra_compliance.data() + m);
+      }
       if (opt.use_lengths) {
         // The cables that have a length row at this pose (the same test as above).
         f->readings.assign(static_cast<std::size_t>(m), kNaN);
@@ -1029,6 +1036,7 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
             options.estimate_stiffness == StiffnessEstimate::kShared ? B.e[0] : B.e[ui];
         elongation_at<double>(B.constants[ui], kin.lengths(i), tr, e, B.g[ui], B.c[ui], nullptr,
                               &compliance);
+        if (pm.extra_compliance.size() == m) compliance += pm.extra_compliance(i);
       }
       rep.log_det_covariance +=
           std::log(noise.sigma_length * noise.sigma_length +

@@ -7,6 +7,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <utility>
 
 #include "cdpr/calibration/catenary.hpp"
@@ -570,6 +571,47 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   return D;
 }
 
+// The catenary of a free span (platform anchor at the origin, exit point at (span, height)) whose
+// tension at the exit point is T: its unstretched length by the secant method (the tension falls
+// as it grows), started from the straight cable plus the small-sag arc. nullopt: no solution.
+struct SpanSolution : CatenarySolution {
+  double unstretched_length = 0.0;
+};
+
+std::optional<SpanSolution> catenary_for_tension(double span, double height, double chord, double w,
+                                                 double ea, double T) {
+  auto tension_at = [&](double l0, CatenarySolution* sol) {
+    auto r = solve_elastic_catenary(span, height, l0, w, ea);
+    if (!r.ok()) return std::numeric_limits<double>::quiet_NaN();
+    if (sol != nullptr) *sol = *r;
+    return r->tension_b - T;
+  };
+  const double arc = sag_arc_minus_chord(w, span, chord, T) * ea / (ea + T);
+  double x0 = chord * ea / (ea + T) + arc, x1 = x0 + 1e-3 * arc + 1e-12 * x0;
+  double f0 = tension_at(x0, nullptr), f1 = tension_at(x1, nullptr);
+  SpanSolution out;
+  for (int it = 0; it < 40 && std::isfinite(f0) && std::isfinite(f1); ++it) {
+    bool done = std::abs(f1) <= 1e-10 * (1.0 + T);
+    if (!done) {
+      if (f1 == f0) return std::nullopt;
+      double x2 = x1 - f1 * (x1 - x0) / (f1 - f0);
+      if (!(x2 > 0.0)) x2 = 0.5 * x1;
+      // Converged in L0 (a stiff cable: the tension cannot be matched closer in double).
+      done = std::abs(x2 - x1) <= 1e-14 * x1;
+      x0 = x1;
+      f0 = f1;
+      x1 = x2;
+      f1 = done ? 0.0 : tension_at(x1, nullptr);
+    }
+    if (done) {
+      if (!std::isfinite(tension_at(x1, &out))) return std::nullopt;
+      out.unstretched_length = x1;
+      return out;
+    }
+  }
+  return std::nullopt;
+}
+
 }  // namespace
 
 std::string selection_group(const std::string& family) {
@@ -649,7 +691,8 @@ Result<MismatchDesign> mismatch_design(const CalibratedModel& model, const Measu
 
 Result<CandidateColumns> sag_effect(const CalibratedModel& model, const MeasurementSet& set,
                                     const std::vector<Pose>& poses, const MismatchDesign& d,
-                                    const IdentificationOptions& options, double mass_per_length) {
+                                    const IdentificationOptions& options, double mass_per_length,
+                                    Eigen::VectorXd* compliance) {
   const RobotModel& robot = model.robot;
   const int m = robot.num_cables();
   const int np = d.num_poses();
@@ -662,6 +705,7 @@ Result<CandidateColumns> sag_effect(const CalibratedModel& model, const Measurem
   out.family = "sag";
   out.X = Eigen::MatrixXd::Zero(d.num_rows(), 1);
   out.si = Eigen::MatrixXd::Zero(d.num_rows(), 1);
+  if (compliance != nullptr) *compliance = Eigen::VectorXd::Zero(d.num_rows());
   if (!(mass_per_length > 0.0)) return out;
   const double w = mass_per_length * robot.gravity;
   const double slack = slack_threshold(options, set.noise);
@@ -702,49 +746,28 @@ Result<CandidateColumns> sag_effect(const CalibratedModel& model, const Measurem
       // catenary's tension cannot be resolved in double precision.
       const double ea = c.elongation == ElongationKind::kRigid || !(c.ea > 0.0) ? 1e8 : c.ea;
       const double l_straight = free * ea / (ea + T);
-      // Unstretched free span whose catenary has the tension T at the exit point: secant on L0
-      // (the tension falls as L0 grows).
-      auto tension_at = [&](double l0, CatenarySolution* sol) {
-        auto r = solve_elastic_catenary(span, chord.z(), l0, w, ea);
-        if (!r.ok()) return std::numeric_limits<double>::quiet_NaN();
-        if (sol != nullptr) *sol = *r;
-        return r->tension_b - T;
-      };
-      // Start from the small-sag arc (catenary.hpp), a second point close by.
-      const double arc = sag_arc_minus_chord(w, span, free, T) * ea / (ea + T);
-      double x0 = l_straight + arc, x1 = x0 + 1e-3 * arc + 1e-12 * x0;
-      double f0 = tension_at(x0, nullptr), f1 = tension_at(x1, nullptr);
-      bool found = false;
-      CatenarySolution sol;
-      for (int it = 0; it < 40 && std::isfinite(f0) && std::isfinite(f1); ++it) {
-        if (std::abs(f1) <= 1e-10 * (1.0 + T)) {
-          found = std::isfinite(tension_at(x1, &sol));
-          break;
-        }
-        if (f1 == f0) break;
-        double x2 = x1 - f1 * (x1 - x0) / (f1 - f0);
-        if (!(x2 > 0.0)) x2 = 0.5 * x1;
-        if (std::abs(x2 - x1) <= 1e-14 * x1) {
-          // Converged in L0 (a stiff cable: the tension cannot be matched closer in double).
-          x1 = x2;
-          found = std::isfinite(tension_at(x1, &sol));
-          break;
-        }
-        x0 = x1;
-        f0 = f1;
-        x1 = x2;
-        f1 = tension_at(x1, nullptr);
-      }
-      if (!found) continue;
+      const std::optional<SpanSolution> sol = catenary_for_tension(span, chord.z(), free, w, ea, T);
+      if (!sol) continue;
+      const double x1 = sol->unstretched_length;
       if (kl >= 0) {
         out.si(kl, 0) = l_straight - x1;
         out.X(kl, 0) = (l_straight - x1) / d.sigma_length(kl);
+        if (compliance != nullptr) {
+          // d(effect)/dT: how the tension noise reaches the corrected length residual.
+          const double dt = 1e-4 * T + 1e-6;
+          const std::optional<SpanSolution> up =
+              catenary_for_tension(span, chord.z(), free, w, ea, T + dt);
+          if (up) {
+            const double l2 = free * ea / (ea + T + dt);
+            (*compliance)(kl) = ((l2 - up->unstretched_length) - (l_straight - x1)) / dt;
+          }
+        }
       }
       // The sagging cable pulls the platform with (H e_h, V_a) (catenary.hpp: end A); the model
       // has T u. The residual (model - truth) of the net wrench gets T u - F.
       const Eigen::Vector3d e_h(chord.x() / span, chord.y() / span, 0.0);
       const Eigen::Vector3d f =
-          sol.horizontal_force * e_h + sol.vertical_force_a * Eigen::Vector3d::UnitZ();
+          sol->horizontal_force * e_h + sol->vertical_force_a * Eigen::Vector3d::UnitZ();
       const Eigen::Vector3d v = T * u - f;
       delta.head<3>() += v;
       delta.tail<3>() += rb.cross(v);

@@ -80,6 +80,12 @@ struct PoseMeasurement {
   // modelled effect such as the cable weight the platform carries (diagnosis.hpp). Zero in
   // recordings.
   Eigen::Matrix<double, 6, 1> external_wrench = Eigen::Matrix<double, 6, 1>::Zero();
+  // A known extra dependence of each cable's length residual on its tension reading besides the
+  // model's elongation (m/N, size m or empty = none): e.g. the arc of a sagging cable, which
+  // shrinks as the tension grows (diagnosis.hpp, sag). The force noise reaches the length
+  // residual through it as through the elongation: the residual's sigma is
+  // sqrt(sigma_length^2 + ((compliance + extra) sigma_force)^2). Empty in recordings.
+  Eigen::VectorXd extra_compliance;
 };
 
 struct MeasurementSet {

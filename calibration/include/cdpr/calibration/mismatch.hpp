@@ -186,10 +186,14 @@ Result<MismatchDesign> mismatch_design(const CalibratedModel& model, const Measu
 // carries part of each cable's weight, and the force leaves the platform along the catenary's
 // tangent), whitened as the screen whitens the equilibrium rows. `si` holds the same in SI units.
 // A cable without a catenary solution (very slack) or below the slack threshold contributes 0.
-// mass_per_length = 0 gives zero columns. Errors: kInvalidArgument (sizes).
+// mass_per_length = 0 gives zero columns. `compliance` (optional, per row, m/N): on the length
+// rows the derivative of the length effect by the tension reading, i.e. how the force noise
+// reaches a residual corrected for the sag (PoseMeasurement::extra_compliance); 0 elsewhere.
+// Errors: kInvalidArgument (sizes).
 Result<CandidateColumns> sag_effect(const CalibratedModel& model, const MeasurementSet& set,
                                     const std::vector<Pose>& poses, const MismatchDesign& d,
-                                    const IdentificationOptions& options, double mass_per_length);
+                                    const IdentificationOptions& options, double mass_per_length,
+                                    Eigen::VectorXd* compliance = nullptr);
 
 // Screens `report` (from identify(initial, set, options)) against `set`. Errors: kInvalidArgument
 // (sizes do not match), kFailedPrecondition (no residuals / dof <= 0), kInternal (the residual
