@@ -872,6 +872,32 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         }
       }
     }
+    // A Gauss-Newton step's corrected readings, re-identified from the best state so far (or
+    // `cur`); kept as the best when the deviance fell. nullopt: the identification or the design
+    // failed; else whether the deviance has settled.
+    auto gn_keep = [&](MeasurementSet&& corrected, const Eigen::VectorXd& theta,
+                       std::optional<State>& best, double& best_dev) -> std::optional<bool> {
+      auto rep = identify(best ? best->report.estimate : cur.report.estimate, corrected, cur.opt);
+      if (!rep) return std::nullopt;
+      auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, cur.opt,
+                                 options.screen);
+      if (!des) return std::nullopt;
+      const double dev = rep->chi2 + rep->log_det_covariance;
+      const bool settled = best && best_dev - dev < 1e-3 * std::max(1.0, std::abs(dev));
+      if (dev < best_dev) {
+        best = State{cur.opt,
+                     std::move(corrected),
+                     std::move(*rep),
+                     std::move(*des),
+                     cur.gn_ids,
+                     cur.gn_theta,
+                     {}};
+        best->gn_ids.push_back(id);
+        best->gn_theta.push_back(theta);
+        best_dev = dev;
+      }
+      return settled;
+    };
     if (!done && id == "sag_shared") {
       // Sag, one parameter: the cables' mass per length mu, fitted by Gauss-Newton on the exact
       // catenary effect (sag_effect, mismatch.hpp) rather than on the first-order columns: the
@@ -920,27 +946,10 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
           if (pm.extra_compliance.size() != m) pm.extra_compliance = Eigen::VectorXd::Zero(m);
           pm.extra_compliance(base->design.index[uk]) = comp(k);
         }
-        auto rep = identify(base->report.estimate, corrected, cur.opt);
-        if (!rep) break;
-        auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, cur.opt,
-                                   options.screen);
-        if (!des) break;
+        const std::optional<bool> settled = gn_keep(std::move(corrected), theta, best, best_dev);
+        if (!settled) break;
         mu = next_mu;
-        const double dev = rep->chi2 + rep->log_det_covariance;
-        const bool settled = best && best_dev - dev < 1e-3 * std::max(1.0, std::abs(dev));
-        if (dev < best_dev) {
-          best = State{cur.opt,
-                       std::move(corrected),
-                       std::move(*rep),
-                       std::move(*des),
-                       cur.gn_ids,
-                       cur.gn_theta,
-                       {}};
-          best->gn_ids.push_back(id);
-          best->gn_theta.push_back(theta);
-          best_dev = dev;
-        }
-        if (settled) break;
+        if (*settled) break;
         base = &*best;
       }
       if (!best) return std::nullopt;
@@ -991,26 +1000,9 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         theta += step;
         MeasurementSet corrected;
         if (!corrected_set(cur.set, *at, *cols, theta, corrected)) break;
-        auto rep = identify(best ? best->report.estimate : cur.report.estimate, corrected, cur.opt);
-        if (!rep) break;
-        auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, cur.opt,
-                                   options.screen);
-        if (!des) break;
-        const double dev = rep->chi2 + rep->log_det_covariance;
-        const bool settled = best && best_dev - dev < 1e-3 * std::max(1.0, std::abs(dev));
-        if (dev < best_dev) {
-          best = State{cur.opt,
-                       std::move(corrected),
-                       std::move(*rep),
-                       std::move(*des),
-                       cur.gn_ids,
-                       cur.gn_theta,
-                       {}};
-          best->gn_ids.push_back(id);
-          best->gn_theta.push_back(theta);
-          best_dev = dev;
-        }
-        if (settled) break;
+        const std::optional<bool> settled = gn_keep(std::move(corrected), theta, best, best_dev);
+        if (!settled) break;
+        if (*settled) break;
         at = &best->design;
         cols = find_columns(*at, id);
         if (cols == nullptr || cols->X.cols() != k) break;

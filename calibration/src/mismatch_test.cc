@@ -185,14 +185,32 @@ TEST(Mismatch, ElasticityAndComplianceAreReportedAsConfounded) {
   EXPECT_FALSE(confounded(*s2, "hooke_shared", "compliance_shared"));
 }
 
+// Rigid MINI data (25 poses, noise seed `seed`), its standard identification and the screen's
+// design at the estimate.
+struct Fitted {
+  RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim;
+  IdentificationOptions opt;
+  Result<IdentificationReport> rep = Status(ErrorCode::kInternal, "not run");
+  Result<MismatchDesign> des = Status(ErrorCode::kInternal, "not run");
+  bool ok() const { return rep.ok() && des.ok(); }
+};
+
+Fitted fitted_rigid_mini(std::uint64_t seed) {
+  Fitted f;
+  f.sim = simulate(f.d, seed);
+  f.rep = identify(f.d.s.nominal, f.sim.set, f.opt);
+  EXPECT_TRUE(f.rep.ok()) << f.rep.status().to_string();
+  if (!f.rep.ok()) return f;
+  f.des = mismatch_design(f.rep->estimate, f.sim.set, f.rep->poses, &f.rep->residuals, f.opt);
+  EXPECT_TRUE(f.des.ok()) << f.des.status().to_string();
+  return f;
+}
+
 TEST(Mismatch, ExactSagEffectAgreesWithTheSmallSagArcAndTheWeightOnThePlatform) {
-  const RigidMini d = rigid_mini(25);
-  const SimulatedMeasurements sim = simulate(d, 7);
-  const IdentificationOptions opt;
-  auto rep = identify(d.s.nominal, sim.set, opt);
-  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
-  auto des = mismatch_design(rep->estimate, sim.set, rep->poses, &rep->residuals, opt);
-  ASSERT_TRUE(des.ok()) << des.status().to_string();
+  const Fitted f = fitted_rigid_mini(7);
+  ASSERT_TRUE(f.ok());
+  const auto& [d, sim, opt, rep, des] = f;
   // No weight, no effect.
   auto zero = sag_effect(rep->estimate, sim.set, rep->poses, *des, opt, 0.0);
   ASSERT_TRUE(zero.ok());
@@ -239,15 +257,11 @@ TEST(Mismatch, ExactSagEffectAgreesWithTheSmallSagArcAndTheWeightOnThePlatform) 
 }
 
 TEST(Mismatch, DesignExposesTheScreensResidualsAndCandidateColumns) {
-  const RigidMini d = rigid_mini(25);
-  const SimulatedMeasurements sim = simulate(d, 6);
-  const IdentificationOptions opt;
-  auto rep = identify(d.s.nominal, sim.set, opt);
-  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+  const Fitted f = fitted_rigid_mini(6);
+  ASSERT_TRUE(f.ok());
+  const auto& [d, sim, opt, rep, des] = f;
   auto s = locate_mismatch(*rep, sim.set, opt);
   ASSERT_TRUE(s.ok()) << s.status().to_string();
-  auto des = mismatch_design(rep->estimate, sim.set, rep->poses, &rep->residuals, opt);
-  ASSERT_TRUE(des.ok()) << des.status().to_string();
   EXPECT_EQ(des->num_rows(), s->num_residuals);
   EXPECT_EQ(des->num_poses(), sim.set.num_poses());
   EXPECT_NEAR(des->residuals.squaredNorm(), s->chi2, 1e-9 * s->chi2);

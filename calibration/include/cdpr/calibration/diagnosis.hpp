@@ -49,8 +49,12 @@
 //    PoseMeasurement::external_wrench and the SI columns), identify() redone, repeated until the
 //    deviance settles. Families that refine each other share a selection group
 //    (mismatch.hpp: nonlinear elasticity refines elasticity) and are compared by nested tests.
+//  - Sag is refitted on the exact elastic catenary (sag_effect, mismatch.hpp) as one parameter,
+//    the mass per length, by Gauss-Newton; the corrected lengths carry the sag's dependence on
+//    the tension reading in their sigma (PoseMeasurement::extra_compliance).
 //  - Acceptance: forward selection started from each of the (up to four) best passing first
-//    effects (Holm-adjusted LRT p < alpha, BIC decrease, held-out RMS in sigmas decrease); each
+//    effects (Holm-adjusted LRT p < alpha, BIC decrease, held-out RMS in sigmas decrease; a first
+//    effect must also be significant in the screen after Holm, screen_gate_p); each
 //    path adds further kept candidates refitted jointly with the accepted ones and tested
 //    against them (their EffectFit is then relative to the model with the earlier effects); the
 //    path with the lowest joint BIC wins. Then swaps: with two or more effects, each is replaced
@@ -68,6 +72,9 @@
 //    +-0.2 rad pitch}, kept where simple_tension_distribution finds feasible tensions, each at the
 //    planned pretension and at twice it; greedy (separating: lowest canonical correlation of the
 //    pair; follow-up: largest log det of the suspect's projected information).
+//  - Follow-up: with no effect named, the screen candidate with the lowest p-value before Holm's
+//    correction is a suspect when below suspect_p; the follow_up_poses grid poses that most
+//    increase the log det of its projected information are proposed (Diagnosis::follow_up).
 //  - model_after: identify()'s estimate with the effects it can estimate; Gauss-Newton effects
 //    written where the config has a field (encoder offsets, common drum scale, mass per length,
 //    EA or a polynomial surface when the cables were rigid); otherwise modelled_in_config = false
