@@ -568,6 +568,7 @@ struct RunResult {
   bool confounded = false, separation_tried = false, separated = false;
   // A suspect with no effect named: its follow-up poses appended, the re-run decides.
   bool follow_up = false, follow_up_named = false;
+  std::string follow_up_error;  // the follow-up poses could not be measured or diagnosed
   double held_before = 0, held_after = 0;
   double len_rms_before = 0, len_rms_after = 0;  // "cable lengths" channel, m
   double param_error = std::nan("");             // RMS relative error of the fitted parameters
@@ -710,6 +711,7 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     auto d2 = set2.ok()
                   ? cdpr::diagnose(r.nominal, *set2, nullptr, cdpr::IdentificationOptions{}, once)
                   : cdpr::Result<Diagnosis>(set2.status());
+    if (!d2.ok()) out.follow_up_error = d2.status().to_string();
     if (d2.ok()) {
       out.follow_up = true;
       RunResult again;
@@ -1124,6 +1126,9 @@ int main(int argc, char** argv) {
       if (res.separation_tried) {
         std::printf("        confounded: separating poses appended, re-run %s\n",
                     res.separated ? "separated the true effect" : "did not separate");
+      }
+      if (!res.follow_up_error.empty()) {
+        std::printf("        suspect: the follow-up failed (%s)\n", res.follow_up_error.c_str());
       }
       if (res.follow_up) {
         std::printf("        suspect: follow-up poses appended, re-run %s\n",

@@ -1317,21 +1317,34 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   auto build_grid = [&]() {
     if (grid_built) return;
     grid_built = true;
+    // The region the recording has already visited (the robot held the platform there with
+    // this model's commands), capped by the pose-design box of the robot: near the edge of the
+    // model's wrench-feasible workspace the real robot may not hold the platform (cables go
+    // slack where the anchors differ from the model).
     PoseDesignOptions box;
     fit_design_box_to_robot(robot, box);
-    const Eigen::Vector3d he = options.separating_half_extent_scale * box.half_extent;
+    Eigen::Vector3d he = Eigen::Vector3d::Zero();
+    double tilt = 0.0;
+    for (const Pose& p : d.before.poses) {
+      he = he.cwiseMax((p.position - robot.home.position).cwiseAbs());
+      tilt = std::max(
+          {tilt, std::abs(p.rpy(0) - robot.home.rpy(0)), std::abs(p.rpy(1) - robot.home.rpy(1))});
+    }
+    he = options.separating_half_extent_scale * he.cwiseMin(box.half_extent);
+    tilt = std::min(tilt, 0.2);
     const double f_ref = default_reference_tension(d.before.estimate.robot);
     std::vector<Pose> grid;
     const int ppa = 4;
     const std::vector<Eigen::Vector3d> rpys = {
-        Eigen::Vector3d::Zero(), Eigen::Vector3d(0.2, 0, 0), Eigen::Vector3d(-0.2, 0, 0),
-        Eigen::Vector3d(0, 0.2, 0), Eigen::Vector3d(0, -0.2, 0)};
+        Eigen::Vector3d::Zero(), Eigen::Vector3d(tilt, 0, 0), Eigen::Vector3d(-tilt, 0, 0),
+        Eigen::Vector3d(0, tilt, 0), Eigen::Vector3d(0, -tilt, 0)};
     for (int ix = 0; ix < ppa; ++ix) {
       for (int iy = 0; iy < ppa; ++iy) {
         for (int iz = 0; iz < ppa; ++iz) {
           for (const auto& rpy : rpys) {
             Pose p;
-            p.position = box.center + he.cwiseProduct(Eigen::Vector3d(-1.0 + 2.0 * ix / (ppa - 1),
+            p.position =
+                robot.home.position + he.cwiseProduct(Eigen::Vector3d(-1.0 + 2.0 * ix / (ppa - 1),
                                                                       -1.0 + 2.0 * iy / (ppa - 1),
                                                                       -1.0 + 2.0 * iz / (ppa - 1)));
             p.rpy = robot.home.rpy + rpy;

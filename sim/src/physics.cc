@@ -355,17 +355,21 @@ Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double tim
     std::vector<std::optional<Pose>> starts;
     if (have_pose_) starts.emplace_back(state_.pose);
     starts.emplace_back(std::nullopt);
-    Pose base = state_.pose;
-    if (!have_pose_) {
-      ForwardKinematicsOptions fo;
-      fo.max_residual = std::numeric_limits<double>::infinity();
-      const ForwardKinematicsSummary fk = forward_kinematics(work_, lengths_, fo, data_.fk);
-      if (fk.pose.vector().allFinite()) base = fk.pose;
-    }
-    for (const double drop : {1e-5, 1e-4, 1e-3, 1e-2, 3e-2}) {
-      Pose p = base;
-      p.position.z() -= drop;
-      starts.emplace_back(p);
+    // Below the previous pose, and below the rigid FK of the new commands: after a long move
+    // (extra poses appended to a recording) the previous pose is far from the new one.
+    std::vector<Pose> bases;
+    if (have_pose_) bases.push_back(state_.pose);
+    ForwardKinematicsOptions fo;
+    fo.max_residual = std::numeric_limits<double>::infinity();
+    const ForwardKinematicsSummary fk = forward_kinematics(work_, lengths_, fo, data_.fk);
+    if (fk.pose.vector().allFinite()) bases.push_back(fk.pose);
+    if (bases.empty()) bases.push_back(state_.pose);
+    for (const Pose& base : bases) {
+      for (const double drop : {1e-5, 1e-4, 1e-3, 1e-2, 3e-2}) {
+        Pose p = base;
+        p.position.z() -= drop;
+        starts.emplace_back(p);
+      }
     }
     ElastostaticSummary s;
     for (const std::optional<Pose>& start : starts) {

@@ -67,11 +67,14 @@
 //  - Validation recording: its poses are re-located by identify() with the encoder zeros
 //    re-estimated and everything else fixed (identify() refuses a problem without parameters;
 //    a new recording is homed again anyway).
-//  - Separating and follow-up poses: a 4 x 4 x 4 grid over the pose-design box of the robot
-//    (fit_design_box_to_robot, scaled by separating_half_extent_scale) x {level, +-0.2 rad roll,
-//    +-0.2 rad pitch}, kept where simple_tension_distribution finds feasible tensions, each at the
-//    planned pretension and at twice it; greedy (separating: lowest canonical correlation of the
-//    pair; follow-up: largest log det of the suspect's projected information).
+//  - Separating and follow-up poses: a 4 x 4 x 4 grid over the region the recording visited
+//    (its estimated poses' extent around home, capped by fit_design_box_to_robot's box, scaled by
+//    separating_half_extent_scale) x {level, +-tilt roll, +-tilt pitch} (tilt: the largest the
+//    recording used, at most 0.2 rad), kept where simple_tension_distribution finds feasible
+//    tensions for the estimate and the nominal model, each at the planned pretension and at twice
+//    it; greedy (separating: lowest canonical correlation of the pair; follow-up: largest log det
+//    of the suspect's projected information). Near the edge of the model's workspace the real
+//    robot may not hold the platform, so no pose goes beyond where the recording already went.
 //  - Follow-up: with no effect named, the screen candidate with the lowest p-value before Holm's
 //    correction is a suspect when below suspect_p; the follow_up_poses grid poses that most
 //    increase the log det of its projected information are proposed (Diagnosis::follow_up).
@@ -112,7 +115,7 @@ struct DiagnosisOptions {
   // correction) is a suspect when that p-value is below suspect_p; follow_up_poses extra poses
   // that add the most information on it are then proposed (Diagnosis::follow_up). 0: never.
   double suspect_p = 0.2;
-  int follow_up_poses = 12;
+  int follow_up_poses = 20;
   // The first accepted effect must also be seen by the linear screen: its screen p-value
   // (after Holm's correction over the library) below this. On noise, a nonlinear refit can reach a
   // far minimum whose likelihood ratio overstates its significance (chi^2 with the nominal degrees
