@@ -110,7 +110,7 @@ struct DiagnosisOptions {
   // than this in BIC; a larger difference is very strong evidence for the better one.
   double decisive_bic = 10.0;
   int separating_poses = 6;                   // extra poses proposed for each confounded pair
-  double separating_half_extent_scale = 1.0;  // of the candidate grid (pose_design.hpp box)
+  double separating_half_extent_scale = 1.0;  // of the extra-pose grid (the visited region)
   // With no effect named, the candidate with the lowest screen p-value (before Holm's
   // correction) is a suspect when that p-value is below suspect_p; follow_up_poses extra poses
   // that add the most information on it are then proposed (Diagnosis::follow_up). 0: never.
