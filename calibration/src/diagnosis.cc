@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <functional>
 #include <limits>
 #include <map>
 #include <optional>
@@ -128,6 +129,37 @@ Eigen::MatrixXd reduce_geometry(const Eigen::MatrixXd& M, int geometry) {
   const Eigen::MatrixXd Gi = pinv_sym(M.topLeftCorner(geometry, geometry));
   const Eigen::MatrixXd B = M.topRightCorner(geometry, rest);
   return M.bottomRightCorner(rest, rest) - B.transpose() * Gi * B;
+}
+
+// Greedy choice of extra poses: `M` is the information of the recorded poses (np of them in
+// `g`), and the candidates are the poses after them. Each step adds the allowed candidate whose
+// Gram raises `score` the most, and only while the score rises above `floor` (updated to the
+// score reached). Returns the chosen candidates (0-based), in order; `M` includes them.
+std::vector<int> greedy_extra_poses(const PoseGrams& g, int np, int count,
+                                    const std::function<bool(int)>& allowed,
+                                    const std::function<double(const Eigen::MatrixXd&)>& score,
+                                    double floor, Eigen::MatrixXd& M) {
+  std::vector<int> chosen;
+  const int nc = static_cast<int>(g.M.size()) - np;
+  std::vector<bool> used(static_cast<std::size_t>(std::max(nc, 0)), false);
+  for (int step = 0; step < count; ++step) {
+    int best = -1;
+    double best_value = floor;
+    for (int q = 0; q < nc; ++q) {
+      if (used[static_cast<std::size_t>(q)] || !allowed(q)) continue;
+      const double v = score(M + g.M[static_cast<std::size_t>(np + q)]);
+      if (v > best_value) {
+        best_value = v;
+        best = q;
+      }
+    }
+    if (best < 0) break;
+    used[static_cast<std::size_t>(best)] = true;
+    M += g.M[static_cast<std::size_t>(np + best)];
+    chosen.push_back(best);
+    floor = best_value;
+  }
+  return chosen;
 }
 
 // Rank of a candidate's projected columns relative to their unprojected norms.
@@ -1408,26 +1440,15 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         };
         Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
         for (int j = 0; j < np; ++j) M += g.M[static_cast<std::size_t>(j)];
-        std::vector<bool> used(cand.size(), false);
-        double rho = corr(M);
-        for (int step = 0; step < options.separating_poses; ++step) {
-          int best = -1;
-          double best_corr = rho;
-          for (std::size_t q = 0; q < cand.size(); ++q) {
-            if (used[q]) continue;
-            const double cq = corr(M + g.M[static_cast<std::size_t>(np) + q]);
-            if (cq < best_corr) {
-              best_corr = cq;
-              best = static_cast<int>(q);
-            }
-          }
-          if (best < 0) break;
-          used[static_cast<std::size_t>(best)] = true;
-          M += g.M[static_cast<std::size_t>(np + best)];
-          cf.separating_poses.push_back(cand[static_cast<std::size_t>(best)]);
-          cf.separating_pretensions.push_back(cand_pretension[static_cast<std::size_t>(best)]);
-          rho = best_corr;
+        // Lowest canonical correlation: maximise its negative, only while it falls.
+        const std::vector<int> chosen = greedy_extra_poses(
+            g, np, options.separating_poses, [](int) { return true; },
+            [&](const Eigen::MatrixXd& Mq) { return -corr(Mq); }, -corr(M), M);
+        for (int q : chosen) {
+          cf.separating_poses.push_back(cand[static_cast<std::size_t>(q)]);
+          cf.separating_pretensions.push_back(cand_pretension[static_cast<std::size_t>(q)]);
         }
+        const double rho = corr(M);
         cf.correlation_with_extra = rho;
       }
       d.confounded.push_back(std::move(cf));
@@ -1462,7 +1483,6 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
         for (int j = 0; j < np; ++j) M += g.M[static_cast<std::size_t>(j)];
         const double f_ref = default_reference_tension(d.before.estimate.robot);
-        std::vector<bool> used(cand.size(), false);
         FollowUp fu;
         fu.suspect = suspect->id;
         fu.name = suspect->name;
@@ -1470,22 +1490,13 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         fu.p_adjusted = suspect->p_adjusted;
         fu.parameters = k;
         fu.information_before = logdet(M);
-        for (int step = 0; step < options.follow_up_poses; ++step) {
-          int best = -1;
-          double best_value = -std::numeric_limits<double>::infinity();
-          for (std::size_t q = 0; q < cand.size(); ++q) {
-            if (used[q] || cand_pretension[q] != f_ref) continue;
-            const double v = logdet(M + g.M[static_cast<std::size_t>(np) + q]);
-            if (v > best_value) {
-              best_value = v;
-              best = static_cast<int>(q);
-            }
-          }
-          if (best < 0) break;
-          used[static_cast<std::size_t>(best)] = true;
-          M += g.M[static_cast<std::size_t>(np + best)];
-          fu.poses.push_back(cand[static_cast<std::size_t>(best)]);
-          fu.pretensions.push_back(cand_pretension[static_cast<std::size_t>(best)]);
+        const std::vector<int> chosen = greedy_extra_poses(
+            g, np, options.follow_up_poses,
+            [&](int q) { return cand_pretension[static_cast<std::size_t>(q)] == f_ref; }, logdet,
+            -std::numeric_limits<double>::infinity(), M);
+        for (int q : chosen) {
+          fu.poses.push_back(cand[static_cast<std::size_t>(q)]);
+          fu.pretensions.push_back(cand_pretension[static_cast<std::size_t>(q)]);
         }
         fu.information_after = logdet(M);
         if (!fu.poses.empty()) d.follow_up = std::move(fu);

@@ -16,6 +16,22 @@
 namespace cdpr {
 namespace {
 
+// A pose's effect on the net wrench, `delta` (SI), into column `col` of the candidate: whitened
+// with the equilibrium rows' covariance `cov` in X, as is in si, rows kw..kw+5. False when the
+// covariance is not positive definite.
+bool put_wrench_effect(Eigen::Matrix<double, 6, 6> cov, const Eigen::Matrix<double, 6, 1>& delta,
+                       int kw, int col, CandidateColumns& c) {
+  cov.diagonal().array() += 1e-12 * cov.trace();
+  const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cov);
+  if (llt.info() != Eigen::Success) return false;
+  const Eigen::Matrix<double, 6, 1> w = llt.matrixL().solve(delta);
+  for (int q = 0; q < 6; ++q) {
+    c.X(kw + q, col) = w(q);
+    c.si(kw + q, col) = delta(q);
+  }
+  return true;
+}
+
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kCreepTimeConstant = 10.0;  // s, the creep candidate's tau
 
@@ -461,14 +477,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
         delta.head<3>() += v;
         delta.tail<3>() += rb.cross(v);
       }
-      cov.diagonal().array() += 1e-12 * cov.trace();
-      const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cov);
-      if (llt.info() != Eigen::Success) continue;
-      const Eigen::Matrix<double, 6, 1> col = llt.matrixL().solve(delta);
-      for (int q = 0; q < 6; ++q) {
-        c.X(kw + q, 1) = col(q);
-        c.si(kw + q, 1) = delta(q);
-      }
+      if (!put_wrench_effect(cov, delta, kw, 1, c)) continue;
       any = true;
     }
     if (any) lib.push_back(std::move(c));
@@ -772,15 +781,7 @@ Result<CandidateColumns> sag_effect(const CalibratedModel& model, const Measurem
       delta.head<3>() += v;
       delta.tail<3>() += rb.cross(v);
     }
-    if (kw < 0) continue;
-    cov.diagonal().array() += 1e-12 * cov.trace();
-    const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cov);
-    if (llt.info() != Eigen::Success) continue;
-    const Eigen::Matrix<double, 6, 1> col = llt.matrixL().solve(delta);
-    for (int q = 0; q < 6; ++q) {
-      out.X(kw + q, 0) = col(q);
-      out.si(kw + q, 0) = delta(q);
-    }
+    if (kw >= 0) put_wrench_effect(cov, delta, kw, 0, out);
   }
   return out;
 }
