@@ -54,6 +54,7 @@ int main(int argc, char** argv) {
   std::uint64_t seed = 1;
   double rate_hz = 100.0, duration_s = 0.0, dwell_s = 2.0;
   int laser_samples = 1, substeps = 10;
+  std::string home_mode = "nominal";
   app.add_option("--config", config_path, "nominal robot description (what the daemon uses)")
       ->required();
   app.add_option("--scenario", scenario_path, "scenario: true robot, hidden effects, faults")
@@ -68,6 +69,11 @@ int main(int argc, char** argv) {
   app.add_option("--out", out_path, "recording CSV written by --lockstep");
   app.add_option("--laser-map", laser_map_path,
                  "register map served (default: the scenario's laser.register_map)");
+  app.add_option("--home", home_mode,
+                 "real time: drive counts at power-on: 'nominal' (the nominal model's home "
+                 "counts) or 'reference' (the true platform stands at home, as on a reference "
+                 "platform)")
+      ->check(CLI::IsMember({"nominal", "reference"}));
   app.add_option("--rate", rate_hz, "real-time physics rate, Hz")->check(CLI::Range(0.1, 10000.0));
   app.add_option("--duration", duration_s, "real-time: stop after this many seconds (0: never)");
   app.add_option("--dwell", dwell_s, "lock-step: scenario time per pose, s")
@@ -122,7 +128,9 @@ int main(int argc, char** argv) {
   if (!can_if.empty() && canopen_path.empty()) {
     return fail("--can needs --canopen (the CANopen network: node ids and PDOs)");
   }
-  auto home = cdpr::sim::nominal_counts(*nominal, nominal->home);
+  auto home = home_mode == "reference"
+                  ? cdpr::sim::true_pose_counts(*physics, physics->truth().home)
+                  : cdpr::sim::nominal_counts(*nominal, nominal->home);
   if (!home.ok()) return fail("home counts: " + home.status().to_string());
   const Eigen::VectorXd counts = home->array().round().matrix();
   cdpr::Status st = physics->step(counts, 0.0);
