@@ -19,7 +19,9 @@ std::string fmt(const char* f, double v) {
   return buf;
 }
 
-json finite_or_null(double v) { return std::isfinite(v) ? json(v) : json(nullptr); }
+json finite_or_null(double v) {
+  return std::isfinite(v) ? json(v) : json(nullptr);
+}
 
 // Standard deviation of frame anchor coordinate a_<cable>.<axis> in the fit, NaN when not
 // estimated.
@@ -103,9 +105,9 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
     g.value = chi2_upper_tail(o.fit->chi2, dof);
     g.limit = gates.min_fit_p_value;
     g.passed = o.fit->converged && g.value >= g.limit;
-    g.text = fmt("chi2 %.1f", o.fit->chi2) + " on " + std::to_string(o.fit->dof) + " dof, p = " +
-             fmt("%.3g", g.value) + (g.passed ? " >= " : " < ") + fmt("%.3g", g.limit) +
-             (o.fit->converged ? "" : " (the solver did not converge)");
+    g.text = fmt("chi2 %.1f", o.fit->chi2) + " on " + std::to_string(o.fit->dof) +
+             " dof, p = " + fmt("%.3g", g.value) + (g.passed ? " >= " : " < ") +
+             fmt("%.3g", g.limit) + (o.fit->converged ? "" : " (the solver did not converge)");
     o.gates.push_back(g);
   }
   // Largest anchor change.
@@ -113,7 +115,9 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
     Gate g;
     g.name = "anchor_change";
     for (std::size_t i = 0; i < before.cables.size() && i < o.model.cables.size(); ++i) {
-      g.value = std::max(g.value, (o.model.cables[i].frame_anchor - before.cables[i].frame_anchor).norm());
+      g.value = std::max(g.value, (o.model.frame_anchors.col(static_cast<Eigen::Index>(i)) -
+                                   before.frame_anchors.col(static_cast<Eigen::Index>(i)))
+                                      .norm());
     }
     g.limit = gates.max_anchor_change_m;
     g.passed = g.value <= g.limit;
@@ -130,7 +134,11 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
     PredictedAccuracyOptions pa;
     pa.identification = options;
     pa.box.center = o.model.home.position;
-    auto acc = predict_accuracy(CalibratedModel::FromRobot(o.model), poses, set.noise, pa);
+    // The pose set was planned feasible for the model it was measured with; the bound hardly
+    // depends on the geometry's few millimetres of change.
+    auto acc = predict_accuracy(CalibratedModel::FromRobot(before), poses, set.noise, pa);
+    if (!acc.ok())
+      acc = predict_accuracy(CalibratedModel::FromRobot(o.model), poses, set.noise, pa);
     g.limit = gates.max_predicted_position_error_m;
     if (acc.ok()) {
       g.value = acc->position_rms_m;
@@ -150,9 +158,9 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
   {
     Gate g;
     g.name = "mismatch";
-    const bool unresolved = diagnosis != nullptr &&
-                            (diagnosis->verdict == Diagnosis::Verdict::kMismatchUnexplained ||
-                             diagnosis->verdict == Diagnosis::Verdict::kInconclusive);
+    const bool unresolved =
+        diagnosis != nullptr && (diagnosis->verdict == Diagnosis::Verdict::kMismatchUnexplained ||
+                                 diagnosis->verdict == Diagnosis::Verdict::kInconclusive);
     g.value = unresolved ? 1.0 : 0.0;
     g.limit = 0.0;
     g.passed = !unresolved || gates.allow_unresolved_mismatch;
@@ -173,17 +181,17 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
 json calibration_json(const CalibrationOutcome& o, const CalibrationReportContext& c) {
   json anchors = json::array();
   for (std::size_t i = 0; i < o.model.cables.size(); ++i) {
-    const Eigen::Vector3d& b = o.before.cables[i].frame_anchor;
-    const Eigen::Vector3d& a = o.model.cables[i].frame_anchor;
+    const Eigen::Vector3d& b = o.before.frame_anchors.col(static_cast<Eigen::Index>(i));
+    const Eigen::Vector3d& a = o.model.frame_anchors.col(static_cast<Eigen::Index>(i));
     const int ci = static_cast<int>(i);
-    anchors.push_back({{"cable", ci + 1},
-                       {"before_m", {b.x(), b.y(), b.z()}},
-                       {"after_m", {a.x(), a.y(), a.z()}},
-                       {"std_m",
-                        {finite_or_null(anchor_std(o.fit, ci, 'x')),
-                         finite_or_null(anchor_std(o.fit, ci, 'y')),
-                         finite_or_null(anchor_std(o.fit, ci, 'z'))}},
-                       {"change_m", (a - b).norm()}});
+    anchors.push_back(
+        {{"cable", ci + 1},
+         {"before_m", {b.x(), b.y(), b.z()}},
+         {"after_m", {a.x(), a.y(), a.z()}},
+         {"std_m",
+          {finite_or_null(anchor_std(o.fit, ci, 'x')), finite_or_null(anchor_std(o.fit, ci, 'y')),
+           finite_or_null(anchor_std(o.fit, ci, 'z'))}},
+         {"change_m", (a - b).norm()}});
   }
   json gates = json::array();
   for (const Gate& g : o.gates) {
@@ -209,7 +217,8 @@ json calibration_json(const CalibrationOutcome& o, const CalibrationReportContex
   json residuals = json::array();  // per pose, normalised length residuals of the final fit
   for (const PoseResiduals& r : o.fit->residuals) {
     json row = json::array();
-    for (int i = 0; i < r.length_normalized.size(); ++i) row.push_back(finite_or_null(r.length_normalized(i)));
+    for (int i = 0; i < r.length_normalized.size(); ++i)
+      row.push_back(finite_or_null(r.length_normalized(i)));
     residuals.push_back(row);
   }
   return {{"calibration", c.calibration},
@@ -246,7 +255,8 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
   std::ostringstream h;
   const int m = static_cast<int>(o.model.cables.size());
   h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>cdprd calibration "
-    << c.calibration << "</title>\n<style>body{font-family:sans-serif;max-width:70em;margin:1em auto;"
+    << c.calibration
+    << "</title>\n<style>body{font-family:sans-serif;max-width:70em;margin:1em auto;"
        "padding:0 1em}table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:2px 6px;"
        "text-align:right}th{background:#eee}.pass{color:#060}.fail{color:#a00;font-weight:bold}"
        "</style></head><body>\n";
@@ -261,7 +271,8 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
       << "</td><td style=\"text-align:left\">" << escape(g.text) << "</td></tr>\n";
   }
   h << "</table>\n<h2>Named effects</h2>\n";
-  if (o.named_effects.empty()) h << "<p>None.</p>\n";
+  if (o.named_effects.empty())
+    h << "<p>None.</p>\n";
   else {
     h << "<ul>";
     for (const auto& e : o.named_effects) h << "<li>" << escape(e) << "</li>";
@@ -272,20 +283,24 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
   std::vector<double> change(static_cast<std::size_t>(m)), sig(static_cast<std::size_t>(m));
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    change[k] = (o.model.cables[k].frame_anchor - o.before.cables[k].frame_anchor).norm() * 1e3;
+    change[k] = (o.model.frame_anchors.col(static_cast<Eigen::Index>(k)) -
+                 o.before.frame_anchors.col(static_cast<Eigen::Index>(k)))
+                    .norm() *
+                1e3;
     const double sx = anchor_std(o.fit, i, 'x'), sy = anchor_std(o.fit, i, 'y'),
                  sz = anchor_std(o.fit, i, 'z');
-    const double s = std::sqrt((std::isfinite(sx) ? sx * sx : 0.0) +
-                               (std::isfinite(sy) ? sy * sy : 0.0) +
-                               (std::isfinite(sz) ? sz * sz : 0.0)) * 1e3;
+    const double s =
+        std::sqrt((std::isfinite(sx) ? sx * sx : 0.0) + (std::isfinite(sy) ? sy * sy : 0.0) +
+                  (std::isfinite(sz) ? sz * sz : 0.0)) *
+        1e3;
     sig[k] = s;
     vmax = std::max(vmax, change[k] + 3.0 * s);
   }
   const int W = 640, H = 220, left = 50, bottom = 30;
   const double bw = (W - left - 10.0) / std::max(m, 1);
   h << "<h2>Frame anchors: change against the active model</h2>\n<svg role=\"img\" aria-label=\""
-       "anchor change per cable in millimetres with 3-sigma whiskers\" width=\"" << W
-    << "\" height=\"" << H << "\" viewBox=\"0 0 " << W << " " << H << "\">\n";
+       "anchor change per cable in millimetres with 3-sigma whiskers\" width=\""
+    << W << "\" height=\"" << H << "\" viewBox=\"0 0 " << W << " " << H << "\">\n";
   h << "<line x1=\"" << left << "\" y1=\"" << H - bottom << "\" x2=\"" << W - 5 << "\" y2=\""
     << H - bottom << "\" stroke=\"black\"/>\n";
   for (int i = 0; i < m; ++i) {
@@ -306,12 +321,12 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
        "<th>change (mm)</th><th>std (mm)</th></tr>\n";
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    const Eigen::Vector3d& b = o.before.cables[k].frame_anchor;
-    const Eigen::Vector3d& a = o.model.cables[k].frame_anchor;
+    const Eigen::Vector3d& b = o.before.frame_anchors.col(static_cast<Eigen::Index>(k));
+    const Eigen::Vector3d& a = o.model.frame_anchors.col(static_cast<Eigen::Index>(k));
     h << "<tr><td>" << i + 1 << "</td><td>" << fmt("%.5f", b.x()) << ", " << fmt("%.5f", b.y())
       << ", " << fmt("%.5f", b.z()) << "</td><td>" << fmt("%.5f", a.x()) << ", "
-      << fmt("%.5f", a.y()) << ", " << fmt("%.5f", a.z()) << "</td><td>"
-      << fmt("%.3f", change[k]) << "</td><td>" << fmt("%.3f", sig[k]) << "</td></tr>\n";
+      << fmt("%.5f", a.y()) << ", " << fmt("%.5f", a.z()) << "</td><td>" << fmt("%.3f", change[k])
+      << "</td><td>" << fmt("%.3f", sig[k]) << "</td></tr>\n";
   }
   h << "</table>\n";
   // Residual heat map: poses (columns) x cables (rows), normalised length residuals.
@@ -331,8 +346,10 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
         const double t = std::clamp(std::abs(r) / 3.0, 0.0, 1.0);
         const int shade = static_cast<int>(255 * (1.0 - t));
         char buf[16];
-        if (r >= 0) std::snprintf(buf, sizeof buf, "#ff%02x%02x", shade, shade);
-        else std::snprintf(buf, sizeof buf, "#%02x%02xff", shade, shade);
+        if (r >= 0)
+          std::snprintf(buf, sizeof buf, "#ff%02x%02x", shade, shade);
+        else
+          std::snprintf(buf, sizeof buf, "#%02x%02xff", shade, shade);
         colour = buf;
       }
       h << "<rect x=\"" << 30 + cw * j << "\" y=\"" << 2 + ch * i << "\" width=\"" << cw - 1
@@ -346,10 +363,11 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
     << " degrees of freedom; length RMS " << fmt("%.4f", o.fit->rms_length_m * 1e3)
     << " mm, laser RMS " << fmt("%.4f", o.fit->rms_laser_m * 1e3) << " mm, equilibrium RMS "
     << fmt("%.3f", o.fit->rms_wrench_n) << " N; " << o.poses << " poses.</p>\n";
-  h << "<h2>Provenance</h2><p>" << escape(c.daemon) << "; geometry version before: "
-    << c.geometry_version << "; recording <code>" << escape(c.recording) << "</code>; robot "
-    << escape(c.robot_config) << "; network " << escape(c.canopen_config) << "; laser "
-    << escape(c.laser_config) << "; started " << escape(c.started) << ".</p>\n";
+  h << "<h2>Provenance</h2><p>" << escape(c.daemon)
+    << "; geometry version before: " << c.geometry_version << "; recording <code>"
+    << escape(c.recording) << "</code>; robot " << escape(c.robot_config) << "; network "
+    << escape(c.canopen_config) << "; laser " << escape(c.laser_config) << "; started "
+    << escape(c.started) << ".</p>\n";
   h << "</body></html>\n";
   return h.str();
 }

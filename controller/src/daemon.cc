@@ -48,14 +48,15 @@ const char* to_string(DaemonState s) {
 namespace {
 
 json pose_json(const Pose& p) {
-  return json::array({p.position.x(), p.position.y(), p.position.z(), p.rpy.x(), p.rpy.y(),
-                      p.rpy.z()});
+  return json::array(
+      {p.position.x(), p.position.y(), p.position.z(), p.rpy.x(), p.rpy.y(), p.rpy.z()});
 }
 
 json anchors_json(const RobotModel& m) {
   json a = json::array();
-  for (const CableModel& c : m.cables) {
-    a.push_back(json::array({c.frame_anchor.x(), c.frame_anchor.y(), c.frame_anchor.z()}));
+  for (Eigen::Index i = 0; i < m.frame_anchors.cols(); ++i) {
+    const Eigen::Vector3d c = m.frame_anchors.col(i);
+    a.push_back(json::array({c.x(), c.y(), c.z()}));
   }
   return a;
 }
@@ -92,19 +93,13 @@ std::pair<std::string, std::string> split_header(const std::string& text) {
   return {text, {}};
 }
 
-double max_anchor_change(const RobotModel& a, const RobotModel& b) {
-  double d = 0.0;
-  for (std::size_t i = 0; i < a.cables.size() && i < b.cables.size(); ++i) {
-    d = std::max(d, (a.cables[i].frame_anchor - b.cables[i].frame_anchor).norm());
-  }
-  return d;
-}
-
 }  // namespace
 
 Daemon::Daemon(DaemonConfig config, DaemonIo io) : config_(std::move(config)), io_(std::move(io)) {}
 
-Daemon::~Daemon() { shutdown(); }
+Daemon::~Daemon() {
+  shutdown();
+}
 
 Result<std::unique_ptr<Daemon>> Daemon::create(DaemonConfig config, DaemonIo io) {
   if (io.bus == nullptr || io.clock == nullptr) {
@@ -246,7 +241,7 @@ Status Daemon::check_identities() {
       return s.prepend("identity of node " + std::to_string(n.id) + " (" + n.name + "): ");
     }
     std::uint32_t expected_product = 0;
-    if (n.kind == canopen::NodeKind::kCia402) expected_product = want.drive_product_code;
+    if (n.kind == canopen::NodeKind::kCia402Drive) expected_product = want.drive_product_code;
     if (n.kind == canopen::NodeKind::kForceSensor) expected_product = want.force_product_code;
     if (want.vendor_id != 0 && *vendor != want.vendor_id) {
       return Status::Error(ErrorCode::kFailedPrecondition,
@@ -274,8 +269,9 @@ Result<Pose> Daemon::pose_from_encoders(const RobotModel& model) {
   const auto& offsets = rt_->encoder_offsets();
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    const double counts = snap.cycle > 0 ? snap.actual_counts[k]
-                                         : static_cast<double>(master_->drives()[k].actual_counts());
+    const double counts = snap.cycle > 0
+                              ? snap.actual_counts[k]
+                              : static_cast<double>(master_->drives()[k].actual_counts());
     lengths(i) = winch_counts_to_length<double>(model.winches[k], counts - offsets[k]);
     double f = snap.cycle > 0 ? snap.tensions[k] : 0.0;
     if (snap.cycle == 0 && !master_->force_sensors().empty()) {
@@ -284,7 +280,10 @@ Result<Pose> Daemon::pose_from_encoders(const RobotModel& model) {
     tensions(i) = std::max(f, 0.0);
   }
   ForwardKinematicsOptions options;
-  options.initial_pose = snap.cycle > 0 ? snap.pose : model.home;
+  options.initial_pose = snap.cycle > 0 ? snap.pose() : model.home;
+  // Another geometry (hot swap, rollback) may not reach the encoders' lengths exactly: the
+  // least-squares pose is wanted, and the RT loop slews the remainder.
+  options.max_residual = 0.05;
   ForwardKinematicsData data(model);
   const ForwardKinematicsSummary fk =
       forward_kinematics_elastic(model, lengths, tensions, options, data);
@@ -301,13 +300,15 @@ Status Daemon::home() {
   auto stored = store_->load_offsets();
   Pose pose = active_->model.home;
   if (stored.ok() && static_cast<int>(stored->size()) == m) {
-    for (int i = 0; i < m; ++i) offsets[static_cast<std::size_t>(i)] = (*stored)[static_cast<std::size_t>(i)];
+    for (int i = 0; i < m; ++i)
+      offsets[static_cast<std::size_t>(i)] = (*stored)[static_cast<std::size_t>(i)];
     rt_->set_encoder_offsets(offsets);
     auto p = pose_from_encoders(active_->model);
     if (!p.ok()) return p.status();
     pose = *p;
-    spdlog::info("homing: stored encoder offsets; pose from the encoders ({:.4f}, {:.4f}, {:.4f}) m",
-                 pose.position.x(), pose.position.y(), pose.position.z());
+    spdlog::info(
+        "homing: stored encoder offsets; pose from the encoders ({:.4f}, {:.4f}, {:.4f}) m",
+        pose.position.x(), pose.position.y(), pose.position.z());
   } else {
     // The platform stands on the reference platform at home: the encoders read the active
     // model's commands there.
@@ -352,8 +353,8 @@ Status Daemon::start() {
     set_state(DaemonState::kFault, "start-up: " + s.to_string());
     return s;
   }
-  set_state(DaemonState::kHolding, "started with geometry version " +
-                                       std::to_string(active_version_));
+  set_state(DaemonState::kHolding,
+            "started with geometry version " + std::to_string(active_version_));
   return Status::Ok();
 }
 
@@ -409,7 +410,7 @@ Result<std::uint64_t> Daemon::start_move(const Pose& pose, double reference_tens
   limits.max_angular_velocity = ms.max_angular_velocity;
   limits.max_angular_acceleration = ms.max_angular_acceleration;
   limits.max_angular_jerk = ms.max_angular_jerk;
-  auto traj = PoseTrajectory::plan(s.pose, pose, limits);
+  auto traj = PoseTrajectory::plan(s.pose(), pose, limits);
   if (!traj.ok()) return traj.status();
   PathCheckOptions pc;
   pc.tension_margin = ms.tension_margin;
@@ -478,8 +479,18 @@ void Daemon::service() {
                     ev.emcy.error_register);
       what += buf;
     }
-    spdlog::warn("CANopen: node {}: {}", int{ev.node}, what);
-    publish("log", {{"level", "warning"}, {"message", "node " + std::to_string(ev.node) + ": " + what}});
+    const bool serious =
+        ev.type == canopen::EventType::kEmcy || ev.type == canopen::EventType::kHeartbeatLost ||
+        ev.type == canopen::EventType::kBusOff || ev.type == canopen::EventType::kDriveFault ||
+        ev.type == canopen::EventType::kDriveStuck || ev.type == canopen::EventType::kRxOverflow ||
+        ev.type == canopen::EventType::kSyncOverrun || ev.type == canopen::EventType::kTxFailed;
+    if (serious) {
+      spdlog::warn("CANopen: node {}: {}", int{ev.node}, what);
+      publish("log",
+              {{"level", "warning"}, {"message", "node " + std::to_string(ev.node) + ": " + what}});
+    } else {
+      spdlog::debug("CANopen: node {}: {}", int{ev.node}, what);
+    }
   }
   const RtSnapshot s = rt_->snapshot();
   DaemonState st = state();
@@ -587,14 +598,21 @@ Result<std::vector<Pose>> Daemon::plan_poses(const std::string& poses_csv) {
     if (!d.ok()) return d.status();
     poses = d->poses;
   }
+  // Every pose must be reachable with the tension margin; a designed pose that is not is dropped
+  // (the design's own test has no margin), a pose the operator gave is refused.
   PathCheckOptions pc;
   pc.tension_margin = config_.motion.tension_margin;
+  std::vector<Pose> kept;
+  const bool designed = poses_csv.empty() && config_.measuring.pose_file.empty();
   for (std::size_t j = 0; j < poses.size(); ++j) {
     if (Status s = check_pose(g->model, poses[j], pc); !s.ok()) {
-      return s.prepend("pose " + std::to_string(j) + ": ");
+      if (!designed || j == 0) return s.prepend("pose " + std::to_string(j) + ": ");
+      spdlog::warn("designed pose {} dropped: {}", j, s.to_string());
+      continue;
     }
+    kept.push_back(poses[j]);
   }
-  return poses;
+  return kept;
 }
 
 Status Daemon::regulate_tensions(int pose_index) {
@@ -610,34 +628,35 @@ Status Daemon::regulate_tensions(int pose_index) {
   for (int iteration = 0; iteration < 6; ++iteration) {
     const std::uint64_t id = rt_->request_average();
     const int n = std::max(3, config_.measuring.average_cycles / 2);
-    if (Status s = wait_rt([id, n](const RtSnapshot& r) {
-          return r.average_id == id && r.average_cycles >= n;
-        },
-                           config_.measuring.settle_timeout_s, "tension reading", true);
+    if (Status s = wait_rt(
+            [id, n](const RtSnapshot& r) { return r.average_id == id && r.average_cycles >= n; },
+            config_.measuring.settle_timeout_s, "tension reading", true);
         !s.ok()) {
       return s;
     }
     const RtSnapshot r = rt_->snapshot();
     trim = r.trim_counts;
-    double worst = 0.0;
-    for (int i = 0; i < m; ++i) {
-      const auto k = static_cast<std::size_t>(i);
-      worst = std::max(worst, std::abs(r.average_tensions[k] - r.planned[k]));
-    }
-    if (worst <= band) return Status::Ok();
-    // Shorten a cable that pulls less than planned by its tension deficit over its stiffness
-    // (mostly internal force: the platform barely moves).
+    // Into the band [f_min + band, f_max - band] of each cable: a cable below it is shortened, one
+    // above it lengthened, by the tension missing over the cable's stiffness (mostly internal
+    // force: the platform barely moves).
+    bool inside = true;
     for (int i = 0; i < m; ++i) {
       const auto k = static_cast<std::size_t>(i);
       const CableModel& c = g->model.cables[k];
+      const double lo = c.f_min + band, hi = c.f_max - band;
+      const double f = r.average_tensions[k];
+      const double want = std::clamp(f, lo, std::max(lo, hi));
+      if (want == f) continue;
+      inside = false;
       const double ea = c.ea > 0.0 ? c.ea : 1e9;
-      const double length = c.routing_length + std::max(0.05, winch_counts_to_length<double>(
-                                                                  g->model.winches[k],
-                                                                  r.average_counts[k] -
-                                                                      rt_->encoder_offsets()[k]));
-      const double dl = -0.8 * (r.planned[k] - r.average_tensions[k]) * length / ea;
+      const double length =
+          c.routing_length +
+          std::max(0.05, winch_counts_to_length<double>(
+                             g->model.winches[k], r.average_counts[k] - rt_->encoder_offsets()[k]));
+      const double dl = -(want + (want > f ? 0.5 : -0.5) * band - f) * length / ea;
       trim[k] += winch_counts_change<double>(g->model.winches[k], dl);
     }
+    if (inside) return Status::Ok();
     auto c = std::make_unique<MotionCommand>();
     c->type = MotionCommand::Type::kTrim;
     c->trim = trim;
@@ -649,8 +668,10 @@ Status Daemon::regulate_tensions(int pose_index) {
     }
     if (Status s = hold_still(true); !s.ok()) return s;
   }
-  spdlog::warn("pose {}: tensions not within +-{:.1f} N of the plan after 6 regulation steps",
-               pose_index, band);
+  spdlog::warn(
+      "pose {}: a tension is still outside [f_min + {:.1f}, f_max - {:.1f}] N after 6 "
+      "regulation steps",
+      pose_index, band, band);
   return Status::Ok();
 }
 
@@ -672,10 +693,9 @@ Status Daemon::measure_pose(const Pose& pose, double reference_tension,
     laser = r->mean_m;
   }
   const int n = config_.measuring.average_cycles;
-  if (Status s = wait_rt([id, n](const RtSnapshot& r) {
-        return r.average_id == id && r.average_cycles >= n;
-      },
-                         config_.measuring.settle_timeout_s + 0.01 * n, "encoder averaging", true);
+  if (Status s = wait_rt(
+          [id, n](const RtSnapshot& r) { return r.average_id == id && r.average_cycles >= n; },
+          config_.measuring.settle_timeout_s + 0.01 * n, "encoder averaging", true);
       !s.ok()) {
     return s;
   }
@@ -692,11 +712,10 @@ Status Daemon::measure_pose(const Pose& pose, double reference_tension,
   row.tensions.resize(m);
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    row.lengths(i) = winch_counts_to_length<double>(g->model.winches[k],
-                                                    r.average_counts[k] - rt_->encoder_offsets()[k]);
-    row.tensions(i) = master_->force_sensors().empty()
-                          ? std::numeric_limits<double>::quiet_NaN()
-                          : r.average_tensions[k];
+    row.lengths(i) = winch_counts_to_length<double>(
+        g->model.winches[k], r.average_counts[k] - rt_->encoder_offsets()[k]);
+    row.tensions(i) = master_->force_sensors().empty() ? std::numeric_limits<double>::quiet_NaN()
+                                                       : r.average_tensions[k];
   }
   row.lasers = Eigen::VectorXd::Constant(static_cast<int>(g->model.lasers.size()), laser);
   row.reference = Pose{Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN()),
@@ -734,8 +753,8 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   const MeasuringSettings& ms = config_.measuring;
   const int m = g->model.num_cables();
   const int k = static_cast<int>(g->model.lasers.size());
-  set_state(DaemonState::kMeasuring, "calibration " + std::to_string(id) + ": " +
-                                         std::to_string(poses.size()) + " poses");
+  set_state(DaemonState::kMeasuring,
+            "calibration " + std::to_string(id) + ": " + std::to_string(poses.size()) + " poses");
   // The recording: noise of the averaged readings, provenance, one row per pose as it is measured.
   recording::Recording rec;
   rec.num_cables = m;
@@ -751,10 +770,21 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   rec.metadata.set(recording::key::kSource, "robot (cdprd)");
   rec.metadata.set("daemon", kDaemonVersion);
   rec.metadata.set("geometry_version", std::to_string(g->version));
-  rec.metadata.set_number(recording::key::kNoiseLength,
-                          ms.noise_length_m / std::sqrt(static_cast<double>(ms.average_cycles)));
-  rec.metadata.set_number(recording::key::kNoiseForce,
-                          ms.noise_force_n / std::sqrt(static_cast<double>(ms.average_cycles)));
+  // The noise of an average: white noise shrinks with the number of readings, the quantisation of
+  // a reading does not when the noise is too small to dither it (a force node's raw unit is
+  // 1/gain N, an encoder's one count), so both add up.
+  const double n_avg = static_cast<double>(ms.average_cycles);
+  double q_force = 0.0, q_length = winch_metres_per_count(g->model.winches[0]);
+  for (const canopen::NodeConfig& n : network_.nodes) {
+    for (double gain : n.force.gain)
+      q_force = std::max(q_force, gain != 0.0 ? 1.0 / std::abs(gain) : 0.0);
+  }
+  const double sigma_length =
+      std::sqrt(ms.noise_length_m * ms.noise_length_m / n_avg + q_length * q_length / 12.0);
+  const double sigma_force =
+      std::sqrt(ms.noise_force_n * ms.noise_force_n / n_avg + q_force * q_force / 12.0);
+  rec.metadata.set_number(recording::key::kNoiseLength, sigma_length);
+  rec.metadata.set_number(recording::key::kNoiseForce, sigma_force);
   rec.metadata.set_number(recording::key::kNoiseLaser,
                           ms.noise_laser_m / std::sqrt(static_cast<double>(ms.laser_samples)));
   AppendOnlyFile file;
@@ -768,8 +798,8 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
       const int index = first_index + static_cast<int>(j);
       recording::RecordedPose row;
       row.index = index;
-      const double pre = j < pretensions.size() ? pretensions[j]
-                                                : std::numeric_limits<double>::quiet_NaN();
+      const double pre =
+          j < pretensions.size() ? pretensions[j] : std::numeric_limits<double>::quiet_NaN();
       if (Status s = measure_pose(list[j], pre, row); !s.ok()) {
         return s.prepend("pose " + std::to_string(index) + ": ");
       }
@@ -789,8 +819,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
       const double elapsed = now_s() - t0;
       const int done = index + 1;
       const int total = static_cast<int>(poses.size());
-      const double remaining =
-          done < total ? elapsed / done * (total - done) : 0.0;
+      const double remaining = done < total ? elapsed / done * (total - done) : 0.0;
       RtSnapshot r = rt_->snapshot();
       json tensions = json::array();
       for (int i = 0; i < m; ++i) tensions.push_back(r.tensions[static_cast<std::size_t>(i)]);
@@ -800,14 +829,15 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
         calibration_->elapsed_s = elapsed;
         calibration_->remaining_s = remaining;
       }
-      publish("progress", {{"phase", "measuring"},
-                           {"calibration", id},
-                           {"pose", done},
-                           {"poses", std::max(total, done)},
-                           {"elapsed_s", elapsed},
-                           {"remaining_s", remaining},
-                           {"tensions", tensions},
-                           {"laser_m", row.lasers.size() > 0 ? json(row.lasers(0)) : json(nullptr)}});
+      publish("progress",
+              {{"phase", "measuring"},
+               {"calibration", id},
+               {"pose", done},
+               {"poses", std::max(total, done)},
+               {"elapsed_s", elapsed},
+               {"remaining_s", remaining},
+               {"tensions", tensions},
+               {"laser_m", row.lasers.size() > 0 ? json(row.lasers(0)) : json(nullptr)}});
     }
     return Status::Ok();
   };
@@ -817,7 +847,8 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
                          rt_->snapshot().fault.kind == FaultKind::kNone;
     finish_calibration(aborted ? "aborted" : "failed", s.to_string());
     if (rt_->snapshot().fault.kind == FaultKind::kNone) {
-      set_state(DaemonState::kHolding, std::string("calibration ") + (aborted ? "aborted" : "failed") +
+      set_state(DaemonState::kHolding, std::string("calibration ") +
+                                           (aborted ? "aborted" : "failed") +
                                            "; the active geometry is unchanged");
     }
     worker_running_ = false;
@@ -875,9 +906,9 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   }
 
   // The result and the gates.
-  CalibrationOutcome out = evaluate_calibration(g->model, set, *report,
-                                                diagnosis.ok() ? &*diagnosis : nullptr,
-                                                config_.acceptance, config_.identification.options);
+  CalibrationOutcome out =
+      evaluate_calibration(g->model, set, *report, diagnosis.ok() ? &*diagnosis : nullptr,
+                           config_.acceptance, config_.identification.options);
   CalibrationReportContext ctx;
   ctx.calibration = id;
   ctx.daemon = kDaemonVersion;
@@ -952,7 +983,7 @@ json Daemon::status() const {
   j["rt"] = {{"mode", to_string(s.mode)},
              {"cycle", s.cycle},
              {"settled", s.settled},
-             {"commanded_pose", pose_json(s.pose)},
+             {"commanded_pose", pose_json(s.pose())},
              {"tensions_n", s.have_tensions ? tensions : json(nullptr)},
              {"target_counts", targets},
              {"actual_counts", actual},
@@ -978,12 +1009,14 @@ json Daemon::status() const {
   return j;
 }
 
-Reply Daemon::cmd_status() const { return Reply::success(status()); }
+Reply Daemon::cmd_status() const {
+  return Reply::success(status());
+}
 
 Reply Daemon::cmd_calibrate(const json& args, const PeerInfo& peer) {
   if (!args.is_object()) return Reply::failure("bad_request", "args must be an object");
-  const bool dry_run = args.contains("dry_run") && args["dry_run"].is_boolean() &&
-                       args["dry_run"].get<bool>();
+  const bool dry_run =
+      args.contains("dry_run") && args["dry_run"].is_boolean() && args["dry_run"].get<bool>();
   std::string csv;
   if (args.contains("poses_csv")) {
     if (!args["poses_csv"].is_string()) {
@@ -993,12 +1026,14 @@ Reply Daemon::cmd_calibrate(const json& args, const PeerInfo& peer) {
   }
   const DaemonState st = state();
   if (st == DaemonState::kFault) {
-    return Reply::failure("fault", "the robot is in fault (" + status()["reason"].get<std::string>() +
+    return Reply::failure("fault", "the robot is in fault (" +
+                                       status()["reason"].get<std::string>() +
                                        "): run fault-reset first");
   }
   if (!dry_run && (st != DaemonState::kHolding || worker_running_.load())) {
     return Reply::failure("invalid_state", std::string("a calibration starts only while holding; "
-                                                       "the daemon is ") + to_string(st));
+                                                       "the daemon is ") +
+                                               to_string(st));
   }
   if (io_.laser == nullptr && !dry_run) {
     return Reply::failure("invalid_state", "no laser is configured (" + config_.file +
@@ -1026,9 +1061,8 @@ Reply Daemon::cmd_calibrate(const json& args, const PeerInfo& peer) {
   worker_running_ = true;
   spdlog::info("calibrate: calibration {} with {} poses requested by pid {} uid {} gid {}", *id,
                poses->size(), peer.pid, peer.uid, peer.gid);
-  worker_ = std::thread([this, p = std::move(*poses), peer]() mutable {
-    run_calibration(std::move(p), peer);
-  });
+  worker_ = std::thread(
+      [this, p = std::move(*poses), peer]() mutable { run_calibration(std::move(p), peer); });
   return Reply::success({{"calibration", *id}, {"poses", calibration_->poses}});
 }
 
@@ -1045,8 +1079,7 @@ Reply Daemon::cmd_accept(const PeerInfo& peer) {
     id = calibration_->id;
   }
   auto version = store_->add_geometry(
-      *proposed, {{"source", "calibration"}, {"calibration", id},
-                  {"parent", active_version_}});
+      *proposed, {{"source", "calibration"}, {"calibration", id}, {"parent", active_version_}});
   if (!version.ok()) return Reply::failure("internal", version.status().to_string());
   const std::string dir = store_->calibration_dir(id);
   json decision = {{"decision", "accepted"},
@@ -1058,11 +1091,11 @@ Reply Daemon::cmd_accept(const PeerInfo& peer) {
     std::lock_guard lock(mu_);
     calibration_->outcome = "applying";
   }
-  spdlog::info("accept: calibration {} as geometry version {} (pid {} uid {} gid {})", id,
-               *version, peer.pid, peer.uid, peer.gid);
-  if (Status s = activate(*version, {{"why", "calibration " + std::to_string(id) + " accepted"},
-                                     {"calibration", id}},
-                          &peer);
+  spdlog::info("accept: calibration {} as geometry version {} (pid {} uid {} gid {})", id, *version,
+               peer.pid, peer.uid, peer.gid);
+  if (Status s = activate(
+          *version,
+          {{"why", "calibration " + std::to_string(id) + " accepted"}, {"calibration", id}}, &peer);
       !s.ok()) {
     set_state(DaemonState::kHolding, "accept failed: " + s.to_string());
     return Reply::failure("internal", s.to_string());
@@ -1088,8 +1121,11 @@ Reply Daemon::cmd_reject(const PeerInfo& peer) {
   (void)write_file_atomically(store_->calibration_dir(id) + "/decision.json",
                               decision.dump(2) + "\n");
   spdlog::info("reject: calibration {} (pid {} uid {} gid {})", id, peer.pid, peer.uid, peer.gid);
-  publish("calibration", {{"calibration", id}, {"version", nullptr}, {"outcome", "rejected"},
-                          {"gates_passed", false}, {"message", "rejected by the operator"}});
+  publish("calibration", {{"calibration", id},
+                          {"version", nullptr},
+                          {"outcome", "rejected"},
+                          {"gates_passed", false},
+                          {"message", "rejected by the operator"}});
   set_state(DaemonState::kHolding, "calibration " + std::to_string(id) +
                                        " rejected; geometry version " +
                                        std::to_string(active_version_) + " stays active");
@@ -1106,13 +1142,13 @@ Reply Daemon::cmd_rollback(const json& args, const PeerInfo& peer) {
                                                to_string(state()) + ")");
   }
   if (!store_->load_geometry(version).ok()) {
-    return Reply::failure("not_found", "geometry version " + std::to_string(version) +
-                                           " does not exist");
+    return Reply::failure("not_found",
+                          "geometry version " + std::to_string(version) + " does not exist");
   }
   spdlog::info("rollback to geometry version {} (pid {} uid {} gid {})", version, peer.pid,
                peer.uid, peer.gid);
-  if (Status s = activate(version, {{"why", "rollback to version " + std::to_string(version)}},
-                          &peer);
+  if (Status s =
+          activate(version, {{"why", "rollback to version " + std::to_string(version)}}, &peer);
       !s.ok()) {
     return Reply::failure("internal", s.to_string());
   }
@@ -1154,14 +1190,15 @@ Reply Daemon::cmd_geometry_diff(const json& args) const {
   json cables = json::array();
   double largest = 0.0;
   for (std::size_t i = 0; i < ma->cables.size() && i < mb->cables.size(); ++i) {
-    const Eigen::Vector3d d = mb->cables[i].frame_anchor - ma->cables[i].frame_anchor;
+    const Eigen::Index c = static_cast<Eigen::Index>(i);
+    const Eigen::Vector3d d = mb->frame_anchors.col(c) - ma->frame_anchors.col(c);
     largest = std::max(largest, d.norm());
     cables.push_back({{"cable", i + 1},
                       {"delta_m", json::array({d.x(), d.y(), d.z()})},
                       {"distance_m", d.norm()}});
   }
-  return Reply::success({{"from", a}, {"to", b}, {"frame_anchors", cables},
-                         {"largest_change_m", largest}});
+  return Reply::success(
+      {{"from", a}, {"to", b}, {"frame_anchors", cables}, {"largest_change_m", largest}});
 }
 
 Reply Daemon::cmd_geometry_history() const {
@@ -1176,7 +1213,8 @@ Reply Daemon::cmd_geometry_history() const {
     for (auto& e : *h) act.push_back(e);
   }
   std::lock_guard lock(mu_);
-  return Reply::success({{"active", active_version_}, {"versions", versions}, {"activations", act}});
+  return Reply::success(
+      {{"active", active_version_}, {"versions", versions}, {"activations", act}});
 }
 
 Reply Daemon::cmd_report(const json& args) const {

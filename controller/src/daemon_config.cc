@@ -22,8 +22,8 @@ class Reader {
       return Status::Error(ErrorCode::kParseError, "%s:%d:%d: field '%s': %s", file_.c_str(),
                            m.line + 1, m.column + 1, field.c_str(), why.c_str());
     }
-    return Status::Error(ErrorCode::kParseError, "%s: field '%s': %s", file_.c_str(),
-                         field.c_str(), why.c_str());
+    return Status::Error(ErrorCode::kParseError, "%s: field '%s': %s", file_.c_str(), field.c_str(),
+                         why.c_str());
   }
 
   Status only(const YAML::Node& map, const std::string& prefix,
@@ -78,16 +78,16 @@ class Reader {
     }
     if (v < lo || v > hi) {
       return error(n, join(prefix, key),
-                   "must be within [" + std::to_string(lo) + ", " + std::to_string(hi) +
-                       "], got " + std::to_string(v));
+                   "must be within [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
+                       std::to_string(v));
     }
     out = v;
     return Status::Ok();
   }
 
   template <typename Int>
-  Status integer_as(const YAML::Node& map, const char* key, const std::string& prefix,
-                    long long lo, long long hi, Int& out) const {
+  Status integer_as(const YAML::Node& map, const char* key, const std::string& prefix, long long lo,
+                    long long hi, Int& out) const {
     long long v = static_cast<long long>(out);
     if (Status s = integer(map, key, prefix, lo, hi, v); !s.ok()) return s;
     out = static_cast<Int>(v);
@@ -114,10 +114,10 @@ class Reader {
   std::string file_;
 };
 
-#define CDPR_CFG(expr)                  \
-  do {                                  \
-    ::cdpr::Status cfg_s = (expr);      \
-    if (!cfg_s.ok()) return cfg_s;      \
+#define CDPR_CFG(expr)             \
+  do {                             \
+    ::cdpr::Status cfg_s = (expr); \
+    if (!cfg_s.ok()) return cfg_s; \
   } while (false)
 
 std::string resolve(const std::string& base_dir, const std::string& p) {
@@ -155,8 +155,8 @@ Status read_motion(const Reader& r, const YAML::Node& n, MotionSettings& m) {
                    "max_angular_velocity", "max_angular_acceleration", "max_angular_jerk",
                    "tension_margin", "max_cable_speed", "max_cable_acceleration"}));
   CDPR_CFG(r.number(n, "max_linear_velocity", p, 1e-4, 10.0, "m/s", m.max_linear_velocity));
-  CDPR_CFG(r.number(n, "max_linear_acceleration", p, 1e-4, 100.0, "m/s^2",
-                    m.max_linear_acceleration));
+  CDPR_CFG(
+      r.number(n, "max_linear_acceleration", p, 1e-4, 100.0, "m/s^2", m.max_linear_acceleration));
   CDPR_CFG(r.number(n, "max_linear_jerk", p, 1e-3, 1e4, "m/s^3", m.max_linear_jerk));
   CDPR_CFG(r.number(n, "max_angular_velocity", p, 1e-4, 10.0, "rad/s", m.max_angular_velocity));
   CDPR_CFG(r.number(n, "max_angular_acceleration", p, 1e-4, 100.0, "rad/s^2",
@@ -164,8 +164,8 @@ Status read_motion(const Reader& r, const YAML::Node& n, MotionSettings& m) {
   CDPR_CFG(r.number(n, "max_angular_jerk", p, 1e-3, 1e4, "rad/s^3", m.max_angular_jerk));
   CDPR_CFG(r.number(n, "tension_margin", p, 0.0, 1e5, "N", m.tension_margin));
   CDPR_CFG(r.number(n, "max_cable_speed", p, 1e-4, 10.0, "m/s", m.max_cable_speed));
-  CDPR_CFG(r.number(n, "max_cable_acceleration", p, 1e-4, 100.0, "m/s^2",
-                    m.max_cable_acceleration));
+  CDPR_CFG(
+      r.number(n, "max_cable_acceleration", p, 1e-4, 100.0, "m/s^2", m.max_cable_acceleration));
   return Status::Ok();
 }
 
@@ -194,10 +194,8 @@ Status read_measuring(const Reader& r, const YAML::Node& n, const std::string& d
   CDPR_CFG(r.number(n, "laser_interval_s", p, -1.0, 10.0, "s", m.laser_interval_s));
   CDPR_CFG(r.integer_as(n, "average_cycles", p, 1, 100000, m.average_cycles));
   CDPR_CFG(r.number(n, "settle_window_s", p, 0.0, 60.0, "s", m.settle_window_s));
-  CDPR_CFG(r.number(n, "settle_position_tolerance", p, 0.0, 0.1, "m",
-                    m.settle_position_tolerance));
-  CDPR_CFG(r.number(n, "settle_tension_tolerance", p, 0.0, 1e5, "N",
-                    m.settle_tension_tolerance));
+  CDPR_CFG(r.number(n, "settle_position_tolerance", p, 0.0, 0.1, "m", m.settle_position_tolerance));
+  CDPR_CFG(r.number(n, "settle_tension_tolerance", p, 0.0, 1e5, "N", m.settle_tension_tolerance));
   CDPR_CFG(r.number(n, "settle_timeout_s", p, 0.01, 3600.0, "s", m.settle_timeout_s));
   CDPR_CFG(r.number(n, "tension_band", p, 0.0, 1e5, "N", m.tension_band));
   CDPR_CFG(r.integer_as(n, "extra_pose_rounds", p, 0, 10, m.extra_pose_rounds));
@@ -212,8 +210,8 @@ Status read_identification(const Reader& r, const YAML::Node& n, IdentificationS
   const std::string p = "identification";
   CDPR_CFG(r.only(n, p,
                   {"frame_anchors", "platform_anchors", "length_offsets", "length_scales",
-                   "force_gains", "force_offsets", "laser_origin", "laser_direction",
-                   "laser_plane", "diagnose", "bootstrap", "folds"}));
+                   "force_gains", "force_offsets", "laser_origin", "laser_direction", "laser_plane",
+                   "diagnose", "bootstrap", "folds"}));
   IdentificationOptions& o = s.options;
   CDPR_CFG(r.boolean(n, "frame_anchors", p, o.estimate_frame_anchors));
   CDPR_CFG(r.boolean(n, "platform_anchors", p, o.estimate_platform_anchors));
@@ -280,10 +278,10 @@ Result<DaemonConfig> parse_daemon_config(std::string_view yaml, std::string_view
     return Status::Error(ErrorCode::kParseError, "%.*s: expected a mapping of daemon settings",
                          static_cast<int>(file.size()), file.data());
   }
-  CDPR_CFG(r.only(root, "",
-                  {"robot", "canopen", "laser", "can_interface", "state_directory", "realtime",
-                   "identity", "motion", "tension_watch", "measuring", "identification",
-                   "acceptance", "control"}));
+  CDPR_CFG(r.only(
+      root, "",
+      {"robot", "canopen", "laser", "can_interface", "state_directory", "realtime", "identity",
+       "motion", "tension_watch", "measuring", "identification", "acceptance", "control"}));
   const std::string dir = std::filesystem::path(std::string(file)).parent_path().string();
   for (const char* required : {"robot", "canopen"}) {
     if (!root[required]) return r.error(root, required, "is missing");

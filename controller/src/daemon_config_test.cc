@@ -36,10 +36,11 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
 }
 
 TEST(DaemonConfig, ErrorsNameFileLineAndField) {
-  auto c = parse_daemon_config("robot: r.yaml\ncanopen: n.yaml\nmotion:\n  max_linear_velocity: -1\n",
-                               "cdprd.yaml");
+  auto c = parse_daemon_config(
+      "robot: r.yaml\ncanopen: n.yaml\nmotion:\n  max_linear_velocity: -1\n", "cdprd.yaml");
   ASSERT_FALSE(c.ok());
-  EXPECT_NE(c.status().to_string().find("cdprd.yaml:4:"), std::string::npos) << c.status().to_string();
+  EXPECT_NE(c.status().to_string().find("cdprd.yaml:4:"), std::string::npos)
+      << c.status().to_string();
   EXPECT_NE(c.status().to_string().find("motion.max_linear_velocity"), std::string::npos);
 
   auto unknown = parse_daemon_config("robot: r.yaml\ncanopen: n.yaml\nmotoin: {}\n", "d.yaml");
@@ -52,7 +53,8 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
   ASSERT_FALSE(missing.ok());
   EXPECT_NE(missing.status().to_string().find("field 'robot': is missing"), std::string::npos);
 
-  auto mode = parse_daemon_config("robot: r\ncanopen: n\nacceptance: {mode: sometimes}\n", "d.yaml");
+  auto mode =
+      parse_daemon_config("robot: r\ncanopen: n\nacceptance: {mode: sometimes}\n", "d.yaml");
   ASSERT_FALSE(mode.ok());
   EXPECT_NE(mode.status().to_string().find("expected 'manual' or 'auto'"), std::string::npos);
 

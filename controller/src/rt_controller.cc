@@ -79,7 +79,7 @@ RtController::RtController(canopen::Master& master, const Geometry& initial,
       m_(initial.model.num_cables()),
       geometry_(&initial),
       command_data_(initial.model),
-      slew_(initial.model.num_cables()) {
+      slew_() {
   for (int i = 0; i < m_; ++i) drives_[static_cast<std::size_t>(i)] = &master.drives()[i];
   if (!master.force_sensors().empty()) force_ = &master.force_sensors()[0];
   hold_pose_ = pose_ = initial.model.home;
@@ -87,7 +87,10 @@ RtController::RtController(canopen::Master& master, const Geometry& initial,
   in_use_geometry_.store(initial.version, std::memory_order_release);
   snap_.num_cables = m_;
   snap_.geometry_version = initial.version;
-  snap_.pose = pose_;
+  for (int j = 0; j < 3; ++j) {
+    snap_.pose_vector[static_cast<std::size_t>(j)] = pose_.position(j);
+    snap_.pose_vector[static_cast<std::size_t>(j + 3)] = pose_.rpy(j);
+  }
   published_.store(snap_);
 }
 
@@ -103,8 +106,7 @@ void RtController::set_fault(const RtFault& f) noexcept {
 }
 
 bool RtController::compute_targets(const Pose& pose) noexcept {
-  const Status s =
-      command_counts(geometry_->model, pose, ref_tension_, command_data_);
+  const Status s = command_counts(geometry_->model, pose, ref_tension_, command_data_);
   if (!s.ok()) return false;
   for (int i = 0; i < m_; ++i) {
     const auto k = static_cast<std::size_t>(i);
@@ -144,12 +146,13 @@ void RtController::take_command(canopen::Timestamp now) noexcept {
     trim_at_move_ = trim_;
     trim_goal_.fill(0.0);
     ref_start_ = ref_tension_;
-    ref_goal_ = std::isnan(c->reference_tension) ? geometry_->reference_tension
-                                                 : c->reference_tension;
+    ref_goal_ =
+        std::isnan(c->reference_tension) ? geometry_->reference_tension : c->reference_tension;
     return;
   }
   if (c->type == MotionCommand::Type::kTrim) {
-    for (int i = 0; i < m_; ++i) trim_goal_[static_cast<std::size_t>(i)] = c->trim[static_cast<std::size_t>(i)];
+    for (int i = 0; i < m_; ++i)
+      trim_goal_[static_cast<std::size_t>(i)] = c->trim[static_cast<std::size_t>(i)];
     return;
   }
   // Re-reference: new geometry (if any), new hold pose, no trims, targets start where they are.
@@ -176,7 +179,17 @@ void RtController::take_command(canopen::Timestamp now) noexcept {
     vmax[k] = options_.slew_velocity * cable_counts_per_metre(i);
     amax[k] = options_.slew_acceleration * cable_counts_per_metre(i);
   }
-  slew_.reset(start, vmax, amax, options_.cycle_s);
+  if (!slew_
+           .configure(options_.cycle_s,
+                      std::span<const double>(vmax.data(), static_cast<std::size_t>(m_)),
+                      std::span<const double>(amax.data(), static_cast<std::size_t>(m_)))
+           .ok() ||
+      !slew_.reset(std::span<const double>(start.data(), static_cast<std::size_t>(m_))).ok() ||
+      !slew_.set_target(std::span<const double>(desired_.data(), static_cast<std::size_t>(m_)))
+           .ok()) {
+    set_fault({FaultKind::kCommand, 0, -1, 0, 0.0, now.count()});
+    return;
+  }
   target_ = start;
   snap_.largest_reference_step = 0.0;
   mode_ = RtMode::kSlewing;
@@ -273,13 +286,12 @@ void RtController::cycle(canopen::Timestamp now) noexcept {
   if (quick_stop_.exchange(false, std::memory_order_acq_rel)) {
     set_fault({FaultKind::kQuickStop, 0, -1, 0, 0.0, now.count()});
   }
-  if (fault_reset_.exchange(false, std::memory_order_acq_rel) &&
-      fault_.kind != FaultKind::kNone) {
+  if (fault_reset_.exchange(false, std::memory_order_acq_rel) && fault_.kind != FaultKind::kNone) {
     fault_ = RtFault{};
     master_.clear_fault();
     for (int i = 0; i < m_; ++i) {
       canopen::Drive& d = *drives_[static_cast<std::size_t>(i)];
-      if (d.state() == cia402::State::kFault) d.reset_fault();
+      if (d.state() == canopen::cia402::State::kFault) d.reset_fault();
       d.enable();
     }
     slack_count_.fill(0);
@@ -312,8 +324,10 @@ void RtController::cycle(canopen::Timestamp now) noexcept {
     } else {
       double step = 0.0;
       if (mode_ == RtMode::kSlewing) {
-        slew_.step(desired_);
-        const auto& cur = slew_.position();
+        (void)slew_.set_target(
+            std::span<const double>(desired_.data(), static_cast<std::size_t>(m_)));
+        slew_.step();
+        const std::span<const double> cur = slew_.command();
         for (int i = 0; i < m_; ++i) {
           const auto k = static_cast<std::size_t>(i);
           step = std::max(step, std::abs(cur[k] - target_[k]));
@@ -328,11 +342,13 @@ void RtController::cycle(canopen::Timestamp now) noexcept {
         if (mode_ == RtMode::kHolding) {  // trims move at a bounded rate
           for (int i = 0; i < m_; ++i) {
             const auto k = static_cast<std::size_t>(i);
-            const double dmax = options_.trim_velocity * cable_counts_per_metre(i) * options_.cycle_s;
+            const double dmax =
+                options_.trim_velocity * cable_counts_per_metre(i) * options_.cycle_s;
             const double d = trim_goal_[k] - trim_[k];
             trim_[k] = std::abs(d) <= dmax ? trim_goal_[k] : trim_[k] + std::clamp(d, -dmax, dmax);
           }
-          if (active_ != nullptr && active_->type == MotionCommand::Type::kTrim && trim_ == trim_goal_) {
+          if (active_ != nullptr && active_->type == MotionCommand::Type::kTrim &&
+              trim_ == trim_goal_) {
             done_ = active_->seq;
           }
         }
@@ -395,7 +411,10 @@ void RtController::cycle(canopen::Timestamp now) noexcept {
   snap_.trim_counts = trim_;
   snap_.geometry_version = geometry_->version;
   snap_.settled = settled_;
-  snap_.pose = pose_;
+  for (int j = 0; j < 3; ++j) {
+    snap_.pose_vector[static_cast<std::size_t>(j)] = pose_.position(j);
+    snap_.pose_vector[static_cast<std::size_t>(j + 3)] = pose_.rpy(j);
+  }
   snap_.reference_tension = ref_tension_;
   for (int i = 0; i < m_; ++i) {
     const auto k = static_cast<std::size_t>(i);

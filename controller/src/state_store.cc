@@ -59,8 +59,8 @@ std::vector<int> numbers_in(const std::string& dir, std::string_view suffix) {
   for (const auto& e : fs::directory_iterator(dir, ec)) {
     std::string name = e.path().filename().string();
     if (!suffix.empty()) {
-      if (name.size() <= suffix.size() || name.compare(name.size() - suffix.size(), suffix.size(),
-                                                       suffix) != 0) {
+      if (name.size() <= suffix.size() ||
+          name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0) {
         continue;
       }
       name.resize(name.size() - suffix.size());
@@ -85,7 +85,8 @@ Status write_file_atomically(const std::string& path, std::string_view text) {
   if (s.ok() && ::fchmod(fd, 0644) != 0) s = errno_status("cannot chmod", tmp);
   if (s.ok() && ::fsync(fd) != 0) s = errno_status("cannot fsync", tmp);
   if (::close(fd) != 0 && s.ok()) s = errno_status("cannot close", tmp);
-  if (s.ok() && ::rename(tmp.c_str(), path.c_str()) != 0) s = errno_status("cannot rename to", path);
+  if (s.ok() && ::rename(tmp.c_str(), path.c_str()) != 0)
+    s = errno_status("cannot rename to", path);
   if (!s.ok()) {
     ::unlink(tmp.c_str());
     return s;
@@ -101,7 +102,9 @@ Result<std::string> read_text_file(const std::string& path) {
   return s.str();
 }
 
-AppendOnlyFile::~AppendOnlyFile() { close(); }
+AppendOnlyFile::~AppendOnlyFile() {
+  close();
+}
 
 Status AppendOnlyFile::open(const std::string& path, bool truncate) {
   close();
@@ -157,7 +160,8 @@ Result<int> StateStore::add_geometry(const RobotModel& model, nlohmann::json met
                            meta.value("source", std::string("?")) + ")\n" +
                            config::save_robot_config(model);
   // The metadata first: a version exists once its YAML does.
-  const std::string meta_path = (fs::path(dir_) / "geometry" / (numbered(version) + ".json")).string();
+  const std::string meta_path =
+      (fs::path(dir_) / "geometry" / (numbered(version) + ".json")).string();
   if (Status s = write_file_atomically(meta_path, meta.dump(2) + "\n"); !s.ok()) return s;
   if (Status s = write_file_atomically(geometry_path(version), yaml); !s.ok()) return s;
   return version;
@@ -227,9 +231,8 @@ Result<std::vector<nlohmann::json>> StateStore::history() const {
 }
 
 Status StateStore::save_offsets(const std::vector<double>& offsets, std::string_view how) {
-  nlohmann::json j = {{"offsets_counts", offsets},
-                      {"how", std::string(how)},
-                      {"time", recording::utc_timestamp()}};
+  nlohmann::json j = {
+      {"offsets_counts", offsets}, {"how", std::string(how)}, {"time", recording::utc_timestamp()}};
   return write_file_atomically((fs::path(dir_) / "homing.json").string(), j.dump(2) + "\n");
 }
 
@@ -259,8 +262,8 @@ Result<int> StateStore::new_calibration() {
   std::error_code ec;
   fs::create_directories(calibration_dir(id), ec);
   if (ec) {
-    return Status::Error(ErrorCode::kIoError, "cannot create %s: %s",
-                         calibration_dir(id).c_str(), ec.message().c_str());
+    return Status::Error(ErrorCode::kIoError, "cannot create %s: %s", calibration_dir(id).c_str(),
+                         ec.message().c_str());
   }
   return id;
 }

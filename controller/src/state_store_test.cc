@@ -15,8 +15,9 @@ namespace fs = std::filesystem;
 class StateStoreTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    dir_ = fs::temp_directory_path() / ("cdpr-store-" + std::to_string(::getpid()) + "-" +
-                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    dir_ = fs::temp_directory_path() /
+           ("cdpr-store-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
     fs::remove_all(dir_);
     auto robot = config::load_robot_config(CDPR_SOURCE_DIR "/config/mini.yaml");
     ASSERT_TRUE(robot.ok());
@@ -34,7 +35,7 @@ TEST_F(StateStoreTest, VersionsAreNumberedActivatedAndReadBackExactly) {
   auto v1 = s->add_geometry(robot_, {{"source", "nominal"}});
   ASSERT_TRUE(v1.ok());
   RobotModel moved = robot_;
-  moved.cables[2].frame_anchor.x() += 0.00123;
+  moved.frame_anchors(0, 2) += 0.00123;
   auto v2 = s->add_geometry(moved, {{"source", "calibration"}});
   ASSERT_TRUE(v2.ok());
   EXPECT_EQ(*v1, 1);
@@ -43,7 +44,7 @@ TEST_F(StateStoreTest, VersionsAreNumberedActivatedAndReadBackExactly) {
   EXPECT_EQ(*s->active_version(), 2);
   auto back = s->load_geometry(2);
   ASSERT_TRUE(back.ok()) << back.status().to_string();
-  EXPECT_EQ(back->cables[2].frame_anchor, moved.cables[2].frame_anchor);
+  EXPECT_EQ(back->frame_anchors.col(2), moved.frame_anchors.col(2));
   EXPECT_EQ((*s->geometry_meta(2))["source"], "calibration");
   auto h = s->history();
   ASSERT_TRUE(h.ok());

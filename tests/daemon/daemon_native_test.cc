@@ -42,7 +42,9 @@ const std::string kSource = CDPR_SOURCE_DIR;
 double anchor_rms(const RobotModel& a, const RobotModel& b) {
   double s = 0.0;
   for (std::size_t i = 0; i < a.cables.size(); ++i) {
-    s += (a.cables[i].frame_anchor - b.cables[i].frame_anchor).squaredNorm();
+    s += (a.frame_anchors.col(static_cast<Eigen::Index>(i)) -
+          b.frame_anchors.col(static_cast<Eigen::Index>(i)))
+             .squaredNorm();
   }
   return std::sqrt(s / static_cast<double>(a.cables.size()));
 }
@@ -128,7 +130,7 @@ class DaemonNative : public ::testing::Test {
            "max_linear_jerk: 5, max_angular_velocity: 0.5, max_angular_acceleration: 2, "
            "max_angular_jerk: 20}\n"
            "measuring: {poses: 25, laser_samples: 5, laser_interval_s: 0.002, average_cycles: "
-           "25, noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 3}\n"
+           "25, noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 1}\n"
            "identification: {bootstrap: 30}\n" +
            extra;
   }
@@ -200,8 +202,7 @@ class DaemonNative : public ::testing::Test {
   // One cycle's normal motion: the largest target change per cycle at the configured cable speed.
   double one_cycle_counts() const {
     const double dt = std::chrono::duration<double>(network_.sync_period).count();
-    return config_.motion.max_cable_speed * dt /
-           winch_metres_per_count(nominal_.winches[0]);
+    return config_.motion.max_cable_speed * dt / winch_metres_per_count(nominal_.winches[0]);
   }
 
   // Runs a full calibration through the control requests; returns the calibration id.
@@ -259,9 +260,10 @@ TEST_F(DaemonNative, CalibratesMiniAcceptsBumplesslyAndTheNextMoveLandsOnTarget)
   const json& rep = report.result["report"];
   std::printf("[daemon-native] verdict: %s; gates passed: %d\n",
               rep["verdict"].get<std::string>().c_str(), rep["gates_passed"].get<bool>());
+  std::printf("[daemon-native] fit: %s\n", rep["fit"].dump().c_str());
   EXPECT_TRUE(rep["gates_passed"].get<bool>()) << rep["gates"].dump(2);
-  auto after = config::load_robot_config(
-      daemon_->store().calibration_dir(id) + "/model_after.yaml");
+  auto after =
+      config::load_robot_config(daemon_->store().calibration_dir(id) + "/model_after.yaml");
   ASSERT_TRUE(after.ok()) << after.status().to_string();
   const double before_rms = anchor_rms(nominal_, physics_->truth());
   const double after_rms = anchor_rms(*after, physics_->truth());
@@ -278,23 +280,25 @@ TEST_F(DaemonNative, CalibratesMiniAcceptsBumplesslyAndTheNextMoveLandsOnTarget)
       << daemon_->status().dump(2);
   EXPECT_EQ(daemon_->status()["geometry_version"], version);
   const RtSnapshot snap = daemon_->rt().snapshot();
-  std::printf("[daemon-native] hot swap: largest target step %.1f counts (one cycle of normal "
-              "motion: %.1f counts)\n",
-              snap.largest_reference_step, one_cycle_counts());
+  std::printf(
+      "[daemon-native] hot swap: largest target step %.1f counts (one cycle of normal "
+      "motion: %.1f counts)\n",
+      snap.largest_reference_step, one_cycle_counts());
   EXPECT_LE(snap.largest_reference_step, one_cycle_counts());
   EXPECT_TRUE(saw_event("calibration", "outcome", "applied"));
 
   // A test move with the new geometry lands within 0.5 mm of its target in the sim.
   Pose target = nominal_.home;
   target.position += Eigen::Vector3d(0.05, -0.04, 0.03);
-  const Reply mv = request("move", {{"pose", {target.position.x(), target.position.y(),
-                                              target.position.z(), 0.0, 0.0, 0.0}}});
+  const Reply mv = request(
+      "move",
+      {{"pose", {target.position.x(), target.position.y(), target.position.z(), 0.0, 0.0, 0.0}}});
   ASSERT_TRUE(mv.ok) << mv.message;
   ASSERT_TRUE(run_until(
       [&] {
         const RtSnapshot s = daemon_->rt().snapshot();
         return daemon_->state() == DaemonState::kHolding && s.settled &&
-               (s.pose.position - target.position).norm() < 1e-9;
+               (s.pose().position - target.position).norm() < 1e-9;
       },
       30.0));
   const double error = (physics_->state().pose.position - target.position).norm();
@@ -326,13 +330,13 @@ TEST_F(DaemonNative, AbortHoldsTheRobotAndKeepsTheGeometry) {
   start_daemon();
   const int before = daemon_->status()["geometry_version"].get<int>();
   ASSERT_TRUE(request("calibrate").ok);
-  ASSERT_TRUE(run_until([&] { return daemon_->status()["calibration"]["pose"].get<int>() >= 3; },
-                        120.0));
+  ASSERT_TRUE(
+      run_until([&] { return daemon_->status()["calibration"]["pose"].get<int>() >= 3; }, 120.0));
   const Reply ab = request("abort");
   ASSERT_TRUE(ab.ok) << ab.message;
-  ASSERT_TRUE(run_until([&] { return daemon_->state() == DaemonState::kHolding &&
-                                     daemon_->rt().snapshot().settled; },
-                        30.0))
+  ASSERT_TRUE(run_until(
+      [&] { return daemon_->state() == DaemonState::kHolding && daemon_->rt().snapshot().settled; },
+      30.0))
       << daemon_->status().dump(2);
   const json st = daemon_->status();
   EXPECT_EQ(st["calibration"]["outcome"], "aborted");
@@ -347,8 +351,9 @@ TEST_F(DaemonNative, AbortHoldsTheRobotAndKeepsTheGeometry) {
 }
 
 TEST_F(DaemonNative, RejectKeepsTheGeometryRestartKeepsTheAcceptedOneAndRollbackIsBumpless) {
-  start_daemon("measuring: {poses: 12, laser_samples: 3, laser_interval_s: 0.002}\n"
-               "identification: {diagnose: false}\n");
+  start_daemon(
+      "measuring: {poses: 12, laser_samples: 3, laser_interval_s: 0.002}\n"
+      "identification: {diagnose: false}\n");
   const int v1 = daemon_->status()["geometry_version"].get<int>();
   ASSERT_GT(calibrate(), 0);
   ASSERT_TRUE(request("reject").ok);
@@ -368,11 +373,12 @@ TEST_F(DaemonNative, RejectKeepsTheGeometryRestartKeepsTheAcceptedOneAndRollback
   const RtSnapshot old = daemon_->rt().snapshot();
   daemon_->shutdown();
   daemon_.reset();
-  start_daemon("measuring: {poses: 12, laser_samples: 3, laser_interval_s: 0.002}\n"
-               "identification: {diagnose: false}\n");
+  start_daemon(
+      "measuring: {poses: 12, laser_samples: 3, laser_interval_s: 0.002}\n"
+      "identification: {diagnose: false}\n");
   EXPECT_EQ(daemon_->status()["geometry_version"], v2);
   const RtSnapshot now = daemon_->rt().snapshot();
-  EXPECT_LT((now.pose.position - old.pose.position).norm(), 0.2e-3);
+  EXPECT_LT((now.pose().position - old.pose().position).norm(), 0.2e-3);
   EXPECT_LE(now.largest_reference_step, one_cycle_counts());
 
   // Rollback to v1: bumpless too, and recorded in the history.
@@ -408,7 +414,9 @@ TEST_F(DaemonNative, RequestsWithBadArgumentsAreNamedErrors) {
   EXPECT_EQ(request("accept").code, "invalid_state");
   EXPECT_EQ(request("geometry_rollback", {{"version", "x"}}).code, "bad_request");
   EXPECT_EQ(request("geometry_rollback", {{"version", 99}}).code, "not_found");
-  EXPECT_EQ(request("calibrate", {{"poses_csv", "# units: SI\npose,x,y,z,roll,pitch,yaw\n0,5,0,0,0,0,0\n"}}).code,
+  EXPECT_EQ(request("calibrate",
+                    {{"poses_csv", "# units: SI\npose,x,y,z,roll,pitch,yaw\n0,5,0,0,0,0,0\n"}})
+                .code,
             "bad_request");
   const Reply dry = request("calibrate", {{"dry_run", true}});
   ASSERT_TRUE(dry.ok) << dry.message;

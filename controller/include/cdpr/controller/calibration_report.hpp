@@ -19,25 +19,25 @@
 namespace cdpr::controller {
 
 struct Gate {
-  std::string name;       // "fit", "anchor_change", "predicted_accuracy", "mismatch"
+  std::string name;  // "fit", "anchor_change", "predicted_accuracy", "mismatch"
   bool passed = false;
-  double value = 0.0;     // the figure judged (p-value, m, m, 0/1)
+  double value = 0.0;  // the figure judged (p-value, m, m, 0/1)
   double limit = 0.0;
-  std::string text;       // "chi2 171.2 on 166 dof, p = 0.37 >= 0.001"
+  std::string text;  // "chi2 171.2 on 166 dof, p = 0.37 >= 0.001"
 };
 
 struct CalibrationOutcome {
-  RobotModel before;                 // the active model the sequence measured with
-  RobotModel model;                  // the proposed model (named effects carried)
-  const IdentificationReport* fit = nullptr;  // the final fit (with the named effects)
+  RobotModel before;                               // the active model the sequence measured with
+  RobotModel model;                                // the proposed model (named effects carried)
+  const IdentificationReport* fit = nullptr;       // the final fit (with the named effects)
   const IdentificationReport* standard = nullptr;  // the standard identification
   const Diagnosis* diagnosis = nullptr;            // nullptr when the locator did not run
-  std::string verdict;               // one sentence
-  std::string verdict_key;           // no_mismatch, mismatch_named, mismatch_unexplained, ...
+  std::string verdict;                             // one sentence
+  std::string verdict_key;  // no_mismatch, mismatch_named, mismatch_unexplained, ...
   std::vector<std::string> named_effects;
   std::vector<Gate> gates;
   bool gates_passed = false;
-  std::string failed_gates;          // "fit, mismatch"
+  std::string failed_gates;  // "fit, mismatch"
   double predicted_position_rms_m = 0.0;
   int poses = 0;
 };

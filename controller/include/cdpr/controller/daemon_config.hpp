@@ -19,8 +19,8 @@
 namespace cdpr::controller {
 
 struct RealtimeSettings {
-  int priority = 80;  // SCHED_FIFO priority of the RT thread (1..99)
-  int cpu = -1;       // CPU the RT thread is pinned to; -1: none
+  int priority = 80;                        // SCHED_FIFO priority of the RT thread (1..99)
+  int cpu = -1;                             // CPU the RT thread is pinned to; -1: none
   std::chrono::nanoseconds sync_period{0};  // 0: the CANopen network's master.sync_period_ms
   bool lock_memory = true;                  // mlockall and pre-faulting
 };
@@ -33,15 +33,15 @@ struct IdentitySettings {
 };
 
 struct MotionSettings {
-  double max_linear_velocity = 0.1;        // m/s
-  double max_linear_acceleration = 0.5;    // m/s^2
-  double max_linear_jerk = 5.0;            // m/s^3
-  double max_angular_velocity = 0.5;       // rad/s
-  double max_angular_acceleration = 2.0;   // rad/s^2
-  double max_angular_jerk = 20.0;          // rad/s^3
-  double tension_margin = 2.0;             // N kept inside [f_min, f_max] when planning moves
-  double max_cable_speed = 0.2;            // m/s, slew of a re-referenced cable (hot swap)
-  double max_cable_acceleration = 1.0;     // m/s^2
+  double max_linear_velocity = 0.1;       // m/s
+  double max_linear_acceleration = 0.5;   // m/s^2
+  double max_linear_jerk = 5.0;           // m/s^3
+  double max_angular_velocity = 0.5;      // rad/s
+  double max_angular_acceleration = 2.0;  // rad/s^2
+  double max_angular_jerk = 20.0;         // rad/s^3
+  double tension_margin = 0.0;            // N kept inside [f_min, f_max] when planning moves
+  double max_cable_speed = 0.2;           // m/s, slew of a re-referenced cable (hot swap)
+  double max_cable_acceleration = 1.0;    // m/s^2
 };
 
 struct TensionWatch {
@@ -51,16 +51,18 @@ struct TensionWatch {
 };
 
 struct MeasuringSettings {
-  int poses = 25;              // designed poses (including home) when no pose file is given
-  std::string pose_file;       // pose list CSV (docs/recording-format.md); "" = pose design
-  int laser_samples = 20;      // readings per pose (median/MAD robust mean)
+  int poses = 25;                  // designed poses (including home) when no pose file is given
+  std::string pose_file;           // pose list CSV (docs/recording-format.md); "" = pose design
+  int laser_samples = 20;          // readings per pose (median/MAD robust mean)
   double laser_interval_s = -1.0;  // between laser readings; < 0: the laser's poll period
-  int average_cycles = 25;     // encoder and tension readings averaged per pose
-  double settle_window_s = 0.2;         // motion and tensions still for this long
+  int average_cycles = 25;         // encoder and tension readings averaged per pose
+  double settle_window_s = 0.2;    // motion and tensions still for this long
   double settle_position_tolerance = 2e-6;  // m of cable: spread of each encoder in the window
   double settle_tension_tolerance = 1.0;    // N: spread of each tension in the window
   double settle_timeout_s = 10.0;
-  double tension_band = 0.0;  // N: measured within planned +- band, else re-tension; 0: off
+  // N: after settling, the measured tensions are regulated into [f_min + band, f_max - band]
+  // (length trims, mostly internal force); 0: off.
+  double tension_band = 1.0;
   int extra_pose_rounds = 1;  // rounds of extra poses the mismatch locator may ask for
   // Noise of ONE reading of each sensor; the recording states the noise of the averages.
   double noise_length_m = 1e-6;
@@ -79,10 +81,10 @@ enum class AcceptanceMode { kManual, kAuto };
 
 struct AcceptanceGates {
   AcceptanceMode mode = AcceptanceMode::kManual;
-  double min_fit_p_value = 1e-3;          // chi-square upper tail of the accepted fit
-  double max_anchor_change_m = 0.05;      // largest frame-anchor move against the active model
+  double min_fit_p_value = 1e-3;      // chi-square upper tail of the accepted fit
+  double max_anchor_change_m = 0.05;  // largest frame-anchor move against the active model
   double max_predicted_position_error_m = 0.002;  // predicted RMS over the ISO 9283 box
-  bool allow_unresolved_mismatch = false;  // "mismatch_unexplained" or "inconclusive" passes
+  bool allow_unresolved_mismatch = false;         // "mismatch_unexplained" or "inconclusive" passes
 };
 
 struct ControlSettings {

@@ -47,35 +47,35 @@ const char* to_string(RtMode m);
 
 enum class FaultKind : std::uint8_t {
   kNone,
-  kDriveFault,     // a drive reported FAULT (EMCY code in `code`)
-  kNodeLost,       // heartbeat lost
-  kBusOff,         // the CAN controller went bus-off
-  kSlackCable,     // a measured tension fell below the slack limit
-  kOverload,       // a measured tension exceeded the overload limit
-  kCommand,        // the inverse kinematics or the tension planner failed at the commanded pose
-  kQuickStop,      // an operator's quick stop
-  kForceSensor,    // no force readings while they are required
+  kDriveFault,   // a drive reported FAULT (EMCY code in `code`)
+  kNodeLost,     // heartbeat lost
+  kBusOff,       // the CAN controller went bus-off
+  kSlackCable,   // a measured tension fell below the slack limit
+  kOverload,     // a measured tension exceeded the overload limit
+  kCommand,      // the inverse kinematics or the tension planner failed at the commanded pose
+  kQuickStop,    // an operator's quick stop
+  kForceSensor,  // no force readings while they are required
 };
 const char* to_string(FaultKind f);
 
 struct RtFault {
   FaultKind kind = FaultKind::kNone;
-  int node = 0;        // CANopen node, 0 when none
-  int cable = -1;      // 0-based cable, -1 when none
+  int node = 0;            // CANopen node, 0 when none
+  int cable = -1;          // 0-based cable, -1 when none
   std::uint16_t code = 0;  // EMCY code
-  double value = 0.0;  // the tension that tripped, N
+  double value = 0.0;      // the tension that tripped, N
   std::int64_t time_ns = 0;
 };
 
 struct RtOptions {
-  double slack_below = 1.0;     // N
-  double overload_above = 0.0;  // N; 0: 1.1 x f_max of each cable
-  int watch_cycles = 5;         // consecutive cycles before a tension fault
-  double cycle_s = 0.004;       // SYNC period, s
-  int settle_cycles = 50;       // window of the stillness test
-  double settle_counts = 10.0;  // spread of each encoder in the window, counts
-  double settle_tension = 1.0;  // spread of each tension in the window, N
-  double slew_velocity = 0.2;   // m/s of cable, re-reference slew
+  double slack_below = 1.0;        // N
+  double overload_above = 0.0;     // N; 0: 1.1 x f_max of each cable
+  int watch_cycles = 5;            // consecutive cycles before a tension fault
+  double cycle_s = 0.004;          // SYNC period, s
+  int settle_cycles = 50;          // window of the stillness test
+  double settle_counts = 10.0;     // spread of each encoder in the window, counts
+  double settle_tension = 1.0;     // spread of each tension in the window, N
+  double slew_velocity = 0.2;      // m/s of cable, re-reference slew
   double slew_acceleration = 1.0;  // m/s^2
   double trim_velocity = 0.002;    // m/s of cable, rate of a tension-regulation trim
 };
@@ -91,8 +91,12 @@ struct RtSnapshot {
   std::uint64_t command_done = 0;   // of the last command that finished (move ended, slew done)
   int geometry_version = 0;
   bool settled = false;
-  Pose pose;                          // commanded pose
-  double reference_tension = 0.0;     // N, pretension of the tension planner now
+  std::array<double, 6> pose_vector{};  // commanded pose: x, y, z (m), roll, pitch, yaw (rad)
+  Pose pose() const {
+    return Pose{Eigen::Vector3d(pose_vector[0], pose_vector[1], pose_vector[2]),
+                Eigen::Vector3d(pose_vector[3], pose_vector[4], pose_vector[5])};
+  }
+  double reference_tension = 0.0;  // N, pretension of the tension planner now
   int num_cables = 0;
   bool have_tensions = false;
   std::array<double, kMaxAxes> tensions{};       // measured, N
