@@ -180,7 +180,15 @@ Result<std::string> ControlClient::read_line(Deadline deadline, const std::atomi
 Result<ControlReply> ControlClient::call(std::string_view cmd, const nlohmann::json& args,
                                          Deadline deadline, const std::atomic<bool>* cancel) {
   const std::int64_t id = next_id_++;
-  if (Status st = send_raw(encode_request(id, cmd, args), deadline); !st.ok()) return st;
+  if (Status st = send_raw(encode_request(id, cmd, args), deadline); !st.ok()) {
+    // The server may have said why before it closed (busy: too many clients).
+    if (st.code() != ErrorCode::kUnavailable) return st;
+    Result<std::string> last = read_line(deadline_after(0.5), cancel);
+    if (!last.ok()) return st;
+    Result<ServerMessage> msg = parse_server_message(*last);
+    if (!msg.ok() || msg->is_event) return st;
+    return std::move(msg->reply);
+  }
   for (;;) {
     Result<std::string> line = read_line(deadline, cancel);
     if (!line.ok()) return line.status();

@@ -302,9 +302,9 @@ struct ControlServer::Impl {
             nullptr, ControlReply::error(ControlErrorCode::kBusy,
                                          "too many clients (" +
                                              std::to_string(options.max_clients) + ")"));
+        st.clients_rejected.fetch_add(1, std::memory_order_relaxed);
         (void)!::send(fd, busy.data(), busy.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
         ::close(fd);
-        st.clients_rejected.fetch_add(1, std::memory_order_relaxed);
         continue;
       }
       auto c = std::make_unique<Client>();
