@@ -54,9 +54,8 @@ Status wait_fd(int fd, short events, const ControlClient::Deadline& deadline,
 
 ControlClient::Deadline deadline_after(double seconds) {
   if (!(seconds > 0)) return std::nullopt;
-  return ControlClient::Clock::now() +
-         std::chrono::duration_cast<ControlClient::Clock::duration>(
-             std::chrono::duration<double>(seconds));
+  return ControlClient::Clock::now() + std::chrono::duration_cast<ControlClient::Clock::duration>(
+                                           std::chrono::duration<double>(seconds));
 }
 
 Result<ControlClient> ControlClient::connect(const std::string& path, Deadline deadline) {
@@ -160,8 +159,8 @@ Result<std::string> ControlClient::read_line(Deadline deadline, const std::atomi
       return line;
     }
     if (in_.size() > kMaxReplyLine) {
-      return Status(ErrorCode::kProtocolError, "cdprd sent a line longer than " +
-                                                   std::to_string(kMaxReplyLine) + " bytes");
+      return Status(ErrorCode::kProtocolError,
+                    "cdprd sent a line longer than " + std::to_string(kMaxReplyLine) + " bytes");
     }
     if (Status st = wait_fd(fd_, POLLIN, deadline, cancel, "answer"); !st.ok()) return st;
     char buf[65536];

@@ -265,8 +265,7 @@ ParsedRequest parse_request(std::string_view line) {
     return refuse(nullptr, ControlErrorCode::kBadRequest, "request has no \"id\"");
   }
   if (!id_it->is_number_integer() && !id_it->is_string()) {
-    return refuse(nullptr, ControlErrorCode::kBadRequest,
-                  "\"id\" must be an integer or a string");
+    return refuse(nullptr, ControlErrorCode::kBadRequest, "\"id\" must be an integer or a string");
   }
   id = *id_it;
   const auto cmd_it = j.find("cmd");
@@ -278,9 +277,9 @@ ParsedRequest parse_request(std::string_view line) {
   }
   for (const auto& [key, value] : j.items()) {
     if (key != "id" && key != "cmd" && key != "args") {
-      return refuse(std::move(id), ControlErrorCode::kBadRequest,
-                    "unknown request field " + dump_safely(json(key)) +
-                        " (a request has id, cmd and args)");
+      return refuse(
+          std::move(id), ControlErrorCode::kBadRequest,
+          "unknown request field " + dump_safely(json(key)) + " (a request has id, cmd and args)");
     }
   }
   const std::string& cmd = cmd_it->get_ref<const std::string&>();

@@ -54,16 +54,16 @@ TEST(ControlProtocol, RefusesMalformedRequestsWithANamedReason) {
        "args.dry_run of calibrate must be a boolean", true},
       {R"({"id":1,"cmd":"calibrate","args":{"dryrun":true}})", ControlErrorCode::kBadRequest,
        "dry_run poses_csv", true},
-      {R"({"id":1,"cmd":"geometry_rollback"})", ControlErrorCode::kBadRequest,
-       "needs args.version", true},
-      {R"({"id":1,"cmd":"geometry_rollback","args":{"version":0}})",
-       ControlErrorCode::kBadRequest, "integer version >= 1", true},
+      {R"({"id":1,"cmd":"geometry_rollback"})", ControlErrorCode::kBadRequest, "needs args.version",
+       true},
+      {R"({"id":1,"cmd":"geometry_rollback","args":{"version":0}})", ControlErrorCode::kBadRequest,
+       "integer version >= 1", true},
       {R"({"id":1,"cmd":"geometry_rollback","args":{"version":"3"}})",
        ControlErrorCode::kBadRequest, "integer version >= 1", true},
       {R"({"id":1,"cmd":"geometry_diff","args":{"from":1}})", ControlErrorCode::kBadRequest,
        "needs args.to", true},
-      {R"({"id":1,"cmd":"report","args":{"html":1}})", ControlErrorCode::kBadRequest,
-       "args.html", true},
+      {R"({"id":1,"cmd":"report","args":{"html":1}})", ControlErrorCode::kBadRequest, "args.html",
+       true},
   };
   for (const BadCase& c : cases) {
     SCOPED_TRACE(c.line);
@@ -87,20 +87,19 @@ TEST(ControlProtocol, RefusesInvalidUtf8AndNamesTheByte) {
   const ParsedRequest p = parse_request(line);
   ASSERT_FALSE(p.request.has_value());
   EXPECT_EQ(p.error_code, ControlErrorCode::kBadRequest);
-  EXPECT_NE(p.error_message.find("UTF-8 (byte " + std::to_string(bad_at) + ")"),
-            std::string::npos)
+  EXPECT_NE(p.error_message.find("UTF-8 (byte " + std::to_string(bad_at) + ")"), std::string::npos)
       << p.error_message;
 }
 
 TEST(ControlProtocol, Utf8ValidatorFollowsRfc3629) {
   EXPECT_FALSE(find_invalid_utf8("plain ascii").has_value());
   EXPECT_FALSE(find_invalid_utf8("\xC3\xA9\xE2\x82\xAC\xF0\x9F\x98\x80").has_value());  // é € 😀
-  EXPECT_EQ(find_invalid_utf8("ab\xC0\xAF"), 2u);          // overlong '/'
-  EXPECT_EQ(find_invalid_utf8("\xE0\x80\xAF"), 0u);        // overlong 3-byte
-  EXPECT_EQ(find_invalid_utf8("x\xED\xA0\x80"), 1u);       // UTF-16 surrogate
-  EXPECT_EQ(find_invalid_utf8("\xF4\x90\x80\x80"), 0u);    // above U+10FFFF
-  EXPECT_EQ(find_invalid_utf8("\x80"), 0u);                // lone continuation
-  EXPECT_EQ(find_invalid_utf8("abc\xE2\x82"), 3u);         // truncated at the end
+  EXPECT_EQ(find_invalid_utf8("ab\xC0\xAF"), 2u);        // overlong '/'
+  EXPECT_EQ(find_invalid_utf8("\xE0\x80\xAF"), 0u);      // overlong 3-byte
+  EXPECT_EQ(find_invalid_utf8("x\xED\xA0\x80"), 1u);     // UTF-16 surrogate
+  EXPECT_EQ(find_invalid_utf8("\xF4\x90\x80\x80"), 0u);  // above U+10FFFF
+  EXPECT_EQ(find_invalid_utf8("\x80"), 0u);              // lone continuation
+  EXPECT_EQ(find_invalid_utf8("abc\xE2\x82"), 3u);       // truncated at the end
   EXPECT_EQ(find_invalid_utf8("\xFF"), 0u);
 }
 
@@ -118,7 +117,7 @@ TEST(ControlProtocol, RefusesNestingDeeperThanTheLimit) {
 }
 
 TEST(ControlProtocol, EveryPrivilegedCommandIsMarkedAndOnlyThose) {
-  const std::set<std::string> privileged = {"calibrate",         "abort", "accept", "reject",
+  const std::set<std::string> privileged = {"calibrate",         "abort", "accept",     "reject",
                                             "geometry_rollback", "stop",  "fault_reset"};
   std::size_t seen = 0;
   for (const CommandSpec& c : commands()) {
@@ -131,11 +130,10 @@ TEST(ControlProtocol, EveryPrivilegedCommandIsMarkedAndOnlyThose) {
 }
 
 TEST(ControlProtocol, ErrorCodesRoundTripThroughTheirNames) {
-  for (ControlErrorCode c :
-       {ControlErrorCode::kBadRequest, ControlErrorCode::kUnknownCommand,
-        ControlErrorCode::kNotPermitted, ControlErrorCode::kInvalidState,
-        ControlErrorCode::kNotFound, ControlErrorCode::kBusy, ControlErrorCode::kFault,
-        ControlErrorCode::kInternal}) {
+  for (ControlErrorCode c : {ControlErrorCode::kBadRequest, ControlErrorCode::kUnknownCommand,
+                             ControlErrorCode::kNotPermitted, ControlErrorCode::kInvalidState,
+                             ControlErrorCode::kNotFound, ControlErrorCode::kBusy,
+                             ControlErrorCode::kFault, ControlErrorCode::kInternal}) {
     EXPECT_EQ(control_error_from_string(to_string(c)), c);
   }
   EXPECT_FALSE(control_error_from_string("nope").has_value());
@@ -204,7 +202,8 @@ TEST(ControlProtocol, RandomBytesNeverCrashTheParser) {
     const int n = len(rng);
     for (int k = 0; k < n; ++k) {
       const int b = byte(rng);
-      s += (i % 2 == 0) ? static_cast<char>(b) : alphabet[static_cast<std::size_t>(b) % alphabet.size()];
+      s += (i % 2 == 0) ? static_cast<char>(b)
+                        : alphabet[static_cast<std::size_t>(b) % alphabet.size()];
     }
     const ParsedRequest p = parse_request(s);
     if (!p.request) {

@@ -102,8 +102,8 @@ struct ControlServer::Impl {
 
   struct {
     std::atomic<std::uint64_t> clients{0}, clients_accepted{0}, clients_rejected{0},
-        clients_disconnected_slow{0}, requests{0}, bad_requests{0}, refused{0},
-        events_published{0}, events_dropped{0};
+        clients_disconnected_slow{0}, requests{0}, bad_requests{0}, refused{0}, events_published{0},
+        events_dropped{0};
   } st;
 
   ~Impl() {
@@ -174,7 +174,8 @@ struct ControlServer::Impl {
   // ---- requests -----------------------------------------------------------------------------
 
   std::string permission_message(const std::string& cmd) const {
-    std::string m = cmd + " moves the robot or changes the geometry: it needs root, the daemon's user";
+    std::string m =
+        cmd + " moves the robot or changes the geometry: it needs root, the daemon's user";
     if (!options.group.empty()) m += " or membership of group '" + options.group + "'";
     return m;
   }
@@ -218,10 +219,10 @@ struct ControlServer::Impl {
   void too_long(Client& c) {
     st.requests.fetch_add(1, std::memory_order_relaxed);
     st.bad_requests.fetch_add(1, std::memory_order_relaxed);
-    enqueue(c, encode_reply(nullptr, ControlReply::error(
-                                         ControlErrorCode::kBadRequest,
-                                         "request line longer than " +
-                                             std::to_string(options.max_line) + " bytes")));
+    enqueue(c, encode_reply(nullptr,
+                            ControlReply::error(ControlErrorCode::kBadRequest,
+                                                "request line longer than " +
+                                                    std::to_string(options.max_line) + " bytes")));
   }
 
   // Serves up to max_lines_per_turn complete lines of `c`. True when complete lines are left.
@@ -299,9 +300,9 @@ struct ControlServer::Impl {
       }
       if (clients.size() >= options.max_clients) {
         const std::string busy = encode_reply(
-            nullptr, ControlReply::error(ControlErrorCode::kBusy,
-                                         "too many clients (" +
-                                             std::to_string(options.max_clients) + ")"));
+            nullptr,
+            ControlReply::error(ControlErrorCode::kBusy,
+                                "too many clients (" + std::to_string(options.max_clients) + ")"));
         st.clients_rejected.fetch_add(1, std::memory_order_relaxed);
         (void)!::send(fd, busy.data(), busy.size(), MSG_NOSIGNAL | MSG_DONTWAIT);
         ::close(fd);
@@ -317,10 +318,9 @@ struct ControlServer::Impl {
         c->peer.gid = cred.gid;
         const bool trivially = cred.uid == 0 || (options.allow_own_uid && cred.uid == own_uid);
         c->peer.privileged_allowed =
-            trivially || peer_may_run_privileged(cred.uid, cred.gid, own_uid,
-                                                 options.allow_own_uid, group_gid,
-                                                 group_gid ? groups_of_uid(cred.uid)
-                                                           : std::vector<gid_t>{});
+            trivially ||
+            peer_may_run_privileged(cred.uid, cred.gid, own_uid, options.allow_own_uid, group_gid,
+                                    group_gid ? groups_of_uid(cred.uid) : std::vector<gid_t>{});
       }  // else: unknown peer, never privileged
       clients.push_back(std::move(c));
       st.clients_accepted.fetch_add(1, std::memory_order_relaxed);
@@ -393,8 +393,8 @@ struct ControlServer::Impl {
         Client& c = *cp;
         if (c.full_since && c.out_bytes <= options.max_pending_bytes / 2) c.full_since.reset();
         if (!c.dead && c.full_since && t - *c.full_since >= options.stall_timeout) {
-          spdlog::warn("control: disconnected pid {} uid {}: it read nothing for {} ms",
-                       c.peer.pid, c.peer.uid, options.stall_timeout.count());
+          spdlog::warn("control: disconnected pid {} uid {}: it read nothing for {} ms", c.peer.pid,
+                       c.peer.uid, options.stall_timeout.count());
           st.clients_disconnected_slow.fetch_add(1, std::memory_order_relaxed);
           c.dead = true;
         }
@@ -407,7 +407,11 @@ struct ControlServer::Impl {
       });
       st.clients.store(clients.size(), std::memory_order_relaxed);
     }
-    for (auto& c : clients) ::close(c->fd);
+    drain_events();
+    for (auto& c : clients) {
+      flush(*c);  // best effort: what fits in the socket now (the daemon is shutting down)
+      ::close(c->fd);
+    }
     clients.clear();
     st.clients.store(0);
   }
@@ -426,10 +430,11 @@ Result<std::unique_ptr<ControlServer>> ControlServer::start(ControlServerOptions
   const std::string tmp = options.path + ".tmp" + std::to_string(::getpid());
   sockaddr_un addr{};
   if (!fill_address(tmp, addr)) {
-    return Status(ErrorCode::kInvalidArgument,
-                  "control socket path '" + options.path + "' is empty or too long (at most " +
-                      std::to_string(sizeof addr.sun_path - 1 - (tmp.size() - options.path.size())) +
-                      " bytes)");
+    return Status(
+        ErrorCode::kInvalidArgument,
+        "control socket path '" + options.path + "' is empty or too long (at most " +
+            std::to_string(sizeof addr.sun_path - 1 - (tmp.size() - options.path.size())) +
+            " bytes)");
   }
   if (!options.group.empty()) {
     group grp{}, *found = nullptr;
@@ -455,8 +460,8 @@ Result<std::unique_ptr<ControlServer>> ControlServer::start(ControlServerOptions
                         "' exists and is not a socket; not replacing it");
     }
     if (someone_listens(options.path)) {
-      return Status(ErrorCode::kUnavailable, "a daemon is already answering on control socket '" +
-                                                 options.path + "'");
+      return Status(ErrorCode::kUnavailable,
+                    "a daemon is already answering on control socket '" + options.path + "'");
     }
     // A stale socket from a daemon that died: replaced by the rename below.
   }

@@ -186,7 +186,8 @@ TEST_F(ControlServerTest, ReplacesAStaleSocketLeftByADeadDaemon) {
 TEST_F(ControlServerTest, NeverReplacesAFileThatIsNotASocket) {
   const std::string path = options().path;
   std::ofstream(path) << "precious";
-  auto s = ControlServer::start(options(), [](const ControlRequest&) { return ControlReply::ok(); });
+  auto s =
+      ControlServer::start(options(), [](const ControlRequest&) { return ControlReply::ok(); });
   ASSERT_FALSE(s.ok());
   EXPECT_EQ(s.status().code(), ErrorCode::kFailedPrecondition);
   std::ifstream in(path);
@@ -252,8 +253,7 @@ TEST_F(ControlServerTest, AnswersBadRequestsWithNamedErrorsAndKeepsTheConnection
       {"{\"id\":3,\"cmd\":\"geometry_rollback\",\"args\":{\"version\":\"latest\"}}\n",
        "bad_request"},
       {"{\"id\":4,\"cmd\":\"self_destruct\"}\n", "unknown_command"},
-      {"{\"id\":5,\"cmd\":\"status\",\"pad\":\"" + std::string(4000, 'x') + "\"}\n",
-       "bad_request"},
+      {"{\"id\":5,\"cmd\":\"status\",\"pad\":\"" + std::string(4000, 'x') + "\"}\n", "bad_request"},
   };
   for (const Case& k : cases) {
     SCOPED_TRACE(k.raw.substr(0, 60));
@@ -323,7 +323,7 @@ TEST(ControlPeerPolicy, AllowsRootTheDaemonUserAndGroupMembersOnly) {
   EXPECT_TRUE(peer_may_run_privileged(0, 0, 999, true, group, {}));
   EXPECT_TRUE(peer_may_run_privileged(999, 999, 999, true, group, {}));
   EXPECT_FALSE(peer_may_run_privileged(999, 999, 999, false, group, {}));
-  EXPECT_TRUE(peer_may_run_privileged(1000, 500, 999, true, group, {}));           // primary
+  EXPECT_TRUE(peer_may_run_privileged(1000, 500, 999, true, group, {}));          // primary
   EXPECT_TRUE(peer_may_run_privileged(1000, 1000, 999, true, group, {27, 500}));  // suppl.
   EXPECT_FALSE(peer_may_run_privileged(1000, 1000, 999, true, group, {27, 100}));
   EXPECT_FALSE(peer_may_run_privileged(1000, 500, 999, true, std::nullopt, {500}));
@@ -353,8 +353,7 @@ ChildOutcome run_as(std::optional<std::pair<uid_t, gid_t>> ids, const std::strin
     ::close(fds[0]);
     auto say = [&](const std::string& s) { (void)!::write(fds[1], s.data(), s.size()); };
     if (ids) {
-      if (::setgroups(0, nullptr) != 0 || ::setgid(ids->second) != 0 ||
-          ::setuid(ids->first) != 0) {
+      if (::setgroups(0, nullptr) != 0 || ::setgid(ids->second) != 0 || ::setuid(ids->first) != 0) {
         say("setid-failed\n");
         ::_exit(1);
       }
@@ -404,10 +403,10 @@ TEST_F(ControlServerTest, RefusesPrivilegedCommandsFromOutsidersBeforeTheHandler
   ControlServerOptions o = options();
   std::optional<std::pair<uid_t, gid_t>> outsider;
   if (::geteuid() == 0) {
-    o.mode = 0666;                // the outsider may connect, but is in no allowed group
-    outsider = {65534, 65534};    // nobody
+    o.mode = 0666;              // the outsider may connect, but is in no allowed group
+    outsider = {65534, 65534};  // nobody
   } else {
-    o.allow_own_uid = false;      // simulate: this uid is not the daemon's...
+    o.allow_own_uid = false;  // simulate: this uid is not the daemon's...
     const group* root_group = ::getgrgid(0);
     ASSERT_NE(root_group, nullptr);
     o.group = root_group->gr_name;  // ...and the group is one this user is not in
@@ -416,10 +415,9 @@ TEST_F(ControlServerTest, RefusesPrivilegedCommandsFromOutsidersBeforeTheHandler
     ASSERT_NE(::getegid(), gid_t{0});
   }
   start(o);
-  const ChildOutcome out =
-      run_as(outsider, o.path,
-             {R"({"id":1,"cmd":"stop"})", R"({"id":2,"cmd":"status"})",
-              R"({"id":3,"cmd":"geometry_rollback","args":{"version":2}})"});
+  const ChildOutcome out = run_as(outsider, o.path,
+                                  {R"({"id":1,"cmd":"stop"})", R"({"id":2,"cmd":"status"})",
+                                   R"({"id":3,"cmd":"geometry_rollback","args":{"version":2}})"});
   spdlog::set_default_logger(previous);
   ASSERT_TRUE(out.connected) << out.connect_error;
   ASSERT_EQ(out.replies.size(), 3u);
@@ -475,7 +473,8 @@ TEST_F(ControlServerTest, APeerOutsideTheGroupCannotOpenTheSocket) {
   ControlServerOptions o = options();
   o.group = g->gr_name;
   start(o);
-  const ChildOutcome out = run_as(std::pair<uid_t, gid_t>{65534, 65534}, o.path, {R"({"id":1,"cmd":"status"})"});
+  const ChildOutcome out =
+      run_as(std::pair<uid_t, gid_t>{65534, 65534}, o.path, {R"({"id":1,"cmd":"status"})"});
   EXPECT_FALSE(out.connected);
   EXPECT_EQ(out.connect_error, std::string(to_string(ErrorCode::kFailedPrecondition)));
   EXPECT_TRUE(seen().empty());
@@ -543,7 +542,8 @@ TEST_F(ControlServerTest, StaysResponsiveWhileAWatcherNeverReadsAndEventsFlood) 
   double slowest_publish_ms = 0;
   std::size_t published = 0;
   std::thread publisher([&] {
-    const json data = {{"phase", "measuring"}, {"tensions", std::vector<double>(64, 123.456)},
+    const json data = {{"phase", "measuring"},
+                       {"tensions", std::vector<double>(64, 123.456)},
                        {"message", std::string(512, 'p')}};
     while (!done.load()) {
       const auto t0 = Clock::now();
@@ -564,10 +564,11 @@ TEST_F(ControlServerTest, StaysResponsiveWhileAWatcherNeverReadsAndEventsFlood) 
   std::sort(latencies.begin(), latencies.end());
   const double worst = latencies.back();
   const double median = latencies[latencies.size() / 2];
-  std::printf("[ figures  ] %zu events published (slowest publish %.3f ms); probe round trip over "
-              "%zu calls: median %.3f ms, worst %.3f ms; events dropped %llu\n",
-              published, slowest_publish_ms, latencies.size(), median, worst,
-              static_cast<unsigned long long>(server_->stats().events_dropped));
+  std::printf(
+      "[ figures  ] %zu events published (slowest publish %.3f ms); probe round trip over "
+      "%zu calls: median %.3f ms, worst %.3f ms; events dropped %llu\n",
+      published, slowest_publish_ms, latencies.size(), median, worst,
+      static_cast<unsigned long long>(server_->stats().events_dropped));
   // Bounds generous for a loaded 2-core machine; the point is "not blocked" (seconds).
   EXPECT_LT(worst, 250.0);
   EXPECT_LT(slowest_publish_ms, 100.0);
@@ -610,10 +611,11 @@ TEST_F(ControlServerTest, StaysResponsiveUnderARequestFloodFromAClientThatNeverR
   done = true;
   flooder.join();
   std::sort(latencies.begin(), latencies.end());
-  std::printf("[ figures  ] flood of %zu bytes of requests; probe round trip over %zu calls: "
-              "median %.3f ms, worst %.3f ms; %llu requests served\n",
-              flood_bytes.load(), latencies.size(), latencies[latencies.size() / 2],
-              latencies.back(), static_cast<unsigned long long>(server_->stats().requests));
+  std::printf(
+      "[ figures  ] flood of %zu bytes of requests; probe round trip over %zu calls: "
+      "median %.3f ms, worst %.3f ms; %llu requests served\n",
+      flood_bytes.load(), latencies.size(), latencies[latencies.size() / 2], latencies.back(),
+      static_cast<unsigned long long>(server_->stats().requests));
   EXPECT_LT(latencies.back(), 250.0);
   EXPECT_EQ(server_->stats().clients_disconnected_slow, 1u);
 }

@@ -39,9 +39,9 @@ struct ControlServerOptions {
   std::string path;   // socket path (at most 107 bytes)
   std::string group;  // group of the socket and of the peers allowed privileged commands; "" none
   unsigned mode = 0660;
-  std::size_t max_line = kDefaultMaxLine;   // longest request line, bytes without '\n'
-  std::size_t max_clients = 128;            // connections served at once
-  std::size_t max_pending_bytes = 1 << 20;  // per-client output queue bound
+  std::size_t max_line = kDefaultMaxLine;         // longest request line, bytes without '\n'
+  std::size_t max_clients = 128;                  // connections served at once
+  std::size_t max_pending_bytes = 1 << 20;        // per-client output queue bound
   std::chrono::milliseconds stall_timeout{5000};  // queue over the bound this long: disconnect
   std::size_t max_lines_per_turn = 16;            // requests served per client per poll round
   std::size_t max_queued_events = 4096;  // published, not yet fanned out (the server is late)
@@ -51,15 +51,15 @@ struct ControlServerOptions {
 };
 
 struct ControlServerStats {
-  std::uint64_t clients = 0;               // connected now
-  std::uint64_t clients_accepted = 0;      // since start
-  std::uint64_t clients_rejected = 0;      // turned away: max_clients reached
+  std::uint64_t clients = 0;                    // connected now
+  std::uint64_t clients_accepted = 0;           // since start
+  std::uint64_t clients_rejected = 0;           // turned away: max_clients reached
   std::uint64_t clients_disconnected_slow = 0;  // queue stayed full for stall_timeout
-  std::uint64_t requests = 0;              // lines answered (valid or not)
-  std::uint64_t bad_requests = 0;          // answered bad_request or unknown_command
-  std::uint64_t refused = 0;               // privileged commands refused with not_permitted
+  std::uint64_t requests = 0;                   // lines answered (valid or not)
+  std::uint64_t bad_requests = 0;               // answered bad_request or unknown_command
+  std::uint64_t refused = 0;                    // privileged commands refused with not_permitted
   std::uint64_t events_published = 0;
-  std::uint64_t events_dropped = 0;        // per watcher: not queued because its queue was full
+  std::uint64_t events_dropped = 0;  // per watcher: not queued because its queue was full
 };
 
 class ControlServer {
