@@ -18,3 +18,7 @@ cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.c
 if(TARGET daemon_state_store_test)
   target_compile_definitions(daemon_state_store_test PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
 endif()
+
+add_executable(cdprd ${_d}/cdprd/main.cc)
+target_link_libraries(cdprd PRIVATE cdpr_daemon cdpr_rt cdpr_control CLI11::CLI11 spdlog::spdlog
+                                    cdpr_options)

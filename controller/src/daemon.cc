@@ -126,7 +126,7 @@ Result<std::unique_ptr<Daemon>> Daemon::create(DaemonConfig config, DaemonIo io)
   if (!master.ok()) return master.status();
   d->master_ = std::move(*master);
 
-  RtOptions ro;
+  RtControllerOptions ro;
   const double cycle_s = std::chrono::duration<double>(d->network_.sync_period).count();
   const MeasuringSettings& ms = d->config_.measuring;
   ro.cycle_s = cycle_s;
@@ -636,14 +636,14 @@ Status Daemon::regulate_tensions(int pose_index) {
     }
     const RtSnapshot r = rt_->snapshot();
     trim = r.trim_counts;
-    // Into the band [f_min + band, f_max - band] of each cable: a cable below it is shortened, one
-    // above it lengthened, by the tension missing over the cable's stiffness (mostly internal
-    // force: the platform barely moves).
+    // Into the planned band of each cable, [f_min - band, f_max + band] (the planner itself puts
+    // tensions on f_min): a cable below it is shortened, one above it lengthened, by the tension
+    // missing over the cable's stiffness (mostly internal force: the platform barely moves).
     bool inside = true;
     for (int i = 0; i < m; ++i) {
       const auto k = static_cast<std::size_t>(i);
       const CableModel& c = g->model.cables[k];
-      const double lo = c.f_min + band, hi = c.f_max - band;
+      const double lo = c.f_min - band, hi = c.f_max + band;
       const double f = r.average_tensions[k];
       const double want = std::clamp(f, lo, std::max(lo, hi));
       if (want == f) continue;
@@ -653,7 +653,7 @@ Status Daemon::regulate_tensions(int pose_index) {
           c.routing_length +
           std::max(0.05, winch_counts_to_length<double>(
                              g->model.winches[k], r.average_counts[k] - rt_->encoder_offsets()[k]));
-      const double dl = -(want + (want > f ? 0.5 : -0.5) * band - f) * length / ea;
+      const double dl = -(want + (want > f ? 1.5 : -1.5) * band - f) * length / ea;
       trim[k] += winch_counts_change<double>(g->model.winches[k], dl);
     }
     if (inside) return Status::Ok();
@@ -988,7 +988,13 @@ json Daemon::status() const {
              {"target_counts", targets},
              {"actual_counts", actual},
              {"largest_reference_step_counts", s.largest_reference_step},
-             {"largest_move_step_counts", s.largest_move_step}};
+             {"largest_move_step_counts", s.largest_move_step},
+             // One cycle of the fastest normal cable motion (max_cable_speed), the bound a
+             // re-reference step must stay under.
+             {"one_cycle_motion_counts",
+              config_.motion.max_cable_speed *
+                  std::chrono::duration<double>(network_.sync_period).count() /
+                  winch_metres_per_count(active_->model.winches[0])}};
   j["loop"] = loop_figures_;
   if (calibration_) {
     j["calibration"] = {{"id", calibration_->id},

@@ -128,7 +128,7 @@ std::string resolve(const std::string& base_dir, const std::string& p) {
 Status read_realtime(const Reader& r, const YAML::Node& n, RealtimeSettings& rt) {
   if (!n) return Status::Ok();
   CDPR_CFG(r.only(n, "realtime", {"priority", "cpu", "sync_period_ms", "lock_memory"}));
-  CDPR_CFG(r.integer_as(n, "priority", "realtime", 1, 99, rt.priority));
+  CDPR_CFG(r.integer_as(n, "priority", "realtime", 0, 99, rt.priority));
   CDPR_CFG(r.integer_as(n, "cpu", "realtime", -1, 1023, rt.cpu));
   double ms = 0.0;
   CDPR_CFG(r.number(n, "sync_period_ms", "realtime", 0.0, 1000.0, "ms", ms));

@@ -47,7 +47,7 @@ const char* to_string(FaultKind f) {
 
 Result<std::unique_ptr<RtController>> RtController::create(canopen::Master& master,
                                                            const Geometry& initial,
-                                                           const RtOptions& options) {
+                                                           const RtControllerOptions& options) {
   const int m = initial.model.num_cables();
   if (m < 1 || m > kMaxAxes) {
     return Status::Error(ErrorCode::kInvalidArgument, "the robot has %d cables (1..%d supported)",
@@ -73,7 +73,7 @@ Result<std::unique_ptr<RtController>> RtController::create(canopen::Master& mast
 }
 
 RtController::RtController(canopen::Master& master, const Geometry& initial,
-                           const RtOptions& options)
+                           const RtControllerOptions& options)
     : master_(master),
       options_(options),
       m_(initial.model.num_cables()),

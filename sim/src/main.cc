@@ -15,6 +15,8 @@
 #include <CLI/CLI.hpp>
 #include <atomic>
 #include <chrono>
+#include <cmath>
+#include <vector>
 #include <csignal>
 #include <cstdio>
 #include <memory>
@@ -22,6 +24,8 @@
 #include <thread>
 
 #include "cdpr/can/socketcan_bus.hpp"
+#include "cdpr/calibration/predicted_accuracy.hpp"
+#include "cdpr/calibration/simulate.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/modbus/register_map.hpp"
@@ -55,6 +59,7 @@ int main(int argc, char** argv) {
   double rate_hz = 100.0, duration_s = 0.0, dwell_s = 2.0;
   int laser_samples = 1, substeps = 10;
   std::string home_mode = "nominal";
+  std::vector<std::string> evaluate;
   app.add_option("--config", config_path, "nominal robot description (what the daemon uses)")
       ->required();
   app.add_option("--scenario", scenario_path, "scenario: true robot, hidden effects, faults")
@@ -74,6 +79,9 @@ int main(int argc, char** argv) {
                  "counts) or 'reference' (the true platform stands at home, as on a reference "
                  "platform)")
       ->check(CLI::IsMember({"nominal", "reference"}));
+  app.add_option("--evaluate", evaluate,
+                 "judge robot descriptions against the scenario's truth: frame-anchor error and "
+                 "the ISO 9283 box position error they realise on the true robot; then exit");
   app.add_option("--rate", rate_hz, "real-time physics rate, Hz")->check(CLI::Range(0.1, 10000.0));
   app.add_option("--duration", duration_s, "real-time: stop after this many seconds (0: never)");
   app.add_option("--dwell", dwell_s, "lock-step: scenario time per pose, s")
@@ -93,6 +101,35 @@ int main(int argc, char** argv) {
   cdpr::Result<cdpr::sim::Physics> physics =
       cdpr::sim::Physics::create(std::move(*truth), *scenario, seed);
   if (!physics.ok()) return fail(physics.status().to_string());
+
+  // ---- evaluate ----------------------------------------------------------------------------
+  if (!evaluate.empty()) {
+    const cdpr::RobotModel& true_robot = physics->truth();
+    std::printf("%-40s %12s %12s %14s %14s\n", "model", "anchor RMS", "anchor max", "box pos. RMS",
+                "box pos. max");
+    for (const std::string& path : evaluate) {
+      auto model = cdpr::config::load_robot_config(path);
+      if (!model.ok()) return fail(model.status().to_string());
+      if (model->num_cables() != true_robot.num_cables()) return fail(path + ": cable count differs");
+      double sum = 0.0, worst = 0.0;
+      for (int i = 0; i < true_robot.num_cables(); ++i) {
+        const double d = (model->frame_anchors.col(i) - true_robot.frame_anchors.col(i)).norm();
+        sum += d * d;
+        worst = std::max(worst, d);
+      }
+      const cdpr::CalibratedModel controller = cdpr::CalibratedModel::FromRobot(*model);
+      auto homed = cdpr::homed_truth(true_robot, *model);
+      if (!homed.ok()) return fail(path + ": " + homed.status().to_string());
+      cdpr::AccuracyBox box;
+      box.center = true_robot.home.position;
+      auto acc = cdpr::measure_position_accuracy(*homed, controller, box);
+      if (!acc.ok()) return fail(path + ": " + acc.status().to_string());
+      std::printf("%-40s %9.3f mm %9.3f mm %11.3f mm %11.3f mm\n", path.c_str(),
+                  1e3 * std::sqrt(sum / true_robot.num_cables()), 1e3 * worst,
+                  1e3 * acc->position_rms_m, 1e3 * acc->position_max_m);
+    }
+    return 0;
+  }
 
   // ---- lock-step -------------------------------------------------------------------------
   if (!lockstep_path.empty()) {

@@ -60,7 +60,7 @@ struct MeasuringSettings {
   double settle_position_tolerance = 2e-6;  // m of cable: spread of each encoder in the window
   double settle_tension_tolerance = 1.0;    // N: spread of each tension in the window
   double settle_timeout_s = 10.0;
-  // N: after settling, the measured tensions are regulated into [f_min + band, f_max - band]
+  // N: after settling, the measured tensions are regulated into [f_min - band, f_max + band]
   // (length trims, mostly internal force); 0: off.
   double tension_band = 1.0;
   int extra_pose_rounds = 1;  // rounds of extra poses the mismatch locator may ask for

@@ -67,7 +67,7 @@ struct RtFault {
   std::int64_t time_ns = 0;
 };
 
-struct RtOptions {
+struct RtControllerOptions {
   double slack_below = 1.0;        // N
   double overload_above = 0.0;     // N; 0: 1.1 x f_max of each cable
   int watch_cycles = 5;            // consecutive cycles before a tension fault
@@ -127,7 +127,7 @@ class RtController {
   // node (channels = cables). Allocates here only.
   static Result<std::unique_ptr<RtController>> create(canopen::Master& master,
                                                       const Geometry& initial,
-                                                      const RtOptions& options);
+                                                      const RtControllerOptions& options);
 
   // Non-RT set-up, before the loop runs (or while it is disabled).
   void set_encoder_offsets(const std::array<double, kMaxAxes>& offsets) { offsets_ = offsets; }
@@ -159,7 +159,7 @@ class RtController {
   void set_overruns(std::uint64_t n) noexcept { overruns_ = n; }
 
  private:
-  RtController(canopen::Master& master, const Geometry& initial, const RtOptions& options);
+  RtController(canopen::Master& master, const Geometry& initial, const RtControllerOptions& options);
   void take_command(canopen::Timestamp now) noexcept;
   void set_fault(const RtFault& f) noexcept;
   void watch(canopen::Timestamp now) noexcept;
@@ -168,7 +168,7 @@ class RtController {
   double cable_counts_per_metre(int i) const noexcept;
 
   canopen::Master& master_;
-  RtOptions options_;
+  RtControllerOptions options_;
   int m_ = 0;
   std::array<canopen::Drive*, kMaxAxes> drives_{};
   canopen::ForceSensor* force_ = nullptr;
