@@ -13,4 +13,4 @@ cdpr_add_gtest(NAME motion_trajectory_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src
 cdpr_add_gtest(NAME motion_path_check_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src/path_check_test.cc
                LIBS cdpr_motion cdpr_calibration_testing cdpr_test_support)
 cdpr_add_gtest(NAME motion_slew_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src/slew_test.cc
-               LIBS cdpr_motion cdpr_test_support)
+               LIBS cdpr_motion cdpr_calibration_testing cdpr_test_support)

@@ -511,6 +511,9 @@ void ControlServer::stop() {
   const std::uint64_t one = 1;
   (void)!::write(impl_->wake_fd, &one, sizeof one);
   if (impl_->thread.joinable()) impl_->thread.join();
+  // Connections still in the backlog (never accepted) see the end now, not at destruction.
+  if (impl_->listen_fd >= 0) ::close(impl_->listen_fd);
+  impl_->listen_fd = -1;
   struct stat sb {};
   if (::stat(impl_->options.path.c_str(), &sb) == 0 && sb.st_dev == impl_->socket_dev &&
       sb.st_ino == impl_->socket_ino) {

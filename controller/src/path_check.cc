@@ -273,6 +273,7 @@ Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
 
 Status check_pose(const RobotModel& model, const Pose& pose, const PathCheckOptions& options,
                   PathCheckSummary* summary) {
+  if (summary != nullptr) *summary = PathCheckSummary{};
   double reference = 0.0;
   if (Status s = validate_options(model, options, &reference); !s.ok()) return s;
   if (!pose.vector().allFinite()) {
@@ -284,7 +285,7 @@ Status check_pose(const RobotModel& model, const Pose& pose, const PathCheckOpti
                                 reference, options, kinematics, plan, summary, 0.0);
   if (v.failure == Failure::kNone) return Status::Ok();
   const char* what = v.failure == Failure::kBox          ? "is outside the workspace box"
-                     : v.failure == Failure::kDegenerate ? "is degenerate"
+                     : v.failure == Failure::kDegenerate ? "is not reachable"
                      : v.failure == Failure::kWrench ? "is outside the wrench-feasible workspace"
                                                      : "cannot be checked";
   char where[160];
@@ -296,6 +297,7 @@ Status check_pose(const RobotModel& model, const Pose& pose, const PathCheckOpti
 
 Status check_path(const RobotModel& model, const PoseTrajectory& trajectory,
                   const PathCheckOptions& options, PathCheckSummary* summary) {
+  if (summary != nullptr) *summary = PathCheckSummary{};
   double reference = 0.0;
   if (Status s = validate_options(model, options, &reference); !s.ok()) return s;
   const double points =

@@ -140,7 +140,7 @@ TEST(CheckPose, NamesADegenerateCable) {
   p.position = mini.frame_anchors.col(4) - mini.platform_anchors.col(4);
   const Status s = check_pose(mini, p);
   EXPECT_EQ(s.code(), ErrorCode::kNumericalFailure);
-  EXPECT_TRUE(contains(s, "is degenerate: cable 5 is degenerate")) << s.to_string();
+  EXPECT_TRUE(contains(s, "is not reachable: cable 5 is degenerate")) << s.to_string();
 }
 
 TEST(CheckPath, RefusesAMoveOutOfTheWorkspaceNamingCableAndPoint) {

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "cdpr/calibration/winch.hpp"
+
 namespace cdpr {
 namespace {
 
@@ -140,6 +142,37 @@ bool SlewLimiter::done() const noexcept {
     if (command_[i] != target_[i] || velocity_[i] != 0.0) return false;
   }
   return true;
+}
+
+Status cable_count_limits(const RobotModel& model, const MotionLimits& limits,
+                          std::span<double> max_velocity, std::span<double> max_acceleration) {
+  if (Status s = limits.validate(); !s.ok()) return s;
+  const int m = model.num_cables();
+  const auto n = static_cast<std::size_t>(m);
+  if (m < 1 || m > kMaxSlewAxes || model.winches.size() != n ||
+      model.platform_anchors.cols() != m || max_velocity.size() != n ||
+      max_acceleration.size() != n) {
+    return Status::Error(ErrorCode::kInvalidArgument,
+                         "cable count limits: %d cables (1 to %d), %zu winches, outputs of %zu "
+                         "and %zu",
+                         m, kMaxSlewAxes, model.winches.size(), max_velocity.size(),
+                         max_acceleration.size());
+  }
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    const double radius = model.platform_anchors.col(i).norm();
+    const double counts_per_metre = 1.0 / winch_metres_per_count(model.winches[k]);
+    if (!positive_finite(counts_per_metre)) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "cable count limits: winch %d has no finite counts per metre", i + 1);
+    }
+    max_velocity[k] =
+        (limits.max_linear_velocity + radius * limits.max_angular_velocity) * counts_per_metre;
+    max_acceleration[k] =
+        (limits.max_linear_acceleration + radius * limits.max_angular_acceleration) *
+        counts_per_metre;
+  }
+  return Status::Ok();
 }
 
 }  // namespace cdpr

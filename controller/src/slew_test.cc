@@ -8,6 +8,9 @@
 #include <vector>
 
 #include "alloc_counter.hpp"
+#include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/winch.hpp"
+#include "testing/test_robots.hpp"
 
 namespace cdpr {
 namespace {
@@ -200,6 +203,46 @@ TEST(SlewLimiter, StepAllocatesNothing) {
   EXPECT_EQ(count.allocations(), 0u);
   EXPECT_TRUE(s.ok());
   EXPECT_TRUE(slew.done());
+}
+
+TEST(CableCountLimits, BoundTheCableRateOfTheTaskSpaceLimits) {
+  const RobotModel mini = testing::mini_robot();
+  const MotionLimits limits;
+  std::vector<double> v(8), a(8);
+  ASSERT_TRUE(cable_count_limits(mini, limits, v, a).ok());
+  // Sampled check: along a move within the limits, no cable's count changes faster than its
+  // limit (the cable rate is bounded by the anchor's speed).
+  Pose to;
+  to.position << 0.1, -0.05, 0.04;
+  to.rpy << 0.05, -0.04, 0.08;
+  auto move = PoseTrajectory::plan(Pose{}, to, limits);
+  ASSERT_TRUE(move.ok());
+  const double dt = 0.004;
+  KinematicsData prev(mini), now(mini);
+  Pose p;
+  move->sample(0.0, p);
+  ASSERT_TRUE(inverse_kinematics(mini, p, prev));
+  double largest_ratio = 0.0;
+  for (double t = dt; t <= move->duration() + dt; t += dt) {
+    move->sample(t, p);
+    ASSERT_TRUE(inverse_kinematics(mini, p, now));
+    for (int i = 0; i < 8; ++i) {
+      const double counts_rate =
+          std::abs(winch_counts_change(mini.winches[0], now.lengths(i) - prev.lengths(i))) / dt;
+      largest_ratio = std::max(largest_ratio, counts_rate / v[static_cast<std::size_t>(i)]);
+    }
+    std::swap(prev, now);
+  }
+  EXPECT_LE(largest_ratio, 1.0);
+  EXPECT_GT(largest_ratio, 0.3);  // and not absurdly loose
+  for (double x : a) EXPECT_GT(x, 0.0);
+  // Wrong output sizes and invalid limits are refused.
+  std::vector<double> short_out(4);
+  EXPECT_FALSE(cable_count_limits(mini, limits, short_out, a).ok());
+  MotionLimits bad;
+  bad.max_angular_velocity = 0.0;
+  EXPECT_NE(cable_count_limits(mini, bad, v, a).message().find("max_angular_velocity"),
+            std::string_view::npos);
 }
 
 }  // namespace

@@ -57,7 +57,7 @@ struct PathCheckOptions {
   std::optional<Eigen::AlignedBox3d> workspace_box;
 };
 
-// What a successful check saw (optional output).
+// What a check saw (optional output; reset at the start of each check).
 struct PathCheckSummary {
   int points = 0;  // poses checked
   // Smallest distance of a planned tension to its cable's hard limits f_min, f_max (N), and where.

@@ -21,6 +21,8 @@
 #include <array>
 #include <span>
 
+#include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/controller/trajectory.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr {
@@ -72,5 +74,16 @@ class SlewLimiter {
   std::array<double, kMaxSlewAxes> velocity_{};
   std::array<double, kMaxSlewAxes> target_{};
 };
+
+// Per-cable limits in encoder counts (counts/s, counts/s^2) equivalent to the task-space motion
+// limits, for slewing drive targets: a cable's length changes no faster than its platform anchor
+// moves, |dl/dt| <= v + |b_i| w (v, w: the linear and angular velocity limits, |b_i| the anchor's
+// distance from the platform origin), and the same bound is used for the acceleration (the terms
+// of the turning cable direction are left out: the slew moves in joint space, these are
+// equivalent rates, not a bound on the platform's acceleration). Converted with each winch's
+// counts per metre. kInvalidArgument for invalid limits, a model with more than kMaxSlewAxes
+// cables or output spans of another size.
+Status cable_count_limits(const RobotModel& model, const MotionLimits& limits,
+                          std::span<double> max_velocity, std::span<double> max_acceleration);
 
 }  // namespace cdpr
