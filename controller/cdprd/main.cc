@@ -10,9 +10,9 @@
 // GCC 12 reports a false "potential null pointer dereference" in std::string code that CLI11's
 // CLI::detail::split inlines at -O2; the warning is not about this file's code.
 #pragma GCC diagnostic ignored "-Wnull-dereference"
-#include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include <CLI/CLI.hpp>
 #include <atomic>
 #include <chrono>
 #include <csignal>
@@ -37,7 +37,9 @@ using namespace cdpr::controller;
 using json = nlohmann::json;
 
 std::atomic<bool> g_stop{false};
-void on_signal(int) { g_stop = true; }
+void on_signal(int) {
+  g_stop = true;
+}
 
 // The RT cycle: the daemon's cycle at the wake-up time of CLOCK_MONOTONIC.
 class Cycle final : public CycleHandler {
@@ -53,7 +55,9 @@ class Cycle final : public CycleHandler {
   Daemon& d_;
 };
 
-double us(std::chrono::nanoseconds d) { return static_cast<double>(d.count()) * 1e-3; }
+double us(std::chrono::nanoseconds d) {
+  return static_cast<double>(d.count()) * 1e-3;
+}
 
 json figures(const RtLoop& loop) {
   const CycleStatsSnapshot s = loop.stats();
@@ -108,8 +112,8 @@ int main(int argc, char** argv) {
     return 2;
   }
   const std::string ifname = cfg->can_interface.empty() ? network->interface : cfg->can_interface;
-  const auto period = cfg->realtime.sync_period.count() > 0 ? cfg->realtime.sync_period
-                                                             : network->sync_period;
+  const auto period =
+      cfg->realtime.sync_period.count() > 0 ? cfg->realtime.sync_period : network->sync_period;
 
   auto bus = can::SocketCanBus::open(ifname);
   if (!bus.ok()) {

@@ -1,9 +1,13 @@
 #include "cdpr/controller/daemon.hpp"
 
 #include <spdlog/spdlog.h>
+#include <sys/resource.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <thread>
 
@@ -742,6 +746,11 @@ void Daemon::finish_calibration(const std::string& outcome, const std::string& m
 }
 
 void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
+  // The worker yields to the RT loop and the supervisor (it computes for seconds when it
+  // identifies; on one CPU, e.g. inside user-mode-linux, it would otherwise delay the cycles).
+  if (::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), 10) != 0) {
+    spdlog::debug("calibration worker: setpriority: {}", std::strerror(errno));
+  }
   int id = 0;
   const Geometry* g;
   {
@@ -980,21 +989,21 @@ json Daemon::status() const {
     targets.push_back(s.target_counts[k]);
     actual.push_back(s.actual_counts[k]);
   }
-  j["rt"] = {{"mode", to_string(s.mode)},
-             {"cycle", s.cycle},
-             {"settled", s.settled},
-             {"commanded_pose", pose_json(s.pose())},
-             {"tensions_n", s.have_tensions ? tensions : json(nullptr)},
-             {"target_counts", targets},
-             {"actual_counts", actual},
-             {"largest_reference_step_counts", s.largest_reference_step},
-             {"largest_move_step_counts", s.largest_move_step},
-             // One cycle of the fastest normal cable motion (max_cable_speed), the bound a
-             // re-reference step must stay under.
-             {"one_cycle_motion_counts",
-              config_.motion.max_cable_speed *
-                  std::chrono::duration<double>(network_.sync_period).count() /
-                  winch_metres_per_count(active_->model.winches[0])}};
+  j["rt"] = {
+      {"mode", to_string(s.mode)},
+      {"cycle", s.cycle},
+      {"settled", s.settled},
+      {"commanded_pose", pose_json(s.pose())},
+      {"tensions_n", s.have_tensions ? tensions : json(nullptr)},
+      {"target_counts", targets},
+      {"actual_counts", actual},
+      {"largest_reference_step_counts", s.largest_reference_step},
+      {"largest_move_step_counts", s.largest_move_step},
+      // One cycle of the fastest normal cable motion (max_cable_speed), the bound a
+      // re-reference step must stay under.
+      {"one_cycle_motion_counts", config_.motion.max_cable_speed *
+                                      std::chrono::duration<double>(network_.sync_period).count() /
+                                      winch_metres_per_count(active_->model.winches[0])}};
   j["loop"] = loop_figures_;
   if (calibration_) {
     j["calibration"] = {{"id", calibration_->id},

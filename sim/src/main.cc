@@ -16,16 +16,16 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <vector>
 #include <csignal>
 #include <cstdio>
 #include <memory>
 #include <string>
 #include <thread>
+#include <vector>
 
-#include "cdpr/can/socketcan_bus.hpp"
 #include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "cdpr/can/socketcan_bus.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/modbus/register_map.hpp"
@@ -39,9 +39,13 @@
 namespace {
 
 std::atomic<bool> g_stop{false};
+std::atomic<bool> g_report_pose{false};
 
 void on_signal(int) {
   g_stop = true;
+}
+void on_report(int) {
+  g_report_pose = true;
 }
 
 int fail(const std::string& what) {
@@ -110,7 +114,8 @@ int main(int argc, char** argv) {
     for (const std::string& path : evaluate) {
       auto model = cdpr::config::load_robot_config(path);
       if (!model.ok()) return fail(model.status().to_string());
-      if (model->num_cables() != true_robot.num_cables()) return fail(path + ": cable count differs");
+      if (model->num_cables() != true_robot.num_cables())
+        return fail(path + ": cable count differs");
       double sum = 0.0, worst = 0.0;
       for (int i = 0; i < true_robot.num_cables(); ++i) {
         const double d = (model->frame_anchors.col(i) - true_robot.frame_anchors.col(i)).norm();
@@ -249,6 +254,8 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
+  // SIGUSR1: print where the true platform is (tests compare it with a commanded target).
+  std::signal(SIGUSR1, on_report);
 
   const auto start = std::chrono::steady_clock::now();
   auto mono = [] {
@@ -278,6 +285,12 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "cdpr-sim: %s\n", st.to_string().c_str());
         continue;
       }
+    }
+    if (g_report_pose.exchange(false)) {
+      const cdpr::Pose& p = physics->state().pose;
+      std::printf("cdpr-sim: t = %.3f s: true platform pose %.9f %.9f %.9f %.9f %.9f %.9f\n", t,
+                  p.position.x(), p.position.y(), p.position.z(), p.rpy.x(), p.rpy.y(), p.rpy.z());
+      std::fflush(stdout);
     }
     if (laser) {
       const cdpr::sim::LaserChannel l = physics->state().lasers.front();

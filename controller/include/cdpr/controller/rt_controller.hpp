@@ -159,7 +159,8 @@ class RtController {
   void set_overruns(std::uint64_t n) noexcept { overruns_ = n; }
 
  private:
-  RtController(canopen::Master& master, const Geometry& initial, const RtControllerOptions& options);
+  RtController(canopen::Master& master, const Geometry& initial,
+               const RtControllerOptions& options);
   void take_command(canopen::Timestamp now) noexcept;
   void set_fault(const RtFault& f) noexcept;
   void watch(canopen::Timestamp now) noexcept;
