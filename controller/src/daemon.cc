@@ -657,7 +657,10 @@ Status Daemon::regulate_tensions(int pose_index) {
           c.routing_length +
           std::max(0.05, winch_counts_to_length<double>(
                              g->model.winches[k], r.average_counts[k] - rt_->encoder_offsets()[k]));
-      const double dl = -(want + (want > f ? 1.5 : -1.5) * band - f) * length / ea;
+      // A slack cable (no tension) has an unknown slack length to take up: the step grows with
+      // each iteration.
+      const double dl =
+          -(want + (want > f ? 1.5 : -1.5) * band - f) * length / ea * (1 << iteration);
       trim[k] += winch_counts_change<double>(g->model.winches[k], dl);
     }
     if (inside) return Status::Ok();
@@ -673,7 +676,7 @@ Status Daemon::regulate_tensions(int pose_index) {
     if (Status s = hold_still(true); !s.ok()) return s;
   }
   spdlog::warn(
-      "pose {}: a tension is still outside [f_min + {:.1f}, f_max - {:.1f}] N after 6 "
+      "pose {}: a tension is still outside [f_min - {:.1f}, f_max + {:.1f}] N after 6 "
       "regulation steps",
       pose_index, band, band);
   return Status::Ok();

@@ -114,7 +114,18 @@ class VirtualCell {
     const can::Timestamp next = clock.now() + network.sync_period;
     while (clock.now() < next) idle();
     if (++cycles_ % 5 == 0) daemon->service();
-    if (daemon->state() == DaemonState::kIdentifying) std::this_thread::sleep_for(2ms);
+    if (paced_) {
+      std::this_thread::sleep_until(wall_origin_ + (clock.now() - robot_origin_));
+    } else if (daemon->state() == DaemonState::kIdentifying) {
+      std::this_thread::sleep_for(2ms);
+    }
+  }
+  // Paced: robot time runs with the wall clock (from now on), so what the daemon's threads do in
+  // real time (laser readings, the identification) costs the robot time it would cost on a robot.
+  void pace(bool on) {
+    paced_ = on;
+    wall_origin_ = std::chrono::steady_clock::now();
+    robot_origin_ = clock.now();
   }
 
   // Cycles until `done` or `max_s` of robot time; returns whether done.
@@ -239,6 +250,9 @@ class VirtualCell {
   std::mutex events_mu_;
   std::vector<nlohmann::json> events_;
   std::uint64_t cycles_ = 0;
+  bool paced_ = false;
+  std::chrono::steady_clock::time_point wall_origin_;
+  can::Timestamp robot_origin_{0};
 };
 
 }  // namespace cdpr::controller::testing
