@@ -4,6 +4,7 @@
 #include <linux/capability.h>
 #include <sched.h>
 #include <sys/mman.h>
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <sys/wait.h>
@@ -326,6 +327,7 @@ TEST(RtLoop, RunsOnTheMonotonicClockUntilStopped) {
 struct ChildSetup {
   RtSetup setup;
   int policy = -1;  // sched_getscheduler in the child after the set-up
+  long slack = -1;  // PR_GET_TIMERSLACK in the child after the set-up
   std::string all_warnings;
 };
 
@@ -342,7 +344,8 @@ ChildSetup run_in_child(const RtOptions& options, Before before) {
     std::ostringstream out;
     out << r.fifo << ' ' << r.priority << ' ' << r.cpu << ' ' << r.memory_locked << ' '
         << r.stack_prefaulted << ' ' << r.heap_prefaulted << ' ' << r.user_mode_linux << ' '
-        << sched_getscheduler(0) << '\n';
+        << sched_getscheduler(0) << ' ' << r.timer_slack_ns << ' '
+        << prctl(PR_GET_TIMERSLACK, 0UL, 0UL, 0UL, 0UL) << '\n';
     for (const auto& w : r.warnings) out << w << '\n';
     const std::string s = out.str();
     std::size_t off = 0;
@@ -365,7 +368,8 @@ ChildSetup run_in_child(const RtOptions& options, Before before) {
   ChildSetup c;
   std::istringstream in(text);
   in >> c.setup.fifo >> c.setup.priority >> c.setup.cpu >> c.setup.memory_locked >>
-      c.setup.stack_prefaulted >> c.setup.heap_prefaulted >> c.setup.user_mode_linux >> c.policy;
+      c.setup.stack_prefaulted >> c.setup.heap_prefaulted >> c.setup.user_mode_linux >> c.policy >>
+      c.setup.timer_slack_ns >> c.slack;
   std::string line;
   std::getline(in, line);
   while (std::getline(in, line)) {
@@ -422,6 +426,10 @@ TEST(PrepareRealtime, ReportsExactlyWhatItObtained) {
   const ChildSetup c = run_in_child(o, [] {});
   const RtSetup& r = c.setup;
   EXPECT_EQ(r.fifo, c.policy == SCHED_FIFO);
+  // 1 ns as set, or 0 where the kernel gives SCHED_FIFO threads no slack at all.
+  EXPECT_GE(r.timer_slack_ns, 0);
+  EXPECT_LE(r.timer_slack_ns, 1);
+  EXPECT_EQ(c.slack, r.timer_slack_ns);
   if (r.fifo) {
     EXPECT_EQ(r.priority, o.priority);
   } else {
@@ -464,6 +472,8 @@ TEST(PrepareRealtime, NormalSchedulerAskedForGivesNoWarning) {
   RtOptions o = quiet_options();
   const ChildSetup c = run_in_child(o, [] {});
   EXPECT_FALSE(c.setup.fifo);
+  EXPECT_EQ(c.slack, 1);  // not the default 50 us
+  EXPECT_EQ(c.setup.timer_slack_ns, 1);
   EXPECT_TRUE(c.setup.warnings.empty() || c.setup.user_mode_linux) << c.all_warnings;
   EXPECT_EQ(c.setup.stack_prefaulted, o.prefault_stack_bytes);
 }
