@@ -428,6 +428,8 @@ void RtLoop::run() noexcept {
   board_.publish(timer.stats());
   set_up_.store(true, std::memory_order_release);
   set_up_.notify_all();
+  // cycles() keeps counting across a stop() and start(): the watchdog sees progress only.
+  const std::uint64_t base = cycles_.load(std::memory_order_relaxed);
   timer.start();
   while (!stop_.load(std::memory_order_acquire)) {
     const Wake w = timer.wait_next();
@@ -435,7 +437,7 @@ void RtLoop::run() noexcept {
     handler_.cycle(w);
     timer.end_cycle();
     board_.publish(timer.stats());
-    cycles_.store(timer.stats().cycles(), std::memory_order_release);
+    cycles_.store(base + timer.stats().cycles(), std::memory_order_release);
   }
   running_.store(false, std::memory_order_release);
 }

@@ -319,6 +319,18 @@ TEST(RtLoop, RunsOnTheMonotonicClockUntilStopped) {
   EXPECT_LE(nanoseconds{handler.last_nominal.load()}, now);
   EXPECT_GT(nanoseconds{handler.last_nominal.load()}, now - std::chrono::seconds(10));
   loop.stop();  // idempotent
+
+  // A second run: the statistics start again, the cycle counter keeps counting.
+  const std::uint64_t first_run = loop.cycles();
+  ASSERT_TRUE(loop.start().ok());
+  const auto t1 = std::chrono::steady_clock::now();
+  while (loop.stats().cycles < 3 &&
+         std::chrono::steady_clock::now() - t1 < std::chrono::seconds(10)) {
+    std::this_thread::sleep_for(milliseconds{2});
+  }
+  loop.stop();
+  EXPECT_EQ(loop.cycles(), first_run + loop.stats().cycles);
+  EXPECT_EQ(loop.cycles(), handler.count.load());
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -212,9 +212,10 @@ class RtLoop {
   bool running() const noexcept { return running_.load(std::memory_order_acquire); }
   const RtSetup& setup() const noexcept { return setup_; }
   const RtOptions& options() const noexcept { return options_; }
-  // Lock-free, any thread.
+  // Lock-free, any thread. Statistics of the current run (since the last start()).
   CycleStatsSnapshot stats() const noexcept { return board_.read(); }
-  // Completed cycles (for the watchdog: feed it only while this advances). Any thread.
+  // Completed cycles over every run of this object (for the watchdog: feed it only while this
+  // advances). Any thread.
   std::uint64_t cycles() const noexcept { return cycles_.load(std::memory_order_acquire); }
 
  private:
