@@ -1,5 +1,6 @@
 #include "cdpr/controller/cycle_stats.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstdio>
@@ -59,7 +60,9 @@ nanoseconds DurationHistogram::bucket_upper(std::size_t i) noexcept {
 
 void DurationHistogram::record(nanoseconds d) noexcept {
   const std::uint64_t v = to_ns(d);
-  ++buckets_[bucket_index(d)];
+  const std::size_t i = bucket_index(d);
+  ++buckets_[i];
+  ++groups_[i / kSubBuckets];
   if (count_ == 0 || v < min_ns_) min_ns_ = v;
   if (count_ == 0 || v > max_ns_) max_ns_ = v;
   ++count_;
@@ -80,17 +83,25 @@ nanoseconds DurationHistogram::mean() const noexcept {
   return count_ == 0 ? nanoseconds{0} : nanoseconds{static_cast<std::int64_t>(sum_ns_ / count_)};
 }
 
+std::size_t DurationHistogram::bucket_of_rank(std::uint64_t rank) const noexcept {
+  std::uint64_t seen = 0;
+  std::size_t g = 0;
+  while (g + 1 < kGroups && seen + groups_[g] < rank) seen += groups_[g++];
+  std::size_t i = g * kSubBuckets;
+  const std::size_t end = std::min(i + kSubBuckets, kBuckets);
+  for (; i + 1 < end; ++i) {
+    seen += buckets_[i];
+    if (seen >= rank) return i;
+  }
+  return i;
+}
+
 nanoseconds DurationHistogram::quantile(double q) const noexcept {
   if (count_ == 0) return nanoseconds{0};
   if (!(q > 0.0)) return min();
   if (q >= 1.0) return max();
   const std::uint64_t rank = rank_of(static_cast<std::uint64_t>(std::llround(q * 1e6)), count_);
-  std::uint64_t seen = 0;
-  for (std::size_t i = 0; i < kBuckets; ++i) {
-    seen += buckets_[i];
-    if (seen >= rank) return clamp_to_seen(bucket_upper(i), min(), max());
-  }
-  return max();
+  return clamp_to_seen(bucket_upper(bucket_of_rank(rank)), min(), max());
 }
 
 DurationSummary summarize(const DurationHistogram& h) noexcept {
@@ -100,17 +111,12 @@ DurationSummary summarize(const DurationHistogram& h) noexcept {
   s.max = h.max();
   s.mean = h.mean();
   if (s.count == 0) return s;
-  // The three percentiles in one pass over the buckets (same definition as quantile()).
-  constexpr std::array<std::uint64_t, 3> kPpm{500'000, 990'000, 999'000};
-  std::array<nanoseconds*, 3> out{&s.p50, &s.p99, &s.p999};
-  std::size_t next = 0;
-  std::uint64_t seen = 0;
-  for (std::size_t i = 0; i < DurationHistogram::kBuckets && next < kPpm.size(); ++i) {
-    seen += h.bucket_count(i);
-    while (next < kPpm.size() && seen >= rank_of(kPpm[next], s.count)) {
-      *out[next++] = clamp_to_seen(DurationHistogram::bucket_upper(i), s.min, s.max);
-    }
-  }
+  s.p50 = clamp_to_seen(
+      DurationHistogram::bucket_upper(h.bucket_of_rank(rank_of(500'000, s.count))), s.min, s.max);
+  s.p99 = clamp_to_seen(
+      DurationHistogram::bucket_upper(h.bucket_of_rank(rank_of(990'000, s.count))), s.min, s.max);
+  s.p999 = clamp_to_seen(
+      DurationHistogram::bucket_upper(h.bucket_of_rank(rank_of(999'000, s.count))), s.min, s.max);
   return s;
 }
 

@@ -4,6 +4,7 @@
 #include <linux/capability.h>
 #include <sched.h>
 #include <sys/mman.h>
+#include <sys/prctl.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
 #include <sys/wait.h>
@@ -318,6 +319,18 @@ TEST(RtLoop, RunsOnTheMonotonicClockUntilStopped) {
   EXPECT_LE(nanoseconds{handler.last_nominal.load()}, now);
   EXPECT_GT(nanoseconds{handler.last_nominal.load()}, now - std::chrono::seconds(10));
   loop.stop();  // idempotent
+
+  // A second run: the statistics start again, the cycle counter keeps counting.
+  const std::uint64_t first_run = loop.cycles();
+  ASSERT_TRUE(loop.start().ok());
+  const auto t1 = std::chrono::steady_clock::now();
+  while (loop.stats().cycles < 3 &&
+         std::chrono::steady_clock::now() - t1 < std::chrono::seconds(10)) {
+    std::this_thread::sleep_for(milliseconds{2});
+  }
+  loop.stop();
+  EXPECT_EQ(loop.cycles(), first_run + loop.stats().cycles);
+  EXPECT_EQ(loop.cycles(), handler.count.load());
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -326,6 +339,7 @@ TEST(RtLoop, RunsOnTheMonotonicClockUntilStopped) {
 struct ChildSetup {
   RtSetup setup;
   int policy = -1;  // sched_getscheduler in the child after the set-up
+  long slack = -1;  // PR_GET_TIMERSLACK in the child after the set-up
   std::string all_warnings;
 };
 
@@ -342,7 +356,8 @@ ChildSetup run_in_child(const RtOptions& options, Before before) {
     std::ostringstream out;
     out << r.fifo << ' ' << r.priority << ' ' << r.cpu << ' ' << r.memory_locked << ' '
         << r.stack_prefaulted << ' ' << r.heap_prefaulted << ' ' << r.user_mode_linux << ' '
-        << sched_getscheduler(0) << '\n';
+        << sched_getscheduler(0) << ' ' << r.timer_slack_ns << ' '
+        << prctl(PR_GET_TIMERSLACK, 0UL, 0UL, 0UL, 0UL) << '\n';
     for (const auto& w : r.warnings) out << w << '\n';
     const std::string s = out.str();
     std::size_t off = 0;
@@ -365,7 +380,8 @@ ChildSetup run_in_child(const RtOptions& options, Before before) {
   ChildSetup c;
   std::istringstream in(text);
   in >> c.setup.fifo >> c.setup.priority >> c.setup.cpu >> c.setup.memory_locked >>
-      c.setup.stack_prefaulted >> c.setup.heap_prefaulted >> c.setup.user_mode_linux >> c.policy;
+      c.setup.stack_prefaulted >> c.setup.heap_prefaulted >> c.setup.user_mode_linux >> c.policy >>
+      c.setup.timer_slack_ns >> c.slack;
   std::string line;
   std::getline(in, line);
   while (std::getline(in, line)) {
@@ -422,6 +438,10 @@ TEST(PrepareRealtime, ReportsExactlyWhatItObtained) {
   const ChildSetup c = run_in_child(o, [] {});
   const RtSetup& r = c.setup;
   EXPECT_EQ(r.fifo, c.policy == SCHED_FIFO);
+  // 1 ns as set, or 0 where the kernel gives SCHED_FIFO threads no slack at all.
+  EXPECT_GE(r.timer_slack_ns, 0);
+  EXPECT_LE(r.timer_slack_ns, 1);
+  EXPECT_EQ(c.slack, r.timer_slack_ns);
   if (r.fifo) {
     EXPECT_EQ(r.priority, o.priority);
   } else {
@@ -464,6 +484,8 @@ TEST(PrepareRealtime, NormalSchedulerAskedForGivesNoWarning) {
   RtOptions o = quiet_options();
   const ChildSetup c = run_in_child(o, [] {});
   EXPECT_FALSE(c.setup.fifo);
+  EXPECT_EQ(c.slack, 1);  // not the default 50 us
+  EXPECT_EQ(c.setup.timer_slack_ns, 1);
   EXPECT_TRUE(c.setup.warnings.empty() || c.setup.user_mode_linux) << c.all_warnings;
   EXPECT_EQ(c.setup.stack_prefaulted, o.prefault_stack_bytes);
 }

@@ -66,4 +66,15 @@ std::optional<std::chrono::microseconds> SystemdNotifier::watchdog_interval() {
   return std::nullopt;
 }
 
+Result<bool> WatchdogFeeder::feed_if_advanced(std::uint64_t progress) {
+  if (progress <= last_) {
+    ++stalled_;
+    return false;
+  }
+  last_ = progress;
+  stalled_ = 0;
+  if (Status st = notifier_.watchdog(); !st) return st;
+  return true;
+}
+
 }  // namespace cdpr::controller

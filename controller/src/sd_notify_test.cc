@@ -132,5 +132,29 @@ TEST(SystemdNotifier, WatchdogIntervalFollowsWatchdogUsecForThisProcess) {
   unsetenv("WATCHDOG_PID");
 }
 
+TEST(WatchdogFeeder, FeedsOnlyWhileTheCounterAdvances) {
+  NotifySocket sock;
+  ASSERT_TRUE(sock.ok());
+  SystemdNotifier n;
+  WatchdogFeeder feeder(n);
+  // The loop has not cycled yet: nothing is sent.
+  Result<bool> r = feeder.feed_if_advanced(0);
+  ASSERT_TRUE(r.ok());
+  EXPECT_FALSE(*r);
+  EXPECT_TRUE(sock.nothing_pending());
+  r = feeder.feed_if_advanced(250);
+  ASSERT_TRUE(r.ok());
+  EXPECT_TRUE(*r);
+  EXPECT_EQ(sock.receive(), "WATCHDOG=1");
+  // Stuck loop: the counter does not move, the watchdog is not fed.
+  EXPECT_FALSE(*feeder.feed_if_advanced(250));
+  EXPECT_FALSE(*feeder.feed_if_advanced(250));
+  EXPECT_EQ(feeder.stalled_checks(), 2u);
+  EXPECT_TRUE(sock.nothing_pending());
+  EXPECT_TRUE(*feeder.feed_if_advanced(251));
+  EXPECT_EQ(sock.receive(), "WATCHDOG=1");
+  EXPECT_EQ(feeder.stalled_checks(), 0u);
+}
+
 }  // namespace
 }  // namespace cdpr::controller

@@ -50,6 +50,9 @@ class DurationHistogram {
   std::chrono::nanoseconds quantile(double q) const noexcept;
 
   std::uint64_t bucket_count(std::size_t i) const noexcept { return buckets_[i]; }
+  // Index of the bucket that holds the rank-th smallest value (1 <= rank <= count()). Scans the
+  // per-octave totals, then one octave: at most 21 + 32 steps.
+  std::size_t bucket_of_rank(std::uint64_t rank) const noexcept;
   // Bucket i holds values in [bucket_lower(i), bucket_upper(i)); the last one has no upper edge
   // (bucket_upper returns nanoseconds::max()).
   static std::chrono::nanoseconds bucket_lower(std::size_t i) noexcept;
@@ -57,7 +60,11 @@ class DurationHistogram {
   static std::size_t bucket_index(std::chrono::nanoseconds d) noexcept;
 
  private:
+  // Buckets in groups of kSubBuckets (the linear range, then one group per octave); the last
+  // group is the overflow bucket alone.
+  static constexpr std::size_t kGroups = (kBuckets + kSubBuckets - 1) / kSubBuckets;
   std::array<std::uint64_t, kBuckets> buckets_{};
+  std::array<std::uint64_t, kGroups> groups_{};
   std::uint64_t count_ = 0;
   std::uint64_t sum_ns_ = 0;
   std::uint64_t min_ns_ = 0;

@@ -15,6 +15,7 @@
 #pragma once
 
 #include <chrono>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -50,6 +51,26 @@ class SystemdNotifier {
  private:
   // STATUS= must be one line: newlines become spaces.
   static std::string one_line(std::string_view text);
+};
+
+// Feeds the watchdog only while a progress counter advances (RtLoop::cycles()): a loop that
+// stopped cycling stops the feeding, and systemd restarts the service after WatchdogSec=.
+//
+//   WatchdogFeeder feeder(notifier);
+//   every watchdog_interval() / 2 on a non-RT thread: feeder.feed_if_advanced(loop.cycles());
+class WatchdogFeeder {
+ public:
+  explicit WatchdogFeeder(SystemdNotifier& notifier) : notifier_(notifier) {}
+  // Sends WATCHDOG=1 when `progress` is larger than at the previous call (and than 0 at the
+  // first). Returns whether it was sent; an error when sending failed.
+  Result<bool> feed_if_advanced(std::uint64_t progress);
+  // Calls in a row that found no progress.
+  std::uint64_t stalled_checks() const { return stalled_; }
+
+ private:
+  SystemdNotifier& notifier_;
+  std::uint64_t last_ = 0;
+  std::uint64_t stalled_ = 0;
 };
 
 }  // namespace cdpr::controller
