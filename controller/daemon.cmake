@@ -15,9 +15,11 @@ target_link_libraries(cdpr_daemon
 
 cdpr_add_gtest(NAME daemon_config_test SOURCES ${_d}/src/daemon_config_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.cc LIBS cdpr_daemon)
-if(TARGET daemon_state_store_test)
-  target_compile_definitions(daemon_state_store_test PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
-endif()
+foreach(t daemon_state_store_test daemon_config_test)
+  if(TARGET ${t})
+    target_compile_definitions(${t} PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
+  endif()
+endforeach()
 
 add_executable(cdprd ${_d}/cdprd/main.cc)
 target_link_libraries(cdprd PRIVATE cdpr_daemon cdpr_rt cdpr_control CLI11::CLI11 spdlog::spdlog

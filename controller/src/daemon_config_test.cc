@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include "cdpr/canopen/config.hpp"
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/modbus/laser_sensor.hpp"
+
 namespace cdpr::controller {
 namespace {
 
@@ -61,6 +65,18 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
   auto bad_yaml = parse_daemon_config("robot: [unclosed\n", "d.yaml");
   ASSERT_FALSE(bad_yaml.ok());
   EXPECT_NE(bad_yaml.status().to_string().find("d.yaml:"), std::string::npos);
+}
+
+TEST(DaemonConfig, TheShippedRobotPcConfigAndTheFilesItNamesLoad) {
+  auto c = load_daemon_config(CDPR_SOURCE_DIR "/config/cdprd.yaml");
+  ASSERT_TRUE(c.ok()) << c.status().to_string();
+  EXPECT_TRUE(config::load_robot_config(c->robot).ok()) << c->robot;
+  auto net = canopen::load_config(c->canopen);
+  EXPECT_TRUE(net.ok()) << net.status().to_string();
+  auto laser = modbus::load_laser_config(c->laser);
+  EXPECT_TRUE(laser.ok()) << laser.status().to_string();
+  EXPECT_EQ(c->control.socket, "/run/cdpr/cdprd.sock");
+  EXPECT_EQ(c->state_directory, "/var/lib/cdpr");
 }
 
 }  // namespace
