@@ -1,7 +1,7 @@
 // daemon_bench: cdprd's RT cycle and a full calibration, in one process with the virtual robot
 // (tests/daemon/virtual_cell.hpp: in-process CAN bus, manual clock, laser over loopback TCP).
 //
-//   daemon_bench [--cycles N]
+//   daemon_bench [--cycles N] [--calibration-only] [--measuring "{poses: 25, ...}"]
 //
 // Prints (figures, not assertions):
 // - the compute time of Daemon::cycle (tension QP + compensated IK with pulleys for 8 cables,
@@ -76,8 +76,14 @@ void print(const char* what, const Percentiles& p, double baseline_p50) {
 
 int main(int argc, char** argv) {
   int cycles = 20000;
-  for (int i = 1; i + 1 < argc; ++i) {
-    if (std::string(argv[i]) == "--cycles") cycles = std::max(100, std::atoi(argv[i + 1]));
+  testing::VirtualCell::Settings settings;
+  bool calibrate_only = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--cycles" && i + 1 < argc) cycles = std::max(100, std::atoi(argv[++i]));
+    // The daemon's measuring group (a YAML flow mapping), e.g. "{poses: 25, tension_band: 0}".
+    if (a == "--measuring" && i + 1 < argc) settings.measuring = argv[++i];
+    if (a == "--calibration-only") calibrate_only = true;
   }
   const std::filesystem::path dir =
       std::filesystem::temp_directory_path() / ("cdpr-daemon-bench-" + std::to_string(::getpid()));
@@ -90,7 +96,7 @@ int main(int argc, char** argv) {
   }
   testing::VirtualCell& cell = **cell_r;
   const long rss0 = status_kib("VmRSS:");
-  if (Status s = cell.start_daemon(); !s.ok()) {
+  if (Status s = cell.start_daemon(settings); !s.ok()) {
     std::fprintf(stderr, "daemon_bench: %s\n", s.to_string().c_str());
     return 1;
   }
@@ -101,6 +107,7 @@ int main(int argc, char** argv) {
       "daemon_bench: MINI (8 cables, swivel pulleys, Hooke elongation compensation), 8 CiA "
       "402 drives + 1 force node, SYNC %.0f ms\n",
       std::chrono::duration<double, std::milli>(cell.network.sync_period).count());
+  if (calibrate_only) cycles = 100;
   std::printf("RT cycle compute time, %d cycles each:\n", cycles);
   const Percentiles master =
       percentiles(time_cycles(cell, cycles, [&] { d.master().cycle(cell.clock.now()); }));

@@ -56,8 +56,8 @@ class DaemonNative : public ::testing::Test {
     fs::remove_all(dir_);
   }
 
-  void start_daemon(const std::string& extra = "") {
-    const Status s = cell_->start_daemon(extra);
+  void start_daemon(const testing::VirtualCell::Settings& settings = {}) {
+    const Status s = cell_->start_daemon(settings);
     ASSERT_TRUE(s.ok()) << s.to_string();
   }
   Daemon& daemon() { return *cell_->daemon; }
@@ -71,6 +71,16 @@ class DaemonNative : public ::testing::Test {
     auto id = cell_->calibrate();
     EXPECT_TRUE(id.ok()) << id.status().to_string();
     return id.ok() ? *id : 0;
+  }
+  // A short calibration: 12 poses, no mismatch locator.
+  static testing::VirtualCell::Settings quick(const std::string& acceptance = "{mode: manual}") {
+    testing::VirtualCell::Settings s;
+    s.measuring =
+        "{poses: 12, laser_samples: 3, laser_interval_s: 0.002, average_cycles: 25, "
+        "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4}";
+    s.identification = "{diagnose: false}";
+    s.acceptance = acceptance;
+    return s;
   }
   // One cycle's normal motion: the largest target change per cycle at the configured cable speed.
   double one_cycle_counts() {
@@ -190,9 +200,7 @@ TEST_F(DaemonNative, AbortHoldsTheRobotAndKeepsTheGeometry) {
 }
 
 TEST_F(DaemonNative, RejectKeepsTheGeometryRestartKeepsTheAcceptedOneAndRollbackIsBumpless) {
-  start_daemon(
-      "measuring: {poses: 12, laser_samples: 3, laser_interval_s: 0.002}\n"
-      "identification: {diagnose: false}\n");
+  start_daemon(quick());
   const int v1 = daemon().status()["geometry_version"].get<int>();
   ASSERT_GT(calibrate(), 0);
   ASSERT_TRUE(request("reject").ok);
@@ -210,9 +218,7 @@ TEST_F(DaemonNative, RejectKeepsTheGeometryRestartKeepsTheAcceptedOneAndRollback
   // Restart: a new daemon on the same state directory comes back with version v2, where the
   // platform is, without a jump.
   const RtSnapshot old = daemon().rt().snapshot();
-  start_daemon(
-      "measuring: {poses: 12, laser_samples: 3, laser_interval_s: 0.002}\n"
-      "identification: {diagnose: false}\n");
+  start_daemon(quick());
   EXPECT_EQ(daemon().status()["geometry_version"], v2);
   const RtSnapshot now = daemon().rt().snapshot();
   EXPECT_LT((now.pose().position - old.pose().position).norm(), 0.2e-3);
@@ -230,6 +236,29 @@ TEST_F(DaemonNative, RejectKeepsTheGeometryRestartKeepsTheAcceptedOneAndRollback
   const Reply diff = request("geometry_diff", {{"from", v1}, {"to", v2}});
   ASSERT_TRUE(diff.ok) << diff.message;
   EXPECT_GT(diff.result["largest_change_m"].get<double>(), 0.0);
+}
+
+TEST_F(DaemonNative, AutoAcceptanceAppliesACalibrationWhoseGatesPassAndWaitsOtherwise) {
+  // Gates an honest 12-pose calibration passes: applied without an operator.
+  start_daemon(quick("{mode: auto, min_fit_p_value: 0, max_predicted_position_error_m: 1}"));
+  ASSERT_TRUE(request("calibrate").ok);
+  ASSERT_TRUE(run_until(
+      [&] {
+        return daemon().state() == DaemonState::kHolding &&
+               daemon().status()["geometry_version"] == 2;
+      },
+      600.0))
+      << daemon().status().dump(2);
+  EXPECT_TRUE(cell_->saw_event("calibration", "outcome", "applied"));
+  EXPECT_LE(daemon().rt().snapshot().largest_reference_step, one_cycle_counts());
+
+  // A gate that fails (the anchors move by centimetres, the limit is 1 mm): it waits.
+  start_daemon(quick("{mode: auto, min_fit_p_value: 0, max_anchor_change_m: 0.000001}"));
+  ASSERT_GT(calibrate(), 0);
+  const json st = daemon().status();
+  EXPECT_EQ(st["state"], "awaiting_acceptance");
+  EXPECT_FALSE(st["calibration"]["gates_passed"].get<bool>());
+  EXPECT_EQ(st["geometry_version"], 2);
 }
 
 TEST_F(DaemonNative, AnOperatorQuickStopFaultsAndFaultResetHoldsWhereThePlatformStopped) {

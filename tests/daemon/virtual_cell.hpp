@@ -33,6 +33,16 @@ namespace cdpr::controller::testing {
 
 using namespace std::chrono_literals;
 
+// The daemon configuration groups a cell starts with (YAML flow mappings).
+struct CellSettings {
+  std::string measuring =
+      "{poses: 25, laser_samples: 5, laser_interval_s: 0.002, average_cycles: 25, "
+      "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 1}";
+  std::string identification = "{bootstrap: 30}";
+  std::string acceptance = "{mode: manual}";
+  std::string extra;
+};
+
 class VirtualCell {
  public:
   // `source` is the project's root (config/), `dir` a scratch folder for the state directory.
@@ -53,8 +63,10 @@ class VirtualCell {
   VirtualCell(const VirtualCell&) = delete;
   VirtualCell& operator=(const VirtualCell&) = delete;
 
-  // The daemon's configuration: MINI, the state directory in `dir`, plus `extra` YAML lines.
-  std::string config_text(const std::string& extra = "") const {
+  // The daemon's configuration: MINI, the state directory in `dir`. Each group can be replaced
+  // (a flow mapping); `extra` adds other top-level groups.
+  using Settings = CellSettings;
+  std::string config_text(const Settings& s) const {
     return "robot: " + source_ + "/config/mini.yaml\n" + "canopen: " + source_ +
            "/config/canopen-mini.yaml\n" + "state_directory: " + (dir_ / "state").string() +
            "\n"
@@ -63,20 +75,18 @@ class VirtualCell {
            "motion: {max_linear_velocity: 0.15, max_linear_acceleration: 0.5, "
            "max_linear_jerk: 5, max_angular_velocity: 0.5, max_angular_acceleration: 2, "
            "max_angular_jerk: 20}\n"
-           "measuring: {poses: 25, laser_samples: 5, laser_interval_s: 0.002, average_cycles: "
-           "25, noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 1}\n"
-           "identification: {bootstrap: 30}\n" +
-           extra;
+           "measuring: " + s.measuring + "\nidentification: " + s.identification +
+           "\nacceptance: " + s.acceptance + "\n" + s.extra;
   }
 
   // Creates and starts the daemon (the state directory is kept between calls: a restart), then
   // cycles until it holds.
-  Status start_daemon(const std::string& extra = "") {
+  Status start_daemon(const Settings& settings = {}) {
     if (daemon) {
       daemon->shutdown();
       daemon.reset();
     }
-    auto cfg = parse_daemon_config(config_text(extra), (dir_ / "cdprd.yaml").string());
+    auto cfg = parse_daemon_config(config_text(settings), (dir_ / "cdprd.yaml").string());
     if (!cfg.ok()) return cfg.status();
     config = *cfg;
     DaemonIo io;
