@@ -8,10 +8,6 @@
 
 namespace cdpr::can {
 
-Timestamp SteadyClock::now() const {
-  return std::chrono::duration_cast<Timestamp>(std::chrono::steady_clock::now().time_since_epoch());
-}
-
 double bus_load(const LoadSample& a, const LoadSample& b) {
   const auto window = b.time - a.time;
   if (window.count() <= 0) return 0.0;
