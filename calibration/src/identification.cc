@@ -367,7 +367,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
   const int m = robot.num_cables();
   const int nl = static_cast<int>(robot.lasers.size());
   const int n = set.num_poses();
-  if (Status st = validate(set, robot); !st.ok()) return st;
+  CDPR_RETURN_IF_ERROR(validate(set, robot));
   if (m < 1) return Status(ErrorCode::kInvalidArgument, "identification: the robot has no cables");
   if (static_cast<int>(robot.pulleys.size()) != m || static_cast<int>(robot.cables.size()) != m ||
       static_cast<int>(robot.force_sensors.size()) != m || robot.platform_anchors.cols() != m ||
@@ -379,8 +379,8 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     return Status(ErrorCode::kInvalidArgument,
                   "identification: the reading model needs one offset and one scale per cable");
   }
-  if (Status st = check_mask(opt.frame_anchor_mask, m, "frame anchor"); !st.ok()) return st;
-  if (Status st = check_mask(opt.platform_anchor_mask, m, "platform anchor"); !st.ok()) return st;
+  CDPR_RETURN_IF_ERROR(check_mask(opt.frame_anchor_mask, m, "frame anchor"));
+  CDPR_RETURN_IF_ERROR(check_mask(opt.platform_anchor_mask, m, "platform anchor"));
   if (static_cast<int>(poses.size()) != n) {
     return Status(ErrorCode::kInternal, "identification: pose guesses do not match the set");
   }
@@ -920,7 +920,7 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
     io.rank_tolerance = options.rank_tolerance;
     const IdentifiabilityReport ir = analyze_identifiability(to_public(B, *info0, initial), io);
     if (options.refuse_unidentifiable) {
-      if (Status st = require_identifiable(ir); !st.ok()) return st;
+      CDPR_RETURN_IF_ERROR(require_identifiable(ir));
     }
   }
 

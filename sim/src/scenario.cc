@@ -173,20 +173,6 @@ class Reader {
   std::string file_;
 };
 
-#define CDPR_SIM_TRY(expr)                   \
-  do {                                       \
-    ::cdpr::Status cdpr_sim_s = (expr);      \
-    if (!cdpr_sim_s.ok()) return cdpr_sim_s; \
-  } while (false)
-
-// Assigns the value of a Result to `target` or returns its status.
-#define CDPR_SIM_ASSIGN(target, expr)                 \
-  do {                                                \
-    auto cdpr_sim_r = (expr);                         \
-    if (!cdpr_sim_r.ok()) return cdpr_sim_r.status(); \
-    target = std::move(*cdpr_sim_r);                  \
-  } while (false)
-
 std::string resolve_path(std::string_view base_dir, const std::string& p) {
   if (p.empty() || std::filesystem::path(p).is_absolute()) return p;
   return (std::filesystem::path(base_dir) / p).lexically_normal().string();
@@ -194,56 +180,61 @@ std::string resolve_path(std::string_view base_dir, const std::string& p) {
 
 Status parse_truth(const Reader& rd, const YAML::Node& n, std::string_view base_dir,
                    TruthSource& t) {
-  CDPR_SIM_TRY(rd.only(n, "truth", {"config", "perturb"}));
+  CDPR_RETURN_IF_ERROR(rd.only(n, "truth", {"config", "perturb"}));
   if (n["config"]) {
     std::string p;
-    CDPR_SIM_ASSIGN(p, rd.text(n["config"], "truth.config"));
+    CDPR_ASSIGN_OR_RETURN(p, rd.text(n["config"], "truth.config"));
     t.config_path = resolve_path(base_dir, p);
   }
   if (const YAML::Node q = n["perturb"]) {
-    CDPR_SIM_TRY(rd.only(q, "truth.perturb", {"frame_anchor_std", "platform_anchor_std", "seed"}));
+    CDPR_RETURN_IF_ERROR(
+        rd.only(q, "truth.perturb", {"frame_anchor_std", "platform_anchor_std", "seed"}));
     if (q["frame_anchor_std"]) {
-      CDPR_SIM_ASSIGN(t.frame_anchor_std, rd.per_cable(q["frame_anchor_std"],
-                                                       "truth.perturb.frame_anchor_std", 2, "m"));
+      CDPR_ASSIGN_OR_RETURN(
+          t.frame_anchor_std,
+          rd.per_cable(q["frame_anchor_std"], "truth.perturb.frame_anchor_std", 2, "m"));
     }
     if (q["platform_anchor_std"]) {
-      CDPR_SIM_ASSIGN(
+      CDPR_ASSIGN_OR_RETURN(
           t.platform_anchor_std,
           rd.per_cable(q["platform_anchor_std"], "truth.perturb.platform_anchor_std", 2, "m"));
     }
     if (q["seed"]) {
-      CDPR_SIM_ASSIGN(t.perturb_seed,
-                      rd.integer(q["seed"], "truth.perturb.seed", 0, ~std::uint64_t{0}));
+      CDPR_ASSIGN_OR_RETURN(t.perturb_seed,
+                            rd.integer(q["seed"], "truth.perturb.seed", 0, ~std::uint64_t{0}));
     }
   }
   return Status::Ok();
 }
 
 Status parse_noise(const Reader& rd, const YAML::Node& n, SensorNoiseLevels& s) {
-  CDPR_SIM_TRY(rd.only(n, "noise", {"encoder_counts", "force_raw", "laser"}));
+  CDPR_RETURN_IF_ERROR(rd.only(n, "noise", {"encoder_counts", "force_raw", "laser"}));
   if (n["encoder_counts"]) {
-    CDPR_SIM_ASSIGN(s.encoder_counts,
-                    rd.non_negative(n["encoder_counts"], "noise.encoder_counts", "counts"));
+    CDPR_ASSIGN_OR_RETURN(s.encoder_counts,
+                          rd.non_negative(n["encoder_counts"], "noise.encoder_counts", "counts"));
   }
   if (n["force_raw"]) {
-    CDPR_SIM_ASSIGN(s.force_raw, rd.non_negative(n["force_raw"], "noise.force_raw", "raw units"));
+    CDPR_ASSIGN_OR_RETURN(s.force_raw,
+                          rd.non_negative(n["force_raw"], "noise.force_raw", "raw units"));
   }
-  if (n["laser"]) CDPR_SIM_ASSIGN(s.laser, rd.non_negative(n["laser"], "noise.laser", "m"));
+  if (n["laser"]) {
+    CDPR_ASSIGN_OR_RETURN(s.laser, rd.non_negative(n["laser"], "noise.laser", "m"));
+  }
   return Status::Ok();
 }
 
 Status parse_polynomial(const Reader& rd, const YAML::Node& n, PolynomialSurface& p) {
   const std::string f = "effects.polynomial";
-  CDPR_SIM_TRY(rd.only(n, f,
-                       {"order", "coefficients", "length_center", "length_scale", "tension_center",
-                        "tension_scale"}));
+  CDPR_RETURN_IF_ERROR(rd.only(n, f,
+                               {"order", "coefficients", "length_center", "length_scale",
+                                "tension_center", "tension_scale"}));
   if (!n["order"]) return rd.error(n, f + ".order", "missing");
   if (!n["coefficients"]) return rd.error(n, f + ".coefficients", "missing");
   std::uint64_t order = 0;
-  CDPR_SIM_ASSIGN(order, rd.integer(n["order"], f + ".order", 0, kMaxPolynomialOrder));
+  CDPR_ASSIGN_OR_RETURN(order, rd.integer(n["order"], f + ".order", 0, kMaxPolynomialOrder));
   p.order = static_cast<int>(order);
   PerCable c;
-  CDPR_SIM_ASSIGN(c, rd.per_cable(n["coefficients"], f + ".coefficients", 0, "m"));
+  CDPR_ASSIGN_OR_RETURN(c, rd.per_cable(n["coefficients"], f + ".coefficients", 0, "m"));
   p.coefficients = c.values;
   if (static_cast<int>(p.coefficients.size()) != polynomial_surface_size(p.order)) {
     return rd.error(n["coefficients"], f + ".coefficients",
@@ -253,16 +244,17 @@ Status parse_polynomial(const Reader& rd, const YAML::Node& n, PolynomialSurface
                         std::to_string(p.coefficients.size()));
   }
   if (n["length_center"]) {
-    CDPR_SIM_ASSIGN(p.length_center, rd.number(n["length_center"], f + ".length_center"));
+    CDPR_ASSIGN_OR_RETURN(p.length_center, rd.number(n["length_center"], f + ".length_center"));
   }
   if (n["length_scale"]) {
-    CDPR_SIM_ASSIGN(p.length_scale, rd.positive(n["length_scale"], f + ".length_scale", "m"));
+    CDPR_ASSIGN_OR_RETURN(p.length_scale, rd.positive(n["length_scale"], f + ".length_scale", "m"));
   }
   if (n["tension_center"]) {
-    CDPR_SIM_ASSIGN(p.tension_center, rd.number(n["tension_center"], f + ".tension_center"));
+    CDPR_ASSIGN_OR_RETURN(p.tension_center, rd.number(n["tension_center"], f + ".tension_center"));
   }
   if (n["tension_scale"]) {
-    CDPR_SIM_ASSIGN(p.tension_scale, rd.positive(n["tension_scale"], f + ".tension_scale", "N"));
+    CDPR_ASSIGN_OR_RETURN(p.tension_scale,
+                          rd.positive(n["tension_scale"], f + ".tension_scale", "N"));
   }
   const Status v = validate_polynomial_surface(p);
   if (!v.ok()) return rd.error(n, f, std::string(v.message()));
@@ -270,13 +262,13 @@ Status parse_polynomial(const Reader& rd, const YAML::Node& n, PolynomialSurface
 }
 
 Status parse_effects(const Reader& rd, const YAML::Node& n, HiddenEffects& e) {
-  CDPR_SIM_TRY(
+  CDPR_RETURN_IF_ERROR(
       rd.only(n, "effects",
               {"cable_law", "stiff_ea", "hooke", "polynomial", "creep", "sag", "pulley_radius",
                "transmission_scale", "encoder_zero_offset", "force_sensor", "laser", "thermal"}));
   if (n["cable_law"]) {
     std::string law;
-    CDPR_SIM_ASSIGN(law, rd.text(n["cable_law"], "effects.cable_law"));
+    CDPR_ASSIGN_OR_RETURN(law, rd.text(n["cable_law"], "effects.cable_law"));
     if (law == "config") {
       e.base_law = BaseCableLaw::kConfig;
     } else if (law == "stiff") {
@@ -286,43 +278,46 @@ Status parse_effects(const Reader& rd, const YAML::Node& n, HiddenEffects& e) {
                       "expected 'config' or 'stiff', got '" + law + "'");
     }
   }
-  if (n["stiff_ea"])
-    CDPR_SIM_ASSIGN(e.stiff_ea, rd.positive(n["stiff_ea"], "effects.stiff_ea", "N"));
+  if (n["stiff_ea"]) {
+    CDPR_ASSIGN_OR_RETURN(e.stiff_ea, rd.positive(n["stiff_ea"], "effects.stiff_ea", "N"));
+  }
   if (const YAML::Node h = n["hooke"]) {
-    CDPR_SIM_TRY(rd.only(h, "effects.hooke", {"ea"}));
+    CDPR_RETURN_IF_ERROR(rd.only(h, "effects.hooke", {"ea"}));
     if (!h["ea"]) return rd.error(h, "effects.hooke.ea", "missing (N)");
-    CDPR_SIM_ASSIGN(e.hooke_ea, rd.per_cable(h["ea"], "effects.hooke.ea", 1, "N"));
+    CDPR_ASSIGN_OR_RETURN(e.hooke_ea, rd.per_cable(h["ea"], "effects.hooke.ea", 1, "N"));
   }
   if (const YAML::Node p = n["polynomial"]) {
     if (e.hooke_ea.given()) {
       return rd.error(p, "effects.polynomial", "give either effects.hooke or effects.polynomial");
     }
     PolynomialSurface s;
-    CDPR_SIM_TRY(parse_polynomial(rd, p, s));
+    CDPR_RETURN_IF_ERROR(parse_polynomial(rd, p, s));
     e.polynomial = s;
   }
   if (const YAML::Node c = n["creep"]) {
-    CDPR_SIM_TRY(rd.only(c, "effects.creep", {"coefficient", "tau"}));
+    CDPR_RETURN_IF_ERROR(rd.only(c, "effects.creep", {"coefficient", "tau"}));
     CreepEffect creep;
     if (!c["coefficient"]) return rd.error(c, "effects.creep.coefficient", "missing (1/N)");
-    CDPR_SIM_ASSIGN(creep.coefficient,
-                    rd.non_negative(c["coefficient"], "effects.creep.coefficient", "1/N"));
+    CDPR_ASSIGN_OR_RETURN(creep.coefficient,
+                          rd.non_negative(c["coefficient"], "effects.creep.coefficient", "1/N"));
     if (!c["tau"]) return rd.error(c, "effects.creep.tau", "missing (s)");
-    CDPR_SIM_ASSIGN(creep.tau_s, rd.positive(c["tau"], "effects.creep.tau", "s"));
+    CDPR_ASSIGN_OR_RETURN(creep.tau_s, rd.positive(c["tau"], "effects.creep.tau", "s"));
     e.creep = creep;
   }
-  if (n["sag"]) CDPR_SIM_ASSIGN(e.sag, rd.boolean(n["sag"], "effects.sag"));
+  if (n["sag"]) {
+    CDPR_ASSIGN_OR_RETURN(e.sag, rd.boolean(n["sag"], "effects.sag"));
+  }
   if (e.sag && e.polynomial) {
     return rd.error(n["sag"], "effects.sag",
                     "sag is modelled for Hooke cables only (not with effects.polynomial)");
   }
   if (n["pulley_radius"]) {
-    CDPR_SIM_ASSIGN(e.pulley_radius,
-                    rd.per_cable(n["pulley_radius"], "effects.pulley_radius", 2, "m"));
+    CDPR_ASSIGN_OR_RETURN(e.pulley_radius,
+                          rd.per_cable(n["pulley_radius"], "effects.pulley_radius", 2, "m"));
   }
   if (n["transmission_scale"]) {
-    CDPR_SIM_ASSIGN(e.transmission_scale,
-                    rd.per_cable(n["transmission_scale"], "effects.transmission_scale", 0, "1"));
+    CDPR_ASSIGN_OR_RETURN(e.transmission_scale, rd.per_cable(n["transmission_scale"],
+                                                             "effects.transmission_scale", 0, "1"));
     for (double s : e.transmission_scale.values) {
       if (!(s > -0.5 && s < 0.5)) {
         return rd.error(n["transmission_scale"], "effects.transmission_scale",
@@ -331,14 +326,16 @@ Status parse_effects(const Reader& rd, const YAML::Node& n, HiddenEffects& e) {
     }
   }
   if (n["encoder_zero_offset"]) {
-    CDPR_SIM_ASSIGN(e.encoder_zero_offset,
-                    rd.per_cable(n["encoder_zero_offset"], "effects.encoder_zero_offset", 0, "m"));
+    CDPR_ASSIGN_OR_RETURN(
+        e.encoder_zero_offset,
+        rd.per_cable(n["encoder_zero_offset"], "effects.encoder_zero_offset", 0, "m"));
   }
   if (const YAML::Node f = n["force_sensor"]) {
-    CDPR_SIM_TRY(rd.only(f, "effects.force_sensor", {"gain_error", "offset_error"}));
+    CDPR_RETURN_IF_ERROR(rd.only(f, "effects.force_sensor", {"gain_error", "offset_error"}));
     if (f["gain_error"]) {
-      CDPR_SIM_ASSIGN(e.force_gain_error,
-                      rd.per_cable(f["gain_error"], "effects.force_sensor.gain_error", 0, "1"));
+      CDPR_ASSIGN_OR_RETURN(
+          e.force_gain_error,
+          rd.per_cable(f["gain_error"], "effects.force_sensor.gain_error", 0, "1"));
       for (double g : e.force_gain_error.values) {
         if (!(g > -0.9)) {
           return rd.error(f["gain_error"], "effects.force_sensor.gain_error",
@@ -347,39 +344,41 @@ Status parse_effects(const Reader& rd, const YAML::Node& n, HiddenEffects& e) {
       }
     }
     if (f["offset_error"]) {
-      CDPR_SIM_ASSIGN(
+      CDPR_ASSIGN_OR_RETURN(
           e.force_offset_error,
           rd.per_cable(f["offset_error"], "effects.force_sensor.offset_error", 0, "raw units"));
     }
   }
   if (const YAML::Node l = n["laser"]) {
-    CDPR_SIM_TRY(
+    CDPR_RETURN_IF_ERROR(
         rd.only(l, "effects.laser", {"mount_offset", "mount_tilt", "plane_tilt", "plane_offset"}));
     if (l["mount_offset"]) {
-      CDPR_SIM_ASSIGN(e.laser_mount_offset,
-                      rd.vector3(l["mount_offset"], "effects.laser.mount_offset", "m"));
+      CDPR_ASSIGN_OR_RETURN(e.laser_mount_offset,
+                            rd.vector3(l["mount_offset"], "effects.laser.mount_offset", "m"));
     }
     if (l["mount_tilt"]) {
-      CDPR_SIM_ASSIGN(e.laser_mount_tilt,
-                      rd.vector3(l["mount_tilt"], "effects.laser.mount_tilt", "rad"));
+      CDPR_ASSIGN_OR_RETURN(e.laser_mount_tilt,
+                            rd.vector3(l["mount_tilt"], "effects.laser.mount_tilt", "rad"));
     }
     if (l["plane_tilt"]) {
-      CDPR_SIM_ASSIGN(e.plane_tilt, rd.vector3(l["plane_tilt"], "effects.laser.plane_tilt", "rad"));
+      CDPR_ASSIGN_OR_RETURN(e.plane_tilt,
+                            rd.vector3(l["plane_tilt"], "effects.laser.plane_tilt", "rad"));
     }
     if (l["plane_offset"]) {
-      CDPR_SIM_ASSIGN(e.plane_offset, rd.number(l["plane_offset"], "effects.laser.plane_offset"));
+      CDPR_ASSIGN_OR_RETURN(e.plane_offset,
+                            rd.number(l["plane_offset"], "effects.laser.plane_offset"));
     }
   }
   if (const YAML::Node t = n["thermal"]) {
-    CDPR_SIM_TRY(rd.only(t, "effects.thermal", {"alpha", "rate", "max_delta"}));
+    CDPR_RETURN_IF_ERROR(rd.only(t, "effects.thermal", {"alpha", "rate", "max_delta"}));
     ThermalEffect th;
     if (!t["alpha"]) return rd.error(t, "effects.thermal.alpha", "missing (1/K)");
-    CDPR_SIM_ASSIGN(th.alpha, rd.number(t["alpha"], "effects.thermal.alpha"));
+    CDPR_ASSIGN_OR_RETURN(th.alpha, rd.number(t["alpha"], "effects.thermal.alpha"));
     if (!t["rate"]) return rd.error(t, "effects.thermal.rate", "missing (K/s)");
-    CDPR_SIM_ASSIGN(th.rate_k_per_s, rd.number(t["rate"], "effects.thermal.rate"));
+    CDPR_ASSIGN_OR_RETURN(th.rate_k_per_s, rd.number(t["rate"], "effects.thermal.rate"));
     if (t["max_delta"]) {
-      CDPR_SIM_ASSIGN(th.max_delta_k,
-                      rd.non_negative(t["max_delta"], "effects.thermal.max_delta", "K"));
+      CDPR_ASSIGN_OR_RETURN(th.max_delta_k,
+                            rd.non_negative(t["max_delta"], "effects.thermal.max_delta", "K"));
     }
     e.thermal = th;
   }
@@ -402,12 +401,12 @@ constexpr FaultName kFaultNames[] = {
 };
 
 Status parse_fault(const Reader& rd, const YAML::Node& n, const std::string& f, Fault& out) {
-  CDPR_SIM_TRY(rd.only(
+  CDPR_RETURN_IF_ERROR(rd.only(
       n, f, {"type", "at", "duration", "cable", "emcy", "object", "subindex", "code", "limit"}));
   out.line = rd.line(n);
   if (!n["type"]) return rd.error(n, f + ".type", "missing");
   std::string type;
-  CDPR_SIM_ASSIGN(type, rd.text(n["type"], f + ".type"));
+  CDPR_ASSIGN_OR_RETURN(type, rd.text(n["type"], f + ".type"));
   bool found = false;
   std::string names;
   for (const FaultName& fn : kFaultNames) {
@@ -420,9 +419,10 @@ Status parse_fault(const Reader& rd, const YAML::Node& n, const std::string& f, 
   }
   if (!found) return rd.error(n["type"], f + ".type", "'" + type + "' is not one of " + names);
   if (!n["at"]) return rd.error(n, f + ".at", "missing (s)");
-  CDPR_SIM_ASSIGN(out.at_s, rd.non_negative(n["at"], f + ".at", "s"));
-  if (n["duration"])
-    CDPR_SIM_ASSIGN(out.duration_s, rd.positive(n["duration"], f + ".duration", "s"));
+  CDPR_ASSIGN_OR_RETURN(out.at_s, rd.non_negative(n["at"], f + ".at", "s"));
+  if (n["duration"]) {
+    CDPR_ASSIGN_OR_RETURN(out.duration_s, rd.positive(n["duration"], f + ".duration", "s"));
+  }
 
   const bool needs_cable =
       out.kind == FaultKind::kDriveFault || out.kind == FaultKind::kDriveSilent ||
@@ -430,7 +430,7 @@ Status parse_fault(const Reader& rd, const YAML::Node& n, const std::string& f, 
   if (needs_cable) {
     if (!n["cable"]) return rd.error(n, f + ".cable", "missing (cable number, 1..m)");
     std::uint64_t c = 0;
-    CDPR_SIM_ASSIGN(c, rd.integer(n["cable"], f + ".cable", 1, 1024));
+    CDPR_ASSIGN_OR_RETURN(c, rd.integer(n["cable"], f + ".cable", 1, 1024));
     out.cable = static_cast<int>(c) - 1;
   } else if (n["cable"]) {
     return rd.error(n["cable"], f + ".cable", "not used by a " + type + " fault");
@@ -441,7 +441,7 @@ Status parse_fault(const Reader& rd, const YAML::Node& n, const std::string& f, 
     out.emcy_code = 0x2310;  // continuous over-current (CiA 402 drives' usual overload code)
     if (n["emcy"]) {
       std::uint64_t c = 0;
-      CDPR_SIM_ASSIGN(c, rd.integer(n["emcy"], f + ".emcy", 0, 0xFFFF));
+      CDPR_ASSIGN_OR_RETURN(c, rd.integer(n["emcy"], f + ".emcy", 0, 0xFFFF));
       out.emcy_code = static_cast<std::uint16_t>(c);
     }
   } else if (n["emcy"]) {
@@ -450,15 +450,15 @@ Status parse_fault(const Reader& rd, const YAML::Node& n, const std::string& f, 
   if (out.kind == FaultKind::kSdoAbort) {
     if (!n["object"]) return rd.error(n, f + ".object", "missing (object index, e.g. 0x6064)");
     std::uint64_t v = 0;
-    CDPR_SIM_ASSIGN(v, rd.integer(n["object"], f + ".object", 0, 0xFFFF));
+    CDPR_ASSIGN_OR_RETURN(v, rd.integer(n["object"], f + ".object", 0, 0xFFFF));
     out.object = static_cast<std::uint16_t>(v);
     if (n["subindex"]) {
-      CDPR_SIM_ASSIGN(v, rd.integer(n["subindex"], f + ".subindex", 0, 0xFF));
+      CDPR_ASSIGN_OR_RETURN(v, rd.integer(n["subindex"], f + ".subindex", 0, 0xFF));
       out.subindex = static_cast<std::uint8_t>(v);
     }
     out.abort_code = 0x06020000;  // object does not exist
     if (n["code"]) {
-      CDPR_SIM_ASSIGN(v, rd.integer(n["code"], f + ".code", 0, 0xFFFFFFFF));
+      CDPR_ASSIGN_OR_RETURN(v, rd.integer(n["code"], f + ".code", 0, 0xFFFFFFFF));
       out.abort_code = static_cast<std::uint32_t>(v);
     }
   } else {
@@ -468,7 +468,7 @@ Status parse_fault(const Reader& rd, const YAML::Node& n, const std::string& f, 
   }
   if (out.kind == FaultKind::kCableOverload) {
     if (!n["limit"]) return rd.error(n, f + ".limit", "missing (tension limit, N)");
-    CDPR_SIM_ASSIGN(out.tension_limit, rd.positive(n["limit"], f + ".limit", "N"));
+    CDPR_ASSIGN_OR_RETURN(out.tension_limit, rd.positive(n["limit"], f + ".limit", "N"));
   } else if (n["limit"]) {
     return rd.error(n["limit"], f + ".limit", "only used by cable_overload faults");
   }
@@ -477,24 +477,24 @@ Status parse_fault(const Reader& rd, const YAML::Node& n, const std::string& f, 
 
 Status parse_laser_serving(const Reader& rd, const YAML::Node& n, std::string_view base_dir,
                            LaserServing& l) {
-  CDPR_SIM_TRY(rd.only(n, "laser", {"register_map", "slave_id", "baud", "parity"}));
+  CDPR_RETURN_IF_ERROR(rd.only(n, "laser", {"register_map", "slave_id", "baud", "parity"}));
   if (n["register_map"]) {
     std::string p;
-    CDPR_SIM_ASSIGN(p, rd.text(n["register_map"], "laser.register_map"));
+    CDPR_ASSIGN_OR_RETURN(p, rd.text(n["register_map"], "laser.register_map"));
     l.register_map_path = resolve_path(base_dir, p);
   }
   std::uint64_t v = 0;
   if (n["slave_id"]) {
-    CDPR_SIM_ASSIGN(v, rd.integer(n["slave_id"], "laser.slave_id", 1, 247));
+    CDPR_ASSIGN_OR_RETURN(v, rd.integer(n["slave_id"], "laser.slave_id", 1, 247));
     l.slave_id = static_cast<int>(v);
   }
   if (n["baud"]) {
-    CDPR_SIM_ASSIGN(v, rd.integer(n["baud"], "laser.baud", 1200, 4000000));
+    CDPR_ASSIGN_OR_RETURN(v, rd.integer(n["baud"], "laser.baud", 1200, 4000000));
     l.baud = static_cast<int>(v);
   }
   if (n["parity"]) {
     std::string p;
-    CDPR_SIM_ASSIGN(p, rd.text(n["parity"], "laser.parity"));
+    CDPR_ASSIGN_OR_RETURN(p, rd.text(n["parity"], "laser.parity"));
     if (p == "none") {
       l.parity = 'N';
     } else if (p == "even") {
@@ -542,20 +542,23 @@ Result<Scenario> parse_scenario(std::string_view text, std::string_view name,
   if (!root || root.IsNull()) {
     return Status::Error(ErrorCode::kInvalidArgument, "%s: empty scenario", rd.file().c_str());
   }
-  CDPR_SIM_TRY(rd.only(root, "", {"name", "truth", "noise", "effects", "faults", "laser"}));
-  if (root["name"]) CDPR_SIM_ASSIGN(s.name, rd.text(root["name"], "name"));
-  if (root["truth"]) CDPR_SIM_TRY(parse_truth(rd, root["truth"], base_dir, s.truth));
-  if (root["noise"]) CDPR_SIM_TRY(parse_noise(rd, root["noise"], s.noise));
-  if (root["effects"]) CDPR_SIM_TRY(parse_effects(rd, root["effects"], s.effects));
+  CDPR_RETURN_IF_ERROR(rd.only(root, "", {"name", "truth", "noise", "effects", "faults", "laser"}));
+  if (root["name"]) {
+    CDPR_ASSIGN_OR_RETURN(s.name, rd.text(root["name"], "name"));
+  }
+  if (root["truth"]) CDPR_RETURN_IF_ERROR(parse_truth(rd, root["truth"], base_dir, s.truth));
+  if (root["noise"]) CDPR_RETURN_IF_ERROR(parse_noise(rd, root["noise"], s.noise));
+  if (root["effects"]) CDPR_RETURN_IF_ERROR(parse_effects(rd, root["effects"], s.effects));
   if (const YAML::Node f = root["faults"]) {
     if (!f.IsSequence()) return rd.error(f, "faults", "expected a list of faults");
     for (std::size_t k = 0; k < f.size(); ++k) {
       Fault fault;
-      CDPR_SIM_TRY(parse_fault(rd, f[k], "faults[" + std::to_string(k) + "]", fault));
+      CDPR_RETURN_IF_ERROR(parse_fault(rd, f[k], "faults[" + std::to_string(k) + "]", fault));
       s.faults.push_back(fault);
     }
   }
-  if (root["laser"]) CDPR_SIM_TRY(parse_laser_serving(rd, root["laser"], base_dir, s.laser));
+  if (root["laser"])
+    CDPR_RETURN_IF_ERROR(parse_laser_serving(rd, root["laser"], base_dir, s.laser));
   return s;
 }
 
@@ -620,7 +623,7 @@ Result<RobotModel> resolve_truth(const Scenario& s, const RobotModel& nominal) {
     }
   }
   const int m = truth.num_cables();
-  CDPR_SIM_TRY(check_against(s, m));
+  CDPR_RETURN_IF_ERROR(check_against(s, m));
 
   // Seeded perturbation: frame anchors first (cable by cable, x y z), then platform anchors.
   if (s.truth.frame_anchor_std.given() || s.truth.platform_anchor_std.given()) {

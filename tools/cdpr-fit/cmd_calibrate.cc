@@ -303,8 +303,8 @@ Result<Output> calibrate_paper(const CalibrateArgs& args, const RobotModel& nomi
   };
   const std::string truth_text =
       truth->has_value() ? truth_comparison(args, nominal, calibrated, **truth, &j) : "";
-  if (Status s = write_calibrated(args, calibrated, &j); !s.ok()) return s;
-  if (Status s = write_report(args, j); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(write_calibrated(args, calibrated, &j));
+  CDPR_RETURN_IF_ERROR(write_report(args, j));
   std::ostringstream h;
   h << "cdpr-fit calibrate --method paper: " << args.config << " + " << args.recording << " ("
     << set.num_poses() << " poses)\n\n"
@@ -349,7 +349,7 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   if (args.method == "paper") return calibrate_paper(args, *nominal, *rec, *set, warnings);
 
   IdentificationOptions options;
-  if (Status s = apply_estimate(args.estimate, nominal->num_cables(), &options); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, nominal->num_cables(), &options));
   if (args.gauge == "home") {
     options.gauge = Gauge::kHomePose;
   } else if (args.gauge == "laser-plane") {
@@ -479,8 +479,8 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   }
   const std::string truth_text =
       truth->has_value() ? truth_comparison(args, *nominal, calibrated, **truth, &j) : "";
-  if (Status st = write_calibrated(args, calibrated, &j); !st.ok()) return st;
-  if (Status st = write_report(args, j); !st.ok()) return st;
+  CDPR_RETURN_IF_ERROR(write_calibrated(args, calibrated, &j));
+  CDPR_RETURN_IF_ERROR(write_report(args, j));
 
   // ---- human text ---------------------------------------------------------------------------
   std::ostringstream h;

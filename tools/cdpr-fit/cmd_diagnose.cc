@@ -90,7 +90,7 @@ Result<Loaded> load_recording(const std::string& file, const DiagnoseArgs& args,
   if (Status s = recording::check_against_model(*rec, nominal); !s.ok()) {
     return with_context(s, file + " vs " + args.config);
   }
-  if (Status s = check_plausible_units(*rec, nominal, file); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(check_plausible_units(*rec, nominal, file));
   const std::string recorded_robot = rec->metadata.get(recording::key::kRobot);
   if (!recorded_robot.empty() && recorded_robot != nominal.name) {
     warnings->push_back(file + " is a recording of robot '" + recorded_robot + "' but " +
@@ -158,9 +158,7 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
   }
 
   IdentificationOptions identification;
-  if (Status s = apply_estimate(args.estimate, nominal->num_cables(), &identification); !s.ok()) {
-    return s;
-  }
+  CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, nominal->num_cables(), &identification));
   DiagnosisOptions options;
   options.seed = args.seed;
   options.bootstrap_samples = args.bootstrap;
@@ -224,16 +222,16 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
         "# Named effects: " + (effects.empty() ? std::string("none") : effects) + ".\n" +
         "# Winch length_offset and drum size include the identified encoder offsets and scales.\n" +
         config::save_robot_config(d.model_after.robot);
-    if (Status s = write_text(args.out, yaml); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(write_text(args.out, yaml));
   }
   if (!args.html.empty()) {
     const std::vector<ResidualPlot> plots = residual_plots(d, primary->set);
-    if (Status s = write_text(args.html, diagnosis_html(d, c, plots, misfit)); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(write_text(args.html, diagnosis_html(d, c, plots, misfit)));
   }
   if (!args.json_report.empty()) {
     nlohmann::json file = out.json;
     file["ok"] = true;
-    if (Status s = write_text(args.json_report, file.dump(2) + "\n"); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(write_text(args.json_report, file.dump(2) + "\n"));
   }
 
   std::ostringstream h;

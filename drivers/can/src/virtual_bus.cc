@@ -122,7 +122,7 @@ VirtualCanEndpoint::~VirtualCanEndpoint() {
 }
 
 Status VirtualCanEndpoint::send(const Frame& frame) {
-  if (Status s = check_frame(frame, name_); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(check_frame(frame, name_));
   // Normalise what a wire would carry: no payload for RTR, nothing beyond dlc.
   Frame f = frame;
   if (f.error) {

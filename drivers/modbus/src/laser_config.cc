@@ -19,38 +19,39 @@ using detail::YamlFields;
 Status parse_config(const YamlFields& f, const YAML::Node& root, std::string_view base_dir,
                     LaserConfig& c) {
   if (!root.IsMap()) return f.error(root, "<top level>", "must be a mapping of laser fields");
-  CDPR_TRY(f.only_known(root, "",
-                        {"name", "transport", "device", "baud", "parity", "data_bits", "stop_bits",
-                         "rs485", "host", "port", "slave_id", "response_timeout", "byte_timeout",
-                         "retries", "reconnect_delay", "poll_rate", "register_map"}));
-  CDPR_TRY(f.get_string(root, "name", "", c.name, false));
+  CDPR_RETURN_IF_ERROR(
+      f.only_known(root, "",
+                   {"name", "transport", "device", "baud", "parity", "data_bits", "stop_bits",
+                    "rs485", "host", "port", "slave_id", "response_timeout", "byte_timeout",
+                    "retries", "reconnect_delay", "poll_rate", "register_map"}));
+  CDPR_RETURN_IF_ERROR(f.get_string(root, "name", "", c.name, false));
   int transport = 0;
-  CDPR_TRY(f.get_choice(root, "transport", "", {"rtu", "tcp"}, transport, true));
+  CDPR_RETURN_IF_ERROR(f.get_choice(root, "transport", "", {"rtu", "tcp"}, transport, true));
   if (transport == 0) {
     RtuSettings rtu;
-    CDPR_TRY(f.get_string(root, "device", "", rtu.device, true));
+    CDPR_RETURN_IF_ERROR(f.get_string(root, "device", "", rtu.device, true));
     long long v = rtu.baud;
-    CDPR_TRY(f.get_int(root, "baud", "", 300, 4000000, v, false));
+    CDPR_RETURN_IF_ERROR(f.get_int(root, "baud", "", 300, 4000000, v, false));
     rtu.baud = static_cast<int>(v);
     int parity = 1;
-    CDPR_TRY(f.get_choice(root, "parity", "", {"none", "even", "odd"}, parity, false));
+    CDPR_RETURN_IF_ERROR(f.get_choice(root, "parity", "", {"none", "even", "odd"}, parity, false));
     rtu.parity = parity == 0 ? 'N' : (parity == 1 ? 'E' : 'O');
     v = rtu.data_bits;
-    CDPR_TRY(f.get_int(root, "data_bits", "", 5, 8, v, false));
+    CDPR_RETURN_IF_ERROR(f.get_int(root, "data_bits", "", 5, 8, v, false));
     rtu.data_bits = static_cast<int>(v);
     v = rtu.stop_bits;
-    CDPR_TRY(f.get_int(root, "stop_bits", "", 1, 2, v, false));
+    CDPR_RETURN_IF_ERROR(f.get_int(root, "stop_bits", "", 1, 2, v, false));
     rtu.stop_bits = static_cast<int>(v);
-    CDPR_TRY(f.get_bool(root, "rs485", "", rtu.rs485));
+    CDPR_RETURN_IF_ERROR(f.get_bool(root, "rs485", "", rtu.rs485));
     for (const char* k : {"host", "port"}) {
       if (root[k]) return f.error(root[k], k, "only for transport: tcp");
     }
     c.link.transport = rtu;
   } else {
     TcpSettings tcp;
-    CDPR_TRY(f.get_string(root, "host", "", tcp.host, true));
+    CDPR_RETURN_IF_ERROR(f.get_string(root, "host", "", tcp.host, true));
     long long v = tcp.port;
-    CDPR_TRY(f.get_int(root, "port", "", 1, 65535, v, false));
+    CDPR_RETURN_IF_ERROR(f.get_int(root, "port", "", 1, 65535, v, false));
     tcp.port = static_cast<int>(v);
     for (const char* k : {"device", "baud", "parity", "data_bits", "stop_bits", "rs485"}) {
       if (root[k]) return f.error(root[k], k, "only for transport: rtu");
@@ -58,16 +59,17 @@ Status parse_config(const YamlFields& f, const YAML::Node& root, std::string_vie
     c.link.transport = tcp;
   }
   long long v = c.link.slave_id;
-  CDPR_TRY(
+  CDPR_RETURN_IF_ERROR(
       f.get_int(root, "slave_id", "", transport == 0 ? 1 : 0, transport == 0 ? 247 : 255, v, true));
   c.link.slave_id = static_cast<int>(v);
-  CDPR_TRY(f.get_double(root, "response_timeout", "", c.link.response_timeout_s, false));
-  CDPR_TRY(f.get_double(root, "byte_timeout", "", c.link.byte_timeout_s, false));
+  CDPR_RETURN_IF_ERROR(
+      f.get_double(root, "response_timeout", "", c.link.response_timeout_s, false));
+  CDPR_RETURN_IF_ERROR(f.get_double(root, "byte_timeout", "", c.link.byte_timeout_s, false));
   v = c.link.retries;
-  CDPR_TRY(f.get_int(root, "retries", "", 0, 10, v, false));
+  CDPR_RETURN_IF_ERROR(f.get_int(root, "retries", "", 0, 10, v, false));
   c.link.retries = static_cast<int>(v);
-  CDPR_TRY(f.get_double(root, "reconnect_delay", "", c.link.reconnect_delay_s, false));
-  CDPR_TRY(f.get_double(root, "poll_rate", "", c.poll_rate_hz, false));
+  CDPR_RETURN_IF_ERROR(f.get_double(root, "reconnect_delay", "", c.link.reconnect_delay_s, false));
+  CDPR_RETURN_IF_ERROR(f.get_double(root, "poll_rate", "", c.poll_rate_hz, false));
 
   const YAML::Node map = root["register_map"];
   if (!map) return f.error(root, "register_map", "is missing (a file path or a mapping)");
@@ -81,7 +83,7 @@ Status parse_config(const YamlFields& f, const YAML::Node& root, std::string_vie
     }
     c.map = std::move(*m);
   } else if (map.IsMap()) {
-    CDPR_TRY(detail::parse_register_map_node(f, map, c.map));
+    CDPR_RETURN_IF_ERROR(detail::parse_register_map_node(f, map, c.map));
   } else {
     return f.error(map, "register_map", "must be a file path or a mapping");
   }

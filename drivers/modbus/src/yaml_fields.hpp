@@ -14,13 +14,6 @@
 #include "cdpr/modbus/register_map.hpp"
 #include "cdpr/status.hpp"
 
-// Returns the Status of `expr` from the calling function when it is not ok.
-#define CDPR_TRY(expr)                       \
-  do {                                       \
-    ::cdpr::Status cdpr_try_s = (expr);      \
-    if (!cdpr_try_s.ok()) return cdpr_try_s; \
-  } while (false)
-
 namespace cdpr::modbus::detail {
 
 class YamlFields {

@@ -68,11 +68,9 @@ std::uint64_t fnv1a64(std::string_view bytes) {
 }
 
 Result<std::string> file_hash(const std::string& path) {
-  auto text = detail::read_file(path);
-  if (!text.ok()) return text.status();
+  CDPR_ASSIGN_OR_RETURN(const std::string text, detail::read_file(path));
   char buf[32];
-  std::snprintf(buf, sizeof buf, "fnv1a64:%016llx",
-                static_cast<unsigned long long>(fnv1a64(*text)));
+  std::snprintf(buf, sizeof buf, "fnv1a64:%016llx", static_cast<unsigned long long>(fnv1a64(text)));
   return std::string(buf);
 }
 
