@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <set>
 #include <sstream>
 
 #include "cdpr/calibration/elongation.hpp"
@@ -933,12 +934,16 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   so.logging_type = ceres::SILENT;
   if (free_pose_params > 0) {
     so.linear_solver_type = ceres::DENSE_SCHUR;
+    // Poses are eliminated first (group 0). Every other block gets a group of its own, in the
+    // order the problem was built: within one group Ceres orders blocks by their address, which
+    // would make the last bits of the result depend on where the heap put the parameter vectors.
     auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
     std::vector<double*> all;
     B.problem.GetParameterBlocks(&all);
-    for (double* p : all) ordering->AddElementToGroup(p, 1);
-    for (std::size_t j = 0; j < B.poses.size(); ++j)
-      ordering->AddElementToGroup(B.poses[j].data(), 0);
+    std::set<const double*> pose_blocks;
+    for (const auto& pose : B.poses) pose_blocks.insert(pose.data());
+    int group = 1;
+    for (double* p : all) ordering->AddElementToGroup(p, pose_blocks.count(p) ? 0 : group++);
     so.linear_solver_ordering = ordering;
   } else {
     so.linear_solver_type = ceres::DENSE_QR;
