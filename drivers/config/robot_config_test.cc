@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -229,6 +230,23 @@ TEST(RobotConfig, SaveThenLoadIsExact) {
     expect_identical(*model, *again);
     EXPECT_EQ(save_robot_config(*again), saved);
   }
+}
+
+TEST(RobotConfig, WrittenFileCarriesTheHeaderAndLoadsBackExactly) {
+  const Result<RobotModel> model = load_robot_config(source_path("config/mini.yaml"));
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  const std::string path = ::testing::TempDir() + "robot_config_test_written.yaml";
+  const std::string header = "# geometry version 3\n";
+  ASSERT_TRUE(write_robot_config(path, *model, header).ok());
+  const std::string text = read_text(path);
+  EXPECT_EQ(text, header + save_robot_config(*model));
+  const Result<RobotModel> again = load_robot_config(path);
+  ASSERT_TRUE(again.ok()) << again.status().to_string();
+  expect_identical(*model, *again);
+  std::remove(path.c_str());
+  const Status bad = write_robot_config("/nonexistent/dir/robot.yaml", *model);
+  EXPECT_EQ(bad.code(), ErrorCode::kNotFound);
+  EXPECT_THAT(std::string(bad.message()), HasSubstr("/nonexistent/dir/robot.yaml"));
 }
 
 TEST(RobotConfig, SaveKeepsNumbersThatNeedAllSeventeenDigits) {

@@ -2,12 +2,12 @@
 // recording(s) as calibrate does, refuses recordings that do not fit the config (counts, units),
 // runs cdpr::diagnose and writes the JSON and HTML reports and the calibrated config.
 #include <cmath>
-#include <fstream>
 #include <sstream>
 
 #include "cdpr/calibration/diagnosis.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/io/atomic_file.hpp"
 #include "cdpr/recording/recording.hpp"
 #include "commands.hpp"
 #include "common.hpp"
@@ -114,14 +114,6 @@ Result<Loaded> load_recording(const std::string& file, const DiagnoseArgs& args,
   return Loaded{std::move(*rec), std::move(*set)};
 }
 
-Status write_text(const std::string& path, const std::string& text) {
-  std::ofstream f(path, std::ios::trunc);
-  f << text;
-  f.flush();
-  if (!f) return Status::Error(ErrorCode::kIoError, "cannot write %s", path.c_str());
-  return Status::Ok();
-}
-
 int exit_status_of(Diagnosis::Verdict v) {
   switch (v) {
     case Diagnosis::Verdict::kNoMismatch:
@@ -210,6 +202,8 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
       args.json_report.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.json_report);
   out.json["html_report"] = args.html.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.html);
 
+  // The calibrated config and the reports are written together, or none of them.
+  io::AtomicFileSet outputs;
   if (!c.calibrated_config.empty()) {
     std::string effects;
     for (const EffectFit& e : d.accepted) {
@@ -222,17 +216,18 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
         "# Named effects: " + (effects.empty() ? std::string("none") : effects) + ".\n" +
         "# Winch length_offset and drum size include the identified encoder offsets and scales.\n" +
         config::save_robot_config(d.model_after.robot);
-    CDPR_RETURN_IF_ERROR(write_text(args.out, yaml));
+    CDPR_RETURN_IF_ERROR(outputs.stage(args.out, yaml));
   }
   if (!args.html.empty()) {
     const std::vector<ResidualPlot> plots = residual_plots(d, primary->set);
-    CDPR_RETURN_IF_ERROR(write_text(args.html, diagnosis_html(d, c, plots, misfit)));
+    CDPR_RETURN_IF_ERROR(outputs.stage(args.html, diagnosis_html(d, c, plots, misfit)));
   }
   if (!args.json_report.empty()) {
     nlohmann::json file = out.json;
     file["ok"] = true;
-    CDPR_RETURN_IF_ERROR(write_text(args.json_report, file.dump(2) + "\n"));
+    CDPR_RETURN_IF_ERROR(outputs.stage(args.json_report, file.dump(2) + "\n"));
   }
+  CDPR_RETURN_IF_ERROR(outputs.commit());
 
   std::ostringstream h;
   h << diagnosis_text(d, c) << "\n";

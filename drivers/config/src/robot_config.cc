@@ -18,6 +18,7 @@
 
 #include "cdpr/calibration/model_check.hpp"
 #include "cdpr/config/yaml_reader.hpp"
+#include "cdpr/io/atomic_file.hpp"
 
 namespace cdpr::config {
 namespace {
@@ -514,6 +515,11 @@ Result<RobotModel> parse_robot_config(std::string_view text, std::string_view na
 Result<RobotModel> load_robot_config(const std::string& path) {
   CDPR_ASSIGN_OR_RETURN(const YamlDocument doc, YamlDocument::load(path, "robot config"));
   return parse_document(doc);
+}
+
+Status write_robot_config(const std::string& path, const RobotModel& model,
+                          std::string_view header) {
+  return io::write_file_atomically(path, std::string(header) + save_robot_config(model));
 }
 
 std::string save_robot_config(const RobotModel& model) {

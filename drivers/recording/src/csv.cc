@@ -11,6 +11,8 @@
 #include <sstream>
 #include <system_error>
 
+#include "cdpr/io/atomic_file.hpp"
+
 namespace cdpr::recording {
 
 // ---------------------------------------------------------------------------------------------
@@ -155,15 +157,7 @@ Result<std::string> read_file(const std::string& path) {
 }
 
 Status write_file(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) {
-    return Status::Error(ErrorCode::kIoError, "cannot create '%s': %s", path.c_str(),
-                         std::strerror(errno));
-  }
-  out << text;
-  out.flush();
-  if (!out) return Status::Error(ErrorCode::kIoError, "cannot write '%s'", path.c_str());
-  return Status::Ok();
+  return io::write_file_atomically(path, text);
 }
 
 Result<CsvTable> parse_table(std::string_view text, std::string_view name) {
