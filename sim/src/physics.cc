@@ -110,8 +110,7 @@ Result<Physics> Physics::create(RobotModel truth, const Scenario& scenario, std:
       static_cast<int>(truth.force_sensors.size()) != m) {
     return Status(ErrorCode::kInvalidArgument, "sim physics: inconsistent true robot model sizes");
   }
-  const Status fits = check_against(scenario, m);
-  if (!fits.ok()) return fits;
+  CDPR_RETURN_IF_ERROR(check_against(scenario, m));
   for (int i = 0; i < m; ++i) {
     if (truth.cables[static_cast<std::size_t>(i)].elongation == ElongationKind::kRigid) {
       return Status::Error(ErrorCode::kInvalidArgument,
