@@ -18,6 +18,7 @@
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/calibration/winch.hpp"
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/io/atomic_file.hpp"
 #include "cdpr/controller/calibration_report.hpp"
 #include "cdpr/controller/path_check.hpp"
 
@@ -652,6 +653,8 @@ Status Daemon::regulate_tensions(int pose_index) {
       const double want = std::clamp(f, lo, std::max(lo, hi));
       if (want == f) continue;
       inside = false;
+      spdlog::debug("pose {}: regulation {}: cable {} at {:.2f} N, band [{:.1f}, {:.1f}] N, trim {:.0f} counts",
+                    pose_index, iteration, i + 1, f, lo, hi, trim[k]);
       const double ea = c.ea > 0.0 ? c.ea : 1e9;
       const double length =
           c.routing_length +
@@ -933,13 +936,13 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   ctx.started = rec.metadata.get(recording::key::kDate);
   ctx.measuring_s = now_s() - t0;
   const json summary = calibration_json(out, ctx);
-  Status wrote = write_file_atomically(dir + "/report.json", summary.dump(2) + "\n");
-  if (wrote.ok()) wrote = write_file_atomically(dir + "/report.html", calibration_html(out, ctx));
+  Status wrote = io::write_file_atomically(dir + "/report.json", summary.dump(2) + "\n");
+  if (wrote.ok()) wrote = io::write_file_atomically(dir + "/report.html", calibration_html(out, ctx));
   if (wrote.ok()) {
-    wrote = write_file_atomically(dir + "/model_before.yaml", config::save_robot_config(g->model));
+    wrote = io::write_file_atomically(dir + "/model_before.yaml", config::save_robot_config(g->model));
   }
   if (wrote.ok()) {
-    wrote = write_file_atomically(dir + "/model_after.yaml", config::save_robot_config(out.model));
+    wrote = io::write_file_atomically(dir + "/model_after.yaml", config::save_robot_config(out.model));
   }
   if (!wrote.ok()) return fail(wrote);
   {
@@ -1104,7 +1107,7 @@ Reply Daemon::cmd_accept(const PeerInfo& peer) {
                    {"version", *version},
                    {"peer", {{"pid", peer.pid}, {"uid", peer.uid}, {"gid", peer.gid}}},
                    {"time", recording::utc_timestamp()}};
-  (void)write_file_atomically(dir + "/decision.json", decision.dump(2) + "\n");
+  (void)io::write_file_atomically(dir + "/decision.json", decision.dump(2) + "\n");
   {
     std::lock_guard lock(mu_);
     calibration_->outcome = "applying";
@@ -1136,7 +1139,7 @@ Reply Daemon::cmd_reject(const PeerInfo& peer) {
   json decision = {{"decision", "rejected"},
                    {"peer", {{"pid", peer.pid}, {"uid", peer.uid}, {"gid", peer.gid}}},
                    {"time", recording::utc_timestamp()}};
-  (void)write_file_atomically(store_->calibration_dir(id) + "/decision.json",
+  (void)io::write_file_atomically(store_->calibration_dir(id) + "/decision.json",
                               decision.dump(2) + "\n");
   spdlog::info("reject: calibration {} (pid {} uid {} gid {})", id, peer.pid, peer.uid, peer.gid);
   publish("calibration", {{"calibration", id},

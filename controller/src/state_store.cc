@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/io/atomic_file.hpp"
 #include "cdpr/recording/recording.hpp"
 
 namespace cdpr::controller {
@@ -73,26 +74,6 @@ std::vector<int> numbers_in(const std::string& dir, std::string_view suffix) {
 }
 
 }  // namespace
-
-Status write_file_atomically(const std::string& path, std::string_view text) {
-  std::string tmpl = path + ".tmp.XXXXXX";
-  std::vector<char> buf(tmpl.begin(), tmpl.end());
-  buf.push_back('\0');
-  const int fd = ::mkostemp(buf.data(), O_CLOEXEC);
-  if (fd < 0) return errno_status("cannot create a temporary file for", path);
-  const std::string tmp = buf.data();
-  Status s = write_all(fd, text, tmp);
-  if (s.ok() && ::fchmod(fd, 0644) != 0) s = errno_status("cannot chmod", tmp);
-  if (s.ok() && ::fsync(fd) != 0) s = errno_status("cannot fsync", tmp);
-  if (::close(fd) != 0 && s.ok()) s = errno_status("cannot close", tmp);
-  if (s.ok() && ::rename(tmp.c_str(), path.c_str()) != 0)
-    s = errno_status("cannot rename to", path);
-  if (!s.ok()) {
-    ::unlink(tmp.c_str());
-    return s;
-  }
-  return fsync_directory(path);
-}
 
 Result<std::string> read_text_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -162,8 +143,8 @@ Result<int> StateStore::add_geometry(const RobotModel& model, nlohmann::json met
   // The metadata first: a version exists once its YAML does.
   const std::string meta_path =
       (fs::path(dir_) / "geometry" / (numbered(version) + ".json")).string();
-  if (Status s = write_file_atomically(meta_path, meta.dump(2) + "\n"); !s.ok()) return s;
-  if (Status s = write_file_atomically(geometry_path(version), yaml); !s.ok()) return s;
+  if (Status s = io::write_file_atomically(meta_path, meta.dump(2) + "\n"); !s.ok()) return s;
+  if (Status s = io::write_file_atomically(geometry_path(version), yaml); !s.ok()) return s;
   return version;
 }
 
@@ -205,7 +186,7 @@ Status StateStore::activate(int version, nlohmann::json why) {
   if (!fs::exists(geometry_path(version))) {
     return Status::Error(ErrorCode::kNotFound, "geometry version %d does not exist", version);
   }
-  if (Status s = write_file_atomically((fs::path(dir_) / "active").string(),
+  if (Status s = io::write_file_atomically((fs::path(dir_) / "active").string(),
                                        std::to_string(version) + "\n");
       !s.ok()) {
     return s;
@@ -233,7 +214,7 @@ Result<std::vector<nlohmann::json>> StateStore::history() const {
 Status StateStore::save_offsets(const std::vector<double>& offsets, std::string_view how) {
   nlohmann::json j = {
       {"offsets_counts", offsets}, {"how", std::string(how)}, {"time", recording::utc_timestamp()}};
-  return write_file_atomically((fs::path(dir_) / "homing.json").string(), j.dump(2) + "\n");
+  return io::write_file_atomically((fs::path(dir_) / "homing.json").string(), j.dump(2) + "\n");
 }
 
 Result<std::vector<double>> StateStore::load_offsets() const {

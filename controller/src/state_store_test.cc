@@ -64,28 +64,6 @@ TEST_F(StateStoreTest, OffsetsRoundTripAndAbsentOffsetsAreNotFound) {
   EXPECT_EQ(*o, (std::vector<double>{1.5, -2.25, 1e6}));
 }
 
-TEST_F(StateStoreTest, AKillBetweenWriteAndRenameLeavesTheOldFileIntact) {
-  fs::create_directories(dir_);
-  const std::string path = (dir_ / "active").string();
-  ASSERT_TRUE(write_file_atomically(path, "1\n").ok());
-  // A child writes a large new version and is killed while writing (before the rename).
-  const pid_t pid = ::fork();
-  ASSERT_GE(pid, 0);
-  if (pid == 0) {
-    std::string big(64 << 20, 'x');
-    (void)write_file_atomically(path, big);
-    _exit(0);
-  }
-  ::usleep(2000);
-  ::kill(pid, SIGKILL);
-  int status = 0;
-  ::waitpid(pid, &status, 0);
-  auto text = read_text_file(path);
-  ASSERT_TRUE(text.ok());
-  // Either the old content or (if the child finished) the new one, never a mixture.
-  EXPECT_TRUE(*text == "1\n" || text->size() == (64u << 20)) << text->size();
-}
-
 TEST_F(StateStoreTest, AppendedRecordsSurviveAndATornLastHistoryLineIsSkipped) {
   auto s = StateStore::open(dir_.string());
   ASSERT_TRUE(s.ok());

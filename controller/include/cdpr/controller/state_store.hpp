@@ -2,8 +2,8 @@
 // encoder offsets of the last homing, and one folder per calibration (recording, reports, models
 // before and after, what was decided). Files that matter are written atomically (temporary file
 // in the same directory, fsync, rename, fsync of the directory), so a crash or a power loss at
-// any moment leaves either the old file or the new one; the recording is appended row by row
-// with an fsync per row.
+// any moment leaves either the old file or the new one: cdpr/io/atomic_file.hpp); the recording is
+// appended row by row with an fsync per row.
 //
 //   state/
 //     active                     "<version>\n": the geometry the daemon commands with
@@ -25,8 +25,6 @@
 
 namespace cdpr::controller {
 
-// Writes `text` to `path` atomically (see above).
-Status write_file_atomically(const std::string& path, std::string_view text);
 Result<std::string> read_text_file(const std::string& path);
 
 // A file that grows by whole records, each made durable (fsync) before append() returns.
