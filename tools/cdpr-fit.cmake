@@ -6,7 +6,7 @@ add_library(cdpr_fit_app STATIC ${_fit}/app.cc ${_fit}/common.cc ${_fit}/cmd_sim
                                 ${_fit}/cmd_design.cc ${_fit}/cmd_diagnose.cc
                                 ${_fit}/diagnose_report.cc)
 target_include_directories(cdpr_fit_app PUBLIC ${_fit})
-target_link_libraries(cdpr_fit_app PUBLIC cdpr_recording cdpr_config cdpr_calibration
+target_link_libraries(cdpr_fit_app PUBLIC cdpr_recording cdpr_config cdpr_io cdpr_calibration
                                           nlohmann_json::nlohmann_json CLI11::CLI11 spdlog::spdlog
                                    PRIVATE cdpr_options)
 

@@ -663,9 +663,9 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     if (!st.ok()) st.prepend(std::string("diagnose: ") + what + ": ");
     return st;
   };
-  if (Status st = check_set(set, "recording"); !st.ok()) return st;
+  CDPR_RETURN_IF_ERROR(check_set(set, "recording"));
   if (validation != nullptr) {
-    if (Status st = check_set(*validation, "validation recording"); !st.ok()) return st;
+    CDPR_RETURN_IF_ERROR(check_set(*validation, "validation recording"));
   }
   if (options.bootstrap_samples < 0 || options.cv_folds < 2 || options.max_effects < 0 ||
       !(options.inclusion_threshold >= 0 && options.inclusion_threshold <= 1)) {

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <set>
 #include <sstream>
 
 #include "cdpr/calibration/elongation.hpp"
@@ -367,7 +368,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
   const int m = robot.num_cables();
   const int nl = static_cast<int>(robot.lasers.size());
   const int n = set.num_poses();
-  if (Status st = validate(set, robot); !st.ok()) return st;
+  CDPR_RETURN_IF_ERROR(validate(set, robot));
   if (m < 1) return Status(ErrorCode::kInvalidArgument, "identification: the robot has no cables");
   if (static_cast<int>(robot.pulleys.size()) != m || static_cast<int>(robot.cables.size()) != m ||
       static_cast<int>(robot.force_sensors.size()) != m || robot.platform_anchors.cols() != m ||
@@ -379,8 +380,8 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     return Status(ErrorCode::kInvalidArgument,
                   "identification: the reading model needs one offset and one scale per cable");
   }
-  if (Status st = check_mask(opt.frame_anchor_mask, m, "frame anchor"); !st.ok()) return st;
-  if (Status st = check_mask(opt.platform_anchor_mask, m, "platform anchor"); !st.ok()) return st;
+  CDPR_RETURN_IF_ERROR(check_mask(opt.frame_anchor_mask, m, "frame anchor"));
+  CDPR_RETURN_IF_ERROR(check_mask(opt.platform_anchor_mask, m, "platform anchor"));
   if (static_cast<int>(poses.size()) != n) {
     return Status(ErrorCode::kInternal, "identification: pose guesses do not match the set");
   }
@@ -920,7 +921,7 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
     io.rank_tolerance = options.rank_tolerance;
     const IdentifiabilityReport ir = analyze_identifiability(to_public(B, *info0, initial), io);
     if (options.refuse_unidentifiable) {
-      if (Status st = require_identifiable(ir); !st.ok()) return st;
+      CDPR_RETURN_IF_ERROR(require_identifiable(ir));
     }
   }
 
@@ -933,12 +934,16 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   so.logging_type = ceres::SILENT;
   if (free_pose_params > 0) {
     so.linear_solver_type = ceres::DENSE_SCHUR;
+    // Poses are eliminated first (group 0). Every other block gets a group of its own, in the
+    // order the problem was built: within one group Ceres orders blocks by their address, which
+    // would make the last bits of the result depend on where the heap put the parameter vectors.
     auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
     std::vector<double*> all;
     B.problem.GetParameterBlocks(&all);
-    for (double* p : all) ordering->AddElementToGroup(p, 1);
-    for (std::size_t j = 0; j < B.poses.size(); ++j)
-      ordering->AddElementToGroup(B.poses[j].data(), 0);
+    std::set<const double*> pose_blocks;
+    for (const auto& pose : B.poses) pose_blocks.insert(pose.data());
+    int group = 1;
+    for (double* p : all) ordering->AddElementToGroup(p, pose_blocks.count(p) ? 0 : group++);
     so.linear_solver_ordering = ordering;
   } else {
     so.linear_solver_type = ceres::DENSE_QR;

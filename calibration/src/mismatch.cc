@@ -242,7 +242,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
                          residuals != nullptr ? static_cast<int>(residuals->size()) : np,
                          static_cast<int>(poses.size()), np);
   }
-  if (Status st = validate(set, robot); !st.ok()) return st;
+  CDPR_RETURN_IF_ERROR(validate(set, robot));
 
   // --- Jacobians at the estimate: the identification's, and one with every candidate parameter
   // switched on (its extra columns are candidate effects).

@@ -56,12 +56,6 @@ Status check_unit(const char* prefix, const char* field, const Eigen::Vector3d& 
   return Status::Ok();
 }
 
-#define CDPR_RETURN_IF_ERROR(expr)     \
-  do {                                 \
-    Status status_ = (expr);           \
-    if (!status_.ok()) return status_; \
-  } while (false)
-
 Status check_cable(const RobotModel& model, int i, const ModelCheckOptions& options) {
   const auto k = static_cast<std::size_t>(i);
   char p[40];

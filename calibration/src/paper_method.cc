@@ -125,7 +125,7 @@ class PaperProblem {
 Result<PaperMethodReport> paper_method(const CalibratedModel& initial, const MeasurementSet& set,
                                        const PaperMethodOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
-  if (Status st = validate(set, initial.robot); !st.ok()) return st;
+  CDPR_RETURN_IF_ERROR(validate(set, initial.robot));
   const int m = initial.robot.num_cables();
   const AnchorMask mask = options.parameters.size() == 0 ? paper_anchor_mask() : options.parameters;
   if (mask.cols() != m) {

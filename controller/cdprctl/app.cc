@@ -484,6 +484,19 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err,
     if (report_version > 0) inv.args["version"] = report_version;
     inv.args["html"] = !inv.html_file.empty();
   });
+  std::vector<double> move_pose;
+  auto* mv = app.add_subcommand(
+      "move", "move the platform to a pose: X Y Z [ROLL PITCH YAW] (m, rad; privileged)");
+  mv->add_option("POSE", move_pose, "x y z in m, then optionally roll pitch yaw in rad")
+      ->required()
+      ->expected(3, 6);
+  mv->callback([&] {
+    inv.name = "move";
+    inv.cmd = "move";
+    std::vector<double> p = move_pose;
+    p.resize(6, 0.0);
+    inv.args = {{"pose", p}};
+  });
   simple("stop", "stop", "quick stop (privileged)");
   simple("fault-reset", "fault_reset", "clear a fault after its cause is gone (privileged)");
 

@@ -1,6 +1,7 @@
 #include "cdpr/controller/control_protocol.hpp"
 
 #include <array>
+#include <cmath>
 #include <utility>
 
 namespace cdpr::control {
@@ -29,7 +30,9 @@ constexpr ArgSpec kDiffArgs[] = {{"from", ArgType::kVersion, true},
 constexpr ArgSpec kReportArgs[] = {{"version", ArgType::kVersion, false},
                                    {"html", ArgType::kBool, false}};
 
-constexpr std::array<CommandSpec, 13> kCommands{{
+constexpr ArgSpec kMoveArgs[] = {{"pose", ArgType::kPose, true}};
+
+constexpr std::array<CommandSpec, 14> kCommands{{
     {"status", false, {}},
     {"calibrate", true, kCalibrateArgs},
     {"watch", false, {}},
@@ -43,6 +46,7 @@ constexpr std::array<CommandSpec, 13> kCommands{{
     {"report", false, kReportArgs},
     {"stop", true, {}},
     {"fault_reset", true, {}},
+    {"move", true, kMoveArgs},
 }};
 
 std::string_view type_name(ArgType t) {
@@ -53,6 +57,8 @@ std::string_view type_name(ArgType t) {
       return "a string";
     case ArgType::kVersion:
       return "an integer version >= 1";
+    case ArgType::kPose:
+      return "[x, y, z, roll, pitch, yaw] (6 finite numbers: m, rad)";
   }
   return "?";
 }
@@ -67,6 +73,12 @@ bool has_type(const json& v, ArgType t) {
       if (v.is_number_unsigned()) return v.get<std::uint64_t>() >= 1;
       if (v.is_number_integer()) return v.get<std::int64_t>() >= 1;
       return false;
+    case ArgType::kPose:
+      if (!v.is_array() || v.size() != 6) return false;
+      for (const json& x : v) {
+        if (!x.is_number() || !std::isfinite(x.get<double>())) return false;
+      }
+      return true;
   }
   return false;
 }

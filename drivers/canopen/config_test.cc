@@ -64,8 +64,11 @@ TEST(Config, ErrorsNameFileLineAndField) {
 
   auto typo = parse_config("master:\n  sync_periode_ms: 4\nnodes:\n  - id: 1\n", "t.yaml");
   ASSERT_FALSE(typo.ok());
-  EXPECT_EQ(std::string(typo.status().message()),
-            "t.yaml:2: master.sync_periode_ms: unknown field");
+  EXPECT_EQ(
+      std::string(typo.status().message())
+          .rfind("t.yaml:2: master.sync_periode_ms: unknown field (known fields: interface, ", 0),
+      0u)
+      << typo.status().message();
 
   auto drive = parse_config("nodes:\n  - id: 3\n    kind: cia402\n", "d.yaml");
   ASSERT_FALSE(drive.ok());

@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <sstream>
@@ -231,6 +232,23 @@ TEST(RobotConfig, SaveThenLoadIsExact) {
   }
 }
 
+TEST(RobotConfig, WrittenFileCarriesTheHeaderAndLoadsBackExactly) {
+  const Result<RobotModel> model = load_robot_config(source_path("config/mini.yaml"));
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  const std::string path = ::testing::TempDir() + "robot_config_test_written.yaml";
+  const std::string header = "# geometry version 3\n";
+  ASSERT_TRUE(write_robot_config(path, *model, header).ok());
+  const std::string text = read_text(path);
+  EXPECT_EQ(text, header + save_robot_config(*model));
+  const Result<RobotModel> again = load_robot_config(path);
+  ASSERT_TRUE(again.ok()) << again.status().to_string();
+  expect_identical(*model, *again);
+  std::remove(path.c_str());
+  const Status bad = write_robot_config("/nonexistent/dir/robot.yaml", *model);
+  EXPECT_EQ(bad.code(), ErrorCode::kNotFound);
+  EXPECT_THAT(std::string(bad.message()), HasSubstr("/nonexistent/dir/robot.yaml"));
+}
+
 TEST(RobotConfig, SaveKeepsNumbersThatNeedAllSeventeenDigits) {
   Result<RobotModel> model = load_robot_config(source_path("config/mini.yaml"));
   ASSERT_TRUE(model.ok()) << model.status().to_string();
@@ -303,11 +321,12 @@ INSTANTIATE_TEST_SUITE_P(
         BadConfig{"NotANumber", "mass: 2.0", "mass: heavy", "mass: heavy", "platform.mass",
                   "expected a positive number (kg), got heavy"},
         BadConfig{"MissingField", "    platform_anchor: [0.06, 0.075, 0.03]\n", "",
-                  "[0.5315, 0.345, 0.4415]", "cables[7]", "missing field 'platform_anchor'"},
+                  "[0.5315, 0.345, 0.4415]", "cables[7].platform_anchor", "missing (b_i"},
         BadConfig{"MissingDefaultedField", "  f_max: 200               # N\n", "",
-                  "[0.5, -0.378, -0.4415]", "cables[0]", "missing field 'f_max'"},
+                  "[0.5, -0.378, -0.4415]", "cables[0].f_max",
+                  "missing (maximum tension in N); give it here or in defaults"},
         BadConfig{"UnknownField", "drum_pitch: 0.002", "drum_pich: 0.002", "drum_pich",
-                  "defaults.winch", "unknown field 'drum_pich'"},
+                  "defaults.winch.drum_pich", "unknown field (known fields: drum_diameter"},
         BadConfig{"DirectionNotUnitSign", "direction: 1,", "direction: 2,", "direction: 2",
                   "defaults.winch.direction", "expected 1 or -1, got 2"},
         BadConfig{"TensionLimitsReversed", "  f_min: 5 ", "  f_min: 500 ", "f_min: 500",
@@ -324,7 +343,7 @@ INSTANTIATE_TEST_SUITE_P(
                   "model: polynomial", "defaults.elongation.coefficients",
                   "order 2 needs a list of 6 numbers, got a list of 3"},
         BadConfig{"UnknownTopLevelField", "name: MINI\n", "name: MINI\nlaser: []\n", "laser: []",
-                  "(top level)", "unknown field 'laser'"},
+                  "laser", "unknown field (known fields: name, gravity"},
         BadConfig{"RepeatedField", "    platform_anchor: [0.06, 0.075, 0.03]\n",
                   "    platform_anchor: [0.06, 0.075, 0.03]\n    ea: 1\n    ea: 2\n", "    ea: 2\n",
                   "cables[7].ea", "field given twice"},

@@ -103,8 +103,7 @@ Result<std::unique_ptr<LaserSlave>> LaserSlave::start(const LaserSlaveConfig& co
                          config.slave_id);
   }
   std::unique_ptr<LaserSlave> s(new LaserSlave(config));
-  const Status st = s->open_transport();
-  if (!st.ok()) return st;
+  CDPR_RETURN_IF_ERROR(s->open_transport());
   {
     std::lock_guard<std::mutex> lock(s->mutex_);
     s->fill_registers();

@@ -15,12 +15,16 @@
 #include <CLI/CLI.hpp>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <memory>
 #include <string>
 #include <thread>
+#include <vector>
 
+#include "cdpr/calibration/predicted_accuracy.hpp"
+#include "cdpr/calibration/simulate.hpp"
 #include "cdpr/can/socketcan_bus.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
@@ -35,9 +39,13 @@
 namespace {
 
 std::atomic<bool> g_stop{false};
+std::atomic<bool> g_report_pose{false};
 
 void on_signal(int) {
   g_stop = true;
+}
+void on_report(int) {
+  g_report_pose = true;
 }
 
 int fail(const std::string& what) {
@@ -54,6 +62,8 @@ int main(int argc, char** argv) {
   std::uint64_t seed = 1;
   double rate_hz = 100.0, duration_s = 0.0, dwell_s = 2.0;
   int laser_samples = 1, substeps = 10;
+  std::string home_mode = "nominal";
+  std::vector<std::string> evaluate;
   app.add_option("--config", config_path, "nominal robot description (what the daemon uses)")
       ->required();
   app.add_option("--scenario", scenario_path, "scenario: true robot, hidden effects, faults")
@@ -68,6 +78,14 @@ int main(int argc, char** argv) {
   app.add_option("--out", out_path, "recording CSV written by --lockstep");
   app.add_option("--laser-map", laser_map_path,
                  "register map served (default: the scenario's laser.register_map)");
+  app.add_option("--home", home_mode,
+                 "real time: drive counts at power-on: 'nominal' (the nominal model's home "
+                 "counts) or 'reference' (the true platform stands at home, as on a reference "
+                 "platform)")
+      ->check(CLI::IsMember({"nominal", "reference"}));
+  app.add_option("--evaluate", evaluate,
+                 "judge robot descriptions against the scenario's truth: frame-anchor error and "
+                 "the ISO 9283 box position error they realise on the true robot; then exit");
   app.add_option("--rate", rate_hz, "real-time physics rate, Hz")->check(CLI::Range(0.1, 10000.0));
   app.add_option("--duration", duration_s, "real-time: stop after this many seconds (0: never)");
   app.add_option("--dwell", dwell_s, "lock-step: scenario time per pose, s")
@@ -87,6 +105,36 @@ int main(int argc, char** argv) {
   cdpr::Result<cdpr::sim::Physics> physics =
       cdpr::sim::Physics::create(std::move(*truth), *scenario, seed);
   if (!physics.ok()) return fail(physics.status().to_string());
+
+  // ---- evaluate ----------------------------------------------------------------------------
+  if (!evaluate.empty()) {
+    const cdpr::RobotModel& true_robot = physics->truth();
+    std::printf("%-40s %12s %12s %14s %14s\n", "model", "anchor RMS", "anchor max", "box pos. RMS",
+                "box pos. max");
+    for (const std::string& path : evaluate) {
+      auto model = cdpr::config::load_robot_config(path);
+      if (!model.ok()) return fail(model.status().to_string());
+      if (model->num_cables() != true_robot.num_cables())
+        return fail(path + ": cable count differs");
+      double sum = 0.0, worst = 0.0;
+      for (int i = 0; i < true_robot.num_cables(); ++i) {
+        const double d = (model->frame_anchors.col(i) - true_robot.frame_anchors.col(i)).norm();
+        sum += d * d;
+        worst = std::max(worst, d);
+      }
+      const cdpr::CalibratedModel controller = cdpr::CalibratedModel::FromRobot(*model);
+      auto homed = cdpr::homed_truth(true_robot, *model);
+      if (!homed.ok()) return fail(path + ": " + homed.status().to_string());
+      cdpr::AccuracyBox box;
+      box.center = true_robot.home.position;
+      auto acc = cdpr::measure_position_accuracy(*homed, controller, box);
+      if (!acc.ok()) return fail(path + ": " + acc.status().to_string());
+      std::printf("%-40s %9.3f mm %9.3f mm %11.3f mm %11.3f mm\n", path.c_str(),
+                  1e3 * std::sqrt(sum / true_robot.num_cables()), 1e3 * worst,
+                  1e3 * acc->position_rms_m, 1e3 * acc->position_max_m);
+    }
+    return 0;
+  }
 
   // ---- lock-step -------------------------------------------------------------------------
   if (!lockstep_path.empty()) {
@@ -122,7 +170,9 @@ int main(int argc, char** argv) {
   if (!can_if.empty() && canopen_path.empty()) {
     return fail("--can needs --canopen (the CANopen network: node ids and PDOs)");
   }
-  auto home = cdpr::sim::nominal_counts(*nominal, nominal->home);
+  auto home = home_mode == "reference"
+                  ? cdpr::sim::true_pose_counts(*physics, physics->truth().home)
+                  : cdpr::sim::nominal_counts(*nominal, nominal->home);
   if (!home.ok()) return fail("home counts: " + home.status().to_string());
   const Eigen::VectorXd counts = home->array().round().matrix();
   cdpr::Status st = physics->step(counts, 0.0);
@@ -204,6 +254,8 @@ int main(int argc, char** argv) {
   std::fflush(stdout);
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
+  // SIGUSR1: print where the true platform is (tests compare it with a commanded target).
+  std::signal(SIGUSR1, on_report);
 
   const auto start = std::chrono::steady_clock::now();
   auto mono = [] {
@@ -233,6 +285,12 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "cdpr-sim: %s\n", st.to_string().c_str());
         continue;
       }
+    }
+    if (g_report_pose.exchange(false)) {
+      const cdpr::Pose& p = physics->state().pose;
+      std::printf("cdpr-sim: t = %.3f s: true platform pose %.9f %.9f %.9f %.9f %.9f %.9f\n", t,
+                  p.position.x(), p.position.y(), p.position.z(), p.rpy.x(), p.rpy.y(), p.rpy.z());
+      std::fflush(stdout);
     }
     if (laser) {
       const cdpr::sim::LaserChannel l = physics->state().lasers.front();

@@ -110,8 +110,7 @@ Result<Physics> Physics::create(RobotModel truth, const Scenario& scenario, std:
       static_cast<int>(truth.force_sensors.size()) != m) {
     return Status(ErrorCode::kInvalidArgument, "sim physics: inconsistent true robot model sizes");
   }
-  const Status fits = check_against(scenario, m);
-  if (!fits.ok()) return fits;
+  CDPR_RETURN_IF_ERROR(check_against(scenario, m));
   for (int i = 0; i < m; ++i) {
     if (truth.cables[static_cast<std::size_t>(i)].elongation == ElongationKind::kRigid) {
       return Status::Error(ErrorCode::kInvalidArgument,
@@ -482,6 +481,28 @@ Result<Eigen::VectorXd> nominal_counts(const RobotModel& nominal, const Pose& po
                          data.kinematics.invalid_cable + 1);
   }
   return Eigen::VectorXd(data.counts);
+}
+
+Result<Eigen::VectorXd> true_pose_counts(const Physics& physics, const Pose& pose,
+                                         double reference_tension) {
+  const RobotModel& truth = physics.truth();
+  const double f_ref =
+      std::isnan(reference_tension) ? default_reference_tension(truth) : reference_tension;
+  Result<Eigen::VectorXd> f = simple_tension_distribution(truth, pose, f_ref);
+  if (!f.ok()) return f.status();
+  Result<Eigen::VectorXd> u = unstretched_lengths(truth, pose, *f);
+  if (!u.ok()) return u.status();
+  const HiddenEffects& e = physics.scenario().effects;
+  Eigen::VectorXd counts(truth.num_cables());
+  for (int i = 0; i < truth.num_cables(); ++i) {
+    const WinchModel& w = truth.winches[static_cast<std::size_t>(i)];
+    // unstretched_length(i, c, 0) = length_offset + o_i + (1 + s_i) * change(c) (no thermal
+    // drift at t = 0), solved for c.
+    const double change = ((*u)(i)-w.length_offset - e.encoder_zero_offset.at(i)) /
+                          (1.0 + e.transmission_scale.at(i));
+    counts(i) = winch_counts_change<double>(w, change);
+  }
+  return counts;
 }
 
 Result<std::vector<LockstepSample>> run_lockstep(Physics& physics, const RobotModel& nominal,

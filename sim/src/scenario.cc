@@ -1,386 +1,176 @@
 #include "cdpr/sim/scenario.hpp"
 
-#include <yaml-cpp/yaml.h>
-
-#include <cerrno>
 #include <cmath>
-#include <cstdlib>
 #include <filesystem>
-#include <fstream>
-#include <initializer_list>
+#include <iterator>
+#include <limits>
 #include <random>
-#include <sstream>
 
 #include "cdpr/calibration/elongation.hpp"
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/config/yaml_reader.hpp"
 
 namespace cdpr::sim {
 namespace {
 
-// Reads typed fields and reports "<file>:<line>: <field>: <reason>".
-class Reader {
- public:
-  explicit Reader(std::string file) : file_(std::move(file)) {}
+using config::Sign;
+using config::YamlDocument;
+using config::YamlField;
 
-  int line(const YAML::Node& n) const { return n.Mark().line >= 0 ? n.Mark().line + 1 : 0; }
-
-  Status error(const YAML::Node& at, const std::string& field, const std::string& reason) const {
-    const int l = line(at);
-    if (l > 0) {
-      return Status::Error(ErrorCode::kInvalidArgument, "%s:%d: %s: %s", file_.c_str(), l,
-                           field.c_str(), reason.c_str());
-    }
-    return Status::Error(ErrorCode::kInvalidArgument, "%s: %s: %s", file_.c_str(), field.c_str(),
-                         reason.c_str());
+// A number or a list of numbers, one per cable.
+Result<PerCable> per_cable(const YamlField& f, Sign sign, const char* unit) {
+  PerCable p;
+  p.line = f.line();
+  CDPR_ASSIGN_OR_RETURN(p.values, f.numbers(sign, unit, /*scalar_allowed=*/true));
+  if (p.values.empty()) {
+    return f.error(
+        std::string("expected a number or a non-empty list of numbers, one per cable (") + unit +
+        ")");
   }
+  return p;
+}
 
-  // Refuses keys not in `allowed` (a misspelt field must not pass unnoticed).
-  Status only(const YAML::Node& map, const std::string& field,
-              std::initializer_list<const char*> allowed) const {
-    if (!map.IsMap()) return error(map, field, "expected a mapping");
-    for (const auto& kv : map) {
-      const std::string key = kv.first.Scalar();
-      bool ok = false;
-      for (const char* a : allowed) ok = ok || key == a;
-      if (!ok) {
-        std::string list;
-        for (const char* a : allowed) {
-          if (!list.empty()) list += ", ";
-          list += a;
-        }
-        return error(kv.first, join(field, key), "unknown field (expected one of: " + list + ")");
-      }
-    }
-    return Status::Ok();
-  }
+// An optional per-cable list: `out` keeps its value when the key is absent.
+Status optional_per_cable(const YamlField& map, const char* key, Sign sign, const char* unit,
+                          PerCable& out) {
+  const YamlField f = map[key];
+  if (!f.present()) return Status::Ok();
+  CDPR_ASSIGN_OR_RETURN(out, per_cable(f, sign, unit));
+  return Status::Ok();
+}
 
-  static std::string join(const std::string& parent, const std::string& key) {
-    return parent.empty() ? key : parent + "." + key;
-  }
-
-  Result<double> number(const YAML::Node& n, const std::string& field) const {
-    if (!n.IsScalar()) return error(n, field, "expected a number");
-    const std::string& s = n.Scalar();
-    char* end = nullptr;
-    errno = 0;
-    const double v = std::strtod(s.c_str(), &end);
-    if (s.empty() || end == s.c_str() || *end != '\0' || errno == ERANGE || !std::isfinite(v)) {
-      return error(n, field, "expected a finite number, got '" + s + "'");
-    }
-    return v;
-  }
-
-  Result<double> positive(const YAML::Node& n, const std::string& field, const char* unit) const {
-    Result<double> v = number(n, field);
-    if (!v.ok()) return v;
-    if (!(*v > 0.0)) {
-      return error(n, field,
-                   std::string("expected a positive number (") + unit + "), got " + n.Scalar());
-    }
-    return v;
-  }
-
-  Result<double> non_negative(const YAML::Node& n, const std::string& field,
-                              const char* unit) const {
-    Result<double> v = number(n, field);
-    if (!v.ok()) return v;
-    if (*v < 0.0) {
-      return error(n, field,
-                   std::string("expected a number >= 0 (") + unit + "), got " + n.Scalar());
-    }
-    return v;
-  }
-
-  // Integer in decimal or 0x hex, within [lo, hi].
-  Result<std::uint64_t> integer(const YAML::Node& n, const std::string& field, std::uint64_t lo,
-                                std::uint64_t hi) const {
-    if (!n.IsScalar()) return error(n, field, "expected an integer");
-    const std::string& s = n.Scalar();
-    char* end = nullptr;
-    errno = 0;
-    const unsigned long long v = std::strtoull(s.c_str(), &end, 0);
-    if (s.empty() || s[0] == '-' || end == s.c_str() || *end != '\0' || errno == ERANGE || v < lo ||
-        v > hi) {
-      std::ostringstream os;
-      os << "expected an integer in [" << lo << ", " << hi << "] (decimal or 0x hex), got '" << s
-         << "'";
-      return error(n, field, os.str());
-    }
-    return static_cast<std::uint64_t>(v);
-  }
-
-  Result<bool> boolean(const YAML::Node& n, const std::string& field) const {
-    if (n.IsScalar()) {
-      const std::string& s = n.Scalar();
-      if (s == "true" || s == "on" || s == "yes") return true;
-      if (s == "false" || s == "off" || s == "no") return false;
-    }
-    return error(n, field, "expected true or false");
-  }
-
-  Result<std::string> text(const YAML::Node& n, const std::string& field) const {
-    if (!n.IsScalar() || n.Scalar().empty()) return error(n, field, "expected a text");
-    return n.Scalar();
-  }
-
-  Result<Eigen::Vector3d> vector3(const YAML::Node& n, const std::string& field,
-                                  const char* unit) const {
-    if (!n.IsSequence() || n.size() != 3) {
-      return error(n, field, std::string("expected a list of 3 numbers (") + unit + ")");
-    }
-    Eigen::Vector3d v;
-    for (std::size_t k = 0; k < 3; ++k) {
-      Result<double> x = number(n[k], field + "[" + std::to_string(k) + "]");
-      if (!x.ok()) return x.status();
-      v(static_cast<int>(k)) = *x;
-    }
-    return v;
-  }
-
-  // A scalar or a list of numbers; `sign`: 0 any, 1 positive, 2 non-negative.
-  Result<PerCable> per_cable(const YAML::Node& n, const std::string& field, int sign,
-                             const char* unit) const {
-    PerCable p;
-    p.line = line(n);
-    auto check = [&](const YAML::Node& x, const std::string& f) -> Result<double> {
-      if (sign == 1) return positive(x, f, unit);
-      if (sign == 2) return non_negative(x, f, unit);
-      return number(x, f);
-    };
-    if (n.IsScalar()) {
-      Result<double> v = check(n, field);
-      if (!v.ok()) return v.status();
-      p.values.push_back(*v);
-      return p;
-    }
-    if (!n.IsSequence() || n.size() == 0) {
-      return error(
-          n, field,
-          std::string("expected a number or a non-empty list of numbers, one per cable (") + unit +
-              ")");
-    }
-    for (std::size_t k = 0; k < n.size(); ++k) {
-      Result<double> v = check(n[k], field + "[" + std::to_string(k) + "]");
-      if (!v.ok()) return v.status();
-      p.values.push_back(*v);
-    }
-    return p;
-  }
-
-  const std::string& file() const { return file_; }
-
- private:
-  std::string file_;
-};
-
-#define CDPR_SIM_TRY(expr)                   \
-  do {                                       \
-    ::cdpr::Status cdpr_sim_s = (expr);      \
-    if (!cdpr_sim_s.ok()) return cdpr_sim_s; \
-  } while (false)
-
-// Assigns the value of a Result to `target` or returns its status.
-#define CDPR_SIM_ASSIGN(target, expr)                 \
-  do {                                                \
-    auto cdpr_sim_r = (expr);                         \
-    if (!cdpr_sim_r.ok()) return cdpr_sim_r.status(); \
-    target = std::move(*cdpr_sim_r);                  \
-  } while (false)
+Status optional_vector(const YamlField& map, const char* key, const char* unit,
+                       Eigen::Vector3d& out) {
+  const YamlField f = map[key];
+  if (!f.present()) return Status::Ok();
+  CDPR_ASSIGN_OR_RETURN(const auto v, f.vector3(unit));
+  out = Eigen::Vector3d(v[0], v[1], v[2]);
+  return Status::Ok();
+}
 
 std::string resolve_path(std::string_view base_dir, const std::string& p) {
   if (p.empty() || std::filesystem::path(p).is_absolute()) return p;
   return (std::filesystem::path(base_dir) / p).lexically_normal().string();
 }
 
-Status parse_truth(const Reader& rd, const YAML::Node& n, std::string_view base_dir,
-                   TruthSource& t) {
-  CDPR_SIM_TRY(rd.only(n, "truth", {"config", "perturb"}));
-  if (n["config"]) {
-    std::string p;
-    CDPR_SIM_ASSIGN(p, rd.text(n["config"], "truth.config"));
-    t.config_path = resolve_path(base_dir, p);
-  }
-  if (const YAML::Node q = n["perturb"]) {
-    CDPR_SIM_TRY(rd.only(q, "truth.perturb", {"frame_anchor_std", "platform_anchor_std", "seed"}));
-    if (q["frame_anchor_std"]) {
-      CDPR_SIM_ASSIGN(t.frame_anchor_std, rd.per_cable(q["frame_anchor_std"],
-                                                       "truth.perturb.frame_anchor_std", 2, "m"));
-    }
-    if (q["platform_anchor_std"]) {
-      CDPR_SIM_ASSIGN(
-          t.platform_anchor_std,
-          rd.per_cable(q["platform_anchor_std"], "truth.perturb.platform_anchor_std", 2, "m"));
-    }
-    if (q["seed"]) {
-      CDPR_SIM_ASSIGN(t.perturb_seed,
-                      rd.integer(q["seed"], "truth.perturb.seed", 0, ~std::uint64_t{0}));
-    }
+Status parse_truth(const YamlField& n, std::string_view base_dir, TruthSource& t) {
+  CDPR_RETURN_IF_ERROR(n.check_keys({"config", "perturb"}));
+  std::string config;
+  CDPR_RETURN_IF_ERROR(n.optional("config", config));
+  if (!config.empty()) t.config_path = resolve_path(base_dir, config);
+  if (const YamlField q = n["perturb"]; q.present()) {
+    CDPR_RETURN_IF_ERROR(q.check_keys({"frame_anchor_std", "platform_anchor_std", "seed"}));
+    CDPR_RETURN_IF_ERROR(
+        optional_per_cable(q, "frame_anchor_std", Sign::kNonNegative, "m", t.frame_anchor_std));
+    CDPR_RETURN_IF_ERROR(optional_per_cable(q, "platform_anchor_std", Sign::kNonNegative, "m",
+                                            t.platform_anchor_std));
+    CDPR_RETURN_IF_ERROR(
+        q.optional("seed", t.perturb_seed, 0, std::numeric_limits<std::int64_t>::max()));
   }
   return Status::Ok();
 }
 
-Status parse_noise(const Reader& rd, const YAML::Node& n, SensorNoiseLevels& s) {
-  CDPR_SIM_TRY(rd.only(n, "noise", {"encoder_counts", "force_raw", "laser"}));
-  if (n["encoder_counts"]) {
-    CDPR_SIM_ASSIGN(s.encoder_counts,
-                    rd.non_negative(n["encoder_counts"], "noise.encoder_counts", "counts"));
-  }
-  if (n["force_raw"]) {
-    CDPR_SIM_ASSIGN(s.force_raw, rd.non_negative(n["force_raw"], "noise.force_raw", "raw units"));
-  }
-  if (n["laser"]) CDPR_SIM_ASSIGN(s.laser, rd.non_negative(n["laser"], "noise.laser", "m"));
+Status parse_noise(const YamlField& n, SensorNoiseLevels& s) {
+  CDPR_RETURN_IF_ERROR(n.check_keys({"encoder_counts", "force_raw", "laser"}));
+  CDPR_RETURN_IF_ERROR(
+      n.optional("encoder_counts", s.encoder_counts, Sign::kNonNegative, "counts"));
+  CDPR_RETURN_IF_ERROR(n.optional("force_raw", s.force_raw, Sign::kNonNegative, "raw units"));
+  CDPR_RETURN_IF_ERROR(n.optional("laser", s.laser, Sign::kNonNegative, "m"));
   return Status::Ok();
 }
 
-Status parse_polynomial(const Reader& rd, const YAML::Node& n, PolynomialSurface& p) {
-  const std::string f = "effects.polynomial";
-  CDPR_SIM_TRY(rd.only(n, f,
-                       {"order", "coefficients", "length_center", "length_scale", "tension_center",
-                        "tension_scale"}));
-  if (!n["order"]) return rd.error(n, f + ".order", "missing");
-  if (!n["coefficients"]) return rd.error(n, f + ".coefficients", "missing");
-  std::uint64_t order = 0;
-  CDPR_SIM_ASSIGN(order, rd.integer(n["order"], f + ".order", 0, kMaxPolynomialOrder));
-  p.order = static_cast<int>(order);
-  PerCable c;
-  CDPR_SIM_ASSIGN(c, rd.per_cable(n["coefficients"], f + ".coefficients", 0, "m"));
+Status parse_polynomial(const YamlField& n, PolynomialSurface& p) {
+  CDPR_RETURN_IF_ERROR(n.check_keys({"order", "coefficients", "length_center", "length_scale",
+                                     "tension_center", "tension_scale"}));
+  CDPR_ASSIGN_OR_RETURN(const YamlField order, n.required("order"));
+  CDPR_ASSIGN_OR_RETURN(const YamlField coefficients, n.required("coefficients"));
+  CDPR_ASSIGN_OR_RETURN(const std::int64_t order_value, order.integer(0, kMaxPolynomialOrder));
+  p.order = static_cast<int>(order_value);
+  CDPR_ASSIGN_OR_RETURN(const PerCable c, per_cable(coefficients, Sign::kAny, "m"));
   p.coefficients = c.values;
   if (static_cast<int>(p.coefficients.size()) != polynomial_surface_size(p.order)) {
-    return rd.error(n["coefficients"], f + ".coefficients",
-                    "order " + std::to_string(p.order) + " needs " +
-                        std::to_string(polynomial_surface_size(p.order)) +
-                        " coefficients (graded order), got " +
-                        std::to_string(p.coefficients.size()));
+    return coefficients.error("order " + std::to_string(p.order) + " needs " +
+                              std::to_string(polynomial_surface_size(p.order)) +
+                              " coefficients (graded order), got " +
+                              std::to_string(p.coefficients.size()));
   }
-  if (n["length_center"]) {
-    CDPR_SIM_ASSIGN(p.length_center, rd.number(n["length_center"], f + ".length_center"));
-  }
-  if (n["length_scale"]) {
-    CDPR_SIM_ASSIGN(p.length_scale, rd.positive(n["length_scale"], f + ".length_scale", "m"));
-  }
-  if (n["tension_center"]) {
-    CDPR_SIM_ASSIGN(p.tension_center, rd.number(n["tension_center"], f + ".tension_center"));
-  }
-  if (n["tension_scale"]) {
-    CDPR_SIM_ASSIGN(p.tension_scale, rd.positive(n["tension_scale"], f + ".tension_scale", "N"));
-  }
+  CDPR_RETURN_IF_ERROR(n.optional("length_center", p.length_center));
+  CDPR_RETURN_IF_ERROR(n.optional("length_scale", p.length_scale, Sign::kPositive, "m"));
+  CDPR_RETURN_IF_ERROR(n.optional("tension_center", p.tension_center));
+  CDPR_RETURN_IF_ERROR(n.optional("tension_scale", p.tension_scale, Sign::kPositive, "N"));
   const Status v = validate_polynomial_surface(p);
-  if (!v.ok()) return rd.error(n, f, std::string(v.message()));
+  if (!v.ok()) return n.error(v.message());
   return Status::Ok();
 }
 
-Status parse_effects(const Reader& rd, const YAML::Node& n, HiddenEffects& e) {
-  CDPR_SIM_TRY(
-      rd.only(n, "effects",
-              {"cable_law", "stiff_ea", "hooke", "polynomial", "creep", "sag", "pulley_radius",
-               "transmission_scale", "encoder_zero_offset", "force_sensor", "laser", "thermal"}));
-  if (n["cable_law"]) {
-    std::string law;
-    CDPR_SIM_ASSIGN(law, rd.text(n["cable_law"], "effects.cable_law"));
-    if (law == "config") {
-      e.base_law = BaseCableLaw::kConfig;
-    } else if (law == "stiff") {
-      e.base_law = BaseCableLaw::kStiff;
-    } else {
-      return rd.error(n["cable_law"], "effects.cable_law",
-                      "expected 'config' or 'stiff', got '" + law + "'");
-    }
+Status parse_effects(const YamlField& n, HiddenEffects& e) {
+  CDPR_RETURN_IF_ERROR(n.check_keys({"cable_law", "stiff_ea", "hooke", "polynomial", "creep", "sag",
+                                     "pulley_radius", "transmission_scale", "encoder_zero_offset",
+                                     "force_sensor", "laser", "thermal"}));
+  int law = e.base_law == BaseCableLaw::kStiff ? 1 : 0;
+  CDPR_RETURN_IF_ERROR(n.optional_choice("cable_law", law, {"config", "stiff"}));
+  e.base_law = law == 1 ? BaseCableLaw::kStiff : BaseCableLaw::kConfig;
+  CDPR_RETURN_IF_ERROR(n.optional("stiff_ea", e.stiff_ea, Sign::kPositive, "N"));
+  if (const YamlField h = n["hooke"]; h.present()) {
+    CDPR_RETURN_IF_ERROR(h.check_keys({"ea"}));
+    CDPR_ASSIGN_OR_RETURN(const YamlField ea, h.required("ea", "N"));
+    CDPR_ASSIGN_OR_RETURN(e.hooke_ea, per_cable(ea, Sign::kPositive, "N"));
   }
-  if (n["stiff_ea"])
-    CDPR_SIM_ASSIGN(e.stiff_ea, rd.positive(n["stiff_ea"], "effects.stiff_ea", "N"));
-  if (const YAML::Node h = n["hooke"]) {
-    CDPR_SIM_TRY(rd.only(h, "effects.hooke", {"ea"}));
-    if (!h["ea"]) return rd.error(h, "effects.hooke.ea", "missing (N)");
-    CDPR_SIM_ASSIGN(e.hooke_ea, rd.per_cable(h["ea"], "effects.hooke.ea", 1, "N"));
-  }
-  if (const YAML::Node p = n["polynomial"]) {
-    if (e.hooke_ea.given()) {
-      return rd.error(p, "effects.polynomial", "give either effects.hooke or effects.polynomial");
-    }
+  if (const YamlField p = n["polynomial"]; p.present()) {
+    if (e.hooke_ea.given()) return p.error("give either effects.hooke or effects.polynomial");
     PolynomialSurface s;
-    CDPR_SIM_TRY(parse_polynomial(rd, p, s));
+    CDPR_RETURN_IF_ERROR(parse_polynomial(p, s));
     e.polynomial = s;
   }
-  if (const YAML::Node c = n["creep"]) {
-    CDPR_SIM_TRY(rd.only(c, "effects.creep", {"coefficient", "tau"}));
+  if (const YamlField c = n["creep"]; c.present()) {
+    CDPR_RETURN_IF_ERROR(c.check_keys({"coefficient", "tau"}));
     CreepEffect creep;
-    if (!c["coefficient"]) return rd.error(c, "effects.creep.coefficient", "missing (1/N)");
-    CDPR_SIM_ASSIGN(creep.coefficient,
-                    rd.non_negative(c["coefficient"], "effects.creep.coefficient", "1/N"));
-    if (!c["tau"]) return rd.error(c, "effects.creep.tau", "missing (s)");
-    CDPR_SIM_ASSIGN(creep.tau_s, rd.positive(c["tau"], "effects.creep.tau", "s"));
+    CDPR_ASSIGN_OR_RETURN(const YamlField coefficient, c.required("coefficient", "1/N"));
+    CDPR_ASSIGN_OR_RETURN(creep.coefficient, coefficient.number(Sign::kNonNegative, "1/N"));
+    CDPR_ASSIGN_OR_RETURN(const YamlField tau, c.required("tau", "s"));
+    CDPR_ASSIGN_OR_RETURN(creep.tau_s, tau.number(Sign::kPositive, "s"));
     e.creep = creep;
   }
-  if (n["sag"]) CDPR_SIM_ASSIGN(e.sag, rd.boolean(n["sag"], "effects.sag"));
+  CDPR_RETURN_IF_ERROR(n.optional("sag", e.sag));
   if (e.sag && e.polynomial) {
-    return rd.error(n["sag"], "effects.sag",
-                    "sag is modelled for Hooke cables only (not with effects.polynomial)");
+    return n["sag"].error("sag is modelled for Hooke cables only (not with effects.polynomial)");
   }
-  if (n["pulley_radius"]) {
-    CDPR_SIM_ASSIGN(e.pulley_radius,
-                    rd.per_cable(n["pulley_radius"], "effects.pulley_radius", 2, "m"));
-  }
-  if (n["transmission_scale"]) {
-    CDPR_SIM_ASSIGN(e.transmission_scale,
-                    rd.per_cable(n["transmission_scale"], "effects.transmission_scale", 0, "1"));
-    for (double s : e.transmission_scale.values) {
-      if (!(s > -0.5 && s < 0.5)) {
-        return rd.error(n["transmission_scale"], "effects.transmission_scale",
-                        "expected relative scale errors in (-0.5, 0.5)");
-      }
+  CDPR_RETURN_IF_ERROR(
+      optional_per_cable(n, "pulley_radius", Sign::kNonNegative, "m", e.pulley_radius));
+  CDPR_RETURN_IF_ERROR(
+      optional_per_cable(n, "transmission_scale", Sign::kAny, "1", e.transmission_scale));
+  for (double s : e.transmission_scale.values) {
+    if (!(s > -0.5 && s < 0.5)) {
+      return n["transmission_scale"].error("expected relative scale errors in (-0.5, 0.5)");
     }
   }
-  if (n["encoder_zero_offset"]) {
-    CDPR_SIM_ASSIGN(e.encoder_zero_offset,
-                    rd.per_cable(n["encoder_zero_offset"], "effects.encoder_zero_offset", 0, "m"));
+  CDPR_RETURN_IF_ERROR(
+      optional_per_cable(n, "encoder_zero_offset", Sign::kAny, "m", e.encoder_zero_offset));
+  if (const YamlField f = n["force_sensor"]; f.present()) {
+    CDPR_RETURN_IF_ERROR(f.check_keys({"gain_error", "offset_error"}));
+    CDPR_RETURN_IF_ERROR(optional_per_cable(f, "gain_error", Sign::kAny, "1", e.force_gain_error));
+    for (double g : e.force_gain_error.values) {
+      if (!(g > -0.9)) return f["gain_error"].error("expected relative gain errors > -0.9");
+    }
+    CDPR_RETURN_IF_ERROR(
+        optional_per_cable(f, "offset_error", Sign::kAny, "raw units", e.force_offset_error));
   }
-  if (const YAML::Node f = n["force_sensor"]) {
-    CDPR_SIM_TRY(rd.only(f, "effects.force_sensor", {"gain_error", "offset_error"}));
-    if (f["gain_error"]) {
-      CDPR_SIM_ASSIGN(e.force_gain_error,
-                      rd.per_cable(f["gain_error"], "effects.force_sensor.gain_error", 0, "1"));
-      for (double g : e.force_gain_error.values) {
-        if (!(g > -0.9)) {
-          return rd.error(f["gain_error"], "effects.force_sensor.gain_error",
-                          "expected relative gain errors > -0.9");
-        }
-      }
-    }
-    if (f["offset_error"]) {
-      CDPR_SIM_ASSIGN(
-          e.force_offset_error,
-          rd.per_cable(f["offset_error"], "effects.force_sensor.offset_error", 0, "raw units"));
-    }
+  if (const YamlField l = n["laser"]; l.present()) {
+    CDPR_RETURN_IF_ERROR(
+        l.check_keys({"mount_offset", "mount_tilt", "plane_tilt", "plane_offset"}));
+    CDPR_RETURN_IF_ERROR(optional_vector(l, "mount_offset", "m", e.laser_mount_offset));
+    CDPR_RETURN_IF_ERROR(optional_vector(l, "mount_tilt", "rad", e.laser_mount_tilt));
+    CDPR_RETURN_IF_ERROR(optional_vector(l, "plane_tilt", "rad", e.plane_tilt));
+    CDPR_RETURN_IF_ERROR(l.optional("plane_offset", e.plane_offset));
   }
-  if (const YAML::Node l = n["laser"]) {
-    CDPR_SIM_TRY(
-        rd.only(l, "effects.laser", {"mount_offset", "mount_tilt", "plane_tilt", "plane_offset"}));
-    if (l["mount_offset"]) {
-      CDPR_SIM_ASSIGN(e.laser_mount_offset,
-                      rd.vector3(l["mount_offset"], "effects.laser.mount_offset", "m"));
-    }
-    if (l["mount_tilt"]) {
-      CDPR_SIM_ASSIGN(e.laser_mount_tilt,
-                      rd.vector3(l["mount_tilt"], "effects.laser.mount_tilt", "rad"));
-    }
-    if (l["plane_tilt"]) {
-      CDPR_SIM_ASSIGN(e.plane_tilt, rd.vector3(l["plane_tilt"], "effects.laser.plane_tilt", "rad"));
-    }
-    if (l["plane_offset"]) {
-      CDPR_SIM_ASSIGN(e.plane_offset, rd.number(l["plane_offset"], "effects.laser.plane_offset"));
-    }
-  }
-  if (const YAML::Node t = n["thermal"]) {
-    CDPR_SIM_TRY(rd.only(t, "effects.thermal", {"alpha", "rate", "max_delta"}));
+  if (const YamlField t = n["thermal"]; t.present()) {
+    CDPR_RETURN_IF_ERROR(t.check_keys({"alpha", "rate", "max_delta"}));
     ThermalEffect th;
-    if (!t["alpha"]) return rd.error(t, "effects.thermal.alpha", "missing (1/K)");
-    CDPR_SIM_ASSIGN(th.alpha, rd.number(t["alpha"], "effects.thermal.alpha"));
-    if (!t["rate"]) return rd.error(t, "effects.thermal.rate", "missing (K/s)");
-    CDPR_SIM_ASSIGN(th.rate_k_per_s, rd.number(t["rate"], "effects.thermal.rate"));
-    if (t["max_delta"]) {
-      CDPR_SIM_ASSIGN(th.max_delta_k,
-                      rd.non_negative(t["max_delta"], "effects.thermal.max_delta", "K"));
-    }
+    CDPR_ASSIGN_OR_RETURN(const YamlField alpha, t.required("alpha", "1/K"));
+    CDPR_ASSIGN_OR_RETURN(th.alpha, alpha.number(Sign::kAny, "1/K"));
+    CDPR_ASSIGN_OR_RETURN(const YamlField rate, t.required("rate", "K/s"));
+    CDPR_ASSIGN_OR_RETURN(th.rate_k_per_s, rate.number(Sign::kAny, "K/s"));
+    CDPR_RETURN_IF_ERROR(t.optional("max_delta", th.max_delta_k, Sign::kNonNegative, "K"));
     e.thermal = th;
   }
   return Status::Ok();
@@ -401,111 +191,103 @@ constexpr FaultName kFaultNames[] = {
     {"cable_overload", FaultKind::kCableOverload},
 };
 
-Status parse_fault(const Reader& rd, const YAML::Node& n, const std::string& f, Fault& out) {
-  CDPR_SIM_TRY(rd.only(
-      n, f, {"type", "at", "duration", "cable", "emcy", "object", "subindex", "code", "limit"}));
-  out.line = rd.line(n);
-  if (!n["type"]) return rd.error(n, f + ".type", "missing");
-  std::string type;
-  CDPR_SIM_ASSIGN(type, rd.text(n["type"], f + ".type"));
-  bool found = false;
-  std::string names;
-  for (const FaultName& fn : kFaultNames) {
-    if (type == fn.name) {
-      out.kind = fn.kind;
-      found = true;
-    }
-    names += names.empty() ? "" : ", ";
-    names += fn.name;
-  }
-  if (!found) return rd.error(n["type"], f + ".type", "'" + type + "' is not one of " + names);
-  if (!n["at"]) return rd.error(n, f + ".at", "missing (s)");
-  CDPR_SIM_ASSIGN(out.at_s, rd.non_negative(n["at"], f + ".at", "s"));
-  if (n["duration"])
-    CDPR_SIM_ASSIGN(out.duration_s, rd.positive(n["duration"], f + ".duration", "s"));
+Status parse_fault(const YamlField& n, Fault& out) {
+  CDPR_RETURN_IF_ERROR(n.check_keys(
+      {"type", "at", "duration", "cable", "emcy", "object", "subindex", "code", "limit"}));
+  out.line = n.line();
+  CDPR_ASSIGN_OR_RETURN(const YamlField type_field, n.required("type"));
+  CDPR_ASSIGN_OR_RETURN(
+      const int kind,
+      type_field.choice({"drive_fault", "drive_silent", "sdo_abort", "bus_off", "laser_timeout",
+                         "laser_garbage", "laser_out_of_range", "cable_overload"}));
+  static_assert(std::size(kFaultNames) == 8, "the choices above list kFaultNames in order");
+  out.kind = kFaultNames[kind].kind;
+  const std::string type = kFaultNames[kind].name;
+  CDPR_ASSIGN_OR_RETURN(const YamlField at, n.required("at", "s"));
+  CDPR_ASSIGN_OR_RETURN(out.at_s, at.number(Sign::kNonNegative, "s"));
+  CDPR_RETURN_IF_ERROR(n.optional("duration", out.duration_s, Sign::kPositive, "s"));
 
   const bool needs_cable =
       out.kind == FaultKind::kDriveFault || out.kind == FaultKind::kDriveSilent ||
       out.kind == FaultKind::kSdoAbort || out.kind == FaultKind::kCableOverload;
   if (needs_cable) {
-    if (!n["cable"]) return rd.error(n, f + ".cable", "missing (cable number, 1..m)");
-    std::uint64_t c = 0;
-    CDPR_SIM_ASSIGN(c, rd.integer(n["cable"], f + ".cable", 1, 1024));
+    CDPR_ASSIGN_OR_RETURN(const YamlField cable, n.required("cable", "cable number, 1..m"));
+    CDPR_ASSIGN_OR_RETURN(const std::int64_t c, cable.integer(1, 1024));
     out.cable = static_cast<int>(c) - 1;
-  } else if (n["cable"]) {
-    return rd.error(n["cable"], f + ".cable", "not used by a " + type + " fault");
+  } else if (n["cable"].present()) {
+    return n["cable"].error("not used by a " + type + " fault");
   }
   const bool uses_emcy =
       out.kind == FaultKind::kDriveFault || out.kind == FaultKind::kCableOverload;
   if (uses_emcy) {
     out.emcy_code = 0x2310;  // continuous over-current (CiA 402 drives' usual overload code)
-    if (n["emcy"]) {
-      std::uint64_t c = 0;
-      CDPR_SIM_ASSIGN(c, rd.integer(n["emcy"], f + ".emcy", 0, 0xFFFF));
-      out.emcy_code = static_cast<std::uint16_t>(c);
-    }
-  } else if (n["emcy"]) {
-    return rd.error(n["emcy"], f + ".emcy", "not used by a " + type + " fault");
+    CDPR_RETURN_IF_ERROR(n.optional("emcy", out.emcy_code, 0, 0xFFFF));
+  } else if (n["emcy"].present()) {
+    return n["emcy"].error("not used by a " + type + " fault");
   }
   if (out.kind == FaultKind::kSdoAbort) {
-    if (!n["object"]) return rd.error(n, f + ".object", "missing (object index, e.g. 0x6064)");
-    std::uint64_t v = 0;
-    CDPR_SIM_ASSIGN(v, rd.integer(n["object"], f + ".object", 0, 0xFFFF));
-    out.object = static_cast<std::uint16_t>(v);
-    if (n["subindex"]) {
-      CDPR_SIM_ASSIGN(v, rd.integer(n["subindex"], f + ".subindex", 0, 0xFF));
-      out.subindex = static_cast<std::uint8_t>(v);
-    }
+    CDPR_ASSIGN_OR_RETURN(const YamlField object,
+                          n.required("object", "object index, e.g. 0x6064"));
+    CDPR_ASSIGN_OR_RETURN(const std::int64_t index, object.integer(0, 0xFFFF));
+    out.object = static_cast<std::uint16_t>(index);
+    CDPR_RETURN_IF_ERROR(n.optional("subindex", out.subindex, 0, 0xFF));
     out.abort_code = 0x06020000;  // object does not exist
-    if (n["code"]) {
-      CDPR_SIM_ASSIGN(v, rd.integer(n["code"], f + ".code", 0, 0xFFFFFFFF));
-      out.abort_code = static_cast<std::uint32_t>(v);
-    }
+    CDPR_RETURN_IF_ERROR(n.optional("code", out.abort_code, 0, 0xFFFFFFFF));
   } else {
     for (const char* k : {"object", "subindex", "code"}) {
-      if (n[k]) return rd.error(n[k], f + "." + k, "only used by sdo_abort faults");
+      if (n[k].present()) return n[k].error("only used by sdo_abort faults");
     }
   }
   if (out.kind == FaultKind::kCableOverload) {
-    if (!n["limit"]) return rd.error(n, f + ".limit", "missing (tension limit, N)");
-    CDPR_SIM_ASSIGN(out.tension_limit, rd.positive(n["limit"], f + ".limit", "N"));
-  } else if (n["limit"]) {
-    return rd.error(n["limit"], f + ".limit", "only used by cable_overload faults");
+    CDPR_ASSIGN_OR_RETURN(const YamlField limit, n.required("limit", "tension limit, N"));
+    CDPR_ASSIGN_OR_RETURN(out.tension_limit, limit.number(Sign::kPositive, "N"));
+  } else if (n["limit"].present()) {
+    return n["limit"].error("only used by cable_overload faults");
   }
   return Status::Ok();
 }
 
-Status parse_laser_serving(const Reader& rd, const YAML::Node& n, std::string_view base_dir,
-                           LaserServing& l) {
-  CDPR_SIM_TRY(rd.only(n, "laser", {"register_map", "slave_id", "baud", "parity"}));
-  if (n["register_map"]) {
-    std::string p;
-    CDPR_SIM_ASSIGN(p, rd.text(n["register_map"], "laser.register_map"));
-    l.register_map_path = resolve_path(base_dir, p);
+Status parse_laser_serving(const YamlField& n, std::string_view base_dir, LaserServing& l) {
+  CDPR_RETURN_IF_ERROR(n.check_keys({"register_map", "slave_id", "baud", "parity"}));
+  std::string map;
+  CDPR_RETURN_IF_ERROR(n.optional("register_map", map));
+  if (!map.empty()) l.register_map_path = resolve_path(base_dir, map);
+  CDPR_RETURN_IF_ERROR(n.optional("slave_id", l.slave_id, 1, 247));
+  CDPR_RETURN_IF_ERROR(n.optional("baud", l.baud, 1200, 4000000));
+  int parity = l.parity == 'N' ? 0 : (l.parity == 'O' ? 2 : 1);
+  CDPR_RETURN_IF_ERROR(n.optional_choice("parity", parity, {"none", "even", "odd"}));
+  l.parity = parity == 0 ? 'N' : (parity == 2 ? 'O' : 'E');
+  return Status::Ok();
+}
+
+Result<Scenario> parse_document(const YamlDocument& doc, std::string_view base_dir) {
+  Scenario s;
+  s.file = doc.file();
+  const YamlField root = doc.root();
+  if (!root.present()) {
+    return Status::Error(ErrorCode::kInvalidArgument, "%s: empty scenario", s.file.c_str());
   }
-  std::uint64_t v = 0;
-  if (n["slave_id"]) {
-    CDPR_SIM_ASSIGN(v, rd.integer(n["slave_id"], "laser.slave_id", 1, 247));
-    l.slave_id = static_cast<int>(v);
+  CDPR_RETURN_IF_ERROR(root.check_keys({"name", "truth", "noise", "effects", "faults", "laser"}));
+  CDPR_RETURN_IF_ERROR(root.optional("name", s.name));
+  if (const YamlField f = root["truth"]; f.present()) {
+    CDPR_RETURN_IF_ERROR(parse_truth(f, base_dir, s.truth));
   }
-  if (n["baud"]) {
-    CDPR_SIM_ASSIGN(v, rd.integer(n["baud"], "laser.baud", 1200, 4000000));
-    l.baud = static_cast<int>(v);
+  if (const YamlField f = root["noise"]; f.present()) CDPR_RETURN_IF_ERROR(parse_noise(f, s.noise));
+  if (const YamlField f = root["effects"]; f.present()) {
+    CDPR_RETURN_IF_ERROR(parse_effects(f, s.effects));
   }
-  if (n["parity"]) {
-    std::string p;
-    CDPR_SIM_ASSIGN(p, rd.text(n["parity"], "laser.parity"));
-    if (p == "none") {
-      l.parity = 'N';
-    } else if (p == "even") {
-      l.parity = 'E';
-    } else if (p == "odd") {
-      l.parity = 'O';
-    } else {
-      return rd.error(n["parity"], "laser.parity", "expected none, even or odd, got '" + p + "'");
+  if (const YamlField f = root["faults"]; f.present()) {
+    CDPR_RETURN_IF_ERROR(f.expect_list("a list of faults"));
+    for (std::size_t k = 0; k < f.size(); ++k) {
+      Fault fault;
+      CDPR_RETURN_IF_ERROR(parse_fault(f[k], fault));
+      s.faults.push_back(fault);
     }
   }
-  return Status::Ok();
+  if (const YamlField f = root["laser"]; f.present()) {
+    CDPR_RETURN_IF_ERROR(parse_laser_serving(f, base_dir, s.laser));
+  }
+  return s;
 }
 
 }  // namespace
@@ -529,46 +311,14 @@ const Fault* Scenario::laser_fault_at(double t) const {
 
 Result<Scenario> parse_scenario(std::string_view text, std::string_view name,
                                 std::string_view base_dir) {
-  const Reader rd{std::string(name)};
-  YAML::Node root;
-  try {
-    root = YAML::Load(std::string(text));
-  } catch (const YAML::Exception& e) {
-    return Status::Error(ErrorCode::kParseError, "%s:%d: YAML syntax: %s", rd.file().c_str(),
-                         e.mark.line + 1, e.msg.c_str());
-  }
-  Scenario s;
-  s.file = std::string(name);
-  if (!root || root.IsNull()) {
-    return Status::Error(ErrorCode::kInvalidArgument, "%s: empty scenario", rd.file().c_str());
-  }
-  CDPR_SIM_TRY(rd.only(root, "", {"name", "truth", "noise", "effects", "faults", "laser"}));
-  if (root["name"]) CDPR_SIM_ASSIGN(s.name, rd.text(root["name"], "name"));
-  if (root["truth"]) CDPR_SIM_TRY(parse_truth(rd, root["truth"], base_dir, s.truth));
-  if (root["noise"]) CDPR_SIM_TRY(parse_noise(rd, root["noise"], s.noise));
-  if (root["effects"]) CDPR_SIM_TRY(parse_effects(rd, root["effects"], s.effects));
-  if (const YAML::Node f = root["faults"]) {
-    if (!f.IsSequence()) return rd.error(f, "faults", "expected a list of faults");
-    for (std::size_t k = 0; k < f.size(); ++k) {
-      Fault fault;
-      CDPR_SIM_TRY(parse_fault(rd, f[k], "faults[" + std::to_string(k) + "]", fault));
-      s.faults.push_back(fault);
-    }
-  }
-  if (root["laser"]) CDPR_SIM_TRY(parse_laser_serving(rd, root["laser"], base_dir, s.laser));
-  return s;
+  CDPR_ASSIGN_OR_RETURN(const YamlDocument doc, YamlDocument::parse(text, name));
+  return parse_document(doc, base_dir);
 }
 
 Result<Scenario> load_scenario(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) {
-    return Status::Error(std::filesystem::exists(path) ? ErrorCode::kIoError : ErrorCode::kNotFound,
-                         "%s: cannot open the scenario file", path.c_str());
-  }
-  std::stringstream ss;
-  ss << in.rdbuf();
+  CDPR_ASSIGN_OR_RETURN(const YamlDocument doc, YamlDocument::load(path, "scenario"));
   const std::string dir = std::filesystem::path(path).parent_path().string();
-  return parse_scenario(ss.str(), path, dir.empty() ? "." : dir);
+  return parse_document(doc, dir.empty() ? "." : dir);
 }
 
 Status check_against(const Scenario& s, int m) {
@@ -620,7 +370,7 @@ Result<RobotModel> resolve_truth(const Scenario& s, const RobotModel& nominal) {
     }
   }
   const int m = truth.num_cables();
-  CDPR_SIM_TRY(check_against(s, m));
+  CDPR_RETURN_IF_ERROR(check_against(s, m));
 
   // Seeded perturbation: frame anchors first (cable by cable, x y z), then platform anchors.
   if (s.truth.frame_anchor_std.given() || s.truth.platform_anchor_std.given()) {

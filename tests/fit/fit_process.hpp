@@ -62,9 +62,11 @@ class FitProcessTest : public ::testing::Test {
 
   std::string path(const std::string& name) const { return (dir_ / name).string(); }
 
-  // Runs cdpr-fit with `args`.
-  ProcessResult fit(const std::vector<std::string>& args) const {
-    std::string cmd = quote(CDPR_FIT_BIN);
+  // Runs cdpr-fit with `args`; with `in_dir` in the test's directory (relative paths then name
+  // files there, as in the documented sessions).
+  ProcessResult fit(const std::vector<std::string>& args, bool in_dir = false) const {
+    std::string cmd =
+        (in_dir ? "cd " + quote(dir_.string()) + " && " : std::string()) + quote(CDPR_FIT_BIN);
     for (const std::string& a : args) cmd += " " + quote(a);
     const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
     cmd += " >" + quote(out.string()) + " 2>" + quote(err.string());

@@ -1,12 +1,12 @@
 // cdpr-fit calibrate: identify the robot from a recording, write the calibrated config and report.
 #include <cmath>
-#include <fstream>
 #include <sstream>
 
 #include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/paper_method.hpp"
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/io/atomic_file.hpp"
 #include "cdpr/recording/recording.hpp"
 #include "commands.hpp"
 #include "common.hpp"
@@ -132,31 +132,22 @@ nlohmann::json identifiability_json(const IdentifiabilityReport& r) {
           {"weak_or_null_directions", dirs}};
 }
 
-// Writes the calibrated config with a comment header; records it in the JSON.
-Status write_calibrated(const CalibrateArgs& args, const RobotModel& calibrated,
-                        nlohmann::json* j) {
-  if (args.out.empty()) return Status::Ok();
-  std::string yaml = "# Calibrated by cdpr-fit calibrate --method " + args.method + " from " +
-                     args.config + " and " + args.recording + " (" + recording::utc_timestamp() +
-                     ").\n" +
-                     "# Winch length_offset and drum size include the identified encoder "
-                     "offsets and scales.\n" +
-                     config::save_robot_config(calibrated);
-  std::ofstream f(args.out, std::ios::trunc);
-  f << yaml;
-  f.flush();
-  if (!f) return Status::Error(ErrorCode::kIoError, "cannot write %s", args.out.c_str());
-  (*j)["calibrated_config"] = args.out;
-  return Status::Ok();
-}
-
-Status write_report(const CalibrateArgs& args, const nlohmann::json& j) {
-  if (args.report.empty()) return Status::Ok();
-  std::ofstream f(args.report, std::ios::trunc);
-  f << j.dump(2) << "\n";
-  f.flush();
-  if (!f) return Status::Error(ErrorCode::kIoError, "cannot write %s", args.report.c_str());
-  return Status::Ok();
+// Writes the calibrated config (with a comment header) and the JSON report together: both or,
+// when one cannot be written, neither (io::AtomicFileSet). Records the config in the JSON.
+Status write_outputs(const CalibrateArgs& args, const RobotModel& calibrated, nlohmann::json* j) {
+  io::AtomicFileSet outputs;
+  if (!args.out.empty()) {
+    const std::string yaml = "# Calibrated by cdpr-fit calibrate --method " + args.method +
+                             " from " + args.config + " and " + args.recording + " (" +
+                             recording::utc_timestamp() + ").\n" +
+                             "# Winch length_offset and drum size include the identified encoder "
+                             "offsets and scales.\n" +
+                             config::save_robot_config(calibrated);
+    CDPR_RETURN_IF_ERROR(outputs.stage(args.out, yaml));
+    (*j)["calibrated_config"] = args.out;
+  }
+  if (!args.report.empty()) CDPR_RETURN_IF_ERROR(outputs.stage(args.report, j->dump(2) + "\n"));
+  return outputs.commit();
 }
 
 Result<std::optional<RobotModel>> load_truth(const CalibrateArgs& args, const RobotModel& nominal) {
@@ -303,8 +294,7 @@ Result<Output> calibrate_paper(const CalibrateArgs& args, const RobotModel& nomi
   };
   const std::string truth_text =
       truth->has_value() ? truth_comparison(args, nominal, calibrated, **truth, &j) : "";
-  if (Status s = write_calibrated(args, calibrated, &j); !s.ok()) return s;
-  if (Status s = write_report(args, j); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(write_outputs(args, calibrated, &j));
   std::ostringstream h;
   h << "cdpr-fit calibrate --method paper: " << args.config << " + " << args.recording << " ("
     << set.num_poses() << " poses)\n\n"
@@ -349,7 +339,7 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   if (args.method == "paper") return calibrate_paper(args, *nominal, *rec, *set, warnings);
 
   IdentificationOptions options;
-  if (Status s = apply_estimate(args.estimate, nominal->num_cables(), &options); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, nominal->num_cables(), &options));
   if (args.gauge == "home") {
     options.gauge = Gauge::kHomePose;
   } else if (args.gauge == "laser-plane") {
@@ -479,8 +469,7 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   }
   const std::string truth_text =
       truth->has_value() ? truth_comparison(args, *nominal, calibrated, **truth, &j) : "";
-  if (Status st = write_calibrated(args, calibrated, &j); !st.ok()) return st;
-  if (Status st = write_report(args, j); !st.ok()) return st;
+  CDPR_RETURN_IF_ERROR(write_outputs(args, calibrated, &j));
 
   // ---- human text ---------------------------------------------------------------------------
   std::ostringstream h;

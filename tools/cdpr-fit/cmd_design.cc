@@ -39,10 +39,7 @@ Result<Output> design_poses(const DesignArgs& args) {
   options.points_per_axis = args.points_per_axis;
   options.max_angle = args.max_angle;
   options.noise = args.noise;
-  if (Status s = apply_estimate(args.estimate, model->num_cables(), &options.identification);
-      !s.ok()) {
-    return s;
-  }
+  CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, model->num_cables(), &options.identification));
   const CalibratedModel cm = CalibratedModel::FromRobot(*model);
   auto design = cdpr::design_poses(cm, options);
   if (!design.ok()) return with_context(design.status(), "designing poses for " + args.config);
@@ -57,7 +54,7 @@ Result<Output> design_poses(const DesignArgs& args) {
                         ? "cdpr-fit design-poses (position accuracy, home first)"
                         : "cdpr-fit design-poses (D-optimal, home first)");
   list.poses = design->poses;
-  if (Status s = recording::write_pose_list(list, args.out); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(recording::write_pose_list(list, args.out));
 
   Output out;
   out.json = {{"command", "design-poses"},
@@ -116,10 +113,7 @@ Result<Output> predict_accuracy(const PredictArgs& args) {
   auto list = recording::read_pose_list(args.poses);
   if (!list.ok()) return list.status();
   PredictedAccuracyOptions options;
-  if (Status s = apply_estimate(args.estimate, model->num_cables(), &options.identification);
-      !s.ok()) {
-    return s;
-  }
+  CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, model->num_cables(), &options.identification));
   options.box.center = model->home.position;
   options.box.half_extent = Eigen::Vector3d::Constant(args.half_extent);
   options.box.points_per_axis = args.points_per_axis;

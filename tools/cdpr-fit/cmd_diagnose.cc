@@ -2,12 +2,12 @@
 // recording(s) as calibrate does, refuses recordings that do not fit the config (counts, units),
 // runs cdpr::diagnose and writes the JSON and HTML reports and the calibrated config.
 #include <cmath>
-#include <fstream>
 #include <sstream>
 
 #include "cdpr/calibration/diagnosis.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/io/atomic_file.hpp"
 #include "cdpr/recording/recording.hpp"
 #include "commands.hpp"
 #include "common.hpp"
@@ -90,7 +90,7 @@ Result<Loaded> load_recording(const std::string& file, const DiagnoseArgs& args,
   if (Status s = recording::check_against_model(*rec, nominal); !s.ok()) {
     return with_context(s, file + " vs " + args.config);
   }
-  if (Status s = check_plausible_units(*rec, nominal, file); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(check_plausible_units(*rec, nominal, file));
   const std::string recorded_robot = rec->metadata.get(recording::key::kRobot);
   if (!recorded_robot.empty() && recorded_robot != nominal.name) {
     warnings->push_back(file + " is a recording of robot '" + recorded_robot + "' but " +
@@ -112,14 +112,6 @@ Result<Loaded> load_recording(const std::string& file, const DiagnoseArgs& args,
   if (std::isfinite(args.noise_force)) set->noise.sigma_force = args.noise_force;
   if (Status s = validate(*set, nominal); !s.ok()) return with_context(s, file);
   return Loaded{std::move(*rec), std::move(*set)};
-}
-
-Status write_text(const std::string& path, const std::string& text) {
-  std::ofstream f(path, std::ios::trunc);
-  f << text;
-  f.flush();
-  if (!f) return Status::Error(ErrorCode::kIoError, "cannot write %s", path.c_str());
-  return Status::Ok();
 }
 
 int exit_status_of(Diagnosis::Verdict v) {
@@ -158,9 +150,7 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
   }
 
   IdentificationOptions identification;
-  if (Status s = apply_estimate(args.estimate, nominal->num_cables(), &identification); !s.ok()) {
-    return s;
-  }
+  CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, nominal->num_cables(), &identification));
   DiagnosisOptions options;
   options.seed = args.seed;
   options.bootstrap_samples = args.bootstrap;
@@ -212,6 +202,8 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
       args.json_report.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.json_report);
   out.json["html_report"] = args.html.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.html);
 
+  // The calibrated config and the reports are written together, or none of them.
+  io::AtomicFileSet outputs;
   if (!c.calibrated_config.empty()) {
     std::string effects;
     for (const EffectFit& e : d.accepted) {
@@ -224,17 +216,18 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
         "# Named effects: " + (effects.empty() ? std::string("none") : effects) + ".\n" +
         "# Winch length_offset and drum size include the identified encoder offsets and scales.\n" +
         config::save_robot_config(d.model_after.robot);
-    if (Status s = write_text(args.out, yaml); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(outputs.stage(args.out, yaml));
   }
   if (!args.html.empty()) {
     const std::vector<ResidualPlot> plots = residual_plots(d, primary->set);
-    if (Status s = write_text(args.html, diagnosis_html(d, c, plots, misfit)); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(outputs.stage(args.html, diagnosis_html(d, c, plots, misfit)));
   }
   if (!args.json_report.empty()) {
     nlohmann::json file = out.json;
     file["ok"] = true;
-    if (Status s = write_text(args.json_report, file.dump(2) + "\n"); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(outputs.stage(args.json_report, file.dump(2) + "\n"));
   }
+  CDPR_RETURN_IF_ERROR(outputs.commit());
 
   std::ostringstream h;
   h << diagnosis_text(d, c) << "\n";

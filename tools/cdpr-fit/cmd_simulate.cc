@@ -100,7 +100,7 @@ Result<Output> simulate(const SimulateArgs& args) {
   md.set("homing", "encoder zero at the home pose of " + config_file);
   auto rec = recording::from_measurement_set(sim->set, md);
   if (!rec.ok()) return rec.status();
-  if (Status s = recording::write_recording(*rec, args.out); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(recording::write_recording(*rec, args.out));
 
   Output out;
   out.json = {{"command", "simulate"},

@@ -138,11 +138,8 @@ Result<std::unique_ptr<SocketCanBus>> SocketCanBus::open(const std::string& ifna
   };
 
   const can_err_mask_t err_mask = options.error_mask & CAN_ERR_MASK;
-  if (Status s = set_opt(SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &err_mask, sizeof(err_mask),
-                         "CAN_RAW_ERR_FILTER");
-      !s.ok()) {
-    return s;
-  }
+  CDPR_RETURN_IF_ERROR(
+      set_opt(SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &err_mask, sizeof(err_mask), "CAN_RAW_ERR_FILTER"));
   const int own = options.receive_own ? 1 : 0;
   if (Status s =
           set_opt(SOL_CAN_RAW, CAN_RAW_RECV_OWN_MSGS, &own, sizeof(own), "CAN_RAW_RECV_OWN_MSGS");
@@ -153,19 +150,12 @@ Result<std::unique_ptr<SocketCanBus>> SocketCanBus::open(const std::string& ifna
     // FORCE needs CAP_NET_ADMIN; without it the plain option still grants up to rmem_max.
     const int want = options.receive_buffer_bytes;
     if (::setsockopt(fd, SOL_SOCKET, SO_RCVBUFFORCE, &want, sizeof(want)) < 0) {
-      if (Status s = set_opt(SOL_SOCKET, SO_RCVBUF, &want, sizeof(want), "SO_RCVBUF"); !s.ok()) {
-        return s;
-      }
+      CDPR_RETURN_IF_ERROR(set_opt(SOL_SOCKET, SO_RCVBUF, &want, sizeof(want), "SO_RCVBUF"));
     }
   }
   const int one = 1;
-  if (Status s = set_opt(SOL_SOCKET, SO_RXQ_OVFL, &one, sizeof(one), "SO_RXQ_OVFL"); !s.ok()) {
-    return s;
-  }
-  if (Status s = set_opt(SOL_SOCKET, SO_TIMESTAMPNS, &one, sizeof(one), "SO_TIMESTAMPNS");
-      !s.ok()) {
-    return s;
-  }
+  CDPR_RETURN_IF_ERROR(set_opt(SOL_SOCKET, SO_RXQ_OVFL, &one, sizeof(one), "SO_RXQ_OVFL"));
+  CDPR_RETURN_IF_ERROR(set_opt(SOL_SOCKET, SO_TIMESTAMPNS, &one, sizeof(one), "SO_TIMESTAMPNS"));
   int granted = 0;
   socklen_t glen = sizeof(granted);
   if (::getsockopt(fd, SOL_SOCKET, SO_RCVBUF, &granted, &glen) < 0) granted = 0;
@@ -195,7 +185,7 @@ SocketCanBus::~SocketCanBus() {
 }
 
 Status SocketCanBus::send(const Frame& frame) {
-  if (Status s = check_frame(frame, name_); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(check_frame(frame, name_));
   can_frame cf{};
   if (frame.error) {
     cf.can_id = CAN_ERR_FLAG | (frame.error_class & CAN_ERR_MASK);

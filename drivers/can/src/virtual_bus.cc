@@ -8,10 +8,6 @@
 
 namespace cdpr::can {
 
-Timestamp SteadyClock::now() const {
-  return std::chrono::duration_cast<Timestamp>(std::chrono::steady_clock::now().time_since_epoch());
-}
-
 double bus_load(const LoadSample& a, const LoadSample& b) {
   const auto window = b.time - a.time;
   if (window.count() <= 0) return 0.0;
@@ -126,7 +122,7 @@ VirtualCanEndpoint::~VirtualCanEndpoint() {
 }
 
 Status VirtualCanEndpoint::send(const Frame& frame) {
-  if (Status s = check_frame(frame, name_); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(check_frame(frame, name_));
   // Normalise what a wire would carry: no payload for RTR, nothing beyond dlc.
   Frame f = frame;
   if (f.error) {

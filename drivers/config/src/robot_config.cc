@@ -10,13 +10,15 @@
 #include <fstream>
 #include <initializer_list>
 #include <map>
-#include <set>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "cdpr/calibration/model_check.hpp"
+#include "cdpr/config/yaml_reader.hpp"
+#include "cdpr/io/atomic_file.hpp"
 
 namespace cdpr::config {
 namespace {
@@ -30,341 +32,189 @@ struct ConfigError {
   Status status;
 };
 
-enum class Sign { kAny, kPositive, kNonNegative, kNonZero };
-
-// What a value looks like, for "got ..." in messages.
-std::string describe(const YAML::Node& n) {
-  switch (n.Type()) {
-    case YAML::NodeType::Scalar:
-      return n.Scalar().empty() ? std::string("an empty value") : n.Scalar();
-    case YAML::NodeType::Sequence:
-      return "a list of " + std::to_string(n.size());
-    case YAML::NodeType::Map:
-      return "a map";
-    case YAML::NodeType::Null:
-      return "nothing";
-    case YAML::NodeType::Undefined:
-      return "nothing";
-  }
-  return "?";
+// The value of a field, or a ConfigError with the reader's message.
+template <typename T>
+T take(Result<T> r) {
+  if (!r.ok()) throw ConfigError{r.status()};
+  return std::move(r).value();
+}
+void take(const Status& s) {
+  if (!s.ok()) throw ConfigError{s};
 }
 
-std::string join(std::initializer_list<const char*> keys) {
-  std::string s;
-  for (const char* k : keys) {
-    if (!s.empty()) s += ", ";
-    s += k;
-  }
-  return s;
+Eigen::Vector3d to_vector(const std::array<double, 3>& v) {
+  return {v[0], v[1], v[2]};
 }
-
-// yaml-cpp: a const lookup of a missing key gives an invalid node on which only IsDefined() may
-// be called; every access below checks IsDefined() first.
-
-// A value found for a field: the node, and the path where it was written (a cable entry or
-// `defaults`).
-struct Found {
-  YAML::Node node;
-  std::string path;
-  explicit operator bool() const { return node.IsDefined() && !node.IsNull(); }
-};
 
 class Parser {
  public:
-  explicit Parser(std::string_view file) : file_(file) {}
-
-  RobotModel parse(const YAML::Node& root);
+  RobotModel parse(const YamlField& root);
 
   // Prefixes "file:line: " to a check_model message, finding the line from its field name.
-  Status locate(Status status) const {
+  Status locate(Status status, const std::string& file) const {
     const std::string_view msg = status.message();
     const std::size_t colon = msg.find(": ");
     std::string field(msg.substr(0, colon == std::string_view::npos ? 0 : colon));
     while (!field.empty()) {
-      const auto it = marks_.find(field);
-      if (it != marks_.end()) return status.prepend(where(it->second));
+      const auto it = lines_.find(field);
+      if (it != lines_.end()) return status.prepend(file + ":" + std::to_string(it->second) + ": ");
       const std::size_t cut = field.find_last_of(".[");
       if (cut == std::string::npos) break;
       field.resize(cut);
     }
-    return status.prepend(file_ + ": ");
+    return status.prepend(file + ": ");
   }
 
  private:
-  std::string where(const YAML::Mark& mark) const {
-    if (mark.is_null()) return file_ + ": ";
-    return file_ + ":" + std::to_string(mark.line + 1) + ": ";
+  // Where each field was written, for the messages of check_model (first mention wins).
+  void remember(const std::string& path, const YamlField& f) {
+    if (f.node().IsDefined() && f.line() > 0) lines_.emplace(path, f.line());
   }
 
-  [[noreturn]] void fail(const YAML::Mark& mark, const std::string& path,
-                         const std::string& what) const {
-    const std::string text = where(mark) + path + ": " + what;
-    throw ConfigError{Status(ErrorCode::kInvalidArgument, text)};
+  double number(const YamlField& f, Sign sign, const char* unit) {
+    remember(f.path(), f);
+    return take(f.number(sign, unit));
+  }
+  Eigen::Vector3d vec3(const YamlField& f, const char* unit) {
+    remember(f.path(), f);
+    return to_vector(take(f.vector3(unit)));
+  }
+  YamlField required(const YamlField& map, const char* key, const char* meaning) {
+    return take(map.required(key, meaning));
   }
 
-  void remember(const std::string& path, const YAML::Node& node) {
-    if (node.IsDefined()) marks_.emplace(path, node.Mark());
-  }
-  // The line of `key:` itself (a block list or map starts on the next lines).
-  void remember_key(const YAML::Node& map, const char* key, const std::string& path) {
-    for (auto it = map.begin(); it != map.end(); ++it) {
-      if (it->first.Scalar() == key) marks_.emplace(path, it->first.Mark());
-    }
-  }
-
-  void expect_map(const YAML::Node& n, const std::string& path, const char* what) const {
-    if (!n.IsMap()) fail(n.Mark(), path, std::string("expected ") + what + ", got " + describe(n));
-  }
-
-  // Refuses unknown and repeated keys (typos must not silently fall back to defaults).
-  void check_keys(const YAML::Node& map, const std::string& path,
-                  std::initializer_list<const char*> known) const {
-    std::set<std::string> seen;
-    for (auto it = map.begin(); it != map.end(); ++it) {
-      const std::string key = it->first.Scalar();
-      bool ok = false;
-      for (const char* k : known) ok = ok || key == k;
-      const std::string field = path.empty() ? key : path + "." + key;
-      if (!ok) {
-        fail(it->first.Mark(), path.empty() ? std::string("(top level)") : path,
-             "unknown field '" + key + "' (known fields: " + join(known) + ")");
-      }
-      if (!seen.insert(key).second) fail(it->first.Mark(), field, "field given twice");
-    }
-  }
-
-  double number(const YAML::Node& n, const std::string& path, Sign sign, const char* unit) {
-    remember(path, n);
-    const char* expectation = "a number";
-    switch (sign) {
-      case Sign::kAny:
-        break;
-      case Sign::kPositive:
-        expectation = "a positive number";
-        break;
-      case Sign::kNonNegative:
-        expectation = "a non-negative number";
-        break;
-      case Sign::kNonZero:
-        expectation = "a non-zero number";
-        break;
-    }
-    const std::string unit_text = unit[0] != '\0' ? std::string(" (") + unit + ")" : "";
-    double v = 0.0;
-    if (!n.IsScalar() || !YAML::convert<double>::decode(n, v)) {
-      fail(n.Mark(), path,
-           std::string("expected ") + expectation + unit_text + ", got " + describe(n));
-    }
-    if (!std::isfinite(v)) {
-      fail(n.Mark(), path,
-           std::string("expected a finite number") + unit_text + ", got " + describe(n));
-    }
-    const bool ok = sign == Sign::kAny || (sign == Sign::kPositive && v > 0.0) ||
-                    (sign == Sign::kNonNegative && v >= 0.0) ||
-                    (sign == Sign::kNonZero && v != 0.0);
-    if (!ok) {
-      fail(n.Mark(), path,
-           std::string("expected ") + expectation + unit_text + ", got " + describe(n));
-    }
-    return v;
-  }
-
-  int integer(const YAML::Node& n, const std::string& path, const char* expectation) {
-    remember(path, n);
-    int v = 0;
-    if (!n.IsScalar() || !YAML::convert<int>::decode(n, v)) {
-      fail(n.Mark(), path, std::string("expected ") + expectation + ", got " + describe(n));
-    }
-    return v;
-  }
-
-  Eigen::Vector3d vec3(const YAML::Node& n, const std::string& path, const char* unit) {
-    remember(path, n);
-    if (!n.IsSequence() || n.size() != 3) {
-      fail(n.Mark(), path,
-           std::string("expected a list of 3 numbers (") + unit + "), got " + describe(n));
-    }
-    Eigen::Vector3d v;
-    for (int k = 0; k < 3; ++k) {
-      v(k) = number(n[static_cast<std::size_t>(k)], path + "[" + std::to_string(k) + "]",
-                    Sign::kAny, unit);
-    }
-    return v;
-  }
-
-  // A required key of a map.
-  YAML::Node required(const YAML::Node& map, const std::string& path, const char* key,
-                      const char* meaning) const {
-    const YAML::Node n = map[key];
-    if (!n.IsDefined() || n.IsNull()) {
-      fail(map.Mark(), path, std::string("missing field '") + key + "' (" + meaning + ")");
-    }
-    return n;
-  }
-
-  // Cable fields: the cable entry first, then `defaults:`.
-  Found lookup(const YAML::Node& cable, int i, const char* key) const {
-    const YAML::Node own = cable[key];
-    if (own.IsDefined() && !own.IsNull()) return {own, cable_path(i) + "." + key};
-    if (defaults_.IsDefined()) {
-      const YAML::Node d = defaults_[key];
-      if (d.IsDefined() && !d.IsNull()) return {d, std::string("defaults.") + key};
-    }
-    return {YAML::Node(YAML::NodeType::Undefined), ""};
+  // Cable fields: the cable entry first, then `defaults:` (absent when neither has it).
+  YamlField lookup(const YamlField& cable, const char* key) const {
+    const YamlField own = cable[key];
+    if (own.present()) return own;
+    const YamlField d = (*defaults_)[key];
+    return d.present() ? d : own;
   }
   // Key of a nested group (pulley, winch, force_sensor): the cable's group first, then the
   // defaults' group.
-  Found lookup(const YAML::Node& cable, int i, const char* group, const char* key) const {
-    const YAML::Node g = cable[group];
-    if (g.IsDefined() && g.IsMap()) {
-      const YAML::Node own = g[key];
-      if (own.IsDefined() && !own.IsNull()) {
-        return {own, cable_path(i) + "." + group + "." + key};
-      }
-    }
-    if (defaults_.IsDefined()) {
-      const YAML::Node dg = defaults_[group];
-      if (dg.IsDefined() && dg.IsMap()) {
-        const YAML::Node d = dg[key];
-        if (d.IsDefined() && !d.IsNull()) {
-          return {d, std::string("defaults.") + group + "." + key};
-        }
-      }
-    }
-    return {YAML::Node(YAML::NodeType::Undefined), ""};
+  YamlField lookup(const YamlField& cable, const char* group, const char* key) const {
+    const YamlField own = cable[group][key];
+    if (own.present()) return own;
+    const YamlField d = (*defaults_)[group][key];
+    return d.present() ? d : own;
   }
 
-  [[noreturn]] void missing(const YAML::Node& cable, int i, const std::string& field,
+  // "cables[0].f_max: missing (maximum tension in N); give it here or in defaults", at the
+  // cable entry's line.
+  [[noreturn]] void missing(const YamlField& cable, const std::string& field,
                             const char* meaning) const {
-    fail(cable.Mark(), cable_path(i),
-         "missing field '" + field + "' (" + meaning + "); give it here or in defaults");
+    throw ConfigError{
+        cable.error_at(cable.path() + "." + field,
+                       std::string("missing (") + meaning + "); give it here or in defaults")};
   }
 
-  double cable_number(const YAML::Node& cable, int i, const char* key, Sign sign, const char* unit,
+  double cable_number(const YamlField& cable, const char* key, Sign sign, const char* unit,
                       const char* meaning, const double* fallback) {
-    const Found f = lookup(cable, i, key);
-    if (!f) {
+    const YamlField f = lookup(cable, key);
+    if (!f.present()) {
       if (fallback != nullptr) return *fallback;
-      missing(cable, i, key, meaning);
+      missing(cable, key, meaning);
     }
-    remember(cable_path(i) + "." + key, f.node);
-    return number(f.node, f.path, sign, unit);
+    remember(cable.path() + "." + key, f);
+    return number(f, sign, unit);
   }
 
-  double group_number(const YAML::Node& cable, int i, const char* group, const char* key, Sign sign,
+  double group_number(const YamlField& cable, const char* group, const char* key, Sign sign,
                       const char* unit, const char* meaning, const double* fallback) {
-    const Found f = lookup(cable, i, group, key);
-    if (!f) {
+    const YamlField f = lookup(cable, group, key);
+    if (!f.present()) {
       if (fallback != nullptr) return *fallback;
-      missing(cable, i, std::string(group) + "." + key, meaning);
+      missing(cable, std::string(group) + "." + key, meaning);
     }
-    remember(cable_path(i) + "." + group + "." + key, f.node);
-    return number(f.node, f.path, sign, unit);
+    remember(cable.path() + "." + group + "." + key, f);
+    return number(f, sign, unit);
   }
 
-  static std::string cable_path(int i) { return "cables[" + std::to_string(i) + "]"; }
+  void check_cable_keys(const YamlField& entry, bool is_defaults) const;
+  void parse_cable(const YamlField& cable, int i, RobotModel& model);
+  PulleyModel parse_pulley(const YamlField& cable);
+  ElongationKind parse_elongation(const YamlField& cable, PolynomialSurface& poly);
+  Eigen::Vector3d unit_or_given(const YamlField& f);
+  PlatformModel parse_platform(const YamlField& p);
+  Pose parse_home(const YamlField& h);
+  LaserModel parse_laser(const YamlField& l);
 
-  void parse_defaults(const YAML::Node& d);
-  void check_cable_keys(const YAML::Node& entry, const std::string& path, bool is_defaults) const;
-  void parse_cable(const YAML::Node& cable, int i, RobotModel& model);
-  PulleyModel parse_pulley(const YAML::Node& cable, int i);
-  ElongationKind parse_elongation(const YAML::Node& cable, int i, PolynomialSurface& poly);
-  Eigen::Vector3d unit_or_given(const YAML::Node& n, const std::string& path);
-  PlatformModel parse_platform(const YAML::Node& p);
-  Pose parse_home(const YAML::Node& h);
-  LaserModel parse_laser(const YAML::Node& l, const std::string& path);
-
-  std::string file_;
-  YAML::Node defaults_{YAML::NodeType::Undefined};
-  std::map<std::string, YAML::Mark> marks_;
+  std::optional<YamlField> defaults_;  // root["defaults"], present or not
+  std::map<std::string, int> lines_;
 };
 
-void Parser::check_cable_keys(const YAML::Node& entry, const std::string& path,
-                              bool is_defaults) const {
+void Parser::check_cable_keys(const YamlField& entry, bool is_defaults) const {
   if (is_defaults) {
-    check_keys(entry, path,
-               {"pulley", "winch", "ea", "mass_per_length", "routing_length", "elongation", "f_min",
-                "f_max", "force_sensor"});
+    take(entry.check_keys({"pulley", "winch", "ea", "mass_per_length", "routing_length",
+                           "elongation", "f_min", "f_max", "force_sensor"}));
   } else {
-    check_keys(entry, path,
-               {"frame_anchor", "platform_anchor", "pulley", "winch", "ea", "mass_per_length",
-                "routing_length", "elongation", "f_min", "f_max", "force_sensor"});
+    take(entry.check_keys({"frame_anchor", "platform_anchor", "pulley", "winch", "ea",
+                           "mass_per_length", "routing_length", "elongation", "f_min", "f_max",
+                           "force_sensor"}));
   }
-  const YAML::Node pulley = entry["pulley"];
-  if (pulley.IsDefined() && pulley.IsMap())
-    check_keys(pulley, path + ".pulley", {"radius", "axis", "reference"});
-  const YAML::Node winch = entry["winch"];
-  if (winch.IsDefined()) {
-    expect_map(winch, path + ".winch", "a map of winch fields");
-    check_keys(winch, path + ".winch",
-               {"drum_diameter", "drum_pitch", "gear_ratio", "counts_per_rev", "direction",
-                "length_offset"});
+  if (const YamlField pulley = entry["pulley"]; pulley.is_map()) {
+    take(pulley.check_keys({"radius", "axis", "reference"}));
   }
-  const YAML::Node sensor = entry["force_sensor"];
-  if (sensor.IsDefined()) {
-    expect_map(sensor, path + ".force_sensor", "a map with gain and offset");
-    check_keys(sensor, path + ".force_sensor", {"gain", "offset"});
+  if (const YamlField winch = entry["winch"]; winch.present()) {
+    take(winch.expect_map("a map of winch fields"));
+    take(winch.check_keys({"drum_diameter", "drum_pitch", "gear_ratio", "counts_per_rev",
+                           "direction", "length_offset"}));
   }
-}
-
-void Parser::parse_defaults(const YAML::Node& d) {
-  expect_map(d, "defaults", "a map with the keys of a cable entry");
-  check_cable_keys(d, "defaults", true);
-  defaults_.reset(d);
+  if (const YamlField sensor = entry["force_sensor"]; sensor.present()) {
+    take(sensor.expect_map("a map with gain and offset"));
+    take(sensor.check_keys({"gain", "offset"}));
+  }
 }
 
 // Normalises a direction, keeping vectors that are already unit (to the last bits) unchanged,
 // so that a saved model reads back exactly.
-Eigen::Vector3d Parser::unit_or_given(const YAML::Node& n, const std::string& path) {
-  const Eigen::Vector3d v = vec3(n, path, "direction");
+Eigen::Vector3d Parser::unit_or_given(const YamlField& f) {
+  const Eigen::Vector3d v = vec3(f, "direction");
   const double norm = v.norm();
-  if (!(norm > 0.0)) fail(n.Mark(), path, "expected a non-zero direction, got [0, 0, 0]");
+  if (!(norm > 0.0)) take(f.error("expected a non-zero direction, got [0, 0, 0]"));
   return std::abs(norm - 1.0) <= 1e-14 ? v : Eigen::Vector3d(v / norm);
 }
 
-PulleyModel Parser::parse_pulley(const YAML::Node& cable, int i) {
+PulleyModel Parser::parse_pulley(const YamlField& cable) {
   PulleyModel p;
-  const std::string path = cable_path(i) + ".pulley";
-  const YAML::Node own = cable["pulley"];
-  remember(path, own.IsDefined() ? own : cable);
+  const std::string path = cable.path() + ".pulley";
+  const YamlField own = cable["pulley"];
+  remember(path, own.node().IsDefined() ? own : cable);
   // `pulley: none` on a cable overrides any default: a point anchor.
-  const auto is_none = [](const YAML::Node& n) {
-    return n.IsDefined() && n.IsScalar() && (n.Scalar() == "none" || n.Scalar() == "point");
+  const auto is_none = [](const YamlField& f) {
+    return f.is_scalar() && (f.scalar() == "none" || f.scalar() == "point");
   };
+  const char* expected = "expected a map {radius, axis, reference} or 'none', got ";
   if (is_none(own)) return p;
-  if (own.IsDefined() && !own.IsNull() && !own.IsMap()) {
-    fail(own.Mark(), path,
-         "expected a map {radius, axis, reference} or 'none', got " + describe(own));
-  }
-  const YAML::Node dflt = defaults_.IsDefined() ? defaults_["pulley"] : YAML::Node();
-  if (!own.IsDefined() && is_none(dflt)) return p;
-  if (dflt.IsDefined() && !dflt.IsNull() && !dflt.IsMap() && !is_none(dflt)) {
-    fail(dflt.Mark(), "defaults.pulley",
-         "expected a map {radius, axis, reference} or 'none', got " + describe(dflt));
+  if (own.present() && !own.is_map()) take(own.error(expected + own.describe()));
+  const YamlField dflt = (*defaults_)["pulley"];
+  if (!own.present() && is_none(dflt)) return p;
+  if (dflt.present() && !dflt.is_map() && !is_none(dflt)) {
+    take(dflt.error(expected + dflt.describe()));
   }
   const double zero = 0.0;
-  p.radius = group_number(cable, i, "pulley", "radius", Sign::kNonNegative, "m",
+  p.radius = group_number(cable, "pulley", "radius", Sign::kNonNegative, "m",
                           "pulley radius in m, 0 for a point anchor", &zero);
-  const Found axis = lookup(cable, i, "pulley", "axis");
-  const Found reference = lookup(cable, i, "pulley", "reference");
-  if (!axis || !reference) {
+  const YamlField axis = lookup(cable, "pulley", "axis");
+  const YamlField reference = lookup(cable, "pulley", "reference");
+  if (!axis.present() || !reference.present()) {
     if (p.radius > 0.0) {
-      missing(cable, i, !axis ? "pulley.axis" : "pulley.reference",
-              !axis ? "unit vector of the swivel axis in the world, the way the cable runs into "
-                      "the pulley"
-                    : "direction in the world from which the swivel angle is measured");
+      missing(cable, !axis.present() ? "pulley.axis" : "pulley.reference",
+              !axis.present()
+                  ? "unit vector of the swivel axis in the world, the way the cable runs into "
+                    "the pulley"
+                  : "direction in the world from which the swivel angle is measured");
     }
     return p;  // point anchor without a frame: identity
   }
-  remember(path + ".axis", axis.node);
-  remember(path + ".reference", reference.node);
-  const Eigen::Vector3d ez = unit_or_given(axis.node, axis.path);
-  const Eigen::Vector3d r = vec3(reference.node, reference.path, "direction");
+  remember(path + ".axis", axis);
+  remember(path + ".reference", reference);
+  const Eigen::Vector3d ez = unit_or_given(axis);
+  const Eigen::Vector3d r = vec3(reference, "direction");
   const double along = r.dot(ez);
   Eigen::Vector3d ex = r - along * ez;
   if (!(ex.norm() > 1e-9 * r.norm())) {
-    fail(reference.node.Mark(), reference.path,
-         "expected a direction not parallel to the pulley axis");
+    take(reference.error("expected a direction not parallel to the pulley axis"));
   }
   if (std::abs(along) > 1e-14 || std::abs(ex.norm() - 1.0) > 1e-14) ex.normalize();
   p.frame.col(0) = ex;
@@ -373,50 +223,37 @@ PulleyModel Parser::parse_pulley(const YAML::Node& cable, int i) {
   return p;
 }
 
-ElongationKind Parser::parse_elongation(const YAML::Node& cable, int i, PolynomialSurface& poly) {
-  const Found f = lookup(cable, i, "elongation");
-  if (!f) return ElongationKind::kHooke;
-  remember(cable_path(i) + ".elongation", f.node);
+ElongationKind Parser::parse_elongation(const YamlField& cable, PolynomialSurface& poly) {
+  const YamlField f = lookup(cable, "elongation");
+  if (!f.present()) return ElongationKind::kHooke;
+  remember(cable.path() + ".elongation", f);
   const char* expected = "expected 'rigid', 'hooke' or {model: polynomial, order, coefficients}";
-  // (yaml-cpp nodes are references: never assign one node to another, bind once.)
-  if (f.node.IsMap()) {
-    check_keys(f.node, f.path,
-               {"model", "order", "coefficients", "length_center", "length_scale", "tension_center",
-                "tension_scale"});
+  if (f.is_map()) {
+    take(f.check_keys({"model", "order", "coefficients", "length_center", "length_scale",
+                       "tension_center", "tension_scale"}));
   }
-  const YAML::Node model_node =
-      f.node.IsMap() ? required(f.node, f.path, "model", "rigid, hooke or polynomial") : f.node;
-  if (!model_node.IsScalar()) fail(model_node.Mark(), f.path, expected);
-  const std::string kind = model_node.Scalar();
+  const YamlField model = f.is_map() ? required(f, "model", "rigid, hooke or polynomial") : f;
+  if (!model.is_scalar()) take(model.error_at(f.path(), expected));
+  const std::string kind = model.scalar();
   if (kind == "rigid") return ElongationKind::kRigid;
   if (kind == "hooke") return ElongationKind::kHooke;
-  if (kind != "polynomial") {
-    fail(model_node.Mark(), f.path, std::string(expected) + ", got " + kind);
-  }
-  if (!f.node.IsMap()) fail(f.node.Mark(), f.path, "a polynomial needs order and coefficients");
-  const YAML::Node order = required(f.node, f.path, "order", "total degree of the polynomial");
-  poly.order = integer(order, f.path + ".order", "a non-negative integer");
-  if (poly.order < 0 || poly.order > 8) {
-    fail(order.Mark(), f.path + ".order",
-         "expected an integer from 0 to 8, got " + describe(order));
-  }
-  const YAML::Node coeffs =
-      required(f.node, f.path, "coefficients",
-               "c_ij of dL = sum c_ij L^i F^j in graded order, in m / (m^i N^j)");
+  if (kind != "polynomial") take(model.error_at(f.path(), std::string(expected) + ", got " + kind));
+  if (!f.is_map()) take(f.error("a polynomial needs order and coefficients"));
+  const YamlField order = required(f, "order", "total degree of the polynomial");
+  remember(order.path(), order);
+  poly.order = static_cast<int>(take(order.integer(0, 8)));
+  const YamlField coeffs = required(
+      f, "coefficients", "c_ij of dL = sum c_ij L^i F^j in graded order, in m / (m^i N^j)");
   const std::size_t n = static_cast<std::size_t>((poly.order + 1) * (poly.order + 2) / 2);
-  if (!coeffs.IsSequence() || coeffs.size() != n) {
-    fail(coeffs.Mark(), f.path + ".coefficients",
-         "order " + std::to_string(poly.order) + " needs a list of " + std::to_string(n) +
-             " numbers, got " + describe(coeffs));
+  if (!coeffs.is_list() || coeffs.size() != n) {
+    take(coeffs.error("order " + std::to_string(poly.order) + " needs a list of " +
+                      std::to_string(n) + " numbers, got " + coeffs.describe()));
   }
   poly.coefficients.resize(n);
-  for (std::size_t k = 0; k < n; ++k) {
-    poly.coefficients[k] =
-        number(coeffs[k], f.path + ".coefficients[" + std::to_string(k) + "]", Sign::kAny, "");
-  }
+  for (std::size_t k = 0; k < n; ++k) poly.coefficients[k] = number(coeffs[k], Sign::kAny, "");
   const auto optional = [&](const char* key, Sign sign, const char* unit, double fallback) {
-    const YAML::Node value = f.node[key];
-    return value.IsDefined() ? number(value, f.path + "." + key, sign, unit) : fallback;
+    const YamlField value = f[key];
+    return value.present() ? number(value, sign, unit) : fallback;
   };
   poly.length_center = optional("length_center", Sign::kAny, "m", 0.0);
   poly.length_scale = optional("length_scale", Sign::kPositive, "m", 1.0);
@@ -425,153 +262,143 @@ ElongationKind Parser::parse_elongation(const YAML::Node& cable, int i, Polynomi
   return ElongationKind::kPolynomial;
 }
 
-void Parser::parse_cable(const YAML::Node& cable, int i, RobotModel& model) {
-  const std::string path = cable_path(i);
-  remember(path, cable);
-  expect_map(cable, path, "a map of cable fields");
-  check_cable_keys(cable, path, false);
+void Parser::parse_cable(const YamlField& cable, int i, RobotModel& model) {
+  remember(cable.path(), cable);
+  take(cable.expect_map("a map of cable fields"));
+  check_cable_keys(cable, false);
 
   model.frame_anchors.col(i) =
-      vec3(required(cable, path, "frame_anchor", "a_i, the frame-side anchor in the world, m"),
-           path + ".frame_anchor", "m");
+      vec3(required(cable, "frame_anchor", "a_i, the frame-side anchor in the world, m"), "m");
   model.platform_anchors.col(i) =
-      vec3(required(cable, path, "platform_anchor",
-                    "b_i, the anchor on the platform, platform frame, m"),
-           path + ".platform_anchor", "m");
+      vec3(required(cable, "platform_anchor", "b_i, the anchor on the platform, platform frame, m"),
+           "m");
 
   const auto k = static_cast<std::size_t>(i);
-  model.pulleys[k] = parse_pulley(cable, i);
+  model.pulleys[k] = parse_pulley(cable);
 
   const double zero = 0.0;
   WinchModel& w = model.winches[k];
-  w.drum_diameter = group_number(cable, i, "winch", "drum_diameter", Sign::kPositive, "m",
+  w.drum_diameter = group_number(cable, "winch", "drum_diameter", Sign::kPositive, "m",
                                  "drum diameter in m", nullptr);
-  w.drum_pitch = group_number(cable, i, "winch", "drum_pitch", Sign::kNonNegative, "m",
+  w.drum_pitch = group_number(cable, "winch", "drum_pitch", Sign::kNonNegative, "m",
                               "groove pitch in m per drum revolution", nullptr);
   w.gear_ratio =
-      group_number(cable, i, "winch", "gear_ratio", Sign::kPositive, "motor rev per drum rev",
+      group_number(cable, "winch", "gear_ratio", Sign::kPositive, "motor rev per drum rev",
                    "motor revolutions per drum revolution", nullptr);
-  w.counts_per_rev = group_number(cable, i, "winch", "counts_per_rev", Sign::kPositive, "counts",
+  w.counts_per_rev = group_number(cable, "winch", "counts_per_rev", Sign::kPositive, "counts",
                                   "encoder counts per motor revolution", nullptr);
-  w.length_offset = group_number(cable, i, "winch", "length_offset", Sign::kAny, "m",
+  w.length_offset = group_number(cable, "winch", "length_offset", Sign::kAny, "m",
                                  "cable length command at encoder count 0", &zero);
-  const Found dir = lookup(cable, i, "winch", "direction");
-  if (dir) {
-    remember(path + ".winch.direction", dir.node);
-    w.direction = integer(dir.node, dir.path, "1 or -1");
-    if (w.direction != 1 && w.direction != -1) {
-      fail(dir.node.Mark(), dir.path, "expected 1 or -1, got " + describe(dir.node));
-    }
+  if (const YamlField dir = lookup(cable, "winch", "direction"); dir.present()) {
+    remember(cable.path() + ".winch.direction", dir);
+    const double d = take(dir.number(Sign::kAny, ""));
+    if (d != 1.0 && d != -1.0) take(dir.error("expected 1 or -1, got " + dir.describe()));
+    w.direction = static_cast<int>(d);
   }
 
   CableModel& c = model.cables[k];
-  c.ea = cable_number(cable, i, "ea", Sign::kPositive, "N", "axial stiffness E*A in N", nullptr);
-  c.mass_per_length = cable_number(cable, i, "mass_per_length", Sign::kNonNegative, "kg/m",
+  c.ea = cable_number(cable, "ea", Sign::kPositive, "N", "axial stiffness E*A in N", nullptr);
+  c.mass_per_length = cable_number(cable, "mass_per_length", Sign::kNonNegative, "kg/m",
                                    "cable mass per metre", &zero);
-  c.routing_length = cable_number(cable, i, "routing_length", Sign::kNonNegative, "m",
+  c.routing_length = cable_number(cable, "routing_length", Sign::kNonNegative, "m",
                                   "cable from the drum to the frame anchor", &zero);
-  c.elongation = parse_elongation(cable, i, c.polynomial);
-  c.f_min =
-      cable_number(cable, i, "f_min", Sign::kNonNegative, "N", "minimum tension in N", nullptr);
-  c.f_max = cable_number(cable, i, "f_max", Sign::kPositive, "N", "maximum tension in N", nullptr);
+  c.elongation = parse_elongation(cable, c.polynomial);
+  c.f_min = cable_number(cable, "f_min", Sign::kNonNegative, "N", "minimum tension in N", nullptr);
+  c.f_max = cable_number(cable, "f_max", Sign::kPositive, "N", "maximum tension in N", nullptr);
 
   ForceSensorModel& s = model.force_sensors[k];
   const double one = 1.0;
-  s.gain = group_number(cable, i, "force_sensor", "gain", Sign::kNonZero, "raw units per N",
+  s.gain = group_number(cable, "force_sensor", "gain", Sign::kNonZero, "raw units per N",
                         "raw = gain * tension + offset", &one);
-  s.offset = group_number(cable, i, "force_sensor", "offset", Sign::kAny, "raw units",
+  s.offset = group_number(cable, "force_sensor", "offset", Sign::kAny, "raw units",
                           "raw = gain * tension + offset", &zero);
 }
 
-PlatformModel Parser::parse_platform(const YAML::Node& p) {
+PlatformModel Parser::parse_platform(const YamlField& p) {
   PlatformModel out;
   remember("platform", p);
-  expect_map(p, "platform", "a map with mass, center_of_mass, inertia");
-  check_keys(p, "platform", {"mass", "center_of_mass", "inertia"});
-  out.mass = number(required(p, "platform", "mass", "platform mass in kg"), "platform.mass",
-                    Sign::kPositive, "kg");
-  const YAML::Node com = p["center_of_mass"];
-  if (com.IsDefined()) out.center_of_mass = vec3(com, "platform.center_of_mass", "m");
-  const YAML::Node inertia = p["inertia"];
-  if (inertia.IsDefined()) {
-    remember("platform.inertia", inertia);
-    const char* expected =
-        "expected [Ixx, Iyy, Izz] or a 3x3 list of lists (kg m^2, about the centre of mass)";
-    if (!inertia.IsSequence() || inertia.size() != 3) {
-      fail(inertia.Mark(), "platform.inertia",
-           std::string(expected) + ", got " + describe(inertia));
+  take(p.expect_map("a map with mass, center_of_mass, inertia"));
+  take(p.check_keys({"mass", "center_of_mass", "inertia"}));
+  out.mass = number(required(p, "mass", "platform mass in kg"), Sign::kPositive, "kg");
+  if (const YamlField com = p["center_of_mass"]; com.present()) out.center_of_mass = vec3(com, "m");
+  if (const YamlField inertia = p["inertia"]; inertia.present()) {
+    remember(inertia.path(), inertia);
+    if (!inertia.is_list() || inertia.size() != 3) {
+      take(inertia.error(
+          "expected [Ixx, Iyy, Izz] or a 3x3 list of lists (kg m^2, about the centre of mass), "
+          "got " +
+          inertia.describe()));
     }
-    if (inertia[0].IsSequence()) {
+    if (inertia[std::size_t{0}].is_list()) {
       for (std::size_t r = 0; r < 3; ++r) {
-        out.inertia.row(static_cast<int>(r)) =
-            vec3(inertia[r], "platform.inertia[" + std::to_string(r) + "]", "kg m^2").transpose();
+        out.inertia.row(static_cast<int>(r)) = vec3(inertia[r], "kg m^2").transpose();
       }
     } else {
-      out.inertia = vec3(inertia, "platform.inertia", "kg m^2").asDiagonal();
+      out.inertia = vec3(inertia, "kg m^2").asDiagonal();
     }
   }
   return out;
 }
 
-Pose Parser::parse_home(const YAML::Node& h) {
+Pose Parser::parse_home(const YamlField& h) {
   Pose pose;
   remember("home", h);
-  expect_map(h, "home", "a map with position and rpy");
-  check_keys(h, "home", {"position", "rpy"});
-  if (h["position"].IsDefined()) pose.position = vec3(h["position"], "home.position", "m");
-  if (h["rpy"].IsDefined()) pose.rpy = vec3(h["rpy"], "home.rpy", "rad");
+  take(h.expect_map("a map with position and rpy"));
+  take(h.check_keys({"position", "rpy"}));
+  if (const YamlField position = h["position"]; position.present()) {
+    pose.position = vec3(position, "m");
+  }
+  if (const YamlField rpy = h["rpy"]; rpy.present()) pose.rpy = vec3(rpy, "rad");
   return pose;
 }
 
-LaserModel Parser::parse_laser(const YAML::Node& l, const std::string& path) {
+LaserModel Parser::parse_laser(const YamlField& l) {
   LaserModel laser;
-  remember(path, l);
-  expect_map(l, path, "a map with origin, direction, plane_point, plane_normal, range");
-  check_keys(l, path, {"origin", "direction", "plane_point", "plane_normal", "range"});
-  if (l["origin"].IsDefined()) laser.origin = vec3(l["origin"], path + ".origin", "m");
-  laser.direction = vec3(required(l, path, "direction", "unit beam direction, platform frame"),
-                         path + ".direction", "unit vector");
-  laser.plane_point = vec3(required(l, path, "plane_point", "a point of the target plane, world"),
-                           path + ".plane_point", "m");
+  remember(l.path(), l);
+  take(l.expect_map("a map with origin, direction, plane_point, plane_normal, range"));
+  take(l.check_keys({"origin", "direction", "plane_point", "plane_normal", "range"}));
+  if (const YamlField origin = l["origin"]; origin.present()) laser.origin = vec3(origin, "m");
+  laser.direction =
+      vec3(required(l, "direction", "unit beam direction, platform frame"), "unit vector");
+  laser.plane_point = vec3(required(l, "plane_point", "a point of the target plane, world"), "m");
   laser.plane_normal =
-      vec3(required(l, path, "plane_normal", "unit normal of the target plane, world"),
-           path + ".plane_normal", "unit vector");
-  const YAML::Node range = required(l, path, "range", "[min, max] measuring range in m");
-  remember(path + ".range", range);
-  if (!range.IsSequence() || range.size() != 2) {
-    fail(range.Mark(), path + ".range", "expected [min, max] (m), got " + describe(range));
+      vec3(required(l, "plane_normal", "unit normal of the target plane, world"), "unit vector");
+  const YamlField range = required(l, "range", "[min, max] measuring range in m");
+  remember(range.path(), range);
+  if (!range.is_list() || range.size() != 2) {
+    take(range.error("expected [min, max] (m), got " + range.describe()));
   }
-  laser.range_min = number(range[0], path + ".range[0]", Sign::kNonNegative, "m");
-  laser.range_max = number(range[1], path + ".range[1]", Sign::kPositive, "m");
+  laser.range_min = number(range[std::size_t{0}], Sign::kNonNegative, "m");
+  laser.range_max = number(range[std::size_t{1}], Sign::kPositive, "m");
   return laser;
 }
 
-RobotModel Parser::parse(const YAML::Node& root) {
-  if (!root.IsMap())
-    fail(root.Mark(), "(top level)", "expected a map of fields, got " + describe(root));
-  check_keys(root, "", {"name", "gravity", "defaults", "cables", "platform", "home", "lasers"});
+RobotModel Parser::parse(const YamlField& root) {
+  take(root.expect_map("a map of fields"));
+  take(root.check_keys({"name", "gravity", "defaults", "cables", "platform", "home", "lasers"}));
   // Whole-section messages of check_model point at the section's key line.
   for (const char* key : {"name", "gravity", "defaults", "cables", "platform", "home", "lasers"}) {
-    remember_key(root, key, key);
+    if (const int line = root.key_line(key); line > 0) lines_.emplace(key, line);
   }
   for (const char* alias : {"pulleys", "winches", "force_sensors", "platform_anchors"}) {
-    remember_key(root, "cables", alias);
+    if (const int line = root.key_line("cables"); line > 0) lines_.emplace(alias, line);
   }
+  defaults_.emplace(root["defaults"]);
   RobotModel model;
-  const YAML::Node name = required(root, "(top level)", "name", "the robot's name");
+  const YamlField name = required(root, "name", "the robot's name");
   remember("name", name);
-  if (!name.IsScalar()) fail(name.Mark(), "name", "expected a string, got " + describe(name));
-  model.name = name.Scalar();
-  if (root["gravity"].IsDefined()) {
-    model.gravity = number(root["gravity"], "gravity", Sign::kNonNegative, "m/s^2");
+  model.name = take(name.text());
+  if (const YamlField gravity = root["gravity"]; gravity.present()) {
+    model.gravity = number(gravity, Sign::kNonNegative, "m/s^2");
   }
-  if (root["defaults"].IsDefined()) parse_defaults(root["defaults"]);
+  if (defaults_->present()) {
+    take(defaults_->expect_map("a map with the keys of a cable entry"));
+    check_cable_keys(*defaults_, true);
+  }
 
-  const YAML::Node cables =
-      required(root, "(top level)", "cables", "one entry per cable, see docs/config.md");
-
-  if (!cables.IsSequence() || cables.size() == 0) {
-    fail(cables.Mark(), "cables", "expected a list of cable entries, got " + describe(cables));
+  const YamlField cables = required(root, "cables", "one entry per cable, see docs/config.md");
+  if (!cables.is_list() || cables.size() == 0) {
+    take(cables.error("expected a list of cable entries, got " + cables.describe()));
   }
   const int m = static_cast<int>(cables.size());
   model.frame_anchors.resize(3, m);
@@ -582,18 +409,12 @@ RobotModel Parser::parse(const YAML::Node& root) {
   model.force_sensors.resize(static_cast<std::size_t>(m));
   for (int i = 0; i < m; ++i) parse_cable(cables[static_cast<std::size_t>(i)], i, model);
 
-  model.platform =
-      parse_platform(required(root, "(top level)", "platform", "mass, centre of mass"));
-  if (root["home"].IsDefined()) model.home = parse_home(root["home"]);
-  const YAML::Node lasers = root["lasers"];
-  if (lasers.IsDefined() && !lasers.IsNull()) {
+  model.platform = parse_platform(required(root, "platform", "mass, centre of mass"));
+  if (const YamlField home = root["home"]; home.present()) model.home = parse_home(home);
+  if (const YamlField lasers = root["lasers"]; lasers.present()) {
     remember("lasers", lasers);
-    if (!lasers.IsSequence()) {
-      fail(lasers.Mark(), "lasers", "expected a list of laser entries, got " + describe(lasers));
-    }
-    for (std::size_t j = 0; j < lasers.size(); ++j) {
-      model.lasers.push_back(parse_laser(lasers[j], "lasers[" + std::to_string(j) + "]"));
-    }
+    take(lasers.expect_list("a list of laser entries"));
+    for (std::size_t j = 0; j < lasers.size(); ++j) model.lasers.push_back(parse_laser(lasers[j]));
   }
   return model;
 }
@@ -671,41 +492,34 @@ std::string flow_map(const std::vector<std::pair<std::string, std::string>>& fie
   return s + "}";
 }
 
-}  // namespace
-
-Result<RobotModel> parse_robot_config(std::string_view text, std::string_view name_for_messages) {
-  Parser parser(name_for_messages);
+Result<RobotModel> parse_document(const YamlDocument& doc) {
+  Parser parser;
   RobotModel model;
   try {
-    const YAML::Node root = YAML::Load(std::string(text));
-    model = parser.parse(root);
+    model = parser.parse(doc.root());
   } catch (const ConfigError& e) {
     return e.status;
-  } catch (const YAML::Exception& e) {
-    std::string where(name_for_messages);
-    if (!e.mark.is_null()) {
-      where += ":" + std::to_string(e.mark.line + 1) + ":" + std::to_string(e.mark.column + 1);
-    }
-    return Status(ErrorCode::kParseError, where + ": YAML syntax error: " + e.msg);
   }
   const Status check = check_model(model);
-  if (!check.ok()) return parser.locate(check);
+  if (!check.ok()) return parser.locate(check, doc.file());
   return model;
 }
 
+}  // namespace
+
+Result<RobotModel> parse_robot_config(std::string_view text, std::string_view name_for_messages) {
+  CDPR_ASSIGN_OR_RETURN(const YamlDocument doc, YamlDocument::parse(text, name_for_messages));
+  return parse_document(doc);
+}
+
 Result<RobotModel> load_robot_config(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    const int err = errno;
-    return Status::Error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
-                         "cannot open robot config %s: %s", path.c_str(), std::strerror(err));
-  }
-  std::ostringstream text;
-  text << in.rdbuf();
-  if (in.bad()) {
-    return Status::Error(ErrorCode::kIoError, "cannot read robot config %s", path.c_str());
-  }
-  return parse_robot_config(text.str(), path);
+  CDPR_ASSIGN_OR_RETURN(const YamlDocument doc, YamlDocument::load(path, "robot config"));
+  return parse_document(doc);
+}
+
+Status write_robot_config(const std::string& path, const RobotModel& model,
+                          std::string_view header) {
+  return io::write_file_atomically(path, std::string(header) + save_robot_config(model));
 }
 
 std::string save_robot_config(const RobotModel& model) {

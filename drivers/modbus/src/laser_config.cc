@@ -1,103 +1,89 @@
 // Reads a LaserConfig (link settings, poll rate, register map) from YAML.
-#include <yaml-cpp/yaml.h>
-
-#include <cerrno>
-#include <cstring>
+#include <cstdint>
 #include <filesystem>
-#include <fstream>
-#include <sstream>
 
 #include "cdpr/modbus/laser_sensor.hpp"
-#include "yaml_fields.hpp"
+#include "register_map_yaml.hpp"
 
 namespace cdpr::modbus {
 
 namespace {
 
-using detail::YamlFields;
+using config::Sign;
+using config::YamlDocument;
+using config::YamlField;
 
-Status parse_config(const YamlFields& f, const YAML::Node& root, std::string_view base_dir,
-                    LaserConfig& c) {
-  if (!root.IsMap()) return f.error(root, "<top level>", "must be a mapping of laser fields");
-  CDPR_TRY(f.only_known(root, "",
-                        {"name", "transport", "device", "baud", "parity", "data_bits", "stop_bits",
-                         "rs485", "host", "port", "slave_id", "response_timeout", "byte_timeout",
-                         "retries", "reconnect_delay", "poll_rate", "register_map"}));
-  CDPR_TRY(f.get_string(root, "name", "", c.name, false));
-  int transport = 0;
-  CDPR_TRY(f.get_choice(root, "transport", "", {"rtu", "tcp"}, transport, true));
+Status parse_config(const YamlField& root, std::string_view base_dir, LaserConfig& c) {
+  CDPR_RETURN_IF_ERROR(root.expect_map("a mapping of laser fields"));
+  CDPR_RETURN_IF_ERROR(
+      root.check_keys({"name", "transport", "device", "baud", "parity", "data_bits", "stop_bits",
+                       "rs485", "host", "port", "slave_id", "response_timeout", "byte_timeout",
+                       "retries", "reconnect_delay", "poll_rate", "register_map"}));
+  CDPR_RETURN_IF_ERROR(root.optional("name", c.name));
+  CDPR_ASSIGN_OR_RETURN(const int transport, root["transport"].choice({"rtu", "tcp"}));
   if (transport == 0) {
     RtuSettings rtu;
-    CDPR_TRY(f.get_string(root, "device", "", rtu.device, true));
-    long long v = rtu.baud;
-    CDPR_TRY(f.get_int(root, "baud", "", 300, 4000000, v, false));
-    rtu.baud = static_cast<int>(v);
+    CDPR_ASSIGN_OR_RETURN(rtu.device, root["device"].text());
+    CDPR_RETURN_IF_ERROR(root.optional("baud", rtu.baud, 300, 4000000));
     int parity = 1;
-    CDPR_TRY(f.get_choice(root, "parity", "", {"none", "even", "odd"}, parity, false));
+    CDPR_RETURN_IF_ERROR(root.optional_choice("parity", parity, {"none", "even", "odd"}));
     rtu.parity = parity == 0 ? 'N' : (parity == 1 ? 'E' : 'O');
-    v = rtu.data_bits;
-    CDPR_TRY(f.get_int(root, "data_bits", "", 5, 8, v, false));
-    rtu.data_bits = static_cast<int>(v);
-    v = rtu.stop_bits;
-    CDPR_TRY(f.get_int(root, "stop_bits", "", 1, 2, v, false));
-    rtu.stop_bits = static_cast<int>(v);
-    CDPR_TRY(f.get_bool(root, "rs485", "", rtu.rs485));
+    CDPR_RETURN_IF_ERROR(root.optional("data_bits", rtu.data_bits, 5, 8));
+    CDPR_RETURN_IF_ERROR(root.optional("stop_bits", rtu.stop_bits, 1, 2));
+    CDPR_RETURN_IF_ERROR(root.optional("rs485", rtu.rs485));
     for (const char* k : {"host", "port"}) {
-      if (root[k]) return f.error(root[k], k, "only for transport: tcp");
+      if (root[k].present()) return root[k].error("only for transport: tcp");
     }
     c.link.transport = rtu;
   } else {
     TcpSettings tcp;
-    CDPR_TRY(f.get_string(root, "host", "", tcp.host, true));
-    long long v = tcp.port;
-    CDPR_TRY(f.get_int(root, "port", "", 1, 65535, v, false));
-    tcp.port = static_cast<int>(v);
+    CDPR_ASSIGN_OR_RETURN(tcp.host, root["host"].text());
+    CDPR_RETURN_IF_ERROR(root.optional("port", tcp.port, 1, 65535));
     for (const char* k : {"device", "baud", "parity", "data_bits", "stop_bits", "rs485"}) {
-      if (root[k]) return f.error(root[k], k, "only for transport: rtu");
+      if (root[k].present()) return root[k].error("only for transport: rtu");
     }
     c.link.transport = tcp;
   }
-  long long v = c.link.slave_id;
-  CDPR_TRY(
-      f.get_int(root, "slave_id", "", transport == 0 ? 1 : 0, transport == 0 ? 247 : 255, v, true));
-  c.link.slave_id = static_cast<int>(v);
-  CDPR_TRY(f.get_double(root, "response_timeout", "", c.link.response_timeout_s, false));
-  CDPR_TRY(f.get_double(root, "byte_timeout", "", c.link.byte_timeout_s, false));
-  v = c.link.retries;
-  CDPR_TRY(f.get_int(root, "retries", "", 0, 10, v, false));
-  c.link.retries = static_cast<int>(v);
-  CDPR_TRY(f.get_double(root, "reconnect_delay", "", c.link.reconnect_delay_s, false));
-  CDPR_TRY(f.get_double(root, "poll_rate", "", c.poll_rate_hz, false));
+  CDPR_ASSIGN_OR_RETURN(
+      const std::int64_t slave_id,
+      root["slave_id"].integer(transport == 0 ? 1 : 0, transport == 0 ? 247 : 255));
+  c.link.slave_id = static_cast<int>(slave_id);
+  CDPR_RETURN_IF_ERROR(
+      root.optional("response_timeout", c.link.response_timeout_s, Sign::kAny, "s"));
+  CDPR_RETURN_IF_ERROR(root.optional("byte_timeout", c.link.byte_timeout_s, Sign::kAny, "s"));
+  CDPR_RETURN_IF_ERROR(root.optional("retries", c.link.retries, 0, 10));
+  CDPR_RETURN_IF_ERROR(root.optional("reconnect_delay", c.link.reconnect_delay_s, Sign::kAny, "s"));
+  CDPR_RETURN_IF_ERROR(root.optional("poll_rate", c.poll_rate_hz, Sign::kAny, "Hz"));
 
-  const YAML::Node map = root["register_map"];
-  if (!map) return f.error(root, "register_map", "is missing (a file path or a mapping)");
-  if (map.IsScalar()) {
-    std::filesystem::path p(map.Scalar());
+  const YamlField map = root["register_map"];
+  if (!map.present()) return map.error("missing (a file path or a mapping)");
+  if (map.is_scalar()) {
+    std::filesystem::path p(map.scalar());
     if (p.is_relative() && !base_dir.empty()) p = std::filesystem::path(base_dir) / p;
     Result<RegisterMap> m = load_register_map(p.string());
     if (!m.ok()) {
-      Status s = m.status();
-      return with_context(f.error(map, "register_map", "").message(), s);
+      const std::string where = map.file() + ":" + std::to_string(map.line()) + ": register_map: ";
+      return with_context(where, m.status());
     }
     c.map = std::move(*m);
-  } else if (map.IsMap()) {
-    CDPR_TRY(detail::parse_register_map_node(f, map, c.map));
+  } else if (map.is_map()) {
+    CDPR_RETURN_IF_ERROR(detail::parse_register_map_node(map, c.map));
   } else {
-    return f.error(map, "register_map", "must be a file path or a mapping");
+    return map.error("must be a file path or a mapping");
   }
 
   // Range checks with the field names (validate() repeats them without positions).
   if (!(c.link.response_timeout_s >= 0.001 && c.link.response_timeout_s <= 10.0)) {
-    return f.error(root["response_timeout"], "response_timeout", "must be 0.001..10 s");
+    return root["response_timeout"].error("must be 0.001..10 s");
   }
   if (!(c.link.byte_timeout_s >= 0.0001 && c.link.byte_timeout_s <= 10.0)) {
-    return f.error(root["byte_timeout"], "byte_timeout", "must be 0.0001..10 s");
+    return root["byte_timeout"].error("must be 0.0001..10 s");
   }
   if (!(c.link.reconnect_delay_s >= 0.0 && c.link.reconnect_delay_s <= 60.0)) {
-    return f.error(root["reconnect_delay"], "reconnect_delay", "must be 0..60 s");
+    return root["reconnect_delay"].error("must be 0..60 s");
   }
   if (!(c.poll_rate_hz >= 0.1 && c.poll_rate_hz <= 1000.0)) {
-    return f.error(root["poll_rate"], "poll_rate", "must be 0.1..1000 Hz");
+    return root["poll_rate"].error("must be 0.1..1000 Hz");
   }
   return c.validate();
 }
@@ -106,29 +92,18 @@ Status parse_config(const YamlFields& f, const YAML::Node& root, std::string_vie
 
 Result<LaserConfig> parse_laser_config(std::string_view yaml_text, std::string_view file,
                                        std::string_view base_dir) {
-  YamlFields f(file);
+  CDPR_ASSIGN_OR_RETURN(const YamlDocument doc, YamlDocument::parse(yaml_text, file));
   LaserConfig c;
-  try {
-    const YAML::Node root = YAML::Load(std::string(yaml_text));
-    Status s = parse_config(f, root, base_dir, c);
-    if (!s.ok()) return s;
-  } catch (const YAML::Exception& e) {
-    return Status::Error(ErrorCode::kParseError, "%.*s:%d:%d: YAML syntax: %s",
-                         static_cast<int>(file.size()), file.data(), e.mark.line + 1,
-                         e.mark.column + 1, e.msg.c_str());
-  }
+  CDPR_RETURN_IF_ERROR(parse_config(doc.root(), base_dir, c));
   return c;
 }
 
 Result<LaserConfig> load_laser_config(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) {
-    return Status::Error(ErrorCode::kNotFound, "laser config %s: cannot open: %s", path.c_str(),
-                         std::strerror(errno));
-  }
-  std::ostringstream text;
-  text << in.rdbuf();
-  return parse_laser_config(text.str(), path, std::filesystem::path(path).parent_path().string());
+  CDPR_ASSIGN_OR_RETURN(const YamlDocument doc, YamlDocument::load(path, "laser config"));
+  LaserConfig c;
+  CDPR_RETURN_IF_ERROR(
+      parse_config(doc.root(), std::filesystem::path(path).parent_path().string(), c));
+  return c;
 }
 
 }  // namespace cdpr::modbus

@@ -50,7 +50,7 @@ LaserSensor::~LaserSensor() {
 }
 
 Status LaserSensor::start() {
-  if (Status s = config_.validate(); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(config_.validate());
   if (thread_.joinable()) return Status::Ok();
   {
     std::lock_guard<std::mutex> lk(stop_mutex_);
@@ -179,7 +179,7 @@ Result<Measurement> LaserSensor::measure(int n, const MeasureOptions& options) {
     return Status::Error(ErrorCode::kInvalidArgument,
                          "laser '%s': measure(%d): n must be 1..100000", config_.name.c_str(), n);
   }
-  if (Status s = config_.validate(); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(config_.validate());
   const double interval =
       options.interval_s >= 0.0 ? options.interval_s : 1.0 / config_.poll_rate_hz;
   const double min_sigma =

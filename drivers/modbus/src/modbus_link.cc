@@ -133,7 +133,7 @@ void ModbusLink::close() {
 Status ModbusLink::connect() {
   close();
   warnings_.clear();
-  if (Status s = config_.validate(); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(config_.validate());
   const auto* rtu = std::get_if<RtuSettings>(&config_.transport);
   if (rtu != nullptr) {
     ctx_ =

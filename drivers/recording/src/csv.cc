@@ -11,6 +11,8 @@
 #include <sstream>
 #include <system_error>
 
+#include "cdpr/io/atomic_file.hpp"
+
 namespace cdpr::recording {
 
 // ---------------------------------------------------------------------------------------------
@@ -68,11 +70,9 @@ std::uint64_t fnv1a64(std::string_view bytes) {
 }
 
 Result<std::string> file_hash(const std::string& path) {
-  auto text = detail::read_file(path);
-  if (!text.ok()) return text.status();
+  CDPR_ASSIGN_OR_RETURN(const std::string text, detail::read_file(path));
   char buf[32];
-  std::snprintf(buf, sizeof buf, "fnv1a64:%016llx",
-                static_cast<unsigned long long>(fnv1a64(*text)));
+  std::snprintf(buf, sizeof buf, "fnv1a64:%016llx", static_cast<unsigned long long>(fnv1a64(text)));
   return std::string(buf);
 }
 
@@ -157,15 +157,7 @@ Result<std::string> read_file(const std::string& path) {
 }
 
 Status write_file(const std::string& path, const std::string& text) {
-  std::ofstream out(path, std::ios::binary | std::ios::trunc);
-  if (!out) {
-    return Status::Error(ErrorCode::kIoError, "cannot create '%s': %s", path.c_str(),
-                         std::strerror(errno));
-  }
-  out << text;
-  out.flush();
-  if (!out) return Status::Error(ErrorCode::kIoError, "cannot write '%s'", path.c_str());
-  return Status::Ok();
+  return io::write_file_atomically(path, text);
 }
 
 Result<CsvTable> parse_table(std::string_view text, std::string_view name) {

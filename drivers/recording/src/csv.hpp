@@ -35,6 +35,7 @@ Result<CsvTable> parse_table(std::string_view text, std::string_view name);
 
 // Reads a whole file into memory.
 Result<std::string> read_file(const std::string& path);
+// Replaces the file atomically (cdpr/io/atomic_file.hpp): a crash leaves the old or the new file.
 Status write_file(const std::string& path, const std::string& text);
 
 // Cell parsers: on failure, a Status "<file>:<line>: column <c> (<name>): <reason>".

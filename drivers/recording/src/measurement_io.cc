@@ -9,13 +9,12 @@ namespace {
 
 Status sigma_from(const Metadata& md, const char* k, double* sigma) {
   if (!md.has(k)) return Status::Ok();
-  auto v = md.number(k);
-  if (!v.ok()) return v.status();
-  if (!(*v > 0.0)) {
+  CDPR_ASSIGN_OR_RETURN(const double v, md.number(k));
+  if (!(v > 0.0)) {
     return Status::Error(ErrorCode::kInvalidArgument, "metadata '%s': %s is not a positive sigma",
                          k, md.get(k).c_str());
   }
-  *sigma = *v;
+  *sigma = v;
   return Status::Ok();
 }
 
@@ -25,16 +24,11 @@ Result<MeasurementSet> to_measurement_set(const Recording& rec, const SensorNois
   MeasurementSet set;
   set.noise = defaults;
   const Metadata& md = rec.metadata;
-  if (Status s = sigma_from(md, key::kNoiseLength, &set.noise.sigma_length); !s.ok()) return s;
-  if (Status s = sigma_from(md, key::kNoiseForce, &set.noise.sigma_force); !s.ok()) return s;
-  if (Status s = sigma_from(md, key::kNoiseLaser, &set.noise.sigma_laser); !s.ok()) return s;
-  if (Status s = sigma_from(md, key::kNoiseRefPosition, &set.noise.sigma_reference_position);
-      !s.ok()) {
-    return s;
-  }
-  if (Status s = sigma_from(md, key::kNoiseRefAngle, &set.noise.sigma_reference_angle); !s.ok()) {
-    return s;
-  }
+  CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseLength, &set.noise.sigma_length));
+  CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseForce, &set.noise.sigma_force));
+  CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseLaser, &set.noise.sigma_laser));
+  CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseRefPosition, &set.noise.sigma_reference_position));
+  CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseRefAngle, &set.noise.sigma_reference_angle));
   bool any_tension = false;
   for (const RecordedPose& p : rec.poses) {
     if (p.tensions.size() > 0 && !p.tensions.array().isNaN().all()) any_tension = true;

@@ -115,9 +115,9 @@ Status resolve_layout(const CsvTable& t, Layout* layout) {
     }
     return Status::Ok();
   };
-  if (Status s = contiguous(lengths, "length_", &layout->lengths); !s.ok()) return s;
-  if (Status s = contiguous(tensions, "tension_", &layout->tensions); !s.ok()) return s;
-  if (Status s = contiguous(lasers, "laser_", &layout->lasers); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(contiguous(lengths, "length_", &layout->lengths));
+  CDPR_RETURN_IF_ERROR(contiguous(tensions, "tension_", &layout->tensions));
+  CDPR_RETURN_IF_ERROR(contiguous(lasers, "laser_", &layout->lasers));
   if (layout->lengths.empty()) return header_error(t, "missing required column '%s'", "length_1");
   if (layout->tensions.size() != layout->lengths.size()) {
     return Status::Error(ErrorCode::kParseError,
@@ -173,12 +173,10 @@ Status with_path(const Status& s, const std::string& path) {
 // ---------------------------------------------------------------------------------------------
 
 Result<Recording> parse_recording(std::string_view text, std::string_view name) {
-  auto table = detail::parse_table(text, name);
-  if (!table.ok()) return table.status();
-  const CsvTable& t = *table;
-  if (Status s = check_format(t, kRecordingFormat); !s.ok()) return s;
+  CDPR_ASSIGN_OR_RETURN(const CsvTable t, detail::parse_table(text, name));
+  CDPR_RETURN_IF_ERROR(check_format(t, kRecordingFormat));
   Layout layout;
-  if (Status s = resolve_layout(t, &layout); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(resolve_layout(t, &layout));
 
   Recording rec;
   rec.metadata = t.metadata;
@@ -191,7 +189,7 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
   int previous_line = 0;
   for (const CsvRow& row : t.rows) {
     RecordedPose p;
-    if (Status s = detail::parse_int(t, row, layout.pose, &p.index); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(detail::parse_int(t, row, layout.pose, &p.index));
     if (!rec.poses.empty() && p.index <= rec.poses.back().index) {
       return detail::cell_error(t, row, layout.pose,
                                 "pose index %lld does not increase (line %d has %lld)",
@@ -199,10 +197,10 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
                                 static_cast<long long>(rec.poses.back().index));
     }
     previous_line = row.line;
-    if (Status s = detail::parse_double(t, row, layout.time, false, &p.time_s); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, layout.time, false, &p.time_s));
     for (int a = 0; a < 6; ++a) {
       double v = 0.0;
-      if (Status s = detail::parse_double(t, row, layout.cmd[a], false, &v); !s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, layout.cmd[a], false, &v));
       (a < 3 ? p.commanded.position : p.commanded.rpy)(a % 3) = v;
     }
     auto fill = [&](const std::vector<int>& cols, Eigen::VectorXd* out) {
@@ -216,23 +214,21 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
       }
       return Status::Ok();
     };
-    if (Status s = fill(layout.lengths, &p.lengths); !s.ok()) return s;
-    if (Status s = fill(layout.tensions, &p.tensions); !s.ok()) return s;
-    if (Status s = fill(layout.lasers, &p.lasers); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(fill(layout.lengths, &p.lengths));
+    CDPR_RETURN_IF_ERROR(fill(layout.tensions, &p.tensions));
+    CDPR_RETURN_IF_ERROR(fill(layout.lasers, &p.lasers));
     p.reference.position.setConstant(nan);
     p.reference.rpy.setConstant(nan);
     if (rec.has_reference) {
       for (int a = 0; a < 6; ++a) {
         double v = 0.0;
-        if (Status s = detail::parse_double(t, row, layout.ref[a], true, &v); !s.ok()) return s;
+        CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, layout.ref[a], true, &v));
         (a < 3 ? p.reference.position : p.reference.rpy)(a % 3) = v;
       }
     }
     if (rec.has_temperature) {
-      if (Status s = detail::parse_double(t, row, layout.temperature, true, &p.temperature_c);
-          !s.ok()) {
-        return s;
-      }
+      CDPR_RETURN_IF_ERROR(
+          detail::parse_double(t, row, layout.temperature, true, &p.temperature_c));
     }
     rec.poses.push_back(std::move(p));
   }
@@ -240,9 +236,8 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
 }
 
 Result<Recording> read_recording(const std::string& path) {
-  auto text = detail::read_file(path);
-  if (!text.ok()) return text.status();
-  return parse_recording(*text, path);
+  CDPR_ASSIGN_OR_RETURN(const std::string text, detail::read_file(path));
+  return parse_recording(text, path);
 }
 
 Result<std::string> format_recording(const Recording& rec) {
@@ -255,7 +250,7 @@ Result<std::string> format_recording(const Recording& rec) {
     return Status(ErrorCode::kInvalidArgument, "a recording needs at least one pose");
   }
   std::string out;
-  if (Status s = detail::format_metadata(rec.metadata, kRecordingFormat, &out); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(detail::format_metadata(rec.metadata, kRecordingFormat, &out));
   out += "pose,time_s";
   for (const char* c : kCmd) out += std::string(",") + c;
   for (int i = 1; i <= rec.num_cables; ++i) out += ",length_" + std::to_string(i);
@@ -272,12 +267,9 @@ Result<std::string> format_recording(const Recording& rec) {
       return Status::Error(ErrorCode::kInvalidArgument, "pose index %lld does not increase",
                            static_cast<long long>(p.index));
     }
-    if (Status s = check_size("length", p.lengths.size(), rec.num_cables, p.index); !s.ok())
-      return s;
-    if (Status s = check_size("tension", p.tensions.size(), rec.num_cables, p.index); !s.ok()) {
-      return s;
-    }
-    if (Status s = check_size("laser", p.lasers.size(), rec.num_lasers, p.index); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(check_size("length", p.lengths.size(), rec.num_cables, p.index));
+    CDPR_RETURN_IF_ERROR(check_size("tension", p.tensions.size(), rec.num_cables, p.index));
+    CDPR_RETURN_IF_ERROR(check_size("laser", p.lasers.size(), rec.num_lasers, p.index));
     if (!std::isfinite(p.time_s) || !p.commanded.vector().allFinite()) {
       return Status::Error(ErrorCode::kInvalidArgument,
                            "pose %lld: time and commanded pose must be finite",
@@ -288,22 +280,22 @@ Result<std::string> format_recording(const Recording& rec) {
     const auto cmd = p.commanded.vector();
     for (int a = 0; a < 6; ++a) out += ',' + format_number(cmd(a));
     for (Eigen::Index i = 0; i < p.lengths.size(); ++i) {
-      if (Status s = append(&out, p.lengths(i), "a length", p.index); !s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(append(&out, p.lengths(i), "a length", p.index));
     }
     for (Eigen::Index i = 0; i < p.tensions.size(); ++i) {
-      if (Status s = append(&out, p.tensions(i), "a tension", p.index); !s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(append(&out, p.tensions(i), "a tension", p.index));
     }
     for (Eigen::Index i = 0; i < p.lasers.size(); ++i) {
-      if (Status s = append(&out, p.lasers(i), "a laser distance", p.index); !s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(append(&out, p.lasers(i), "a laser distance", p.index));
     }
     if (rec.has_reference) {
       const auto ref = p.reference.vector();
       for (int a = 0; a < 6; ++a) {
-        if (Status s = append(&out, ref(a), "the reference pose", p.index); !s.ok()) return s;
+        CDPR_RETURN_IF_ERROR(append(&out, ref(a), "the reference pose", p.index));
       }
     }
     if (rec.has_temperature) {
-      if (Status s = append(&out, p.temperature_c, "the temperature", p.index); !s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(append(&out, p.temperature_c, "the temperature", p.index));
     }
     out += '\n';
   }
@@ -368,19 +360,17 @@ constexpr std::array<const char*, 3> kForceColumns = {"channel", "mass_kg", "raw
 }  // namespace
 
 Result<CableExperiment> parse_cable_experiment(std::string_view text, std::string_view name) {
-  auto table = detail::parse_table(text, name);
-  if (!table.ok()) return table.status();
-  const CsvTable& t = *table;
-  if (Status s = check_format(t, kCableFormat); !s.ok()) return s;
+  CDPR_ASSIGN_OR_RETURN(const CsvTable t, detail::parse_table(text, name));
+  CDPR_RETURN_IF_ERROR(check_format(t, kCableFormat));
   std::array<int, 3> cols{-1, -1, -1};
-  if (Status s = resolve_fixed(t, kCableColumns, &cols); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(resolve_fixed(t, kCableColumns, &cols));
   CableExperiment e;
   e.metadata = t.metadata;
   for (const CsvRow& row : t.rows) {
     CableSample c;
-    if (Status s = detail::parse_double(t, row, cols[0], false, &c.length_m); !s.ok()) return s;
-    if (Status s = detail::parse_double(t, row, cols[1], false, &c.tension_n); !s.ok()) return s;
-    if (Status s = detail::parse_double(t, row, cols[2], false, &c.elongation_m); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, cols[0], false, &c.length_m));
+    CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, cols[1], false, &c.tension_n));
+    CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, cols[2], false, &c.elongation_m));
     if (c.length_m <= 0.0) return detail::cell_error(t, row, cols[0], "a length must be > 0 m");
     if (c.tension_n < 0.0) return detail::cell_error(t, row, cols[1], "a tension must be >= 0 N");
     e.samples.push_back(c);
@@ -389,14 +379,13 @@ Result<CableExperiment> parse_cable_experiment(std::string_view text, std::strin
 }
 
 Result<CableExperiment> read_cable_experiment(const std::string& path) {
-  auto text = detail::read_file(path);
-  if (!text.ok()) return text.status();
-  return parse_cable_experiment(*text, path);
+  CDPR_ASSIGN_OR_RETURN(const std::string text, detail::read_file(path));
+  return parse_cable_experiment(text, path);
 }
 
 Result<std::string> format_cable_experiment(const CableExperiment& e) {
   std::string out;
-  if (Status s = detail::format_metadata(e.metadata, kCableFormat, &out); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(detail::format_metadata(e.metadata, kCableFormat, &out));
   out += "length_m,tension_n,elongation_m\n";
   for (const CableSample& c : e.samples) {
     if (!std::isfinite(c.length_m) || !std::isfinite(c.tension_n) ||
@@ -420,25 +409,23 @@ Status write_cable_experiment(const CableExperiment& e, const std::string& path)
 // ---------------------------------------------------------------------------------------------
 
 Result<ForceSensorExperiment> parse_force_experiment(std::string_view text, std::string_view name) {
-  auto table = detail::parse_table(text, name);
-  if (!table.ok()) return table.status();
-  const CsvTable& t = *table;
-  if (Status s = check_format(t, kForceFormat); !s.ok()) return s;
+  CDPR_ASSIGN_OR_RETURN(const CsvTable t, detail::parse_table(text, name));
+  CDPR_RETURN_IF_ERROR(check_format(t, kForceFormat));
   std::array<int, 3> cols{-1, -1, -1};
-  if (Status s = resolve_fixed(t, kForceColumns, &cols); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(resolve_fixed(t, kForceColumns, &cols));
   ForceSensorExperiment e;
   e.metadata = t.metadata;
   for (const CsvRow& row : t.rows) {
     ForceSample f;
     std::int64_t channel = 0;
-    if (Status s = detail::parse_int(t, row, cols[0], &channel); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(detail::parse_int(t, row, cols[0], &channel));
     if (channel < 1 || channel > 1000) {
       return detail::cell_error(t, row, cols[0], "channel %lld is not in 1..1000",
                                 static_cast<long long>(channel));
     }
     f.channel = static_cast<int>(channel);
-    if (Status s = detail::parse_double(t, row, cols[1], false, &f.mass_kg); !s.ok()) return s;
-    if (Status s = detail::parse_double(t, row, cols[2], false, &f.raw); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, cols[1], false, &f.mass_kg));
+    CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, cols[2], false, &f.raw));
     if (f.mass_kg < 0.0) return detail::cell_error(t, row, cols[1], "a mass must be >= 0 kg");
     e.samples.push_back(f);
   }
@@ -446,14 +433,13 @@ Result<ForceSensorExperiment> parse_force_experiment(std::string_view text, std:
 }
 
 Result<ForceSensorExperiment> read_force_experiment(const std::string& path) {
-  auto text = detail::read_file(path);
-  if (!text.ok()) return text.status();
-  return parse_force_experiment(*text, path);
+  CDPR_ASSIGN_OR_RETURN(const std::string text, detail::read_file(path));
+  return parse_force_experiment(text, path);
 }
 
 Result<std::string> format_force_experiment(const ForceSensorExperiment& e) {
   std::string out;
-  if (Status s = detail::format_metadata(e.metadata, kForceFormat, &out); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(detail::format_metadata(e.metadata, kForceFormat, &out));
   out += "channel,mass_kg,raw\n";
   for (const ForceSample& f : e.samples) {
     if (f.channel < 1 || !std::isfinite(f.mass_kg) || !std::isfinite(f.raw)) {
@@ -481,19 +467,17 @@ constexpr std::array<const char*, 7> kPoseColumns = {"pose", "x", "y", "z", "rol
 }  // namespace
 
 Result<PoseList> parse_pose_list(std::string_view text, std::string_view name) {
-  auto table = detail::parse_table(text, name);
-  if (!table.ok()) return table.status();
-  const CsvTable& t = *table;
-  if (Status s = check_format(t, kPoseListFormat); !s.ok()) return s;
+  CDPR_ASSIGN_OR_RETURN(const CsvTable t, detail::parse_table(text, name));
+  CDPR_RETURN_IF_ERROR(check_format(t, kPoseListFormat));
   std::array<int, 7> cols{-1, -1, -1, -1, -1, -1, -1};
-  if (Status s = resolve_fixed(t, kPoseColumns, &cols); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(resolve_fixed(t, kPoseColumns, &cols));
   PoseList list;
   list.metadata = t.metadata;
   std::int64_t previous = 0;
   int previous_line = 0;
   for (const CsvRow& row : t.rows) {
     std::int64_t index = 0;
-    if (Status s = detail::parse_int(t, row, cols[0], &index); !s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(detail::parse_int(t, row, cols[0], &index));
     if (previous_line != 0 && index <= previous) {
       return detail::cell_error(
           t, row, cols[0], "pose index %lld does not increase (line %d has %lld)",
@@ -504,10 +488,8 @@ Result<PoseList> parse_pose_list(std::string_view text, std::string_view name) {
     Pose p;
     for (int a = 0; a < 6; ++a) {
       double v = 0.0;
-      if (Status s = detail::parse_double(t, row, cols[static_cast<std::size_t>(a) + 1], false, &v);
-          !s.ok()) {
-        return s;
-      }
+      CDPR_RETURN_IF_ERROR(
+          detail::parse_double(t, row, cols[static_cast<std::size_t>(a) + 1], false, &v));
       (a < 3 ? p.position : p.rpy)(a % 3) = v;
     }
     list.poses.push_back(p);
@@ -516,15 +498,14 @@ Result<PoseList> parse_pose_list(std::string_view text, std::string_view name) {
 }
 
 Result<PoseList> read_pose_list(const std::string& path) {
-  auto text = detail::read_file(path);
-  if (!text.ok()) return text.status();
-  return parse_pose_list(*text, path);
+  CDPR_ASSIGN_OR_RETURN(const std::string text, detail::read_file(path));
+  return parse_pose_list(text, path);
 }
 
 Result<std::string> format_pose_list(const PoseList& list) {
   if (list.poses.empty()) return Status(ErrorCode::kInvalidArgument, "a pose list needs a pose");
   std::string out;
-  if (Status s = detail::format_metadata(list.metadata, kPoseListFormat, &out); !s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(detail::format_metadata(list.metadata, kPoseListFormat, &out));
   out += "pose,x,y,z,roll,pitch,yaw\n";
   for (std::size_t j = 0; j < list.poses.size(); ++j) {
     const auto v = list.poses[j].vector();

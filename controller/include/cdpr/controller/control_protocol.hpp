@@ -81,7 +81,7 @@ class ControlReply {
 
 // ---- Command table ----------------------------------------------------------------------------
 
-enum class ArgType { kBool, kString, kVersion /* integer >= 1 */ };
+enum class ArgType { kBool, kString, kVersion /* integer >= 1 */, kPose /* 6 finite numbers */ };
 
 struct ArgSpec {
   std::string_view name;

@@ -141,6 +141,13 @@ class Physics {
 Result<Eigen::VectorXd> nominal_counts(const RobotModel& nominal, const Pose& pose,
                                        double reference_tension = kNaN);
 
+// Motor counts (fractional) that put the TRUE platform at `pose` with the tensions the true
+// robot's planner gives there (pretension `reference_tension`, NaN: default_reference_tension of
+// the truth), the hidden winch effects included: the state of a robot whose platform stands on
+// its reference platform at home when the drives are switched on (cdpr-sim --home reference).
+Result<Eigen::VectorXd> true_pose_counts(const Physics& physics, const Pose& pose,
+                                         double reference_tension = kNaN);
+
 struct LockstepOptions {
   double start_time_s = 0.0;
   double dwell_s = 2.0;   // scenario time spent per pose (creep and thermal drift go on), s

@@ -1,6 +1,6 @@
 // An in-process CAN bus for tests and simulations.
 //
-//   cdpr::can::SteadyClock clock;            // or ManualClock for deterministic tests
+//   cdpr::SteadyClock clock;                 // or cdpr::ManualClock for deterministic tests
 //   cdpr::can::VirtualCanBus bus(clock);
 //   auto master = bus.endpoint("master");    // std::unique_ptr<VirtualCanEndpoint>, a CanBus
 //   auto drive3 = bus.endpoint("drive3");
@@ -26,39 +26,15 @@
 #include <string>
 
 #include "cdpr/can/can_bus.hpp"
+#include "cdpr/core/clock.hpp"
 
 namespace cdpr::can {
 
-// The source of time of a virtual bus.
-class Clock {
- public:
-  virtual ~Clock() = default;
-  virtual Timestamp now() const = 0;
-  // True when time passes on its own, so that waiting for a frame makes sense. A manual clock
-  // returns false: a receive() with a timeout then returns kTimeout at once when nothing is queued,
-  // because no other thread is expected to send while the test drives the time.
-  virtual bool real_time() const = 0;
-};
-
-// std::chrono::steady_clock (CLOCK_MONOTONIC, the same base as SocketCAN timestamps).
-class SteadyClock final : public Clock {
- public:
-  Timestamp now() const override;
-  bool real_time() const override { return true; }
-};
-
-// Time set by the test. Thread-safe.
-class ManualClock final : public Clock {
- public:
-  explicit ManualClock(Timestamp start = Timestamp{0}) : now_(start.count()) {}
-  Timestamp now() const override { return Timestamp{now_.load(std::memory_order_acquire)}; }
-  bool real_time() const override { return false; }
-  void set(Timestamp t) { now_.store(t.count(), std::memory_order_release); }
-  void advance(Timestamp dt) { now_.fetch_add(dt.count(), std::memory_order_acq_rel); }
-
- private:
-  std::atomic<std::int64_t> now_;
-};
+// The bus's source of time: cdpr::Clock, SteadyClock, ManualClock (core/, cdpr/core/clock.hpp),
+// also reachable under their former names in cdpr::can.
+using Clock = cdpr::Clock;
+using SteadyClock = cdpr::SteadyClock;
+using ManualClock = cdpr::ManualClock;
 
 struct VirtualBusOptions {
   std::size_t queue_capacity = 1024;  // frames per endpoint receive queue

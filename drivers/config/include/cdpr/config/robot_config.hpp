@@ -33,4 +33,10 @@ Result<RobotModel> parse_robot_config(std::string_view text, std::string_view na
 // all cables go to `defaults:`, per-cable differences to the cable entries.
 std::string save_robot_config(const RobotModel& model);
 
+// Writes `header` (comment lines, each starting with '#', may be empty) and
+// save_robot_config(model) to `path`, atomically (cdpr/io/atomic_file.hpp): a crash leaves the old
+// file or the new one.
+Status write_robot_config(const std::string& path, const RobotModel& model,
+                          std::string_view header = {});
+
 }  // namespace cdpr::config

@@ -22,7 +22,7 @@
 
 #include "cdpr/modbus/modbus_link.hpp"
 #include "cdpr/modbus/register_map.hpp"
-#include "cdpr/modbus/seqlock.hpp"
+#include "cdpr/core/seqlock.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr::modbus {

@@ -4,6 +4,18 @@
 // or interface). The message lives in a fixed buffer, so creating, copying and returning a Status
 // never allocates: the RT loop may use it. Result<T> carries either a value or a non-ok Status
 // (std::expected is C++23; this is the small subset we need).
+//
+// Propagating an error is written with one of two macros, in a function that returns Status or
+// Result<U>:
+//
+//   CDPR_RETURN_IF_ERROR(bus.send(frame));               // a Status: returned when not ok
+//   CDPR_ASSIGN_OR_RETURN(RobotModel m, load(path));     // a Result<T>: declares m, or returns
+//   CDPR_ASSIGN_OR_RETURN(auto list, read_pose_list(p)); //   the Status
+//   CDPR_ASSIGN_OR_RETURN(config.period, period(node));  // assigns to an existing lvalue
+//
+// CDPR_ASSIGN_OR_RETURN is several statements (its left-hand side may be a declaration in the
+// enclosing scope): give it a line of its own, never the unbraced body of an `if` or a loop.
+// Neither macro allocates, so both may be used on the RT path.
 #pragma once
 
 #include <array>
@@ -164,3 +176,26 @@ class [[nodiscard]] Result {
 };
 
 }  // namespace cdpr
+
+// Returns the Status `expr` from the enclosing function when it is not ok.
+#define CDPR_RETURN_IF_ERROR(expr)                               \
+  do {                                                           \
+    const ::cdpr::Status& cdpr_return_if_error_status_ = (expr); \
+    if (!cdpr_return_if_error_status_.ok()) {                    \
+      return cdpr_return_if_error_status_;                       \
+    }                                                            \
+  } while (false)
+
+// Evaluates the Result<T> `...`; returns its Status from the enclosing function when it holds
+// none, else moves its value into `lhs` (a declaration such as `auto x` or an lvalue).
+#define CDPR_ASSIGN_OR_RETURN(lhs, ...)                                                   \
+  CDPR_ASSIGN_OR_RETURN_IMPL_(CDPR_STATUS_CONCAT_(cdpr_assign_or_return_, __LINE__), lhs, \
+                              __VA_ARGS__)
+
+// Implementation details of the macros above.
+#define CDPR_STATUS_CONCAT_INNER_(a, b) a##b
+#define CDPR_STATUS_CONCAT_(a, b) CDPR_STATUS_CONCAT_INNER_(a, b)
+#define CDPR_ASSIGN_OR_RETURN_IMPL_(result, lhs, ...) \
+  auto result = (__VA_ARGS__);                        \
+  if (!result.ok()) return result.status();           \
+  lhs = std::move(result).value()

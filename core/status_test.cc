@@ -2,7 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <memory>
 #include <string>
+#include <vector>
 
 namespace cdpr {
 namespace {
@@ -60,6 +62,67 @@ TEST(Result, OkStatusWithoutValueBecomesInternalError) {
   const Result<int> r{Status::Ok()};
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), ErrorCode::kInternal);
+}
+
+// Helpers for the propagation macros: each step records that it ran.
+Status step(std::vector<int>& ran, int id, bool ok) {
+  ran.push_back(id);
+  return ok ? Status::Ok() : Status::Error(ErrorCode::kTimeout, "step %d failed", id);
+}
+
+Result<int> value(std::vector<int>& ran, int id, bool ok) {
+  ran.push_back(id);
+  if (!ok) return Status::Error(ErrorCode::kNotFound, "value %d missing", id);
+  return 10 * id;
+}
+
+Status two_steps(std::vector<int>& ran, bool first_ok) {
+  CDPR_RETURN_IF_ERROR(step(ran, 1, first_ok));
+  CDPR_RETURN_IF_ERROR(step(ran, 2, true));
+  return Status::Ok();
+}
+
+TEST(StatusMacros, ReturnIfErrorStopsAtTheFirstError) {
+  std::vector<int> ran;
+  const Status s = two_steps(ran, false);
+  EXPECT_EQ(s.to_string(), "timeout: step 1 failed");
+  EXPECT_EQ(ran, std::vector<int>{1});
+  ran.clear();
+  EXPECT_TRUE(two_steps(ran, true).ok());
+  EXPECT_EQ(ran, (std::vector<int>{1, 2}));
+}
+
+Result<int> sum(std::vector<int>& ran, bool second_ok) {
+  CDPR_ASSIGN_OR_RETURN(const int a, value(ran, 1, true));  // a declaration
+  int b = 0;
+  CDPR_ASSIGN_OR_RETURN(b, value(ran, 2, second_ok));  // an existing lvalue
+  CDPR_RETURN_IF_ERROR(step(ran, 3, true));            // a Status inside a Result<T> function
+  return a + b;
+}
+
+TEST(StatusMacros, AssignOrReturnDeclaresOrAssignsAndPassesTheStatusOn) {
+  std::vector<int> ran;
+  const Result<int> good = sum(ran, true);
+  ASSERT_TRUE(good.ok()) << good.status().to_string();
+  EXPECT_EQ(*good, 30);
+  EXPECT_EQ(ran, (std::vector<int>{1, 2, 3}));
+  ran.clear();
+  const Result<int> bad = sum(ran, false);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_EQ(bad.status().to_string(), "not found: value 2 missing");
+  EXPECT_EQ(ran, (std::vector<int>{1, 2}));
+}
+
+Status move_only(std::unique_ptr<int>& out) {
+  CDPR_ASSIGN_OR_RETURN(out, Result<std::unique_ptr<int>>(std::make_unique<int>(5)));
+  return Status::Ok();
+}
+
+TEST(StatusMacros, AssignOrReturnMovesTheValue) {
+  std::unique_ptr<int> p;
+  ASSERT_TRUE(move_only(p).ok());
+  ASSERT_NE(p, nullptr);
+  EXPECT_EQ(*p, 5);
 }
 
 }  // namespace

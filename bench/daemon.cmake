@@ -1,0 +1,6 @@
+# daemon_bench: cdprd's RT cycle and a full calibration with the virtual robot in one process
+# (tests/daemon/virtual_cell.hpp). Figures only.
+add_executable(daemon_bench ${CMAKE_CURRENT_LIST_DIR}/daemon_bench.cc)
+target_include_directories(daemon_bench PRIVATE ${PROJECT_SOURCE_DIR}/tests/daemon)
+target_link_libraries(daemon_bench PRIVATE cdpr_daemon cdpr_sim cdpr_options)
+target_compile_definitions(daemon_bench PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")

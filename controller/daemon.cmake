@@ -1,0 +1,26 @@
+# The daemon: configuration, RT cycle, supervisor and calibration sequence, state directory,
+# calibration report (library cdpr_daemon), and the executable cdprd (docs/daemon.md).
+set(_d ${CDPR_CONTROLLER_DIR})
+add_library(cdpr_daemon STATIC
+  ${_d}/src/daemon_config.cc
+  ${_d}/src/rt_controller.cc
+  ${_d}/src/state_store.cc
+  ${_d}/src/calibration_report.cc
+  ${_d}/src/daemon.cc)
+target_include_directories(cdpr_daemon PUBLIC ${_d}/include)
+target_link_libraries(cdpr_daemon
+  PUBLIC cdpr_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording
+         cdpr_calibration nlohmann_json::nlohmann_json Threads::Threads
+  PRIVATE spdlog::spdlog yaml-cpp cdpr_options)
+
+cdpr_add_gtest(NAME daemon_config_test SOURCES ${_d}/src/daemon_config_test.cc LIBS cdpr_daemon)
+cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.cc LIBS cdpr_daemon)
+foreach(t daemon_state_store_test daemon_config_test)
+  if(TARGET ${t})
+    target_compile_definitions(${t} PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
+  endif()
+endforeach()
+
+add_executable(cdprd ${_d}/cdprd/main.cc)
+target_link_libraries(cdprd PRIVATE cdpr_daemon cdpr_rt cdpr_control CLI11::CLI11 spdlog::spdlog
+                                    cdpr_options)

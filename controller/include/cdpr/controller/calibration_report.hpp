@@ -1,0 +1,64 @@
+// What cdprd makes of one calibration: the proposed model, the acceptance gates and the report
+// a person reads before accepting (JSON for scripts, one self-contained HTML page with plots).
+//
+// Gates (DaemonConfig::acceptance): the chi-square p-value of the final fit (its degrees of
+// freedom accounted for), the largest frame-anchor change against the active model, the
+// predicted RMS position error over the ISO 9283 box (Cramer-Rao bound of the recorded pose
+// set), and no unresolved mismatch (the mismatch locator's verdict is "no mismatch" or
+// "mismatch named").
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "cdpr/calibration/diagnosis.hpp"
+#include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/measurement.hpp"
+#include "cdpr/controller/daemon_config.hpp"
+
+namespace cdpr::controller {
+
+struct Gate {
+  std::string name;  // "fit", "anchor_change", "predicted_accuracy", "mismatch"
+  bool passed = false;
+  double value = 0.0;  // the figure judged (p-value, m, m, 0/1)
+  double limit = 0.0;
+  std::string text;  // "chi2 171.2 on 166 dof, p = 0.37 >= 0.001"
+};
+
+struct CalibrationOutcome {
+  RobotModel before;                               // the active model the sequence measured with
+  RobotModel model;                                // the proposed model (named effects carried)
+  const IdentificationReport* fit = nullptr;       // the final fit (with the named effects)
+  const IdentificationReport* standard = nullptr;  // the standard identification
+  const Diagnosis* diagnosis = nullptr;            // nullptr when the locator did not run
+  std::string verdict;                             // one sentence
+  std::string verdict_key;  // no_mismatch, mismatch_named, mismatch_unexplained, ...
+  std::vector<std::string> named_effects;
+  std::vector<Gate> gates;
+  bool gates_passed = false;
+  std::string failed_gates;  // "fit, mismatch"
+  double predicted_position_rms_m = 0.0;
+  int poses = 0;
+};
+
+struct CalibrationReportContext {
+  int calibration = 0;
+  std::string daemon;
+  int geometry_version = 0;
+  std::string recording, robot_config, canopen_config, laser_config, daemon_config;
+  std::string started;
+  double measuring_s = 0.0;
+};
+
+// The gates and the proposed model. `diagnosis` may be nullptr. The referenced reports must
+// outlive the outcome.
+CalibrationOutcome evaluate_calibration(const RobotModel& before, const MeasurementSet& set,
+                                        const IdentificationReport& standard,
+                                        const Diagnosis* diagnosis, const AcceptanceGates& gates,
+                                        const IdentificationOptions& options);
+
+nlohmann::json calibration_json(const CalibrationOutcome& o, const CalibrationReportContext& c);
+std::string calibration_html(const CalibrationOutcome& o, const CalibrationReportContext& c);
+
+}  // namespace cdpr::controller

@@ -1,0 +1,115 @@
+// The daemon's own configuration (docs/daemon.md): which robot, network and laser files it uses,
+// where it keeps its state, its real-time settings, motion and tension limits, the measuring
+// sequence, the identification, the acceptance gates and the control socket.
+//
+//   Result<DaemonConfig> c = load_daemon_config("/etc/cdpr/cdprd.yaml");
+//
+// Relative paths inside the file are taken relative to the file's directory. Every error names
+// the file, line and field ("cdprd.yaml:12:3: field 'motion.max_linear_velocity': must be > 0").
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <string>
+#include <string_view>
+
+#include "cdpr/calibration/identification.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr::controller {
+
+struct RealtimeSettings {
+  int priority = 80;                        // SCHED_FIFO priority of the RT thread (1..99)
+  int cpu = -1;                             // CPU the RT thread is pinned to; -1: none
+  std::chrono::nanoseconds sync_period{0};  // 0: the CANopen network's master.sync_period_ms
+  bool lock_memory = true;                  // mlockall and pre-faulting
+};
+
+// Expected CANopen identity (0x1018) of the nodes, checked at start-up. 0 = not checked.
+struct IdentitySettings {
+  std::uint32_t vendor_id = 0;
+  std::uint32_t drive_product_code = 0;
+  std::uint32_t force_product_code = 0;
+};
+
+struct MotionSettings {
+  double max_linear_velocity = 0.1;       // m/s
+  double max_linear_acceleration = 0.5;   // m/s^2
+  double max_linear_jerk = 5.0;           // m/s^3
+  double max_angular_velocity = 0.5;      // rad/s
+  double max_angular_acceleration = 2.0;  // rad/s^2
+  double max_angular_jerk = 20.0;         // rad/s^3
+  double tension_margin = 0.0;            // N kept inside [f_min, f_max] when planning moves
+  double max_cable_speed = 0.2;           // m/s, slew of a re-referenced cable (hot swap)
+  double max_cable_acceleration = 1.0;    // m/s^2
+};
+
+struct TensionWatch {
+  double slack_below = 1.0;     // N: a measured tension below this while moving is a slack cable
+  double overload_above = 0.0;  // N: above this is an overload; 0: 1.1 x the cable's f_max
+  int cycles = 5;               // consecutive cycles before the fault is declared
+};
+
+struct MeasuringSettings {
+  int poses = 25;                  // designed poses (including home) when no pose file is given
+  std::string pose_file;           // pose list CSV (docs/recording-format.md); "" = pose design
+  int laser_samples = 20;          // readings per pose (median/MAD robust mean)
+  double laser_interval_s = -1.0;  // between laser readings; < 0: the laser's poll period
+  int average_cycles = 25;         // encoder and tension readings averaged per pose
+  double settle_window_s = 0.2;    // motion and tensions still for this long
+  double settle_position_tolerance = 2e-6;  // m of cable: spread of each encoder in the window
+  double settle_tension_tolerance = 1.0;    // N: spread of each tension in the window
+  double settle_timeout_s = 10.0;
+  // N: after settling, the measured tensions are regulated into [f_min - band, f_max + band]
+  // (length trims, mostly internal force); 0: off.
+  double tension_band = 1.0;
+  int extra_pose_rounds = 1;  // rounds of extra poses the mismatch locator may ask for
+  // Noise of ONE reading of each sensor; the recording states the noise of the averages.
+  double noise_length_m = 1e-6;
+  double noise_force_n = 0.5;
+  double noise_laser_m = 1e-4;
+};
+
+struct IdentificationSettings {
+  IdentificationOptions options;  // which parameters are estimated (defaults: identification.hpp)
+  bool diagnose = true;           // run the mismatch locator after the identification
+  int bootstrap = 100;
+  int folds = 5;
+};
+
+enum class AcceptanceMode { kManual, kAuto };
+
+struct AcceptanceGates {
+  AcceptanceMode mode = AcceptanceMode::kManual;
+  double min_fit_p_value = 1e-3;      // chi-square upper tail of the accepted fit
+  double max_anchor_change_m = 0.05;  // largest frame-anchor move against the active model
+  double max_predicted_position_error_m = 0.002;  // predicted RMS over the ISO 9283 box
+  bool allow_unresolved_mismatch = false;         // "mismatch_unexplained" or "inconclusive" passes
+};
+
+struct ControlSettings {
+  std::string socket = "/run/cdpr/cdprd.sock";
+  std::string group;  // owner group of the socket; "" = the daemon's group
+};
+
+struct DaemonConfig {
+  std::string file;           // where it was read from
+  std::string robot;          // robot description (nominal geometry at first start)
+  std::string canopen;        // CANopen network
+  std::string laser;          // laser (Modbus); "" = none
+  std::string can_interface;  // overrides the network's master.interface when not empty
+  std::string state_directory = "/var/lib/cdpr";
+  RealtimeSettings realtime;
+  IdentitySettings identity;
+  MotionSettings motion;
+  TensionWatch tension_watch;
+  MeasuringSettings measuring;
+  IdentificationSettings identification;
+  AcceptanceGates acceptance;
+  ControlSettings control;
+};
+
+Result<DaemonConfig> parse_daemon_config(std::string_view yaml, std::string_view file);
+Result<DaemonConfig> load_daemon_config(const std::string& path);
+
+}  // namespace cdpr::controller

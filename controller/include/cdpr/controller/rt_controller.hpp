@@ -1,0 +1,215 @@
+// The per-cycle part of cdprd: read -> update -> write against the CANopen master.
+//
+//   RtController rt(master, options);           // non-RT: sizes every buffer once
+//   rt.set_encoder_offsets(offsets);             // non-RT, before the loop runs
+//   rt.post(command);                            // any thread: a move, or a re-reference
+//   loop: rt.cycle(now);                         // RT thread, once per SYNC period
+//   RtSnapshot s = rt.snapshot();                // any thread, lock-free
+//
+// cycle(now): takes a posted command at the cycle boundary, samples the active trajectory (or
+// holds), plans the tensions (QP, allocation-free) and computes the compensated inverse
+// kinematics with the active geometry, writes the drive targets, runs the master's cycle (TPDOs
+// in, drive state machines, RPDOs and SYNC out), then watches what came back: drive faults, lost
+// nodes, bus-off, slack or overloaded cables. A fault quick-stops every drive and is latched
+// until fault_reset(). It publishes a snapshot (seqlock) and the master's events (SPSC ring).
+// cycle() allocates, locks, logs and throws nothing (tests prove it).
+//
+// Geometry hand-over (hot swap): a kReference command carries an immutable Geometry snapshot and
+// the pose to hold under it. It is taken only while holding still (settled); the drive targets
+// then start exactly where they were and slew (per-axis velocity and acceleration limits) to the
+// new geometry's targets for that pose, so the commanded positions do not jump. The caller owns
+// Geometry and RtCommand objects; they must outlive their use: see released_up_to().
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <optional>
+
+#include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/canopen/master.hpp"
+#include "cdpr/controller/motion_command.hpp"
+#include "cdpr/controller/path_check.hpp"
+#include "cdpr/controller/slew.hpp"
+#include "cdpr/controller/spsc_ring.hpp"
+#include "cdpr/controller/trajectory.hpp"
+#include "cdpr/modbus/seqlock.hpp"
+
+namespace cdpr::controller {
+
+enum class RtMode : std::uint8_t {
+  kDisabled,  // drives not (yet) enabled, or stopped after a fault: targets follow the actuals
+  kHolding,   // holding a pose
+  kMoving,    // following a trajectory
+  kSlewing,   // re-referenced: the targets slew to the geometry's targets for the hold pose
+};
+const char* to_string(RtMode m);
+
+enum class FaultKind : std::uint8_t {
+  kNone,
+  kDriveFault,   // a drive reported FAULT (EMCY code in `code`)
+  kNodeLost,     // heartbeat lost
+  kBusOff,       // the CAN controller went bus-off
+  kSlackCable,   // a measured tension fell below the slack limit
+  kOverload,     // a measured tension exceeded the overload limit
+  kCommand,      // the inverse kinematics or the tension planner failed at the commanded pose
+  kQuickStop,    // an operator's quick stop
+  kForceSensor,  // no force readings while they are required
+};
+const char* to_string(FaultKind f);
+
+struct RtFault {
+  FaultKind kind = FaultKind::kNone;
+  int node = 0;            // CANopen node, 0 when none
+  int cable = -1;          // 0-based cable, -1 when none
+  std::uint16_t code = 0;  // EMCY code
+  double value = 0.0;      // the tension that tripped, N
+  std::int64_t time_ns = 0;
+};
+
+struct RtControllerOptions {
+  double slack_below = 1.0;        // N
+  double overload_above = 0.0;     // N; 0: 1.1 x f_max of each cable
+  int watch_cycles = 5;            // consecutive cycles before a tension fault
+  double cycle_s = 0.004;          // SYNC period, s
+  int settle_cycles = 50;          // window of the stillness test
+  double settle_counts = 10.0;     // spread of each encoder in the window, counts
+  double settle_tension = 1.0;     // spread of each tension in the window, N
+  double slew_velocity = 0.2;      // m/s of cable, re-reference slew
+  double slew_acceleration = 1.0;  // m/s^2
+  double trim_velocity = 0.002;    // m/s of cable, rate of a tension-regulation trim
+};
+
+// What any thread may read about the loop (trivially copyable, published every cycle).
+struct RtSnapshot {
+  std::uint64_t cycle = 0;
+  std::int64_t now_ns = 0;
+  RtMode mode = RtMode::kDisabled;
+  RtFault fault;
+  bool all_enabled = false;
+  std::uint64_t command_taken = 0;  // sequence number of the active command
+  std::uint64_t command_done = 0;   // of the last command that finished (move ended, slew done)
+  int geometry_version = 0;
+  bool settled = false;
+  std::array<double, 6> pose_vector{};  // commanded pose: x, y, z (m), roll, pitch, yaw (rad)
+  Pose pose() const {
+    return Pose{Eigen::Vector3d(pose_vector[0], pose_vector[1], pose_vector[2]),
+                Eigen::Vector3d(pose_vector[3], pose_vector[4], pose_vector[5])};
+  }
+  double reference_tension = 0.0;  // N, pretension of the tension planner now
+  int num_cables = 0;
+  bool have_tensions = false;
+  std::array<double, kMaxAxes> tensions{};       // measured, N
+  std::array<double, kMaxAxes> planned{};        // planned, N
+  std::array<double, kMaxAxes> actual_counts{};  // drive position actual
+  std::array<double, kMaxAxes> target_counts{};  // drive target sent
+  std::array<double, kMaxAxes> trim_counts{};    // tension-regulation trims in force
+  std::array<int, kMaxAxes> slack_cycles{};      // consecutive cycles below the slack limit
+  // Averages over the cycles since the last request_average() while settled.
+  std::uint64_t average_id = 0;
+  int average_cycles = 0;
+  std::array<double, kMaxAxes> average_counts{};
+  std::array<double, kMaxAxes> average_tensions{};
+  // Largest change of any drive target from one cycle to the next: over the last move, and
+  // over the last re-reference (hot swap) — counts.
+  double largest_move_step = 0.0;
+  double largest_reference_step = 0.0;
+  std::uint64_t overruns = 0;  // filled by the loop driver
+};
+
+struct RtEvent {
+  canopen::Event event;
+};
+
+class RtController {
+ public:
+  // Binds to the master's drives (cables 1..m in the master's drive order) and its first force
+  // node (channels = cables). Allocates here only.
+  static Result<std::unique_ptr<RtController>> create(canopen::Master& master,
+                                                      const Geometry& initial,
+                                                      const RtControllerOptions& options);
+
+  // Non-RT set-up, before the loop runs (or while it is disabled).
+  void set_encoder_offsets(const std::array<double, kMaxAxes>& offsets) { offsets_ = offsets; }
+  const std::array<double, kMaxAxes>& encoder_offsets() const { return offsets_; }
+
+  // Any thread: hand a command to the next cycle. Returns the command replaced before the RT
+  // loop took it (the caller may free it), or nullptr.
+  MotionCommand* post(MotionCommand* command) noexcept {
+    return inbox_.exchange(command, std::memory_order_acq_rel);
+  }
+  // Any thread: requests (taken at the next cycle).
+  void request_quick_stop() noexcept { quick_stop_.store(true, std::memory_order_release); }
+  void request_fault_reset() noexcept { fault_reset_.store(true, std::memory_order_release); }
+  // Starts a new average of encoder counts and tensions; returns its id (see RtSnapshot).
+  std::uint64_t request_average() noexcept {
+    return average_request_.fetch_add(1, std::memory_order_acq_rel) + 1;
+  }
+
+  // The RT cycle.
+  void cycle(canopen::Timestamp now) noexcept;
+
+  RtSnapshot snapshot() const noexcept { return published_.load(); }
+  bool pop_event(RtEvent& e) noexcept { return events_.pop(e); }
+  // Commands and geometries older than the active ones are no longer referenced by the loop.
+  std::uint64_t command_in_use() const noexcept {
+    return in_use_command_.load(std::memory_order_acquire);
+  }
+  int geometry_in_use() const noexcept { return in_use_geometry_.load(std::memory_order_acquire); }
+  void set_overruns(std::uint64_t n) noexcept { overruns_ = n; }
+
+ private:
+  RtController(canopen::Master& master, const Geometry& initial,
+               const RtControllerOptions& options);
+  void take_command(canopen::Timestamp now) noexcept;
+  void set_fault(const RtFault& f) noexcept;
+  void watch(canopen::Timestamp now) noexcept;
+  void update_settle() noexcept;
+  bool compute_targets(const Pose& pose) noexcept;
+  double cable_counts_per_metre(int i) const noexcept;
+
+  canopen::Master& master_;
+  RtControllerOptions options_;
+  int m_ = 0;
+  std::array<canopen::Drive*, kMaxAxes> drives_{};
+  canopen::ForceSensor* force_ = nullptr;
+  const Geometry* geometry_ = nullptr;
+  CommandData command_data_;
+  std::array<double, kMaxAxes> offsets_{};
+  std::array<double, kMaxAxes> target_{};   // sent last cycle (fractional counts)
+  std::array<double, kMaxAxes> desired_{};  // from the IK this cycle
+  SlewLimiter slew_;
+
+  std::atomic<MotionCommand*> inbox_{nullptr};
+  MotionCommand* active_ = nullptr;
+  std::atomic<std::uint64_t> in_use_command_{0};
+  std::atomic<int> in_use_geometry_{0};
+  std::atomic<bool> quick_stop_{false};
+  std::atomic<bool> fault_reset_{false};
+  std::atomic<std::uint64_t> average_request_{0};
+  std::uint64_t average_taken_ = 0;
+
+  RtMode mode_ = RtMode::kDisabled;
+  RtFault fault_;
+  double ref_tension_ = 0.0, ref_start_ = 0.0, ref_goal_ = 0.0;  // planner pretension, N
+  Pose hold_pose_;
+  Pose pose_;
+  canopen::Timestamp move_start_{0};
+  std::uint64_t done_ = 0;
+  std::array<double, kMaxAxes> trim_{}, trim_goal_{}, trim_at_move_{};
+  std::array<int, kMaxAxes> slack_count_{}, overload_count_{};
+
+  // Stillness window: ring of the last settle_cycles actual counts and tensions.
+  static constexpr int kMaxWindow = 512;
+  std::array<std::array<double, kMaxAxes>, kMaxWindow> win_counts_{};
+  std::array<std::array<double, kMaxAxes>, kMaxWindow> win_tensions_{};
+  int win_size_ = 0, win_head_ = 0;
+  bool settled_ = false;
+
+  RtSnapshot snap_;
+  modbus::SeqLock<RtSnapshot> published_;
+  SpscRing<RtEvent, 256> events_;
+  std::uint64_t overruns_ = 0;
+};
+
+}  // namespace cdpr::controller

@@ -1,0 +1,16 @@
+# Motion: task-space trajectories (double-S, straight line with the orientation on the geodesic),
+# feasibility along a path, the per-cycle tension plan and encoder targets, the joint-space slew
+# limiter. Planning and checks run in the supervisor; sampling, command_counts and the slew
+# limiter in the RT cycle (allocation-free).
+add_library(cdpr_motion STATIC ${CMAKE_CURRENT_LIST_DIR}/src/trajectory.cc
+                               ${CMAKE_CURRENT_LIST_DIR}/src/path_check.cc
+                               ${CMAKE_CURRENT_LIST_DIR}/src/slew.cc)
+target_include_directories(cdpr_motion PUBLIC ${CMAKE_CURRENT_LIST_DIR}/include)
+target_link_libraries(cdpr_motion PUBLIC cdpr_calibration cdpr_status PRIVATE cdpr_options)
+
+cdpr_add_gtest(NAME motion_trajectory_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src/trajectory_test.cc
+               LIBS cdpr_motion cdpr_test_support)
+cdpr_add_gtest(NAME motion_path_check_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src/path_check_test.cc
+               LIBS cdpr_motion cdpr_calibration_testing cdpr_test_support)
+cdpr_add_gtest(NAME motion_slew_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src/slew_test.cc
+               LIBS cdpr_motion cdpr_calibration_testing cdpr_test_support)

@@ -1,0 +1,375 @@
+#include "cdpr/controller/calibration_report.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include "cdpr/calibration/mismatch.hpp"
+#include "cdpr/calibration/predicted_accuracy.hpp"
+
+namespace cdpr::controller {
+using json = nlohmann::json;
+
+namespace {
+
+std::string fmt(const char* f, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, v);
+  return buf;
+}
+
+json finite_or_null(double v) {
+  return std::isfinite(v) ? json(v) : json(nullptr);
+}
+
+// Standard deviation of frame anchor coordinate a_<cable>.<axis> in the fit, NaN when not
+// estimated.
+double anchor_std(const IdentificationReport* fit, int cable, char axis) {
+  if (fit == nullptr) return std::numeric_limits<double>::quiet_NaN();
+  const std::string name = "a_" + std::to_string(cable + 1) + "." + axis;
+  for (const ParameterEstimate& p : fit->parameters) {
+    if (p.name == name) return p.std_dev;
+  }
+  return std::numeric_limits<double>::quiet_NaN();
+}
+
+std::string escape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    switch (c) {
+      case '&':
+        o += "&amp;";
+        break;
+      case '<':
+        o += "&lt;";
+        break;
+      case '>':
+        o += "&gt;";
+        break;
+      case '"':
+        o += "&quot;";
+        break;
+      default:
+        o += c;
+    }
+  }
+  return o;
+}
+
+const char* verdict_key_of(Diagnosis::Verdict v) {
+  switch (v) {
+    case Diagnosis::Verdict::kNoMismatch:
+      return "no_mismatch";
+    case Diagnosis::Verdict::kMismatchNamed:
+      return "mismatch_named";
+    case Diagnosis::Verdict::kMismatchUnexplained:
+      return "mismatch_unexplained";
+    case Diagnosis::Verdict::kInconclusive:
+      return "inconclusive";
+  }
+  return "?";
+}
+
+}  // namespace
+
+CalibrationOutcome evaluate_calibration(const RobotModel& before, const MeasurementSet& set,
+                                        const IdentificationReport& standard,
+                                        const Diagnosis* diagnosis, const AcceptanceGates& gates,
+                                        const IdentificationOptions& options) {
+  CalibrationOutcome o;
+  o.before = before;
+  o.standard = &standard;
+  o.diagnosis = diagnosis;
+  o.poses = set.num_poses();
+  o.fit = &standard;
+  o.model = standard.estimate.robot;
+  if (diagnosis != nullptr) {
+    o.model = diagnosis->model_after.robot;
+    if (diagnosis->after) o.fit = &*diagnosis->after;
+    o.verdict = diagnosis->headline;
+    o.verdict_key = verdict_key_of(diagnosis->verdict);
+    for (const EffectFit& e : diagnosis->accepted) {
+      o.named_effects.push_back(e.name + (e.modelled_in_config ? "" : " (not carried)"));
+    }
+  } else {
+    o.verdict = "identification only (the mismatch locator is off)";
+    o.verdict_key = "not_diagnosed";
+  }
+
+  // Fit: chi-square upper tail with the fit's degrees of freedom.
+  {
+    Gate g;
+    g.name = "fit";
+    const double dof = std::max(1, o.fit->dof);
+    g.value = chi2_upper_tail(o.fit->chi2, dof);
+    g.limit = gates.min_fit_p_value;
+    g.passed = o.fit->converged && g.value >= g.limit;
+    g.text = fmt("chi2 %.1f", o.fit->chi2) + " on " + std::to_string(o.fit->dof) +
+             " dof, p = " + fmt("%.3g", g.value) + (g.passed ? " >= " : " < ") +
+             fmt("%.3g", g.limit) + (o.fit->converged ? "" : " (the solver did not converge)");
+    o.gates.push_back(g);
+  }
+  // Largest anchor change.
+  {
+    Gate g;
+    g.name = "anchor_change";
+    for (std::size_t i = 0; i < before.cables.size() && i < o.model.cables.size(); ++i) {
+      g.value = std::max(g.value, (o.model.frame_anchors.col(static_cast<Eigen::Index>(i)) -
+                                   before.frame_anchors.col(static_cast<Eigen::Index>(i)))
+                                      .norm());
+    }
+    g.limit = gates.max_anchor_change_m;
+    g.passed = g.value <= g.limit;
+    g.text = "largest frame-anchor change " + fmt("%.2f", g.value * 1e3) + " mm" +
+             (g.passed ? " <= " : " > ") + fmt("%.1f", g.limit * 1e3) + " mm";
+    o.gates.push_back(g);
+  }
+  // Predicted position accuracy over the ISO 9283 box (Cramer-Rao bound of this pose set).
+  {
+    Gate g;
+    g.name = "predicted_accuracy";
+    std::vector<Pose> poses;
+    for (const PoseMeasurement& p : set.poses) poses.push_back(p.commanded);
+    PredictedAccuracyOptions pa;
+    pa.identification = options;
+    pa.box.center = o.model.home.position;
+    // The pose set was planned feasible for the model it was measured with; the bound hardly
+    // depends on the geometry's few millimetres of change.
+    auto acc = predict_accuracy(CalibratedModel::FromRobot(before), poses, set.noise, pa);
+    if (!acc.ok())
+      acc = predict_accuracy(CalibratedModel::FromRobot(o.model), poses, set.noise, pa);
+    g.limit = gates.max_predicted_position_error_m;
+    if (acc.ok()) {
+      g.value = acc->position_rms_m;
+      o.predicted_position_rms_m = g.value;
+      g.passed = g.value <= g.limit;
+      g.text = "predicted RMS position error " + fmt("%.3f", g.value * 1e3) + " mm over " +
+               std::to_string(acc->grid_points) + " box points" + (g.passed ? " <= " : " > ") +
+               fmt("%.3f", g.limit * 1e3) + " mm";
+    } else {
+      g.value = std::numeric_limits<double>::quiet_NaN();
+      g.passed = false;
+      g.text = "predicted accuracy unavailable: " + acc.status().to_string();
+    }
+    o.gates.push_back(g);
+  }
+  // No unresolved mismatch.
+  {
+    Gate g;
+    g.name = "mismatch";
+    const bool unresolved =
+        diagnosis != nullptr && (diagnosis->verdict == Diagnosis::Verdict::kMismatchUnexplained ||
+                                 diagnosis->verdict == Diagnosis::Verdict::kInconclusive);
+    g.value = unresolved ? 1.0 : 0.0;
+    g.limit = 0.0;
+    g.passed = !unresolved || gates.allow_unresolved_mismatch;
+    g.text = std::string("mismatch locator: ") + o.verdict_key +
+             (unresolved && gates.allow_unresolved_mismatch ? " (allowed by the config)" : "");
+    o.gates.push_back(g);
+  }
+  o.gates_passed = true;
+  for (const Gate& g : o.gates) {
+    if (!g.passed) {
+      o.gates_passed = false;
+      o.failed_gates += (o.failed_gates.empty() ? "" : ", ") + g.name;
+    }
+  }
+  return o;
+}
+
+json calibration_json(const CalibrationOutcome& o, const CalibrationReportContext& c) {
+  json anchors = json::array();
+  for (std::size_t i = 0; i < o.model.cables.size(); ++i) {
+    const Eigen::Vector3d& b = o.before.frame_anchors.col(static_cast<Eigen::Index>(i));
+    const Eigen::Vector3d& a = o.model.frame_anchors.col(static_cast<Eigen::Index>(i));
+    const int ci = static_cast<int>(i);
+    anchors.push_back(
+        {{"cable", ci + 1},
+         {"before_m", {b.x(), b.y(), b.z()}},
+         {"after_m", {a.x(), a.y(), a.z()}},
+         {"std_m",
+          {finite_or_null(anchor_std(o.fit, ci, 'x')), finite_or_null(anchor_std(o.fit, ci, 'y')),
+           finite_or_null(anchor_std(o.fit, ci, 'z'))}},
+         {"change_m", (a - b).norm()}});
+  }
+  json gates = json::array();
+  for (const Gate& g : o.gates) {
+    gates.push_back({{"name", g.name},
+                     {"passed", g.passed},
+                     {"value", finite_or_null(g.value)},
+                     {"limit", g.limit},
+                     {"text", g.text}});
+  }
+  json effects = json::array();
+  if (o.diagnosis != nullptr) {
+    for (const EffectFit& e : o.diagnosis->accepted) {
+      json params = json::array();
+      for (const EffectParameter& p : e.parameters) params.push_back(p.text);
+      effects.push_back({{"id", e.id},
+                         {"name", e.name},
+                         {"parameters", params},
+                         {"carried_in_model", e.modelled_in_config},
+                         {"held_out_rms_before_m", e.cv_rms_before},
+                         {"held_out_rms_after_m", e.cv_rms_after}});
+    }
+  }
+  json residuals = json::array();  // per pose, normalised length residuals of the final fit
+  for (const PoseResiduals& r : o.fit->residuals) {
+    json row = json::array();
+    for (int i = 0; i < r.length_normalized.size(); ++i)
+      row.push_back(finite_or_null(r.length_normalized(i)));
+    residuals.push_back(row);
+  }
+  return {{"calibration", c.calibration},
+          {"daemon", c.daemon},
+          {"geometry_version_before", c.geometry_version},
+          {"started", c.started},
+          {"measuring_and_identification_s", c.measuring_s},
+          {"files",
+           {{"recording", c.recording},
+            {"robot", c.robot_config},
+            {"canopen", c.canopen_config},
+            {"laser", c.laser_config},
+            {"daemon", c.daemon_config}}},
+          {"poses", o.poses},
+          {"verdict", o.verdict},
+          {"verdict_key", o.verdict_key},
+          {"named_effects", effects},
+          {"gates", gates},
+          {"gates_passed", o.gates_passed},
+          {"predicted_position_rms_m", o.predicted_position_rms_m},
+          {"fit",
+           {{"chi2", o.fit->chi2},
+            {"dof", o.fit->dof},
+            {"converged", o.fit->converged},
+            {"rms_length_m", o.fit->rms_length_m},
+            {"rms_laser_m", o.fit->rms_laser_m},
+            {"rms_wrench_n", o.fit->rms_wrench_n}}},
+          {"standard_fit", {{"chi2", o.standard->chi2}, {"dof", o.standard->dof}}},
+          {"frame_anchors", anchors},
+          {"length_residuals_normalized", residuals}};
+}
+
+std::string calibration_html(const CalibrationOutcome& o, const CalibrationReportContext& c) {
+  std::ostringstream h;
+  const int m = static_cast<int>(o.model.cables.size());
+  h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>cdprd calibration "
+    << c.calibration
+    << "</title>\n<style>body{font-family:sans-serif;max-width:70em;margin:1em auto;"
+       "padding:0 1em}table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:2px 6px;"
+       "text-align:right}th{background:#eee}.pass{color:#060}.fail{color:#a00;font-weight:bold}"
+       "</style></head><body>\n";
+  h << "<h1>Calibration " << c.calibration << " of " << escape(o.model.name) << "</h1>\n";
+  h << "<p><strong class=\"" << (o.gates_passed ? "pass" : "fail") << "\">"
+    << (o.gates_passed ? "Every gate passed" : "Gates failed: " + escape(o.failed_gates))
+    << "</strong>. " << escape(o.verdict) << "</p>\n";
+  h << "<p>Next step: <code>cdprctl accept</code> or <code>cdprctl reject</code>.</p>\n";
+  h << "<h2>Gates</h2><table><tr><th>gate</th><th>result</th><th>detail</th></tr>\n";
+  for (const Gate& g : o.gates) {
+    h << "<tr><td>" << g.name << "</td><td class=\"" << (g.passed ? "pass\">pass" : "fail\">fail")
+      << "</td><td style=\"text-align:left\">" << escape(g.text) << "</td></tr>\n";
+  }
+  h << "</table>\n<h2>Named effects</h2>\n";
+  if (o.named_effects.empty())
+    h << "<p>None.</p>\n";
+  else {
+    h << "<ul>";
+    for (const auto& e : o.named_effects) h << "<li>" << escape(e) << "</li>";
+    h << "</ul>\n";
+  }
+  // Anchor changes with their uncertainty: one bar per cable (change in mm), whisker = 3 sigma.
+  double vmax = 1e-6;
+  std::vector<double> change(static_cast<std::size_t>(m)), sig(static_cast<std::size_t>(m));
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    change[k] = (o.model.frame_anchors.col(static_cast<Eigen::Index>(k)) -
+                 o.before.frame_anchors.col(static_cast<Eigen::Index>(k)))
+                    .norm() *
+                1e3;
+    const double sx = anchor_std(o.fit, i, 'x'), sy = anchor_std(o.fit, i, 'y'),
+                 sz = anchor_std(o.fit, i, 'z');
+    const double s =
+        std::sqrt((std::isfinite(sx) ? sx * sx : 0.0) + (std::isfinite(sy) ? sy * sy : 0.0) +
+                  (std::isfinite(sz) ? sz * sz : 0.0)) *
+        1e3;
+    sig[k] = s;
+    vmax = std::max(vmax, change[k] + 3.0 * s);
+  }
+  const int W = 640, H = 220, left = 50, bottom = 30;
+  const double bw = (W - left - 10.0) / std::max(m, 1);
+  h << "<h2>Frame anchors: change against the active model</h2>\n<svg role=\"img\" aria-label=\""
+       "anchor change per cable in millimetres with 3-sigma whiskers\" width=\""
+    << W << "\" height=\"" << H << "\" viewBox=\"0 0 " << W << " " << H << "\">\n";
+  h << "<line x1=\"" << left << "\" y1=\"" << H - bottom << "\" x2=\"" << W - 5 << "\" y2=\""
+    << H - bottom << "\" stroke=\"black\"/>\n";
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    const double x = left + bw * i + bw * 0.2;
+    const double y = (H - bottom) - (H - bottom - 10.0) * change[k] / vmax;
+    const double ys = (H - bottom) - (H - bottom - 10.0) * (change[k] + 3.0 * sig[k]) / vmax;
+    h << "<rect x=\"" << x << "\" y=\"" << y << "\" width=\"" << bw * 0.6 << "\" height=\""
+      << (H - bottom) - y << "\" fill=\"#4a7ab5\"><title>cable " << i + 1 << ": "
+      << fmt("%.3f", change[k]) << " mm +- " << fmt("%.3f", sig[k]) << " mm</title></rect>\n";
+    h << "<line x1=\"" << x + bw * 0.3 << "\" y1=\"" << y << "\" x2=\"" << x + bw * 0.3
+      << "\" y2=\"" << ys << "\" stroke=\"black\"/>\n";
+    h << "<text x=\"" << x + bw * 0.3 << "\" y=\"" << H - 10 << "\" font-size=\"11\" "
+      << "text-anchor=\"middle\">" << i + 1 << "</text>\n";
+  }
+  h << "<text x=\"4\" y=\"14\" font-size=\"11\">" << fmt("%.2f", vmax) << " mm</text>\n</svg>\n";
+  h << "<table><tr><th>cable</th><th>before x, y, z (m)</th><th>after x, y, z (m)</th>"
+       "<th>change (mm)</th><th>std (mm)</th></tr>\n";
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    const Eigen::Vector3d& b = o.before.frame_anchors.col(static_cast<Eigen::Index>(k));
+    const Eigen::Vector3d& a = o.model.frame_anchors.col(static_cast<Eigen::Index>(k));
+    h << "<tr><td>" << i + 1 << "</td><td>" << fmt("%.5f", b.x()) << ", " << fmt("%.5f", b.y())
+      << ", " << fmt("%.5f", b.z()) << "</td><td>" << fmt("%.5f", a.x()) << ", "
+      << fmt("%.5f", a.y()) << ", " << fmt("%.5f", a.z()) << "</td><td>" << fmt("%.3f", change[k])
+      << "</td><td>" << fmt("%.3f", sig[k]) << "</td></tr>\n";
+  }
+  h << "</table>\n";
+  // Residual heat map: poses (columns) x cables (rows), normalised length residuals.
+  const auto& res = o.fit->residuals;
+  const int n = static_cast<int>(res.size());
+  const int cw = std::max(6, std::min(24, 600 / std::max(n, 1))), ch = 18;
+  h << "<h2>Cable-length residuals of the final fit (residual / sigma)</h2>\n<svg role=\"img\" "
+       "aria-label=\"heat map of normalised cable-length residuals, cables by poses\" width=\""
+    << 40 + cw * n << "\" height=\"" << 20 + ch * m << "\">\n";
+  for (int i = 0; i < m; ++i) {
+    h << "<text x=\"2\" y=\"" << 14 + ch * i << "\" font-size=\"11\">c" << i + 1 << "</text>\n";
+    for (int j = 0; j < n; ++j) {
+      const auto& v = res[static_cast<std::size_t>(j)].length_normalized;
+      const double r = i < v.size() ? v(i) : std::numeric_limits<double>::quiet_NaN();
+      std::string colour = "#ddd";
+      if (std::isfinite(r)) {
+        const double t = std::clamp(std::abs(r) / 3.0, 0.0, 1.0);
+        const int shade = static_cast<int>(255 * (1.0 - t));
+        char buf[16];
+        if (r >= 0)
+          std::snprintf(buf, sizeof buf, "#ff%02x%02x", shade, shade);
+        else
+          std::snprintf(buf, sizeof buf, "#%02x%02xff", shade, shade);
+        colour = buf;
+      }
+      h << "<rect x=\"" << 30 + cw * j << "\" y=\"" << 2 + ch * i << "\" width=\"" << cw - 1
+        << "\" height=\"" << ch - 1 << "\" fill=\"" << colour << "\"><title>pose " << j
+        << ", cable " << i + 1 << ": " << fmt("%.2f", r) << " sigma</title></rect>\n";
+    }
+  }
+  h << "</svg>\n<p>Red: the cable reads longer than the model, blue: shorter; full colour at "
+       "3 sigma.</p>\n";
+  h << "<h2>Fit</h2><p>chi2 " << fmt("%.1f", o.fit->chi2) << " on " << o.fit->dof
+    << " degrees of freedom; length RMS " << fmt("%.4f", o.fit->rms_length_m * 1e3)
+    << " mm, laser RMS " << fmt("%.4f", o.fit->rms_laser_m * 1e3) << " mm, equilibrium RMS "
+    << fmt("%.3f", o.fit->rms_wrench_n) << " N; " << o.poses << " poses.</p>\n";
+  h << "<h2>Provenance</h2><p>" << escape(c.daemon)
+    << "; geometry version before: " << c.geometry_version << "; recording <code>"
+    << escape(c.recording) << "</code>; robot " << escape(c.robot_config) << "; network "
+    << escape(c.canopen_config) << "; laser " << escape(c.laser_config) << "; started "
+    << escape(c.started) << ".</p>\n";
+  h << "</body></html>\n";
+  return h.str();
+}
+
+}  // namespace cdpr::controller

@@ -1,0 +1,83 @@
+#include "cdpr/controller/daemon_config.hpp"
+
+#include <gtest/gtest.h>
+
+#include "cdpr/canopen/config.hpp"
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/modbus/laser_sensor.hpp"
+
+namespace cdpr::controller {
+namespace {
+
+TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
+  auto c = parse_daemon_config(
+      "robot: mini.yaml\ncanopen: /abs/net.yaml\nlaser: lasers/l.yaml\n"
+      "state_directory: state\n"
+      "realtime: {priority: 70, cpu: 1, sync_period_ms: 20}\n"
+      "identity: {vendor_id: 0x00CD9001}\n"
+      "motion: {max_linear_velocity: 0.2}\n"
+      "measuring: {poses: 30, laser_samples: 10}\n"
+      "identification: {length_scales: true, diagnose: false}\n"
+      "acceptance: {mode: auto, max_anchor_change_m: 0.01}\n"
+      "control: {socket: /run/x.sock, group: cdpr}\n",
+      "/etc/cdpr/cdprd.yaml");
+  ASSERT_TRUE(c.ok()) << c.status().to_string();
+  EXPECT_EQ(c->robot, "/etc/cdpr/mini.yaml");
+  EXPECT_EQ(c->canopen, "/abs/net.yaml");
+  EXPECT_EQ(c->laser, "/etc/cdpr/lasers/l.yaml");
+  EXPECT_EQ(c->state_directory, "/etc/cdpr/state");
+  EXPECT_EQ(c->realtime.priority, 70);
+  EXPECT_EQ(c->realtime.cpu, 1);
+  EXPECT_EQ(c->realtime.sync_period, std::chrono::milliseconds(20));
+  EXPECT_EQ(c->identity.vendor_id, 0x00CD9001u);
+  EXPECT_DOUBLE_EQ(c->motion.max_linear_velocity, 0.2);
+  EXPECT_EQ(c->measuring.poses, 30);
+  EXPECT_TRUE(c->identification.options.estimate_length_scales);
+  EXPECT_FALSE(c->identification.diagnose);
+  EXPECT_EQ(c->acceptance.mode, AcceptanceMode::kAuto);
+  EXPECT_DOUBLE_EQ(c->acceptance.max_anchor_change_m, 0.01);
+  EXPECT_EQ(c->control.group, "cdpr");
+}
+
+TEST(DaemonConfig, ErrorsNameFileLineAndField) {
+  auto c = parse_daemon_config(
+      "robot: r.yaml\ncanopen: n.yaml\nmotion:\n  max_linear_velocity: -1\n", "cdprd.yaml");
+  ASSERT_FALSE(c.ok());
+  EXPECT_NE(c.status().to_string().find("cdprd.yaml:4:"), std::string::npos)
+      << c.status().to_string();
+  EXPECT_NE(c.status().to_string().find("motion.max_linear_velocity"), std::string::npos);
+
+  auto unknown = parse_daemon_config("robot: r.yaml\ncanopen: n.yaml\nmotoin: {}\n", "d.yaml");
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.status().to_string().find("d.yaml:3:1: field 'motoin': unknown field"),
+            std::string::npos)
+      << unknown.status().to_string();
+
+  auto missing = parse_daemon_config("canopen: n.yaml\n", "d.yaml");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.status().to_string().find("field 'robot': is missing"), std::string::npos);
+
+  auto mode =
+      parse_daemon_config("robot: r\ncanopen: n\nacceptance: {mode: sometimes}\n", "d.yaml");
+  ASSERT_FALSE(mode.ok());
+  EXPECT_NE(mode.status().to_string().find("expected 'manual' or 'auto'"), std::string::npos);
+
+  auto bad_yaml = parse_daemon_config("robot: [unclosed\n", "d.yaml");
+  ASSERT_FALSE(bad_yaml.ok());
+  EXPECT_NE(bad_yaml.status().to_string().find("d.yaml:"), std::string::npos);
+}
+
+TEST(DaemonConfig, TheShippedRobotPcConfigAndTheFilesItNamesLoad) {
+  auto c = load_daemon_config(CDPR_SOURCE_DIR "/config/cdprd.yaml");
+  ASSERT_TRUE(c.ok()) << c.status().to_string();
+  EXPECT_TRUE(config::load_robot_config(c->robot).ok()) << c->robot;
+  auto net = canopen::load_config(c->canopen);
+  EXPECT_TRUE(net.ok()) << net.status().to_string();
+  auto laser = modbus::load_laser_config(c->laser);
+  EXPECT_TRUE(laser.ok()) << laser.status().to_string();
+  EXPECT_EQ(c->control.socket, "/run/cdpr/cdprd.sock");
+  EXPECT_EQ(c->state_directory, "/var/lib/cdpr");
+}
+
+}  // namespace
+}  // namespace cdpr::controller

@@ -1,0 +1,279 @@
+#include "cdpr/controller/state_store.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/recording/recording.hpp"
+
+namespace cdpr::controller {
+namespace fs = std::filesystem;
+
+namespace {
+
+Status errno_status(const char* what, const std::string& path) {
+  return Status::Error(ErrorCode::kIoError, "%s %s: %s", what, path.c_str(), std::strerror(errno));
+}
+
+Status write_all(int fd, std::string_view text, const std::string& path) {
+  std::size_t done = 0;
+  while (done < text.size()) {
+    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return errno_status("cannot write", path);
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  return Status::Ok();
+}
+
+Status fsync_directory(const std::string& path) {
+  const std::string dir = fs::path(path).parent_path().string();
+  const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return errno_status("cannot open directory", dir);
+  const int r = ::fsync(fd);
+  ::close(fd);
+  if (r != 0) return errno_status("cannot fsync directory", dir);
+  return Status::Ok();
+}
+
+std::string numbered(int n) {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "%06d", n);
+  return buf;
+}
+
+std::vector<int> numbers_in(const std::string& dir, std::string_view suffix) {
+  std::vector<int> out;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    std::string name = e.path().filename().string();
+    if (!suffix.empty()) {
+      if (name.size() <= suffix.size() ||
+          name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0) {
+        continue;
+      }
+      name.resize(name.size() - suffix.size());
+    }
+    if (name.size() != 6 || !std::all_of(name.begin(), name.end(), ::isdigit)) continue;
+    out.push_back(std::stoi(name));
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+}  // namespace
+
+Status write_file_atomically(const std::string& path, std::string_view text) {
+  std::string tmpl = path + ".tmp.XXXXXX";
+  std::vector<char> buf(tmpl.begin(), tmpl.end());
+  buf.push_back('\0');
+  const int fd = ::mkostemp(buf.data(), O_CLOEXEC);
+  if (fd < 0) return errno_status("cannot create a temporary file for", path);
+  const std::string tmp = buf.data();
+  Status s = write_all(fd, text, tmp);
+  if (s.ok() && ::fchmod(fd, 0644) != 0) s = errno_status("cannot chmod", tmp);
+  if (s.ok() && ::fsync(fd) != 0) s = errno_status("cannot fsync", tmp);
+  if (::close(fd) != 0 && s.ok()) s = errno_status("cannot close", tmp);
+  if (s.ok() && ::rename(tmp.c_str(), path.c_str()) != 0)
+    s = errno_status("cannot rename to", path);
+  if (!s.ok()) {
+    ::unlink(tmp.c_str());
+    return s;
+  }
+  return fsync_directory(path);
+}
+
+Result<std::string> read_text_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return Status::Error(ErrorCode::kNotFound, "%s: cannot open", path.c_str());
+  std::ostringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+AppendOnlyFile::~AppendOnlyFile() {
+  close();
+}
+
+Status AppendOnlyFile::open(const std::string& path, bool truncate) {
+  close();
+  const int flags = O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC | (truncate ? O_TRUNC : 0);
+  fd_ = ::open(path.c_str(), flags, 0644);
+  if (fd_ < 0) return errno_status("cannot open", path);
+  path_ = path;
+  return fsync_directory(path);
+}
+
+Status AppendOnlyFile::append(std::string_view record) {
+  if (fd_ < 0) return Status(ErrorCode::kFailedPrecondition, "append to a closed file");
+  if (Status s = write_all(fd_, record, path_); !s.ok()) return s;
+  if (::fdatasync(fd_) != 0) return errno_status("cannot fsync", path_);
+  return Status::Ok();
+}
+
+void AppendOnlyFile::close() {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+}
+
+Result<StateStore> StateStore::open(const std::string& directory) {
+  std::error_code ec;
+  for (const char* sub : {"", "geometry", "calibrations"}) {
+    const fs::path p = fs::path(directory) / sub;
+    fs::create_directories(p, ec);
+    if (ec) {
+      return Status::Error(ErrorCode::kIoError, "state directory %s: %s", p.string().c_str(),
+                           ec.message().c_str());
+    }
+  }
+  if (::access(directory.c_str(), W_OK) != 0) {
+    return errno_status("state directory is not writable:", directory);
+  }
+  return StateStore(directory);
+}
+
+std::string StateStore::geometry_path(int version) const {
+  return (fs::path(dir_) / "geometry" / (numbered(version) + ".yaml")).string();
+}
+
+std::vector<int> StateStore::geometry_versions() const {
+  return numbers_in((fs::path(dir_) / "geometry").string(), ".yaml");
+}
+
+Result<int> StateStore::add_geometry(const RobotModel& model, nlohmann::json meta) {
+  const std::vector<int> v = geometry_versions();
+  const int version = v.empty() ? 1 : v.back() + 1;
+  meta["version"] = version;
+  meta["created"] = recording::utc_timestamp();
+  const std::string yaml = "# cdprd geometry version " + std::to_string(version) + " (" +
+                           meta.value("source", std::string("?")) + ")\n" +
+                           config::save_robot_config(model);
+  // The metadata first: a version exists once its YAML does.
+  const std::string meta_path =
+      (fs::path(dir_) / "geometry" / (numbered(version) + ".json")).string();
+  if (Status s = write_file_atomically(meta_path, meta.dump(2) + "\n"); !s.ok()) return s;
+  if (Status s = write_file_atomically(geometry_path(version), yaml); !s.ok()) return s;
+  return version;
+}
+
+Result<RobotModel> StateStore::load_geometry(int version) const {
+  const std::string path = geometry_path(version);
+  if (!fs::exists(path)) {
+    return Status::Error(ErrorCode::kNotFound, "geometry version %d does not exist (%s)", version,
+                         path.c_str());
+  }
+  return config::load_robot_config(path);
+}
+
+Result<nlohmann::json> StateStore::geometry_meta(int version) const {
+  const std::string path = (fs::path(dir_) / "geometry" / (numbered(version) + ".json")).string();
+  auto text = read_text_file(path);
+  if (!text.ok()) return text.status();
+  nlohmann::json j = nlohmann::json::parse(*text, nullptr, false);
+  if (j.is_discarded()) return Status::Error(ErrorCode::kParseError, "%s: not JSON", path.c_str());
+  return j;
+}
+
+Result<int> StateStore::active_version() const {
+  const std::string path = (fs::path(dir_) / "active").string();
+  if (!fs::exists(path)) return Status(ErrorCode::kNotFound, "no active geometry yet");
+  auto text = read_text_file(path);
+  if (!text.ok()) return text.status();
+  int v = 0;
+  if (std::sscanf(text->c_str(), "%d", &v) != 1 || v < 1) {
+    return Status::Error(ErrorCode::kParseError, "%s: expected a version number", path.c_str());
+  }
+  if (!fs::exists(geometry_path(v))) {
+    return Status::Error(ErrorCode::kNotFound, "%s names version %d, which does not exist",
+                         path.c_str(), v);
+  }
+  return v;
+}
+
+Status StateStore::activate(int version, nlohmann::json why) {
+  if (!fs::exists(geometry_path(version))) {
+    return Status::Error(ErrorCode::kNotFound, "geometry version %d does not exist", version);
+  }
+  if (Status s = write_file_atomically((fs::path(dir_) / "active").string(),
+                                       std::to_string(version) + "\n");
+      !s.ok()) {
+    return s;
+  }
+  why["version"] = version;
+  why["time"] = recording::utc_timestamp();
+  AppendOnlyFile log;
+  if (Status s = log.open((fs::path(dir_) / "history.jsonl").string(), false); !s.ok()) return s;
+  return log.append(why.dump() + "\n");
+}
+
+Result<std::vector<nlohmann::json>> StateStore::history() const {
+  std::vector<nlohmann::json> out;
+  const std::string path = (fs::path(dir_) / "history.jsonl").string();
+  if (!fs::exists(path)) return out;
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) {
+    nlohmann::json j = nlohmann::json::parse(line, nullptr, false);
+    if (!j.is_discarded()) out.push_back(std::move(j));  // a torn last line is skipped
+  }
+  return out;
+}
+
+Status StateStore::save_offsets(const std::vector<double>& offsets, std::string_view how) {
+  nlohmann::json j = {
+      {"offsets_counts", offsets}, {"how", std::string(how)}, {"time", recording::utc_timestamp()}};
+  return write_file_atomically((fs::path(dir_) / "homing.json").string(), j.dump(2) + "\n");
+}
+
+Result<std::vector<double>> StateStore::load_offsets() const {
+  const std::string path = (fs::path(dir_) / "homing.json").string();
+  if (!fs::exists(path)) return Status(ErrorCode::kNotFound, "not homed yet (no homing.json)");
+  auto text = read_text_file(path);
+  if (!text.ok()) return text.status();
+  nlohmann::json j = nlohmann::json::parse(*text, nullptr, false);
+  if (j.is_discarded() || !j.contains("offsets_counts") || !j["offsets_counts"].is_array()) {
+    return Status::Error(ErrorCode::kParseError, "%s: expected {\"offsets_counts\": [...]}",
+                         path.c_str());
+  }
+  std::vector<double> out;
+  for (const auto& v : j["offsets_counts"]) {
+    if (!v.is_number()) {
+      return Status::Error(ErrorCode::kParseError, "%s: offsets must be numbers", path.c_str());
+    }
+    out.push_back(v.get<double>());
+  }
+  return out;
+}
+
+Result<int> StateStore::new_calibration() {
+  const std::vector<int> v = calibrations();
+  const int id = v.empty() ? 1 : v.back() + 1;
+  std::error_code ec;
+  fs::create_directories(calibration_dir(id), ec);
+  if (ec) {
+    return Status::Error(ErrorCode::kIoError, "cannot create %s: %s", calibration_dir(id).c_str(),
+                         ec.message().c_str());
+  }
+  return id;
+}
+
+std::string StateStore::calibration_dir(int id) const {
+  return (fs::path(dir_) / "calibrations" / numbered(id)).string();
+}
+
+std::vector<int> StateStore::calibrations() const {
+  return numbers_in((fs::path(dir_) / "calibrations").string(), "");
+}
+
+}  // namespace cdpr::controller

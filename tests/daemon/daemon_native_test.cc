@@ -1,0 +1,294 @@
+// cdprd's supervisor and RT cycle composed with the virtual robot in ONE process, over the
+// in-process virtual CAN bus with a manual clock and the laser over Modbus TCP on loopback: the
+// daemon's logic tested in seconds (the same scenarios run across processes on vcan in
+// tests/daemon/daemon_vcan_test.cc). The composition lives here, not in the daemon: the
+// controller and the virtual robot only meet on the bus and the Modbus link, as on the robot.
+//
+// Truth: config/mini-measured.yaml with config/scenarios/mini-calibration.yaml's hidden effects
+// (softer cables, encoder zero offsets, noise); the daemon starts from config/mini.yaml. The drives
+// power on with the true platform at home (the reference platform).
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include "alloc_counter.hpp"
+#include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/can/virtual_bus.hpp"
+#include "cdpr/canopen/config.hpp"
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/controller/daemon.hpp"
+#include "cdpr/modbus/laser_sensor.hpp"
+#include "cdpr/modbus/register_map.hpp"
+#include "cdpr/sim/can_robot.hpp"
+#include "cdpr/sim/laser_slave.hpp"
+#include "cdpr/sim/physics.hpp"
+#include "cdpr/sim/scenario.hpp"
+#include "virtual_cell.hpp"
+
+namespace cdpr::controller {
+namespace {
+
+using namespace std::chrono_literals;
+using json = nlohmann::json;
+namespace fs = std::filesystem;
+
+const std::string kSource = CDPR_SOURCE_DIR;
+
+class DaemonNative : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("cdprd-native-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+    auto c = testing::VirtualCell::create(kSource, dir_);
+    ASSERT_TRUE(c.ok()) << c.status().to_string();
+    cell_ = std::move(*c);
+  }
+  void TearDown() override {
+    cell_.reset();
+    fs::remove_all(dir_);
+  }
+
+  void start_daemon(const testing::VirtualCell::Settings& settings = {}) {
+    const Status s = cell_->start_daemon(settings);
+    ASSERT_TRUE(s.ok()) << s.to_string();
+  }
+  Daemon& daemon() { return *cell_->daemon; }
+  bool run_until(const std::function<bool()>& done, double max_s) {
+    return cell_->run_until(done, max_s);
+  }
+  Reply request(const std::string& cmd, const json& args = json::object()) {
+    return cell_->request(cmd, args);
+  }
+  int calibrate() {
+    auto id = cell_->calibrate();
+    EXPECT_TRUE(id.ok()) << id.status().to_string();
+    return id.ok() ? *id : 0;
+  }
+  // A short calibration: 12 poses, no mismatch locator.
+  static testing::VirtualCell::Settings quick(const std::string& acceptance = "{mode: manual}") {
+    testing::VirtualCell::Settings s;
+    s.measuring =
+        "{poses: 12, laser_samples: 3, laser_interval_s: 0.002, average_cycles: 25, "
+        "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4}";
+    s.identification = "{diagnose: false}";
+    s.acceptance = acceptance;
+    return s;
+  }
+  // One cycle's normal motion: the largest target change per cycle at the configured cable speed.
+  double one_cycle_counts() {
+    return daemon().status()["rt"]["one_cycle_motion_counts"].get<double>();
+  }
+
+  fs::path dir_;
+  std::unique_ptr<testing::VirtualCell> cell_;
+};
+
+TEST_F(DaemonNative, CalibratesMiniAcceptsBumplesslyAndTheNextMoveLandsOnTarget) {
+  start_daemon();
+  const double t0 = cell_->seconds();
+  const auto wall0 = std::chrono::steady_clock::now();
+  const int id = calibrate();
+  ASSERT_GT(id, 0);
+  std::printf("[daemon-native] calibration %d: %.1f s of robot time, %.1f s wall\n", id,
+              cell_->seconds() - t0,
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count());
+  const json st = daemon().status();
+  ASSERT_EQ(st["calibration"]["outcome"], "awaiting_acceptance") << st.dump(2);
+  // The report names the hidden elasticity and proposes anchors close to the truth.
+  auto report = request("report");
+  ASSERT_TRUE(report.ok) << report.message;
+  const json& rep = report.result["report"];
+  std::printf("[daemon-native] verdict: %s; gates passed: %d\n",
+              rep["verdict"].get<std::string>().c_str(), rep["gates_passed"].get<bool>());
+  std::printf("[daemon-native] fit: %s\n", rep["fit"].dump().c_str());
+  EXPECT_TRUE(rep["gates_passed"].get<bool>()) << rep["gates"].dump(2);
+  auto after =
+      config::load_robot_config(daemon().store().calibration_dir(id) + "/model_after.yaml");
+  ASSERT_TRUE(after.ok()) << after.status().to_string();
+  const double before_rms =
+      testing::VirtualCell::anchor_rms(cell_->nominal, cell_->physics->truth());
+  const double after_rms = testing::VirtualCell::anchor_rms(*after, cell_->physics->truth());
+  std::printf("[daemon-native] anchors RMS vs truth: %.3f mm before, %.3f mm after\n",
+              before_rms * 1e3, after_rms * 1e3);
+  EXPECT_LT(after_rms, 1e-3);
+  EXPECT_LT(after_rms, before_rms);
+
+  // Accept: the hot swap does not jump.
+  const Reply acc = request("accept");
+  ASSERT_TRUE(acc.ok) << acc.message;
+  const int version = acc.result["version"].get<int>();
+  ASSERT_TRUE(run_until([&] { return daemon().state() == DaemonState::kHolding; }, 30.0))
+      << daemon().status().dump(2);
+  EXPECT_EQ(daemon().status()["geometry_version"], version);
+  const RtSnapshot snap = daemon().rt().snapshot();
+  std::printf(
+      "[daemon-native] hot swap: largest target step %.1f counts (one cycle of normal "
+      "motion: %.1f counts)\n",
+      snap.largest_reference_step, one_cycle_counts());
+  EXPECT_LE(snap.largest_reference_step, one_cycle_counts());
+  EXPECT_TRUE(cell_->saw_event("calibration", "outcome", "applied"));
+
+  // A test move with the new geometry lands within 0.5 mm of its target in the sim.
+  Pose target = cell_->nominal.home;
+  target.position += Eigen::Vector3d(0.05, -0.04, 0.03);
+  const Reply mv = request(
+      "move",
+      {{"pose", {target.position.x(), target.position.y(), target.position.z(), 0.0, 0.0, 0.0}}});
+  ASSERT_TRUE(mv.ok) << mv.message;
+  ASSERT_TRUE(run_until(
+      [&] {
+        const RtSnapshot s = daemon().rt().snapshot();
+        return daemon().state() == DaemonState::kHolding && s.settled &&
+               (s.pose().position - target.position).norm() < 1e-9;
+      },
+      30.0));
+  const double error = (cell_->physics->state().pose.position - target.position).norm();
+  std::printf("[daemon-native] test move: true position error %.3f mm\n", error * 1e3);
+  EXPECT_LT(error, 0.5e-3);
+}
+
+TEST_F(DaemonNative, RtCycleDoesNotAllocateWhileHoldingOrMoving) {
+  start_daemon();
+  Pose target = cell_->nominal.home;
+  target.position.z() += 0.02;
+  ASSERT_TRUE(request("move", {{"pose", {0.0, 0.0, target.position.z(), 0.0, 0.0, 0.0}}}).ok);
+  // The robot's steps allocate (it stands in for devices); count only the daemon's cycle.
+  std::uint64_t allocations = 0;
+  for (int c = 0; c < 300; ++c) {
+    {
+      test::AllocationCounter count;
+      daemon().cycle(cell_->clock.now());
+      allocations += count.allocations();
+    }
+    const can::Timestamp next = cell_->clock.now() + cell_->network.sync_period;
+    while (cell_->clock.now() < next) cell_->idle();
+  }
+  EXPECT_EQ(allocations, 0u);
+  EXPECT_GT(daemon().rt().snapshot().largest_move_step, 0.0) << "the platform did not move";
+}
+
+TEST_F(DaemonNative, AbortHoldsTheRobotAndKeepsTheGeometry) {
+  start_daemon();
+  const int before = daemon().status()["geometry_version"].get<int>();
+  ASSERT_TRUE(request("calibrate").ok);
+  ASSERT_TRUE(
+      run_until([&] { return daemon().status()["calibration"]["pose"].get<int>() >= 3; }, 120.0));
+  const Reply ab = request("abort");
+  ASSERT_TRUE(ab.ok) << ab.message;
+  ASSERT_TRUE(run_until(
+      [&] { return daemon().state() == DaemonState::kHolding && daemon().rt().snapshot().settled; },
+      30.0))
+      << daemon().status().dump(2);
+  const json st = daemon().status();
+  EXPECT_EQ(st["calibration"]["outcome"], "aborted");
+  EXPECT_EQ(st["geometry_version"], before);
+  EXPECT_TRUE(st["fault"].is_null());
+  // The partial recording is kept and readable.
+  const std::string rec =
+      daemon().store().calibration_dir(st["calibration"]["id"].get<int>()) + "/recording.csv";
+  auto r = recording::read_recording(rec);
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_GE(r->poses.size(), 3u);
+}
+
+TEST_F(DaemonNative, RejectKeepsTheGeometryRestartKeepsTheAcceptedOneAndRollbackIsBumpless) {
+  start_daemon(quick());
+  const int v1 = daemon().status()["geometry_version"].get<int>();
+  ASSERT_GT(calibrate(), 0);
+  ASSERT_TRUE(request("reject").ok);
+  run_until([&] { return daemon().state() == DaemonState::kHolding; }, 5.0);
+  EXPECT_EQ(daemon().status()["geometry_version"], v1);
+  EXPECT_TRUE(cell_->saw_event("calibration", "outcome", "rejected"));
+
+  ASSERT_GT(calibrate(), 0);
+  const Reply acc = request("accept");
+  ASSERT_TRUE(acc.ok) << acc.message;
+  const int v2 = acc.result["version"].get<int>();
+  ASSERT_TRUE(run_until([&] { return daemon().state() == DaemonState::kHolding; }, 30.0));
+  ASSERT_EQ(daemon().status()["geometry_version"], v2);
+
+  // Restart: a new daemon on the same state directory comes back with version v2, where the
+  // platform is, without a jump.
+  const RtSnapshot old = daemon().rt().snapshot();
+  start_daemon(quick());
+  EXPECT_EQ(daemon().status()["geometry_version"], v2);
+  const RtSnapshot now = daemon().rt().snapshot();
+  EXPECT_LT((now.pose().position - old.pose().position).norm(), 0.2e-3);
+  EXPECT_LE(now.largest_reference_step, one_cycle_counts());
+
+  // Rollback to v1: bumpless too, and recorded in the history.
+  const Reply rb = request("geometry_rollback", {{"version", v1}});
+  ASSERT_TRUE(rb.ok) << rb.message;
+  ASSERT_TRUE(run_until([&] { return daemon().state() == DaemonState::kHolding; }, 30.0));
+  EXPECT_EQ(daemon().status()["geometry_version"], v1);
+  EXPECT_LE(daemon().rt().snapshot().largest_reference_step, one_cycle_counts());
+  const Reply h = request("geometry_history");
+  ASSERT_TRUE(h.ok);
+  EXPECT_EQ(h.result["activations"].back()["version"], v1);
+  const Reply diff = request("geometry_diff", {{"from", v1}, {"to", v2}});
+  ASSERT_TRUE(diff.ok) << diff.message;
+  EXPECT_GT(diff.result["largest_change_m"].get<double>(), 0.0);
+}
+
+TEST_F(DaemonNative, AutoAcceptanceAppliesACalibrationWhoseGatesPassAndWaitsOtherwise) {
+  // Gates an honest 12-pose calibration passes: applied without an operator.
+  start_daemon(quick("{mode: auto, min_fit_p_value: 0, max_predicted_position_error_m: 1}"));
+  ASSERT_TRUE(request("calibrate").ok);
+  ASSERT_TRUE(run_until(
+      [&] {
+        return daemon().state() == DaemonState::kHolding &&
+               daemon().status()["geometry_version"] == 2;
+      },
+      600.0))
+      << daemon().status().dump(2);
+  EXPECT_TRUE(cell_->saw_event("calibration", "outcome", "applied"));
+  EXPECT_LE(daemon().rt().snapshot().largest_reference_step, one_cycle_counts());
+
+  // A gate that fails (the anchors move by centimetres, the limit is 1 mm): it waits.
+  start_daemon(quick("{mode: auto, min_fit_p_value: 0, max_anchor_change_m: 0.000001}"));
+  ASSERT_GT(calibrate(), 0);
+  const json st = daemon().status();
+  EXPECT_EQ(st["state"], "awaiting_acceptance");
+  EXPECT_FALSE(st["calibration"]["gates_passed"].get<bool>());
+  EXPECT_EQ(st["geometry_version"], 2);
+}
+
+TEST_F(DaemonNative, AnOperatorQuickStopFaultsAndFaultResetHoldsWhereThePlatformStopped) {
+  start_daemon();
+  ASSERT_TRUE(request("stop").ok);
+  ASSERT_TRUE(run_until([&] { return daemon().state() == DaemonState::kFault; }, 2.0));
+  const json st = daemon().status();
+  EXPECT_EQ(st["fault"]["fault"], "quick_stop");
+  EXPECT_EQ(request("calibrate").code, "fault");
+  ASSERT_TRUE(request("fault_reset").ok);
+  ASSERT_TRUE(run_until([&] { return daemon().state() == DaemonState::kHolding; }, 10.0))
+      << daemon().status().dump(2);
+  EXPECT_LE(daemon().rt().snapshot().largest_reference_step, one_cycle_counts());
+}
+
+TEST_F(DaemonNative, RequestsWithBadArgumentsAreNamedErrors) {
+  start_daemon();
+  EXPECT_EQ(request("nonsense").code, "unknown_command");
+  EXPECT_EQ(request("accept").code, "invalid_state");
+  EXPECT_EQ(request("geometry_rollback", {{"version", "x"}}).code, "bad_request");
+  EXPECT_EQ(request("geometry_rollback", {{"version", 99}}).code, "not_found");
+  EXPECT_EQ(request("calibrate",
+                    {{"poses_csv", "# units: SI\npose,x,y,z,roll,pitch,yaw\n0,5,0,0,0,0,0\n"}})
+                .code,
+            "bad_request");
+  const Reply dry = request("calibrate", {{"dry_run", true}});
+  ASSERT_TRUE(dry.ok) << dry.message;
+  EXPECT_EQ(dry.result["poses"].size(), 25u);
+  EXPECT_EQ(daemon().state(), DaemonState::kHolding);
+}
+
+}  // namespace
+}  // namespace cdpr::controller

@@ -1,0 +1,233 @@
+#!/usr/bin/env python3
+"""cdprd end to end on a kernel CAN bus: cdpr-sim, cdprd and cdprctl as separate processes.
+
+Run through tests/vcan/vcan-run (native vcan, or user-mode-linux with a relaxed 20 ms SYNC):
+
+    daemon_vcan_test.py CDPRD CDPRCTL CDPR_SIM SOURCE_DIR WORK_DIR
+
+The virtual robot (truth: config/mini-measured.yaml with config/scenarios/mini-calibration.yaml's
+hidden effects) serves its drives and force node on vcan0 and its laser over Modbus TCP on
+loopback; cdprd starts from config/mini.yaml. Checked, in this order, all through cdprctl:
+  1. abort mid-sequence holds the robot and keeps the geometry; the partial recording is readable;
+  2. a full calibration (`calibrate --wait`), accepted: anchors within 1 mm RMS of the truth
+     (cdpr-sim --evaluate), the hot swap's largest target step within one cycle of normal motion;
+  3. a test move after the swap lands within 0.5 mm of its target on the true robot (SIGUSR1);
+  4. a restart of cdprd comes back with the accepted geometry, holding;
+  5. a second calibration, rejected, keeps the accepted geometry;
+  6. rollback to version 1 makes it active again (bumpless) and is in the history.
+"""
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+
+CDPRD, CDPRCTL, SIM, SRC, WORK = sys.argv[1:6]
+UML = os.environ.get("CDPR_VCAN_PATH", "").startswith("user-mode-linux")
+PERIOD_MS = 20 if UML else 4
+NETWORK = f"{SRC}/tests/sim/sim-master-network.yaml" if UML else f"{SRC}/config/canopen-mini.yaml"
+SOCK = f"{WORK}/cdprd.sock"
+PORT = 16020 + os.getpid() % 1000
+failures = []
+
+
+def check(ok, what):
+    print(("ok    " if ok else "FAIL  ") + what, flush=True)
+    if not ok:
+        failures.append(what)
+    return ok
+
+
+def ctl(*args, timeout=60):
+    r = subprocess.run([CDPRCTL, "--socket", SOCK, *args], capture_output=True, text=True,
+                       timeout=timeout)
+    return r.returncode, r.stdout, r.stderr
+
+
+def ctl_json(*args):
+    rc, out, err = ctl("--json", *args)
+    if rc != 0:
+        raise RuntimeError(f"cdprctl {' '.join(args)} exited {rc}: {err}{out}")
+    return json.loads(out)
+
+
+def wait_for(pred, timeout, what):
+    end = time.time() + timeout
+    while time.time() < end:
+        try:
+            if pred():
+                return True
+        except (RuntimeError, json.JSONDecodeError, KeyError, TypeError):
+            pass
+        time.sleep(0.2)
+    return check(False, f"{what} within {timeout} s")
+
+
+def holding(version=None):
+    s = ctl_json("status")
+    return s["state"] == "holding" and s["rt"]["settled"] and (
+        version is None or s["geometry_version"] == version)
+
+
+def write_configs():
+    os.makedirs(WORK, exist_ok=True)
+    with open(f"{WORK}/laser.yaml", "w") as f:
+        f.write(f"name: sim-laser\ntransport: tcp\nhost: 127.0.0.1\nport: {PORT}\nslave_id: 1\n"
+                f"response_timeout: 0.2\npoll_rate: 50\n"
+                f"register_map: {SRC}/config/lasers/baumer-om20-om30.yaml\n")
+    with open(f"{WORK}/cdprd.yaml", "w") as f:
+        f.write(f"robot: {SRC}/config/mini.yaml\ncanopen: {NETWORK}\nlaser: {WORK}/laser.yaml\n"
+                f"can_interface: vcan0\nstate_directory: {WORK}/state\n"
+                f"realtime: {{priority: {0 if UML else 80}, sync_period_ms: {PERIOD_MS}}}\n"
+                "identity: {vendor_id: 0x00CD9001, drive_product_code: 0x402, "
+                "force_product_code: 0x404}\n"
+                "motion: {max_linear_velocity: 0.2, max_linear_acceleration: 0.6, "
+                "max_linear_jerk: 6, max_angular_velocity: 0.6, max_angular_acceleration: 2, "
+                "max_angular_jerk: 20}\n"
+                "measuring: {poses: 25, laser_samples: 10, average_cycles: 10, "
+                "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4}\n"
+                "identification: {bootstrap: 30}\n"
+                f"control: {{socket: {SOCK}}}\n")
+    # Eight poses from the designed set for the quick calibration that gets rejected.
+    with open(f"{WORK}/few-poses.csv", "w") as f:
+        f.write("# units: SI\npose,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n"
+                "1,0.05,0.05,0.05,0,0,0\n2,-0.05,0.05,-0.05,0,0,0\n3,0.05,-0.05,-0.05,0,0,0\n"
+                "4,-0.05,-0.05,0.05,0,0,0\n5,0.08,0,0,0.1,0,0\n6,0,0.08,0,0,0.1,0\n"
+                "7,0,0,0.08,0,0,0.1\n")
+
+
+def start_daemon(log):
+    p = subprocess.Popen([CDPRD, "--config", f"{WORK}/cdprd.yaml"], stdout=log, stderr=log)
+    for _ in range(600):
+        if os.path.exists(SOCK):
+            try:
+                ctl_json("status")
+                return p
+            except RuntimeError:
+                pass
+        if p.poll() is not None:
+            break
+        time.sleep(0.1)
+    raise RuntimeError("cdprd did not come up; see " + log.name)
+
+
+def true_pose(sim_log_path):
+    sim.send_signal(signal.SIGUSR1)
+    time.sleep(1.0)
+    lines = [l for l in open(sim_log_path) if "true platform pose" in l]
+    return [float(x) for x in lines[-1].split("pose")[1].split()]
+
+
+write_configs()
+sim_log = open(f"{WORK}/cdpr-sim.log", "w")
+sim = subprocess.Popen([SIM, "--config", f"{SRC}/config/mini.yaml", "--scenario",
+                        f"{SRC}/config/scenarios/mini-calibration.yaml", "--can", "vcan0",
+                        "--canopen", NETWORK, "--modbus", f"tcp:{PORT}", "--home", "reference",
+                        "--seed", "3"], stdout=sim_log, stderr=sim_log)
+daemon_log = open(f"{WORK}/cdprd.log", "w")
+daemon = None
+try:
+    for _ in range(600):
+        if "CANopen on vcan0" in open(f"{WORK}/cdpr-sim.log").read():
+            break
+        time.sleep(0.1)
+    daemon = start_daemon(daemon_log)
+    s = ctl_json("status")
+    check(s["state"] == "holding" and s["geometry_version"] == 1,
+          f"cdprd holds with the nominal geometry (state {s['state']}, version {s['geometry_version']})")
+
+    # 1. Abort mid-sequence.
+    rc, out, err = ctl("calibrate")
+    check(rc == 0, f"calibrate starts ({out.strip()}{err.strip()})")
+    wait_for(lambda: ctl_json("status")["calibration"]["pose"] >= 2, 180, "two poses measured")
+    rc, out, err = ctl("abort")
+    check(rc == 0, "abort accepted")
+    wait_for(lambda: holding(1), 60, "holding after the abort")
+    s = ctl_json("status")
+    check(s["calibration"]["outcome"] == "aborted" and s["geometry_version"] == 1 and s["fault"] is None,
+          f"abort: outcome {s['calibration']['outcome']}, geometry {s['geometry_version']}, no fault")
+    rec = f"{WORK}/state/calibrations/{s['calibration']['id']:06d}/recording.csv"
+    rows = [l for l in open(rec) if l[:1].isdigit()]
+    check(len(rows) >= 2, f"the partial recording keeps {len(rows)} measured poses")
+
+    # 2. A full calibration, accepted.
+    t0 = time.time()
+    rc, out, err = ctl("--timeout", "1500", "calibrate", "--wait", timeout=1600)
+    print(out, err)
+    check(rc == 0, f"calibrate --wait exits 0 (got {rc}) in {time.time() - t0:.0f} s")
+    rc, out, err = ctl("accept")
+    check(rc == 0, f"accept ({out.strip()}{err.strip()})")
+    wait_for(lambda: holding(2), 60, "holding with geometry version 2")
+    s = ctl_json("status")
+    cal = ctl_json("report")["calibration"]
+    ev = subprocess.run([SIM, "--config", f"{SRC}/config/mini.yaml", "--scenario",
+                         f"{SRC}/config/scenarios/mini-calibration.yaml", "--evaluate",
+                         f"{WORK}/state/calibrations/{cal:06d}/model_after.yaml"],
+                        capture_output=True, text=True)
+    print(ev.stdout)
+    anchor_rms_mm = float(ev.stdout.splitlines()[1].split()[1])
+    check(anchor_rms_mm <= 1.0, f"identified anchors {anchor_rms_mm:.3f} mm RMS from the truth (<= 1 mm)")
+    step, bound = s["rt"]["largest_reference_step_counts"], s["rt"]["one_cycle_motion_counts"]
+    check(step <= bound, f"hot swap: largest target step {step:.0f} counts <= one cycle of normal motion {bound:.0f}")
+
+    # 3. A test move lands on its target on the true robot.
+    target = [0.05, -0.04, 0.03]
+    rc, out, err = ctl("move", *map(str, target))
+    check(rc == 0, f"move accepted ({err.strip()})")
+    wait_for(lambda: holding(2) and abs(ctl_json("status")["rt"]["commanded_pose"][0] - target[0]) < 1e-9,
+             60, "holding at the move's target")
+    p = true_pose(f"{WORK}/cdpr-sim.log")
+    err_mm = 1e3 * sum((a - b) ** 2 for a, b in zip(p[:3], target)) ** 0.5
+    check(err_mm <= 0.5, f"test move: the true platform is {err_mm:.3f} mm from the target (<= 0.5 mm)")
+
+    # 4. Restart: back with the accepted geometry.
+    daemon.send_signal(signal.SIGTERM)
+    daemon.wait(timeout=30)
+    os.path.exists(SOCK) and os.unlink(SOCK)
+    daemon = start_daemon(daemon_log)
+    wait_for(lambda: holding(2), 60, "holding with version 2 after the restart")
+    s = ctl_json("status")
+    check(s["geometry_version"] == 2, f"restart: geometry version {s['geometry_version']} active")
+
+    # 5. A second calibration, rejected.
+    rc, out, err = ctl("--timeout", "900", "calibrate", "--poses", f"{WORK}/few-poses.csv", "--wait",
+                       timeout=1000)
+    check(rc in (0, 5), f"a short calibration ends awaiting acceptance (exit {rc}: {err.strip()[:200]})")
+    rc, out, err = ctl("reject")
+    check(rc == 0, f"reject ({err.strip()})")
+    wait_for(lambda: holding(2), 60, "holding with version 2 after the reject")
+
+    # 6. Rollback to the nominal geometry.
+    rc, out, err = ctl("geometry", "rollback", "1")
+    check(rc == 0, f"rollback to version 1 ({err.strip()})")
+    wait_for(lambda: holding(1), 60, "holding with version 1 after the rollback")
+    s = ctl_json("status")
+    check(s["rt"]["largest_reference_step_counts"] <= s["rt"]["one_cycle_motion_counts"],
+          f"rollback is bumpless ({s['rt']['largest_reference_step_counts']:.0f} counts)")
+    h = ctl_json("geometry", "history")
+    check(h["activations"][-1]["version"] == 1, "the history ends with the rollback")
+except Exception as e:  # noqa: BLE001 - report any failure with the logs
+    check(False, f"exception: {e}")
+finally:
+    if daemon is not None and daemon.poll() is None:
+        daemon.send_signal(signal.SIGTERM)
+        try:
+            daemon.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            daemon.kill()
+    sim.send_signal(signal.SIGTERM)
+    try:
+        sim.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        sim.kill()
+
+if failures:
+    print("\n--- cdprd.log (tail) ---")
+    print("".join(open(f"{WORK}/cdprd.log").readlines()[-40:]))
+    print("--- cdpr-sim.log (tail) ---")
+    print("".join(open(f"{WORK}/cdpr-sim.log").readlines()[-20:]))
+    print(f"{len(failures)} check(s) failed")
+    sys.exit(1)
+print("every check passed")

@@ -1,0 +1,268 @@
+// A robot cell in one process: cdprd's Daemon and the virtual robot (CANopen drives and force
+// node on the in-process virtual bus with a manual clock, the laser's Modbus slave on loopback
+// TCP read by our laser driver). For the native daemon tests and the daemon benchmark; the
+// composition lives here, not in the daemon: the two only meet on the bus and the Modbus link.
+//
+// Truth: config/mini-measured.yaml with config/scenarios/mini-calibration.yaml's hidden effects;
+// the drives power on with the true platform at home (the reference platform).
+#pragma once
+
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "cdpr/can/virtual_bus.hpp"
+#include "cdpr/canopen/config.hpp"
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/controller/daemon.hpp"
+#include "cdpr/modbus/laser_sensor.hpp"
+#include "cdpr/modbus/register_map.hpp"
+#include "cdpr/sim/can_robot.hpp"
+#include "cdpr/sim/laser_slave.hpp"
+#include "cdpr/sim/physics.hpp"
+#include "cdpr/sim/scenario.hpp"
+
+namespace cdpr::controller::testing {
+
+using namespace std::chrono_literals;
+
+// The daemon configuration groups a cell starts with (YAML flow mappings).
+struct CellSettings {
+  std::string measuring =
+      "{poses: 25, laser_samples: 5, laser_interval_s: 0.002, average_cycles: 25, "
+      "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 1}";
+  std::string identification = "{bootstrap: 30}";
+  std::string acceptance = "{mode: manual}";
+  std::string extra;
+};
+
+class VirtualCell {
+ public:
+  // `source` is the project's root (config/), `dir` a scratch folder for the state directory.
+  static Result<std::unique_ptr<VirtualCell>> create(const std::string& source,
+                                                     std::filesystem::path dir,
+                                                     std::uint64_t seed = 7) {
+    std::unique_ptr<VirtualCell> c(new VirtualCell(source, std::move(dir)));
+    if (Status s = c->make_robot(seed); !s.ok()) return s;
+    return c;
+  }
+  ~VirtualCell() {
+    if (daemon) daemon->shutdown();
+    daemon.reset();
+    if (laser) laser->stop();
+    if (slave) slave->stop();
+    robot.reset();  // before its bus endpoint
+  }
+  VirtualCell(const VirtualCell&) = delete;
+  VirtualCell& operator=(const VirtualCell&) = delete;
+
+  // The daemon's configuration: MINI, the state directory in `dir`. Each group can be replaced
+  // (a flow mapping); `extra` adds other top-level groups.
+  using Settings = CellSettings;
+  std::string config_text(const Settings& s) const {
+    return "robot: " + source_ + "/config/mini.yaml\n" + "canopen: " + source_ +
+           "/config/canopen-mini.yaml\n" + "state_directory: " + (dir_ / "state").string() +
+           "\n"
+           "identity: {vendor_id: 0x00CD9001, drive_product_code: 0x402, force_product_code: "
+           "0x404}\n"
+           "motion: {max_linear_velocity: 0.15, max_linear_acceleration: 0.5, "
+           "max_linear_jerk: 5, max_angular_velocity: 0.5, max_angular_acceleration: 2, "
+           "max_angular_jerk: 20}\n"
+           "measuring: " + s.measuring + "\nidentification: " + s.identification +
+           "\nacceptance: " + s.acceptance + "\n" + s.extra;
+  }
+
+  // Creates and starts the daemon (the state directory is kept between calls: a restart), then
+  // cycles until it holds.
+  Status start_daemon(const Settings& settings = {}) {
+    if (daemon) {
+      daemon->shutdown();
+      daemon.reset();
+    }
+    auto cfg = parse_daemon_config(config_text(settings), (dir_ / "cdprd.yaml").string());
+    if (!cfg.ok()) return cfg.status();
+    config = *cfg;
+    DaemonIo io;
+    io.bus = master_ep_.get();
+    io.laser = laser.get();
+    io.clock = &clock;
+    io.idle = [this] { idle(); };
+    io.poll = 200us;
+    auto d = Daemon::create(config, io);
+    if (!d.ok()) return d.status();
+    daemon = std::move(*d);
+    daemon->set_event_sink([this](const nlohmann::json& e) {
+      std::lock_guard lock(events_mu_);
+      events_.push_back(e);
+    });
+    if (Status s = daemon->start(); !s.ok()) return s;
+    if (!run_until([&] { return daemon->rt().snapshot().mode == RtMode::kHolding; }, 5.0)) {
+      return Status(ErrorCode::kTimeout, "the daemon did not hold within 5 s after start-up");
+    }
+    return Status::Ok();
+  }
+
+  // The robot between two SYNCs (and the laser's distance follows the physics).
+  void idle() {
+    clock.advance(250us);
+    robot->step(clock.now());
+    const sim::LaserChannel l = physics->state().lasers.front();
+    slave->set_distance(l.true_distance, l.status);
+  }
+
+  // One SYNC period: the daemon's RT cycle, then the robot until the next one; the supervisor
+  // every 5 cycles. While the worker identifies, the CPU is left to it (the robot holds).
+  void cycle() {
+    daemon->cycle(clock.now());
+    const can::Timestamp next = clock.now() + network.sync_period;
+    while (clock.now() < next) idle();
+    if (++cycles_ % 5 == 0) daemon->service();
+    if (paced_) {
+      std::this_thread::sleep_until(wall_origin_ + (clock.now() - robot_origin_));
+    } else if (daemon->state() == DaemonState::kIdentifying) {
+      std::this_thread::sleep_for(2ms);
+    }
+  }
+  // Paced: robot time runs with the wall clock (from now on), so what the daemon's threads do in
+  // real time (laser readings, the identification) costs the robot time it would cost on a robot.
+  void pace(bool on) {
+    paced_ = on;
+    wall_origin_ = std::chrono::steady_clock::now();
+    robot_origin_ = clock.now();
+  }
+
+  // Cycles until `done` or `max_s` of robot time; returns whether done.
+  bool run_until(const std::function<bool()>& done, double max_s) {
+    const double end = seconds() + max_s;
+    while (seconds() < end) {
+      if (done()) return true;
+      cycle();
+    }
+    return done();
+  }
+  double seconds() const { return std::chrono::duration<double>(clock.now()).count(); }
+
+  Reply request(const std::string& cmd, const nlohmann::json& args = nlohmann::json::object()) {
+    PeerInfo peer{static_cast<int>(::getpid()), static_cast<int>(::getuid()),
+                  static_cast<int>(::getgid())};
+    return daemon->handle(cmd, args, peer);
+  }
+
+  bool saw_event(const std::string& type, const std::string& key, const std::string& value) {
+    std::lock_guard lock(events_mu_);
+    for (const nlohmann::json& e : events_) {
+      if (e["event"] == type && e["data"].contains(key) && e["data"][key] == value) return true;
+    }
+    return false;
+  }
+
+  // Runs a calibration through the control requests until it awaits acceptance (or ends
+  // otherwise); returns the calibration id or the reason it did not get there.
+  Result<int> calibrate(const nlohmann::json& args = nlohmann::json::object()) {
+    const Reply r = request("calibrate", args);
+    if (!r.ok) return Status(ErrorCode::kAborted, "calibrate: " + r.code + ": " + r.message);
+    const bool done = run_until(
+        [&] {
+          const DaemonState s = daemon->state();
+          if (s == DaemonState::kAwaitingAcceptance || s == DaemonState::kFault) return true;
+          const nlohmann::json c = daemon->status()["calibration"];
+          return s == DaemonState::kHolding && !c.is_null() && c["outcome"] != "measuring" &&
+                 c["outcome"] != "identifying";
+        },
+        900.0);
+    if (!done || daemon->state() != DaemonState::kAwaitingAcceptance) {
+      return Status(ErrorCode::kAborted,
+                    "the calibration did not reach acceptance: " + daemon->status().dump());
+    }
+    return r.result["calibration"].get<int>();
+  }
+
+  // RMS over cables of the frame-anchor distance between two models, m.
+  static double anchor_rms(const RobotModel& a, const RobotModel& b) {
+    return std::sqrt((a.frame_anchors - b.frame_anchors).colwise().squaredNorm().mean());
+  }
+
+  can::ManualClock clock;
+  RobotModel nominal;
+  sim::Scenario scenario;
+  std::unique_ptr<sim::Physics> physics;
+  canopen::MasterConfig network;
+  std::unique_ptr<sim::CanRobot> robot;
+  std::unique_ptr<sim::LaserSlave> slave;
+  std::unique_ptr<modbus::LaserSensor> laser;
+  DaemonConfig config;
+  std::unique_ptr<Daemon> daemon;
+
+ private:
+  VirtualCell(std::string source, std::filesystem::path dir)
+      : source_(std::move(source)), dir_(std::move(dir)) {}
+
+  Status make_robot(std::uint64_t seed) {
+    auto nom = config::load_robot_config(source_ + "/config/mini.yaml");
+    if (!nom.ok()) return nom.status();
+    nominal = *nom;
+    auto sc = sim::load_scenario(source_ + "/config/scenarios/mini-calibration.yaml");
+    if (!sc.ok()) return sc.status();
+    scenario = *sc;
+    auto truth = sim::resolve_truth(scenario, nominal);
+    if (!truth.ok()) return truth.status();
+    auto p = sim::Physics::create(*truth, scenario, seed);
+    if (!p.ok()) return p.status();
+    physics = std::make_unique<sim::Physics>(std::move(*p));
+    auto home = sim::true_pose_counts(*physics, physics->truth().home);
+    if (!home.ok()) return home.status();
+    if (Status s = physics->step(home->array().round().matrix(), 0.0); !s.ok()) return s;
+    auto net = canopen::load_config(source_ + "/config/canopen-mini.yaml");
+    if (!net.ok()) return net.status();
+    network = *net;
+    sim::CanRobotOptions ro;
+    for (int i = 0; i < home->size(); ++i) {
+      ro.initial_counts.push_back(static_cast<std::int32_t>(std::lround((*home)(i))));
+    }
+    auto r = sim::CanRobot::create(*robot_ep_, network, *physics, ro);
+    if (!r.ok()) return r.status();
+    robot = std::move(*r);
+    robot->power_on(clock.now());
+
+    auto map = modbus::load_register_map(source_ + "/config/lasers/baumer-om20-om30.yaml");
+    if (!map.ok()) return map.status();
+    sim::LaserSlaveConfig lc;
+    lc.transport = sim::LaserSlaveConfig::Transport::kTcp;
+    lc.map = *map;
+    lc.noise_sigma_m = scenario.noise.laser;
+    auto sl = sim::LaserSlave::start(lc);
+    if (!sl.ok()) return sl.status();
+    slave = std::move(*sl);
+    const sim::LaserChannel l = physics->state().lasers.front();
+    slave->set_distance(l.true_distance, l.status);
+    modbus::LaserConfig cfg;
+    cfg.map = *map;
+    modbus::TcpSettings tcp;
+    tcp.port = slave->port();
+    cfg.link.transport = tcp;
+    cfg.poll_rate_hz = 200.0;
+    laser = std::make_unique<modbus::LaserSensor>(cfg);
+    return laser->start();
+  }
+
+  std::string source_;
+  std::filesystem::path dir_;
+  can::VirtualCanBus bus_{clock};
+  std::unique_ptr<can::VirtualCanEndpoint> master_ep_ = bus_.endpoint("cdprd");
+  std::unique_ptr<can::VirtualCanEndpoint> robot_ep_ = bus_.endpoint("cdpr-sim");
+  std::mutex events_mu_;
+  std::vector<nlohmann::json> events_;
+  std::uint64_t cycles_ = 0;
+  bool paced_ = false;
+  std::chrono::steady_clock::time_point wall_origin_;
+  can::Timestamp robot_origin_{0};
+};
+
+}  // namespace cdpr::controller::testing
