@@ -143,6 +143,10 @@ TEST_F(CdprctlTest, EverySubcommandSendsItsRequest) {
       {{"report", "2"}, "report", {{"version", 2}, {"html", false}}},
       {{"stop"}, "stop", json::object()},
       {{"fault-reset"}, "fault_reset", json::object()},
+      {{"move", "0.1", "0.2", "0.3"}, "move", {{"pose", {0.1, 0.2, 0.3, 0.0, 0.0, 0.0}}}},
+      {{"move", "0.1", "0.2", "0.3", "0", "0", "0.05"},
+       "move",
+       {{"pose", {0.1, 0.2, 0.3, 0.0, 0.0, 0.05}}}},
       {{"status", "--json"}, "status", json::object()},  // global options after the command
   };
   for (const Case& c : cases) {
@@ -305,6 +309,7 @@ TEST_F(CdprctlTest, UsageErrorsExitTwoAndHelpExitsZero) {
       {"calibrate", "--dry-run", "--wait"},
       {"calibrate", "--poses", "/no/such/file.csv"},
       {"--timeout", "-1", "status"},
+      {"move", "0.1", "0.2"},
   };
   for (const auto& args : bad) {
     const Outcome o = ctl(args);

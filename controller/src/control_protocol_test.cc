@@ -117,16 +117,35 @@ TEST(ControlProtocol, RefusesNestingDeeperThanTheLimit) {
 }
 
 TEST(ControlProtocol, EveryPrivilegedCommandIsMarkedAndOnlyThose) {
-  const std::set<std::string> privileged = {"calibrate",         "abort", "accept",     "reject",
-                                            "geometry_rollback", "stop",  "fault_reset"};
-  std::size_t seen = 0;
+  // Those that move the robot or change the geometry (docs/control-protocol.md, Permissions).
+  const std::set<std::string> privileged = {"calibrate",         "abort", "accept",      "reject",
+                                            "geometry_rollback", "stop",  "fault_reset", "move"};
+  const std::set<std::string> open = {"status",           "watch", "geometry_show", "geometry_diff",
+                                      "geometry_history", "report"};
+  std::set<std::string> seen;
   for (const CommandSpec& c : commands()) {
-    EXPECT_EQ(c.privileged, privileged.count(std::string(c.name)) == 1) << c.name;
+    const std::string name(c.name);
+    EXPECT_TRUE(privileged.count(name) + open.count(name) == 1) << name << " is not documented";
+    EXPECT_EQ(c.privileged, privileged.count(name) == 1) << name;
     EXPECT_EQ(is_privileged(c.name), c.privileged);
-    ++seen;
+    EXPECT_TRUE(seen.insert(name).second) << name << " twice";
   }
-  EXPECT_EQ(seen, 13u);
+  EXPECT_EQ(seen.size(), privileged.size() + open.size());
   EXPECT_FALSE(is_privileged("no_such_command"));
+}
+
+TEST(ControlProtocol, MoveTakesSixFiniteNumbers) {
+  EXPECT_TRUE(parse_request(R"({"id":1,"cmd":"move","args":{"pose":[0.1,0.2,0.3,0,0,0.05]}})")
+                  .request.has_value());
+  for (const char* bad :
+       {R"({"id":1,"cmd":"move"})", R"({"id":1,"cmd":"move","args":{"pose":[0.1,0.2,0.3]}})",
+        R"({"id":1,"cmd":"move","args":{"pose":[0.1,0.2,0.3,0,0,"x"]}})",
+        R"({"id":1,"cmd":"move","args":{"pose":[0.1,0.2,0.3,0,0,null]}})"}) {
+    const ParsedRequest p = parse_request(bad);
+    EXPECT_FALSE(p.request.has_value()) << bad;
+    EXPECT_EQ(p.error_code, ControlErrorCode::kBadRequest) << bad;
+    EXPECT_NE(p.error_message.find("pose"), std::string::npos) << p.error_message;
+  }
 }
 
 TEST(ControlProtocol, ErrorCodesRoundTripThroughTheirNames) {

@@ -97,7 +97,8 @@ struct ControlServer::Impl {
   std::mutex events_mu;
   std::vector<std::shared_ptr<const std::string>> events;  // guarded by events_mu
 
-  std::vector<std::unique_ptr<Client>> clients;  // server thread only
+  std::vector<std::unique_ptr<Client>> clients;                // server thread only
+  std::vector<char> read_buf = std::vector<char>(kReadChunk);  // server thread only
   Clock::time_point accept_paused_until{};
 
   struct {
@@ -264,19 +265,17 @@ struct ControlServer::Impl {
       c.in.erase(0, c.in_pos);
       c.in_pos = 0;
     }
+    if (c.in.empty() && c.in.capacity() > 2 * kReadChunk) c.in.shrink_to_fit();
     return !c.discarding && c.in.find('\n') != std::string::npos;
   }
 
   // Reads once from `c` (when it has no complete line waiting).
   void read_from(Client& c) {
-    const std::size_t old = c.in.size();
-    c.in.resize(old + kReadChunk);
-    const ssize_t n = ::recv(c.fd, c.in.data() + old, kReadChunk, 0);
+    const ssize_t n = ::recv(c.fd, read_buf.data(), read_buf.size(), 0);
     if (n > 0) {
-      c.in.resize(old + static_cast<std::size_t>(n));
+      c.in.append(read_buf.data(), static_cast<std::size_t>(n));
       return;
     }
-    c.in.resize(old);
     if (n == 0) {
       c.eof = true;
       // A last request without its '\n' still counts.
