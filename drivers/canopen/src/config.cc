@@ -6,8 +6,13 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <map>
+#include <memory>
 #include <set>
 #include <sstream>
+
+#include "cdpr/canopen/eds.hpp"
+#include "cdpr/canopen/eds_check.hpp"
 
 namespace cdpr::canopen {
 
@@ -352,7 +357,8 @@ class Parser {
                                                  "profile_acceleration",
                                                  "homing_method",
                                                  "gain",
-                                                 "offset"};
+                                                 "offset",
+                                                 "eds"};
     Status s = check_keys(f.node, f.node_field, kNodeKeys);
     if (!s.ok()) return s;
     std::int64_t v = 0;
@@ -460,6 +466,9 @@ class Parser {
       if (!(s = integer(n, f.name("homing_method"), -128, 127, v)).ok()) return s;
       d.homing_method = static_cast<std::int8_t>(v);
     }
+    if (const YAML::Node n = f.get("eds"); n) {
+      if (!(s = device_eds(n, f.name("eds"), c)).ok()) return s;
+    }
     for (const char* key : {"gain", "offset"}) {
       const YAML::Node n = f.get(key);
       if (!n) continue;
@@ -513,7 +522,7 @@ class Parser {
             {"kind", "heartbeat_ms", "heartbeat_timeout_ms", "master_heartbeat_timeout_ms", "rpdo",
              "tpdo", "sdo", "mode", "counts_per_unit", "transition_timeout_ms",
              "mode_switch_timeout_ms", "abort_connection_option", "quick_stop_option",
-             "profile_velocity", "profile_acceleration", "homing_method", "gain", "offset"});
+             "profile_velocity", "profile_acceleration", "homing_method", "gain", "offset", "eds"});
         if (!ps.ok()) return ps;
       }
       if (!(s = node(f, nc)).ok()) return s;
@@ -525,7 +534,28 @@ class Parser {
   const std::string& source() const { return source_; }
 
  private:
+  // `eds:` names the device's EDS/DCF, relative to the YAML file's directory; loaded once per
+  // file (profiles share it).
+  Status device_eds(const YAML::Node& n, const std::string& field, NodeConfig& c) const {
+    if (!n.IsScalar() || n.Scalar().empty()) return error(n, field, "expected a file name");
+    std::string path = n.Scalar();
+    const auto slash = source_.rfind('/');
+    if (path.front() != '/' && slash != std::string::npos) {
+      path = source_.substr(0, slash + 1) + path;
+    }
+    auto& cached = eds_cache_[path];
+    if (!cached) {
+      auto e = eds::Eds::load(path);
+      if (!e.ok()) return error(n, field, std::string(e.status().message()));
+      cached = std::make_shared<const eds::Eds>(std::move(*e));
+    }
+    c.eds = path;
+    c.eds_data = cached;
+    return Status::Ok();
+  }
+
   std::string source_;
+  mutable std::map<std::string, std::shared_ptr<const eds::Eds>> eds_cache_;
 };
 
 std::size_t mapped_count(const std::vector<PdoConfig>& pdos) {
@@ -664,6 +694,7 @@ Result<MasterConfig> parse_config(std::string_view yaml, std::string_view source
     if (n.force.offset.size() == 1) n.force.offset.assign(ch, n.force.offset[0]);
   }
   s = validate(c);
+  if (s.ok()) s = check_eds(c);
   if (!s.ok()) {
     return Status::Error(s.code(), "%.*s: %.*s", static_cast<int>(source.size()), source.data(),
                          static_cast<int>(s.message().size()), s.message().data());

@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -15,6 +16,10 @@
 #include "cdpr/status.hpp"
 
 namespace cdpr::canopen {
+
+namespace eds {
+class Eds;
+}
 
 using std::chrono::nanoseconds;
 
@@ -68,6 +73,10 @@ struct NodeConfig {
   std::vector<SdoWrite> sdo_writes;  // extra start-up writes, after the PDOs
   DriveConfig drive;
   ForceConfig force;
+  // The device's EDS/DCF (CiA 306), `eds:` in the YAML, relative to the YAML file's directory;
+  // empty: none. Loaded and checked against the configuration at load (eds_check.hpp).
+  std::string eds;
+  std::shared_ptr<const eds::Eds> eds_data;
 };
 
 struct MasterConfig {
@@ -99,7 +108,8 @@ Result<MasterConfig> parse_config(std::string_view yaml, std::string_view source
 Result<MasterConfig> load_config(const std::string& path);
 
 // Checks what parsing cannot: unique node ids and COB-IDs, PDO sizes, drive and force-sensor
-// mappings, heartbeat timeouts longer than the producer period.
+// mappings, heartbeat timeouts longer than the producer period. (parse_config also checks every
+// node that names an EDS against it: check_eds in eds_check.hpp.)
 Status validate(const MasterConfig& config);
 
 }  // namespace cdpr::canopen
