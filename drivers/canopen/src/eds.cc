@@ -660,6 +660,15 @@ namespace {
 std::string format_value(std::uint16_t data_type, std::int64_t v) {
   char b[32];
   if (type_is_signed(data_type)) {
+    // Values may come as the raw bytes of the object (0xFD for INTEGER8 -3): sign-extend.
+    const int size = type_size(data_type);
+    if (size > 0 && size < 8) {
+      const int bits = 8 * size;
+      const std::uint64_t mask = (std::uint64_t{1} << bits) - 1;
+      std::uint64_t u = static_cast<std::uint64_t>(v) & mask;
+      if (u & (std::uint64_t{1} << (bits - 1))) u |= ~mask;
+      v = static_cast<std::int64_t>(u);
+    }
     std::snprintf(b, sizeof b, "%lld", static_cast<long long>(v));
   } else {
     const int size = type_size(data_type);

@@ -95,6 +95,10 @@ struct MasterConfig {
   double bus_load_warning = 0.7;
   bool reset_communication = true;  // boot starts with NMT reset communication to all nodes
   bool quick_stop_on_fault = true;  // a faulted or lost node quick-stops every drive
+  // At boot, invalidate every RPDO/TPDO of a node that the configuration does not use (default
+  // mappings that real drives ship enabled). Not a YAML field: off only to measure what the
+  // defaults cost (docs/canopen.md, bus load).
+  bool disable_unused_pdos = true;
   std::vector<NodeConfig> nodes;
 
   std::uint32_t heartbeat_cob_id() const {
