@@ -709,8 +709,9 @@ std::string to_dcf(const Eds& eds, const Commissioning& c,
       << eds.source() << "\n; with ParameterValue = what the master wrote at boot.\n\n";
   out << "[FileInfo]\n";
   char name[64];
-  std::snprintf(name, sizeof name, "node%u.dcf", unsigned{c.node_id});
-  out << "FileName=" << name << "\nFileVersion=1\nFileRevision=0\nEDSVersion=4.0\n";
+  std::snprintf(name, sizeof name, "node%u", unsigned{c.node_id});
+  out << "FileName=" << (c.node_name.empty() ? std::string(name) : c.node_name) << ".dcf"
+      << "\nFileVersion=1\nFileRevision=0\nEDSVersion=4.0\n";
   out << "Description=configuration of node " << unsigned{c.node_id} << " (" << c.node_name
       << ")\nCreatedBy=cdpr canopen master\n\n";
   out << "[DeviceInfo]\n";
