@@ -2,8 +2,11 @@
 
 #include <gtest/gtest.h>
 
+#include <set>
+
 #include "alloc_counter.hpp"
 #include "cdpr/canopen/codes.hpp"
+#include "cdpr/canopen/eds.hpp"
 #include "testing/sim_network.hpp"
 
 namespace cdpr::canopen {
@@ -438,6 +441,259 @@ TEST_F(MasterTest, CycleDoesNotAllocate) {
   EXPECT_EQ(allocations, 0u);
   EXPECT_GE(master->stats().tpdos_received, 500u * 9);
   EXPECT_EQ(drives[1]->position(), 1017 + 498);
+}
+
+// --- issue 14: the master's own conformance, default PDOs, EDS/DCF ------------------------------
+
+// The MINI network built from the shipped EDS files, as the simulator builds it: the drives come
+// with their default PDO mappings enabled. The bus measures its load (bit-time model).
+class MasterEdsTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    auto c = load_config(CDPR_SOURCE_DIR "/config/canopen-mini.yaml");
+    ASSERT_TRUE(c.ok()) << c.status().to_string();
+    config = *c;
+    ASSERT_NE(config.nodes[0].eds_data, nullptr);
+    for (NodeId id = 1; id <= 8; ++id) {
+      drives[id] = &net.add<slave::Drive402>(id, 1000 * id + 17);
+      const Status s = drives[id]->load_eds(*config.nodes[id - 1].eds_data);
+      ASSERT_TRUE(s.ok()) << s.to_string();
+    }
+    force = &net.add<slave::SlaveNode>(9);
+    const Status s = force->load_eds(*config.nodes[8].eds_data);
+    ASSERT_TRUE(s.ok()) << s.to_string();
+    net.power_on();
+  }
+
+  Status make_and_boot() {
+    MasterHooks hooks;
+    hooks.now = [this] { return net.now(); };
+    hooks.idle = [this] {
+      net.idle();
+      take_spy();
+    };
+    hooks.receive_timeout = 0ns;
+    auto m = Master::create(net.master_bus(), config, hooks);
+    if (!m.ok()) return m.status();
+    master = std::move(*m);
+    return master->boot();
+  }
+
+  void take_spy() {
+    can::Frame f;
+    while (spy->receive(f, 0ns).ok()) {
+      f.timestamp = net.now();
+      seen.push_back(f);
+    }
+  }
+
+  void run(std::chrono::nanoseconds d) {
+    const Timestamp end = net.now() + d;
+    while (net.now() < end) {
+      master->cycle(net.now());
+      const Timestamp next = net.now() + config.sync_period;
+      while (net.now() < next) {
+        net.idle();
+        take_spy();
+      }
+    }
+  }
+
+  // Bus load measured over `d` of running (frames' worst-case bit times / time).
+  double measure_load(std::chrono::nanoseconds d) {
+    const can::LoadSample a = net.bus().load_sample();
+    run(d);
+    return can::bus_load(a, net.bus().load_sample());
+  }
+
+  testing::SimNetwork net{can::VirtualBusOptions{1024, true, 1'000'000}};
+  std::unique_ptr<can::VirtualCanEndpoint> spy = net.bus().endpoint("spy");
+  std::vector<can::Frame> seen;  // everything on the bus, stamped with the receive time
+  MasterConfig config;
+  std::array<slave::Drive402*, 9> drives{};
+  slave::SlaveNode* force = nullptr;
+  std::unique_ptr<Master> master;
+};
+
+// Item 11: the default PDOs real drives ship enabled are invalidated at boot; only what the
+// configuration uses is on the bus.
+TEST_F(MasterEdsTest, UnusedDefaultPdosAreDisabledAtBoot) {
+  // The drives start with all four RPDOs and TPDOs enabled.
+  for (std::uint16_t comm : {0x1401, 0x1402, 0x1403, 0x1801, 0x1802, 0x1803}) {
+    ASSERT_EQ(drives[1]->od().get({comm, 1}) & cob::kInvalidBit, 0u) << std::hex << comm;
+  }
+  const Status s = make_and_boot();
+  ASSERT_TRUE(s.ok()) << s.to_string();
+  for (NodeId id = 1; id <= 8; ++id) {
+    for (std::uint16_t comm : {0x1401, 0x1402, 0x1403, 0x1801, 0x1802, 0x1803}) {
+      EXPECT_NE(drives[id]->od().get({comm, 1}) & cob::kInvalidBit, 0u)
+          << "node " << int{id} << " 0x" << std::hex << comm << " still enabled";
+    }
+    EXPECT_EQ(master->disabled_pdos(id),
+              (std::vector<std::uint16_t>{0x1401, 0x1402, 0x1403, 0x1801, 0x1802, 0x1803}));
+  }
+  EXPECT_TRUE(master->disabled_pdos(9).empty());  // the force node's defaults are the used ones
+  EXPECT_EQ(master->stats().pdos_disabled, 8u * 6u);
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  seen.clear();
+  run(200ms);
+  std::set<std::uint32_t> ids;
+  for (const can::Frame& f : seen) ids.insert(f.id);
+  for (NodeId id = 1; id <= 8; ++id) {
+    for (int n = 2; n <= 4; ++n) {
+      EXPECT_EQ(ids.count(cob::tpdo(n, id)), 0u) << "TPDO" << n << " of node " << int{id};
+    }
+  }
+  EXPECT_EQ(ids.count(cob::tpdo(1, 1)), 1u);
+}
+
+// Item 11, the figure in docs/canopen.md: the MINI network at 4 ms measured on the bit-time
+// model, with and without the cleanup; the master's own figure counts only what is left.
+TEST_F(MasterEdsTest, BusLoadWithAndWithoutTheCleanupOfDefaultPdos) {
+  auto measure = [&](bool cleanup, double& computed) {
+    config.disable_unused_pdos = cleanup;
+    // A fresh network each time: reset node restores the drives' defaults.
+    for (NodeId id = 1; id <= 9; ++id) {
+      EXPECT_TRUE(net.master_bus().send(nmt_frame(NmtCommand::kResetNode, id)).ok());
+    }
+    for (int i = 0; i < 4; ++i) net.idle();
+    const Status s = make_and_boot();
+    EXPECT_TRUE(s.ok()) << s.to_string();
+    EXPECT_TRUE(master->enable_all(2s).ok());
+    run(100ms);
+    computed = master->bus_load().load;
+    const double measured = measure_load(1s);
+    (void)master->shutdown(1s);
+    return measured;
+  };
+  double computed_with = 0, computed_without = 0;
+  const double without = measure(false, computed_without);
+  const double with = measure(true, computed_with);
+  std::printf(
+      "[bus load] MINI at 4 ms, 1 Mbit/s: %.1f %% measured with the cleanup of default "
+      "PDOs (master's figure %.1f %%), %.1f %% without\n",
+      100 * with, 100 * computed_with, 100 * without);
+  EXPECT_GT(without, 1.0) << "the default PDOs alone should overload the bus";
+  EXPECT_LT(with, 0.7);
+  EXPECT_NEAR(with, computed_with, 0.03);
+}
+
+// Item 9: the master's heartbeat keeps its period whatever the cycle (it was late by up to a
+// cycle every period: 52 ms for 50 ms at a 4 ms cycle).
+TEST_F(MasterEdsTest, MasterHeartbeatKeepsItsPeriod) {
+  ASSERT_TRUE(make_and_boot().ok());
+  seen.clear();
+  run(1s);
+  std::vector<Timestamp> t;
+  for (const can::Frame& f : seen) {
+    if (f.id == config.heartbeat_cob_id()) t.push_back(f.timestamp);
+  }
+  ASSERT_GE(t.size(), 10u);
+  const double mean = to_ms(t.back() - t.front()) / static_cast<double>(t.size() - 1);
+  EXPECT_NEAR(mean, 50.0, 0.5);
+  for (std::size_t i = 1; i < t.size(); ++i) {
+    EXPECT_LE(t[i] - t[i - 1], 50ms + config.sync_period);
+  }
+}
+
+// Item 12: the master's boot-up message precedes its first heartbeat (and the NMT reset).
+TEST_F(MasterEdsTest, MasterSendsItsBootUpBeforeItsFirstHeartbeat) {
+  ASSERT_TRUE(make_and_boot().ok());
+  run(100ms);
+  int first_own = -1, first_nmt = -1;
+  for (std::size_t i = 0; i < seen.size(); ++i) {
+    if (first_own < 0 && seen[i].id == config.heartbeat_cob_id()) first_own = static_cast<int>(i);
+    if (first_nmt < 0 && seen[i].id == cob::kNmt) first_nmt = static_cast<int>(i);
+  }
+  ASSERT_GE(first_own, 0);
+  EXPECT_EQ(seen[static_cast<std::size_t>(first_own)].dlc, 1);
+  EXPECT_EQ(seen[static_cast<std::size_t>(first_own)].data[0], 0x00)
+      << "first own frame is not a boot-up";
+  EXPECT_LT(first_own, first_nmt);
+  int boot_ups = 0;
+  for (const can::Frame& f : seen) {
+    boot_ups += f.id == config.heartbeat_cob_id() && f.data[0] == 0x00 ? 1 : 0;
+  }
+  EXPECT_EQ(boot_ups, 1);
+}
+
+// Item 10: with a SYNC counter the master writes 0x1019 on every node, so conforming nodes take
+// the 1-byte SYNC instead of raising EMCY 0x8240 and leaving OPERATIONAL.
+TEST_F(MasterEdsTest, SyncCounterOverflowIsWrittenToTheNodes) {
+  config.sync_counter_overflow = 5;
+  const Status s = make_and_boot();
+  ASSERT_TRUE(s.ok()) << s.to_string();
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  const auto syncs = drives[3]->syncs();
+  run(100ms);
+  for (NodeId id = 1; id <= 8; ++id) {
+    EXPECT_EQ(drives[id]->od().get({0x1019, 0}), 5) << "node " << int{id};
+    EXPECT_EQ(drives[id]->nmt_state(), NmtState::kOperational) << "node " << int{id};
+  }
+  EXPECT_EQ(force->od().get({0x1019, 0}), 5);
+  EXPECT_GE(drives[3]->syncs() - syncs, 20u);
+  Event e;
+  while (master->events().pop(e)) {
+    EXPECT_FALSE(e.type == EventType::kEmcy && e.emcy.code == 0x8240) << "node " << int{e.node};
+  }
+  EXPECT_FALSE(master->faulted());
+  bool counter = false;
+  for (const can::Frame& f : seen) counter = counter || (f.id == cob::kSync && f.dlc == 1);
+  EXPECT_TRUE(counter);
+}
+
+// The DCF of what the master applied: the EDS with ParameterValue for every object it wrote.
+TEST_F(MasterEdsTest, WritesTheDcfOfTheAppliedConfiguration) {
+  ASSERT_TRUE(make_and_boot().ok());
+  const std::string dir = ::testing::TempDir();
+  ASSERT_TRUE(master->write_dcfs(dir).ok());
+  auto dcf = eds::Eds::load(dir + "/winch3.dcf");
+  ASSERT_TRUE(dcf.ok()) << dcf.status().to_string();
+  auto value = [&](ObjectAddress a) -> std::int64_t {
+    const eds::SubObject* s = dcf->find(a);
+    if (s == nullptr || !s->parameter_value) return -999999;
+    auto v = dcf->value(*s, 3, true);
+    return v.ok() ? *v : -999999;
+  };
+  EXPECT_EQ(value({0x1017, 0}), 50);
+  EXPECT_EQ(value({0x1016, 1}), (127 << 16) | 150);
+  EXPECT_EQ(value({0x1600, 2}), 0x607A0020);
+  EXPECT_EQ(value({0x1400, 1}), 0x203);
+  EXPECT_EQ(value({0x1801, 1}), 0x80000283);  // disabled default TPDO2
+  EXPECT_EQ(value({0x6060, 0}), 8);
+  EXPECT_EQ(value({0x60C2, 2}), -3);
+  EXPECT_FALSE(dcf->find({0x6041, 0})->parameter_value.has_value());
+  bool node_id = false;
+  for (const auto& [k, v] : dcf->commissioning()) node_id = node_id || (k == "nodeid" && v == "3");
+  EXPECT_TRUE(node_id);
+  // The applied values are those the node holds.
+  for (const auto& [key, v] : *master->applied(3)) {
+    const ObjectAddress a{static_cast<std::uint16_t>(key >> 8), static_cast<std::uint8_t>(key)};
+    if (a.index == 0x6040 || a.index == 0x6060) continue;  // changed by the RPDO / the model
+    const auto* e = drives[3]->od().find(a);
+    ASSERT_NE(e, nullptr);
+    std::int64_t raw = 0;
+    for (std::size_t i = 0; i < e->data.size() && i < 8; ++i)
+      raw |= std::int64_t{e->data[i]} << (8 * i);
+    EXPECT_EQ(raw, v) << std::hex << a.index << ":" << int{a.sub};
+  }
+}
+
+TEST_F(MasterTest, WritesADcfForANodeWithoutEds) {
+  config.nodes[8].eds_data.reset();
+  config.nodes[8].eds.clear();
+  ASSERT_TRUE(make_and_boot().ok());
+  const std::string path = ::testing::TempDir() + "/forces-no-eds.dcf";
+  ASSERT_TRUE(master->write_dcf(9, path).ok());
+  auto dcf = eds::Eds::load(path);
+  ASSERT_TRUE(dcf.ok()) << dcf.status().to_string();
+  const eds::SubObject* m = dcf->find({0x1A01, 4});
+  ASSERT_NE(m, nullptr);
+  ASSERT_TRUE(m->parameter_value.has_value());
+  auto v = dcf->value(*m, 9, true);
+  ASSERT_TRUE(v.ok());
+  EXPECT_EQ(*v, 0x64010810);
+  EXPECT_EQ(m->data_type, eds::type::kUnsigned32);
 }
 
 }  // namespace

@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <vector>
+
 #include "cdpr/canopen/codes.hpp"
 
 namespace cdpr::canopen {
@@ -89,6 +91,29 @@ TEST(Nmt, MasterHeartbeatProducer) {
   EXPECT_EQ(f.data[0], 0x05);
   EXPECT_FALSE(hb.poll(Timestamp{49ms}, NmtState::kOperational, f));
   EXPECT_TRUE(hb.poll(Timestamp{50ms}, NmtState::kOperational, f));
+}
+
+// Issue 14, item 9: polled once per cycle, the heartbeat is due a period after the previous due
+// time, not after it was sent (which made it late by up to a cycle every period).
+TEST(Nmt, MasterHeartbeatIsDueEveryPeriodWhateverTheCycle) {
+  HeartbeatProducer hb(0x77F, 50ms);
+  can::Frame f;
+  std::vector<Timestamp> sent;
+  for (Timestamp t{0}; t <= 1000ms; t += 20ms) {  // a 20 ms cycle, as in user-mode-linux tests
+    if (hb.poll(t, NmtState::kOperational, f)) sent.push_back(t);
+  }
+  // Due at 0, 50, 100, ...: sent at the first cycle at or after each.
+  ASSERT_EQ(sent.size(), 21u);
+  for (std::size_t k = 0; k < sent.size(); ++k) {
+    EXPECT_GE(sent[k], 50ms * static_cast<int>(k));
+    EXPECT_LT(sent[k], 50ms * static_cast<int>(k) + 20ms);
+  }
+  // Late by whole periods: one heartbeat, then the schedule goes on (no burst).
+  EXPECT_TRUE(hb.poll(1230ms, NmtState::kOperational, f));
+  EXPECT_FALSE(hb.poll(1240ms, NmtState::kOperational, f));
+  EXPECT_TRUE(hb.poll(1250ms, NmtState::kOperational, f));
+  EXPECT_EQ(hb.boot_up().data[0], 0x00);
+  EXPECT_EQ(hb.boot_up().id, 0x77Fu);
 }
 
 TEST(Emcy, DecodesCodeRegisterAndManufacturerBytes) {

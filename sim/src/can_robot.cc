@@ -115,11 +115,22 @@ Result<std::unique_ptr<CanRobot>> CanRobot::create(can::CanBus& bus,
     } else {
       node = std::make_unique<cos::SlaveNode>(*port, n.id);
       if (n.kind == co::NodeKind::kForceSensor) {
-        node->od().set({0x1000, 0}, 0x00000194);  // CiA 404 measuring device
+        node->od().set_default({0x1000, 0}, 0x00000194);  // CiA 404 measuring device
         product = r->options_.force_product_code;
         r->force_nodes_.push_back(node.get());
       } else {
-        node->od().set({0x1000, 0}, 0);
+        node->od().set_default({0x1000, 0}, 0);
+      }
+    }
+    // A node whose configuration names an EDS gets exactly the dictionary it describes (default
+    // PDO mappings included), so the simulator and the master's checks share one description.
+    const bool from_eds = n.eds_data != nullptr;
+    if (from_eds) {
+      const Status st = node->load_eds(*n.eds_data);
+      if (!st.ok()) {
+        return Status::Error(st.code(), "CAN robot: node %u (%s): %.*s", unsigned{n.id},
+                             n.name.c_str(), static_cast<int>(st.message().size()),
+                             st.message().data());
       }
     }
     cos::ObjectDictionary& od = node->od();
@@ -129,25 +140,31 @@ Result<std::unique_ptr<CanRobot>> CanRobot::create(can::CanBus& bus,
     od.add({0x1018, 4}, co::DataType::kU32, r->options_.serial_base + n.id, cos::Access::kRo);
     od.add_string({0x1008, 0}, "cdpr-sim " + n.name, cos::Access::kConst);
     if (n.heartbeat_period.count() > 0) {
-      od.set({0x1017, 0},
-             std::chrono::duration_cast<std::chrono::milliseconds>(n.heartbeat_period).count());
+      od.set_default(
+          {0x1017, 0},
+          std::chrono::duration_cast<std::chrono::milliseconds>(n.heartbeat_period).count());
     }
-    // Every object the configuration maps or writes exists (new ones start at 0).
+    // Without an EDS, every object the configuration maps or writes exists (new ones start at
+    // 0); with one, the master's load checked that the EDS has them.
     for (const co::PdoConfig& p : n.rpdos) {
       for (const co::PdoEntry& e : p.entries) {
-        if (od.find(e.object) == nullptr) od.add(e.object, e.type, 0, cos::Access::kRw);
+        if (!from_eds && od.find(e.object) == nullptr) {
+          od.add(e.object, e.type, 0, cos::Access::kRw);
+        }
       }
     }
     for (const co::PdoConfig& p : n.tpdos) {
       for (const co::PdoEntry& e : p.entries) {
-        if (od.find(e.object) == nullptr) od.add(e.object, e.type, 0, cos::Access::kRo);
+        if (!from_eds && od.find(e.object) == nullptr) {
+          od.add(e.object, e.type, 0, cos::Access::kRo);
+        }
         if (n.kind == co::NodeKind::kForceSensor) {
           r->force_channels_.push_back({node.get(), e.object, e.type});
         }
       }
     }
     for (const co::SdoWrite& w : n.sdo_writes) {
-      if (od.find(w.object) == nullptr) od.add(w.object, w.type, 0, cos::Access::kRw);
+      if (!from_eds && od.find(w.object) == nullptr) od.add(w.object, w.type, 0, cos::Access::kRw);
     }
     r->ports_.push_back(std::move(port));
     r->nodes_.push_back(std::move(node));

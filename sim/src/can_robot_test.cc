@@ -260,5 +260,36 @@ TEST_F(CanRobotTest, ScenarioOverloadSdoAbortAndBusOff) {
   EXPECT_GT(robot->stats().frames_dropped_bus_off, 0u);
 }
 
+// The nodes are built from the shipped EDS files that canopen-mini.yaml names: the drives come
+// with their default PDO mappings enabled, as real drives do, and the master disables what it
+// does not use, so no frame of those PDOs reaches the bus.
+TEST_F(CanRobotTest, NodesComeFromTheEdsWithDefaultPdosThatTheMasterDisables) {
+  make();
+  ASSERT_NE(config.nodes[0].eds_data, nullptr);
+  for (int cable = 0; cable < robot->num_cables(); ++cable) {
+    auto& od = robot->drive(cable).od();
+    const co::NodeId id = robot->drive(cable).id();
+    for (std::uint16_t comm : {0x1401, 0x1402, 0x1403, 0x1801, 0x1802, 0x1803}) {
+      const auto* e = od.find({comm, 1});
+      ASSERT_NE(e, nullptr);
+      EXPECT_EQ(e->default_data[3] & 0x80, 0)
+          << "the EDS default of 0x" << std::hex << comm << " should be enabled";
+      EXPECT_NE(od.get({comm, 1}) & co::cob::kInvalidBit, 0u)
+          << "node " << int{id} << " 0x" << std::hex << comm << " left enabled";
+    }
+    EXPECT_EQ(master->disabled_pdos(id).size(), 6u);
+    EXPECT_EQ(od.get({0x6502, 0}), 0xA1);
+    EXPECT_FALSE(od.find({0x607C, 0})->mappable);  // PDOMapping=0 in the EDS
+  }
+  auto type = master->sdo(9)->read<std::uint32_t>({0x1000, 0}, master->pump());
+  ASSERT_TRUE(type.ok());
+  EXPECT_EQ(*type, 0x194u);
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  const auto unknown = master->stats().unknown_frames;
+  run(200ms);
+  EXPECT_EQ(master->stats().unknown_frames, unknown) << "frames of PDOs nobody configured";
+  EXPECT_LT(master->bus_load().load, 0.7);
+}
+
 }  // namespace
 }  // namespace cdpr::sim

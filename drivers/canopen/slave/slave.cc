@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "cdpr/canopen/codes.hpp"
+#include "cdpr/canopen/eds.hpp"
 
 namespace cdpr::canopen::slave {
 
@@ -15,13 +16,25 @@ Entry& ObjectDictionary::add(ObjectAddress a, DataType type, std::int64_t value,
   Entry& e = entries_[a.key()];
   e.data.assign(size_of(type), 0);
   put_le(e.data.data(), static_cast<std::uint32_t>(value), size_of(type));
+  e.default_data = e.data;
   e.access = access;
+  e.variable_size = false;
+  return e;
+}
+
+Entry& ObjectDictionary::add_raw(ObjectAddress a, std::vector<std::uint8_t> bytes, Access access) {
+  Entry& e = entries_[a.key()];
+  e.data = std::move(bytes);
+  e.default_data = e.data;
+  e.access = access;
+  e.variable_size = false;
   return e;
 }
 
 Entry& ObjectDictionary::add_string(ObjectAddress a, std::string_view value, Access access) {
   Entry& e = entries_[a.key()];
   e.data.assign(value.begin(), value.end());
+  e.default_data = e.data;
   e.access = access;
   e.variable_size = true;
   return e;
@@ -58,6 +71,27 @@ void ObjectDictionary::set(ObjectAddress a, std::int64_t value) {
   put_le(e->data.data(), static_cast<std::uint32_t>(value), e->data.size());
 }
 
+void ObjectDictionary::set_default(ObjectAddress a, std::int64_t value) {
+  set(a, value);
+  if (Entry* e = find(a)) e->default_data = e->data;
+}
+
+void ObjectDictionary::restore_defaults(std::uint16_t lo, std::uint16_t hi) {
+  for (auto& [key, e] : entries_) {
+    const auto index = static_cast<std::uint16_t>(key >> 8);
+    if (index >= lo && index <= hi) e.data = e.default_data;
+  }
+}
+
+std::vector<ObjectAddress> ObjectDictionary::addresses() const {
+  std::vector<ObjectAddress> out;
+  out.reserve(entries_.size());
+  for (const auto& [key, e] : entries_) {
+    out.push_back({static_cast<std::uint16_t>(key >> 8), static_cast<std::uint8_t>(key & 0xFF)});
+  }
+  return out;
+}
+
 std::uint32_t ObjectDictionary::read(ObjectAddress a, std::vector<std::uint8_t>& out) const {
   const Entry* e = find(a);
   if (e == nullptr) return has_index(a.index) ? abort_code::kNoSubIndex : abort_code::kNoObject;
@@ -90,28 +124,78 @@ SlaveNode::SlaveNode(can::CanBus& bus, NodeId id) : bus_(bus), id_(id) {
   od_.add({0x1000, 0}, DataType::kU32, 0x00020192, Access::kRo);  // device type (402)
   od_.add({0x1001, 0}, DataType::kU8, 0, Access::kRo);
   od_.add_string({0x1008, 0}, "cdpr simulated CANopen node", Access::kConst);
+  // COB-ID EMCY (CiA 301, 7.5.2.16): bit 31 set = no EMCY; the CAN-ID may change only while
+  // bit 31 is set; 29-bit ids are not supported.
+  Entry& emcy = od_.add({0x1014, 0}, DataType::kU32, cob::kEmcy + id);
+  emcy.validate = [this](std::span<const std::uint8_t> d) -> std::uint32_t {
+    const std::uint32_t v = get_u32(d.data());
+    const auto old = static_cast<std::uint32_t>(od_.get({0x1014, 0}));
+    if (v & 0x3FFFF800u) return abort_code::kValueRange;
+    if (!(old & cob::kInvalidBit) && !(v & cob::kInvalidBit) && (v & 0x7FF) != (old & 0x7FF)) {
+      return abort_code::kValueRange;
+    }
+    return 0;
+  };
   od_.add({0x1016, 0}, DataType::kU8, 1, Access::kRo);
   od_.add({0x1016, 1}, DataType::kU32, 0);
   od_.add({0x1017, 0}, DataType::kU16, 0);
   od_.add({0x1018, 0}, DataType::kU8, 4, Access::kRo);
   od_.add({0x1018, 1}, DataType::kU32, 0x00CD9001, Access::kRo);
-  for (int n = 0; n < 4; ++n) {
+  // Synchronous counter overflow value (CiA 301, 7.5.2.22): 0 = SYNC without data, 2..240 =
+  // SYNC with a counter byte. Writable only while the communication cycle period is 0.
+  Entry& overflow = od_.add({0x1019, 0}, DataType::kU8, 0);
+  overflow.validate = [this](std::span<const std::uint8_t> d) -> std::uint32_t {
+    if (d[0] == 1 || d[0] > 240) return abort_code::kValueRange;
+    if (od_.find({0x1006, 0}) != nullptr && od_.get({0x1006, 0}) != 0) {
+      return abort_code::kDeviceState;
+    }
+    return 0;
+  };
+  for (int n = 0; n < kPdos; ++n) {
     for (int dir = 0; dir < 2; ++dir) {
+      const bool tpdo = dir == 1;
       const auto comm = static_cast<std::uint16_t>((dir == 0 ? 0x1400 : 0x1800) + n);
       const auto map = static_cast<std::uint16_t>((dir == 0 ? 0x1600 : 0x1A00) + n);
       const std::uint32_t cob = dir == 0 ? cob::rpdo(n + 1, id) : cob::tpdo(n + 1, id);
+      auto refresh = [this, tpdo, n] { refresh_pdo(tpdo, n); };
+      auto disabled = [this, comm] { return (od_.get({comm, 1}) & cob::kInvalidBit) != 0; };
       od_.add({comm, 0}, DataType::kU8, dir == 0 ? 2 : 5, Access::kRo);
-      od_.add({comm, 1}, DataType::kU32, cob::kInvalidBit | cob);
-      od_.add({comm, 2}, DataType::kU8, 255);
-      if (dir == 1) {
-        od_.add({comm, 3}, DataType::kU16, 0);
-        od_.add({comm, 5}, DataType::kU16, 0);
+      // COB-ID (CiA 301, 7.5.2.35/37): bit 31 creates (0) or deletes (1) the PDO at once; bits
+      // 0..29 may change only while the PDO is deleted; 29-bit ids are not supported.
+      Entry& cob_entry = od_.add({comm, 1}, DataType::kU32, cob::kInvalidBit | cob);
+      cob_entry.validate = [this, comm](std::span<const std::uint8_t> d) -> std::uint32_t {
+        const std::uint32_t v = get_u32(d.data());
+        const auto old = static_cast<std::uint32_t>(od_.get({comm, 1}));
+        if (v & 0x3FFFF800u) return abort_code::kValueRange;
+        const bool was_valid = !(old & cob::kInvalidBit);
+        const bool valid = !(v & cob::kInvalidBit);
+        if (was_valid && valid && (v & 0x3FFFFFFFu) != (old & 0x3FFFFFFFu)) {
+          return abort_code::kValueRange;
+        }
+        return 0;
+      };
+      cob_entry.on_write = refresh;
+      // Transmission type: 241..251 reserved, 252/253 (RTR only) not supported.
+      Entry& type = od_.add({comm, 2}, DataType::kU8, 255);
+      type.validate = [](std::span<const std::uint8_t> d) -> std::uint32_t {
+        return d[0] > 240 && d[0] < 254 ? abort_code::kValueRange : 0;
+      };
+      type.on_write = refresh;
+      if (tpdo) {
+        // The inhibit time may change only while the PDO is deleted.
+        Entry& inhibit = od_.add({comm, 3}, DataType::kU16, 0);
+        inhibit.validate = [disabled](std::span<const std::uint8_t>) -> std::uint32_t {
+          return disabled() ? 0 : abort_code::kValueRange;
+        };
+        inhibit.on_write = refresh;
+        Entry& timer = od_.add({comm, 5}, DataType::kU16, 0);
+        timer.on_write = refresh;
       }
       // Mapping may change only while the PDO is disabled (CiA 301, 7.5.2.36), and the count
-      // only to entries that exist and fit 8 bytes.
-      auto disabled = [this, comm] { return (od_.get({comm, 1}) & cob::kInvalidBit) != 0; };
+      // only to entries that exist, may be mapped (RPDO: and written) and fit 8 bytes.
       Entry& count = od_.add({map, 0}, DataType::kU8, 0);
-      count.validate = [this, map, disabled](std::span<const std::uint8_t> d) -> std::uint32_t {
+      count.validate = [this, map, tpdo,
+                        disabled](std::span<const std::uint8_t> d) -> std::uint32_t {
         if (!disabled()) return abort_code::kDeviceState;
         if (d[0] > 8) return abort_code::kValueTooHigh;
         unsigned bits = 0;
@@ -120,13 +204,18 @@ SlaveNode::SlaveNode(can::CanBus& bus, NodeId id) : bus_(bus), id_(id) {
           const ObjectAddress obj{static_cast<std::uint16_t>(v >> 16),
                                   static_cast<std::uint8_t>(v >> 8)};
           const Entry* e = od_.find(obj);
-          if (e == nullptr || e->variable_size || e->data.size() * 8 != (v & 0xFF)) {
+          if (e == nullptr || e->variable_size || !e->mappable ||
+              e->data.size() * 8 != (v & 0xFF)) {
+            return abort_code::kNotMappable;
+          }
+          if (!tpdo && (e->access == Access::kRo || e->access == Access::kConst)) {
             return abort_code::kNotMappable;
           }
           bits += v & 0xFF;
         }
         return bits > 64 ? abort_code::kPdoLength : 0;
       };
+      count.on_write = refresh;
       for (std::uint8_t s = 1; s <= 8; ++s) {
         Entry& e = od_.add({map, s}, DataType::kU32, 0);
         e.validate = [this, map, disabled](std::span<const std::uint8_t>) -> std::uint32_t {
@@ -138,12 +227,79 @@ SlaveNode::SlaveNode(can::CanBus& bus, NodeId id) : bus_(bus), id_(id) {
   }
 }
 
+Status SlaveNode::load_eds(const eds::Eds& description) {
+  std::map<std::uint32_t, bool> described;
+  for (const auto& [index, object] : description.objects()) {
+    if (index < 0x1000) continue;  // data type definitions
+    for (const eds::SubObject& sub : object.subs) {
+      const int size = eds::type_size(sub.data_type);
+      Access access = Access::kRw;
+      switch (sub.access) {
+        case eds::Access::kRo:
+          access = Access::kRo;
+          break;
+        case eds::Access::kWo:
+          access = Access::kWo;
+          break;
+        case eds::Access::kConst:
+          access = Access::kConst;
+          break;
+        default:
+          access = Access::kRw;
+          break;
+      }
+      std::vector<std::uint8_t> bytes;
+      if (size == 0) {
+        bytes.assign(sub.default_value.begin(), sub.default_value.end());
+      } else if (sub.data_type == eds::type::kReal32 || sub.data_type == eds::type::kReal64) {
+        bytes.assign(static_cast<std::size_t>(size), 0);
+      } else {
+        auto v = description.value(sub, id_);
+        if (!v.ok()) return v.status();
+        bytes.assign(static_cast<std::size_t>(size), 0);
+        for (int i = 0; i < size; ++i) {
+          bytes[static_cast<std::size_t>(i)] =
+              static_cast<std::uint8_t>(static_cast<std::uint64_t>(*v) >> (8 * i));
+        }
+      }
+      Entry* e = od_.find(sub.address);
+      if (e == nullptr) {
+        e = size == 0 ? &od_.add_string(sub.address, sub.default_value, access)
+                      : &od_.add_raw(sub.address, bytes, access);
+      } else if (size != 0 && (e->variable_size || e->data.size() != bytes.size())) {
+        return Status::Error(ErrorCode::kInvalidArgument,
+                             "%s: node %u: the device model has %zu bytes here, the EDS says %s",
+                             description.where(sub).c_str(), unsigned{id_}, e->data.size(),
+                             std::string(eds::type_name(sub.data_type)).c_str());
+      }
+      e->access = access;
+      e->mappable = sub.pdo_mapping;
+      e->variable_size = size == 0;
+      e->data = bytes;
+      e->default_data = bytes;
+      described[sub.address.key()] = true;
+    }
+  }
+  for (const ObjectAddress a : od_.addresses()) {
+    if (described.count(a.key()) == 0) {
+      return Status::Error(ErrorCode::kInvalidArgument,
+                           "%s: node %u: the device model needs 0x%04X:%02X, which the EDS does "
+                           "not describe",
+                           description.source().c_str(), unsigned{id_}, unsigned{a.index},
+                           unsigned{a.sub});
+    }
+  }
+  refresh_pdos();
+  return Status::Ok();
+}
+
 void SlaveNode::send(const can::Frame& f) {
   if (faults_.silent) return;
   (void)bus_.send(f);
 }
 
 void SlaveNode::power_on(Timestamp now) {
+  od_.restore_defaults(0x2000, 0xFFFF);
   on_reset_application();
   reset_communication(now);
 }
@@ -151,8 +307,10 @@ void SlaveNode::power_on(Timestamp now) {
 void SlaveNode::reset_communication(Timestamp now) {
   sdo_state_ = SdoState::kIdle;
   held_sdo_.clear();
-  rpdos_.clear();
-  tpdos_.clear();
+  // The communication profile area returns to its defaults (CiA 301, 7.3.2.2.2): default PDO
+  // mappings are back, as on a real device.
+  od_.restore_defaults(0x1000, 0x1FFF);
+  refresh_pdos();
   master_heard_ = false;
   master_lost_ = false;
   state_ = NmtState::kPreOperational;
@@ -162,12 +320,19 @@ void SlaveNode::reset_communication(Timestamp now) {
 
 void SlaveNode::send_emcy(std::uint16_t code, std::uint8_t error_register,
                           std::array<std::uint8_t, 5> manufacturer) {
-  can::Frame f = make_frame(cob::kEmcy + id_, 8);
+  od_.set({0x1001, 0}, error_register);
+  const auto cob_id = static_cast<std::uint32_t>(od_.get({0x1014, 0}));
+  if (cob_id & cob::kInvalidBit) return;
+  can::Frame f = make_frame(cob_id & 0x7FF, 8);
   put_u16(&f.data[0], code);
   f.data[2] = error_register;
   std::copy(manufacturer.begin(), manufacturer.end(), f.data.begin() + 3);
-  od_.set({0x1001, 0}, error_register);
+  ++emcys_sent_;
   send(f);
+}
+
+void SlaveNode::clear_errors() {
+  send_emcy(0x0000, 0x00);
 }
 
 void SlaveNode::step(Timestamp now) {
@@ -194,6 +359,7 @@ void SlaveNode::step(Timestamp now) {
     on_master_lost(now);
   }
   on_step(now);
+  if (state_ == NmtState::kOperational) send_event_tpdos(now);
 }
 
 void SlaveNode::handle(const can::Frame& f, Timestamp now) {
@@ -201,7 +367,10 @@ void SlaveNode::handle(const can::Frame& f, Timestamp now) {
   if (f.id == cob::kNmt && f.dlc >= 2 && (f.data[1] == 0 || f.data[1] == id_)) {
     switch (static_cast<NmtCommand>(f.data[0])) {
       case NmtCommand::kStart:
-        build_pdos();
+        // Event-driven TPDOs report their values once on entering OPERATIONAL.
+        if (state_ != NmtState::kOperational) {
+          for (Pdo& p : tpdos_) p.sent = false;
+        }
         state_ = NmtState::kOperational;
         break;
       case NmtCommand::kStop:
@@ -211,6 +380,7 @@ void SlaveNode::handle(const can::Frame& f, Timestamp now) {
         state_ = NmtState::kPreOperational;
         break;
       case NmtCommand::kResetNode:
+        od_.restore_defaults(0x2000, 0xFFFF);
         on_reset_application();
         reset_communication(now);
         break;
@@ -234,22 +404,31 @@ void SlaveNode::handle(const can::Frame& f, Timestamp now) {
   }
   if (state_ != NmtState::kOperational) return;
   if (f.id == cob::kSync) {
+    // The SYNC's length must agree with 0x1019 (0: no data, 2..240: a counter byte); otherwise
+    // EMCY 0x8240 "unexpected SYNC data length" and, as 0x1029:01 = 0 prescribes for a
+    // communication error, PRE-OPERATIONAL (CiA 301, 7.2.5.2 and 7.5.2.32).
+    const auto overflow = od_.get({0x1019, 0});
+    if (f.dlc != (overflow >= 2 ? 1 : 0)) {
+      send_emcy(0x8240, 0x11);
+      state_ = NmtState::kPreOperational;
+      return;
+    }
     ++syncs_;
     bool applied = false;
     for (std::size_t i = 0; i < rpdos_.size(); ++i) {
-      if (rpdos_[i].has_pending && rpdos_[i].type <= 240) {
+      if (rpdos_[i].valid && rpdos_[i].has_pending && rpdos_[i].type <= 240) {
         apply_rpdo(i, now);
         applied = true;
       }
     }
     if (applied) on_rpdo_applied(now);
     on_sync(now);
-    send_tpdos();
+    send_sync_tpdos();
     return;
   }
   for (std::size_t i = 0; i < rpdos_.size(); ++i) {
     Pdo& p = rpdos_[i];
-    if (f.id != p.cob_id) continue;
+    if (!p.valid || f.id != p.cob_id) continue;
     std::size_t need = 0;
     for (const auto& m : p.map) need += m.second;
     if (f.dlc < need) {
@@ -277,43 +456,95 @@ void SlaveNode::apply_rpdo(std::size_t i, Timestamp) {
   ++rpdos_applied_;
 }
 
-void SlaveNode::send_tpdos() {
+std::uint8_t SlaveNode::tpdo_data(const Pdo& p, std::array<std::uint8_t, 8>& out) const {
+  out.fill(0);
+  std::size_t off = 0;
+  for (const auto& [obj, bytes] : p.map) {
+    put_le(&out[off], static_cast<std::uint32_t>(od_.get(obj)), bytes);
+    off += bytes;
+  }
+  return static_cast<std::uint8_t>(off);
+}
+
+void SlaveNode::transmit_tpdo(Pdo& p, const std::array<std::uint8_t, 8>& data, std::uint8_t dlc,
+                              Timestamp now) {
+  can::Frame f = make_frame(p.cob_id, dlc);
+  std::copy(data.begin(), data.end(), f.data.begin());
+  p.sent = true;
+  p.last = data;
+  p.last_dlc = dlc;
+  p.last_time = now;
+  ++tpdos_sent_;
+  send(f);
+}
+
+void SlaveNode::send_sync_tpdos() {
+  std::array<std::uint8_t, 8> data{};
   for (Pdo& p : tpdos_) {
-    if (p.type == 0 || p.type > 240) continue;
+    if (!p.valid || p.type > 240) continue;
+    if (p.type == 0) {  // acyclic synchronous: at the SYNC after a change
+      const std::uint8_t dlc = tpdo_data(p, data);
+      if (p.sent && data == p.last && dlc == p.last_dlc) continue;
+      transmit_tpdo(p, data, dlc, now_);
+      continue;
+    }
     if (++p.sync_count < p.type) continue;
     p.sync_count = 0;
-    can::Frame f = make_frame(p.cob_id, 0);
-    std::size_t off = 0;
-    for (const auto& [obj, bytes] : p.map) {
-      put_le(&f.data[off], static_cast<std::uint32_t>(od_.get(obj)), bytes);
-      off += bytes;
-    }
-    f.dlc = static_cast<std::uint8_t>(off);
-    send(f);
+    const std::uint8_t dlc = tpdo_data(p, data);
+    transmit_tpdo(p, data, dlc, now_);
   }
 }
 
-void SlaveNode::build_pdos() {
-  rpdos_.clear();
-  tpdos_.clear();
-  for (int dir = 0; dir < 2; ++dir) {
-    for (int n = 0; n < 4; ++n) {
-      const auto comm = static_cast<std::uint16_t>((dir == 0 ? 0x1400 : 0x1800) + n);
-      const auto map = static_cast<std::uint16_t>((dir == 0 ? 0x1600 : 0x1A00) + n);
-      const auto cob_id = static_cast<std::uint32_t>(od_.get({comm, 1}));
-      if (cob_id & cob::kInvalidBit) continue;
-      Pdo p;
-      p.cob_id = cob_id & 0x7FF;
-      p.type = static_cast<std::uint8_t>(od_.get({comm, 2}));
-      const auto count = od_.get({map, 0});
-      for (std::uint8_t s = 1; s <= count; ++s) {
-        const auto v = static_cast<std::uint32_t>(od_.get({map, s}));
-        p.map.emplace_back(
-            ObjectAddress{static_cast<std::uint16_t>(v >> 16), static_cast<std::uint8_t>(v >> 8)},
-            static_cast<std::uint8_t>((v & 0xFF) / 8));
-      }
-      (dir == 0 ? rpdos_ : tpdos_).push_back(std::move(p));
-    }
+// Event-driven TPDOs (254/255): sent when a mapped value changed, and when the event timer ran
+// out since the last transmission; never two within the inhibit time (CiA 301, 7.2.2.2).
+void SlaveNode::send_event_tpdos(Timestamp now) {
+  std::array<std::uint8_t, 8> data{};
+  for (Pdo& p : tpdos_) {
+    if (!p.valid || p.type < 254) continue;
+    const std::uint8_t dlc = tpdo_data(p, data);
+    const bool changed = !p.sent || data != p.last || dlc != p.last_dlc;
+    const bool timer = p.sent && p.event_timer.count() > 0 && now - p.last_time >= p.event_timer;
+    const bool inhibited = p.sent && now - p.last_time < p.inhibit;
+    if ((changed || timer) && !inhibited) transmit_tpdo(p, data, dlc, now);
+  }
+}
+
+void SlaveNode::refresh_pdo(bool tpdo, int n) {
+  Pdo& p = (tpdo ? tpdos_ : rpdos_)[static_cast<std::size_t>(n)];
+  const auto comm = static_cast<std::uint16_t>((tpdo ? 0x1800 : 0x1400) + n);
+  const auto map = static_cast<std::uint16_t>((tpdo ? 0x1A00 : 0x1600) + n);
+  const auto cob_id = static_cast<std::uint32_t>(od_.get({comm, 1}));
+  Pdo fresh;
+  fresh.valid = (cob_id & cob::kInvalidBit) == 0;
+  fresh.cob_id = cob_id & 0x7FF;
+  fresh.type = static_cast<std::uint8_t>(od_.get({comm, 2}));
+  if (tpdo) {
+    fresh.inhibit = std::chrono::microseconds(100 * od_.get({comm, 3}));
+    fresh.event_timer = std::chrono::milliseconds(od_.get({comm, 5}));
+  }
+  const auto count = od_.get({map, 0});
+  for (std::uint8_t s = 1; s <= count && s <= 8; ++s) {
+    const auto v = static_cast<std::uint32_t>(od_.get({map, s}));
+    fresh.map.emplace_back(
+        ObjectAddress{static_cast<std::uint16_t>(v >> 16), static_cast<std::uint8_t>(v >> 8)},
+        static_cast<std::uint8_t>((v & 0xFF) / 8));
+  }
+  // A PDO that stays the same keeps its transmission state (an event timer written while it
+  // runs takes effect from the last transmission).
+  if (p.valid && fresh.valid && p.cob_id == fresh.cob_id && p.map == fresh.map) {
+    fresh.sent = p.sent;
+    fresh.last = p.last;
+    fresh.last_dlc = p.last_dlc;
+    fresh.last_time = p.last_time;
+    fresh.sync_count = p.sync_count;
+  }
+  p = std::move(fresh);
+}
+
+void SlaveNode::refresh_pdos() {
+  for (int n = 0; n < kPdos; ++n) {
+    refresh_pdo(false, n);
+    refresh_pdo(true, n);
   }
 }
 
@@ -370,7 +601,14 @@ void SlaveNode::handle_sdo(const can::Frame& rx) {
       tx.data[3] = mux.sub;
       tx.data[0] = 0x60;
       if (cmd & 0x02) {  // expedited
-        const std::size_t n = (cmd & 0x01) ? 4u - ((cmd >> 2) & 0x03u) : 4u;
+        // Without the size indicated (0x22) the data is as long as the object (CiA 301,
+        // 7.2.4.3.3: "the number of bytes is unspecified"); 4 bytes for a variable-size one.
+        std::size_t n = 4;
+        if (cmd & 0x01) {
+          n = 4u - ((cmd >> 2) & 0x03u);
+        } else if (const Entry* e = od_.find(mux); e != nullptr && !e->variable_size) {
+          n = std::min<std::size_t>(4, e->data.size());
+        }
         const std::uint32_t code = od_.write(mux, std::span<const std::uint8_t>(&rx.data[4], n));
         if (code != 0) return sdo_abort(mux, code);
         sdo_state_ = SdoState::kIdle;
@@ -494,6 +732,8 @@ Drive402::Drive402(can::CanBus& bus, NodeId id, std::int32_t initial_position)
   };
   Entry& ipi = d.add({0x60C2, 2}, DataType::kI8, -3);
   ipi.on_write = ip.on_write;
+  // Supported drive modes (CiA 402): bit 0 profile position, bit 5 homing, bit 7 CSP.
+  d.add({0x6502, 0}, DataType::kU32, (1u << 0) | (1u << 5) | (1u << 7), Access::kRo);
   publish();
 }
 
@@ -592,7 +832,10 @@ void Drive402::apply_controlword(std::uint16_t cw) {
     case S::kFaultReaction:
       break;
     case S::kFault:
-      if ((cw & 0x80) && !(prev & 0x80)) s_ = S::kSwitchOnDisabled;  // rising edge only
+      if ((cw & 0x80) && !(prev & 0x80)) {  // rising edge only
+        s_ = S::kSwitchOnDisabled;
+        clear_errors();  // the fault is gone: 0x1001 = 0 and EMCY 0x0000
+      }
       break;
   }
   if (s_ == S::kEnabled && before != S::kEnabled) {
@@ -702,6 +945,8 @@ void Drive402::publish() {
     if (homing_error_) sw |= 0x2000;
   } else {
     sw |= 0x0400;
+    // CSP: bit 12 "target position used as input to the position loop" while enabled.
+    if (mode == 8 && s_ == S::kEnabled) sw |= 0x1000;
   }
   statusword_ = sw;
   od().set({0x6041, 0}, sw);

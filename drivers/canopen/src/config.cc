@@ -2,11 +2,15 @@
 
 #include <cstdlib>
 #include <fstream>
+#include <map>
+#include <memory>
 #include <optional>
 #include <set>
 #include <sstream>
 #include <type_traits>
 
+#include "cdpr/canopen/eds.hpp"
+#include "cdpr/canopen/eds_check.hpp"
 #include "cdpr/config/yaml_reader.hpp"
 
 namespace cdpr::canopen {
@@ -197,7 +201,27 @@ Status parse_sdo_writes(const YamlField& list, std::vector<SdoWrite>& out) {
   return Status::Ok();
 }
 
-Status parse_node(const NodeFields& f, NodeConfig& c) {
+// EDS files named by the network, parsed once per file (profiles share them).
+using EdsCache = std::map<std::string, std::shared_ptr<const eds::Eds>>;
+
+// `eds:` names the device's EDS/DCF, relative to the YAML file's directory.
+Status device_eds(const YamlField& field, EdsCache& cache, NodeConfig& c) {
+  CDPR_ASSIGN_OR_RETURN(std::string path, field.text());
+  const std::string& source = field.file();
+  const auto slash = source.rfind('/');
+  if (path.front() != '/' && slash != std::string::npos) path = source.substr(0, slash + 1) + path;
+  auto& cached = cache[path];
+  if (!cached) {
+    auto e = eds::Eds::load(path);
+    if (!e.ok()) return field.error(std::string(e.status().message()));
+    cached = std::make_shared<const eds::Eds>(std::move(*e));
+  }
+  c.eds = path;
+  c.eds_data = cached;
+  return Status::Ok();
+}
+
+Status parse_node(const NodeFields& f, EdsCache& eds_cache, NodeConfig& c) {
   CDPR_RETURN_IF_ERROR(f.node.check_keys({"id",
                                           "name",
                                           "profile",
@@ -218,7 +242,8 @@ Status parse_node(const NodeFields& f, NodeConfig& c) {
                                           "profile_acceleration",
                                           "homing_method",
                                           "gain",
-                                          "offset"}));
+                                          "offset",
+                                          "eds"}));
   if (const YamlField kind = f["kind"]; kind.present()) {
     CDPR_ASSIGN_OR_RETURN(const int k, kind.choice({"generic", "cia402", "force_sensor"}));
     constexpr NodeKind kKinds[] = {NodeKind::kGeneric, NodeKind::kCia402Drive,
@@ -262,6 +287,7 @@ Status parse_node(const NodeFields& f, NodeConfig& c) {
   CDPR_RETURN_IF_ERROR(integer("profile_velocity", d.profile_velocity, 0, 0xFFFFFFFF));
   CDPR_RETURN_IF_ERROR(integer("profile_acceleration", d.profile_acceleration, 0, 0xFFFFFFFF));
   CDPR_RETURN_IF_ERROR(integer("homing_method", d.homing_method, -128, 127));
+  if (const YamlField e = f["eds"]; e.present()) CDPR_RETURN_IF_ERROR(device_eds(e, eds_cache, c));
   // One value for every channel (expanded in parse_config) or one per channel.
   if (const YamlField gain = f["gain"]; gain.present()) {
     CDPR_ASSIGN_OR_RETURN(c.force.gain, gain.numbers(Sign::kAny, "", /*scalar_allowed=*/true));
@@ -273,6 +299,7 @@ Status parse_node(const NodeFields& f, NodeConfig& c) {
 }
 
 Status parse_document(const YamlField& root, MasterConfig& c) {
+  EdsCache eds_cache;
   CDPR_RETURN_IF_ERROR(root.check_keys({"master", "profiles", "nodes"}));
   if (const YamlField m = root["master"]; m.present()) CDPR_RETURN_IF_ERROR(parse_master(m, c));
   const YamlField profiles = root["profiles"];
@@ -300,10 +327,10 @@ Status parse_document(const YamlField& root, MasterConfig& c) {
           {"kind", "heartbeat_ms", "heartbeat_timeout_ms", "master_heartbeat_timeout_ms", "rpdo",
            "tpdo", "sdo", "mode", "counts_per_unit", "transition_timeout_ms",
            "mode_switch_timeout_ms", "abort_connection_option", "quick_stop_option",
-           "profile_velocity", "profile_acceleration", "homing_method", "gain", "offset"}));
+           "profile_velocity", "profile_acceleration", "homing_method", "gain", "offset", "eds"}));
       f.profile = p;
     }
-    CDPR_RETURN_IF_ERROR(parse_node(f, nc));
+    CDPR_RETURN_IF_ERROR(parse_node(f, eds_cache, nc));
     c.nodes.push_back(std::move(nc));
   }
   return Status::Ok();
@@ -430,7 +457,8 @@ Result<MasterConfig> parse_config(std::string_view yaml, std::string_view source
     if (n.force.gain.size() == 1) n.force.gain.assign(ch, n.force.gain[0]);
     if (n.force.offset.size() == 1) n.force.offset.assign(ch, n.force.offset[0]);
   }
-  const Status s = validate(c);
+  Status s = validate(c);
+  if (s.ok()) s = check_eds(c);
   if (!s.ok()) {
     return Status::Error(s.code(), "%.*s: %.*s", static_cast<int>(source.size()), source.data(),
                          static_cast<int>(s.message().size()), s.message().data());

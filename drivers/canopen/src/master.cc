@@ -1,7 +1,12 @@
 #include "cdpr/canopen/master.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <string>
+
+#include "cdpr/canopen/codes.hpp"
+#include "cdpr/canopen/eds.hpp"
+#include "cdpr/canopen/eds_check.hpp"
 
 namespace cdpr::canopen {
 
@@ -28,6 +33,15 @@ Result<std::unique_ptr<Master>> Master::create(can::CanBus& bus, MasterConfig co
     auto rt = std::make_unique<NodeRt>();
     rt->config = nc;
     rt->sdo = std::make_unique<SdoClient>(bus, nc.id, timing);
+    // What the node confirmed is what the master applied (kept for the DCF).
+    rt->sdo->set_download_observer(
+        [n = rt.get()](ObjectAddress a, std::span<const std::uint8_t> data) {
+          if (data.empty() || data.size() > 8) return;
+          std::uint64_t v = 0;
+          for (std::size_t i = 0; i < data.size(); ++i) v |= std::uint64_t{data[i]} << (8 * i);
+          n->applied[a.key()] = static_cast<std::int64_t>(v);
+          n->applied_size[a.key()] = static_cast<std::uint8_t>(data.size());
+        });
     for (const auto& p : nc.rpdos) {
       if (p.entries.empty()) continue;
       auto l = PdoLayout::compile(p, nc.id, rt->image);
@@ -243,6 +257,15 @@ Status Master::nmt(NmtCommand cmd, NodeId node_id) {
 Status Master::boot() {
   running_ = false;
   own_state_ = NmtState::kPreOperational;
+  // The master is a CANopen device too: its boot-up message comes before its first heartbeat
+  // (CiA 301, 7.2.8.3.3).
+  {
+    const Status up = bus_.send(heartbeat_.boot_up());
+    if (!up.ok()) {
+      return Status::Error(ErrorCode::kIoError, "master boot-up message: %.*s",
+                           static_cast<int>(up.message().size()), up.message().data());
+    }
+  }
   // Take in what is already queued (old boot-ups) so that only fresh boot-ups count below.
   can::Frame stale;
   while (bus_.receive(stale, std::chrono::nanoseconds(0)).ok()) dispatch(stale, hooks_.now());
@@ -323,6 +346,12 @@ Status Master::configure_node(NodeId id) {
     s = sdo.write<std::uint32_t>({0x1016, 1}, (std::uint32_t{config_.master_id} << 16) | ms, pump_);
     if (!s.ok()) return s;
   }
+  // A SYNC with a counter byte needs the node's 0x1019 to agree, or it raises EMCY 0x8240 and
+  // leaves OPERATIONAL (CiA 301, 7.5.2.22).
+  if (config_.sync_counter_overflow >= 2) {
+    s = sdo.write<std::uint8_t>({0x1019, 0}, config_.sync_counter_overflow, pump_);
+    if (!s.ok()) return s;
+  }
   if (c.kind == NodeKind::kCia402Drive) {
     s = sdo.write<std::int16_t>(cia402::obj::kAbortConnectionOption,
                                 c.drive.abort_connection_option, pump_);
@@ -331,6 +360,10 @@ Status Master::configure_node(NodeId id) {
       s = sdo.write<std::int16_t>(cia402::obj::kQuickStopOption, *c.drive.quick_stop_option, pump_);
       if (!s.ok()) return s;
     }
+  }
+  if (config_.disable_unused_pdos) {
+    s = disable_unused_pdos(*n);
+    if (!s.ok()) return s;
   }
   for (const auto* list : {&c.rpdos, &c.tpdos}) {
     for (const PdoConfig& p : *list) {
@@ -366,6 +399,155 @@ Status Master::configure_node(NodeId id) {
     s = set_mode(id, c.drive.mode);
     if (!s.ok()) return s;
   }
+  return Status::Ok();
+}
+
+// Real drives ship with default PDO mappings enabled (often four TPDOs each); left alone they
+// load the bus with frames nobody reads and make a foreign RPDO COB-ID act on the drive. Every
+// PDO the node has (its EDS lists them; without one the four of the pre-defined connection set,
+// skipping those the node says it lacks) that the configuration does not use is invalidated:
+// COB-ID read, written back with bit 31 set if it was valid.
+Status Master::disable_unused_pdos(NodeRt& n) {
+  const NodeConfig& c = n.config;
+  SdoClient& sdo = *n.sdo;
+  n.disabled.clear();
+  for (PdoDirection d : {PdoDirection::kRpdo, PdoDirection::kTpdo}) {
+    const auto& used = d == PdoDirection::kRpdo ? c.rpdos : c.tpdos;
+    for (int number : pdo_numbers(c, d)) {
+      bool configured = false;
+      for (const PdoConfig& p : used) configured = configured || p.number == number;
+      if (configured) continue;
+      PdoConfig p;
+      p.direction = d;
+      p.number = number;
+      const ObjectAddress cob{p.comm_index(), 1};
+      auto r = sdo.read<std::uint32_t>(cob, pump_);
+      if (!r.ok()) {
+        const std::uint32_t code = sdo.server_abort_code();
+        if (!c.eds_data && (code == abort_code::kNoObject || code == abort_code::kNoSubIndex)) {
+          continue;  // the node has fewer PDOs
+        }
+        return r.status();
+      }
+      if (*r & cob::kInvalidBit) continue;
+      Status s = sdo.write<std::uint32_t>(cob, *r | cob::kInvalidBit, pump_);
+      if (!s.ok()) return s;
+      n.disabled.push_back(p.comm_index());
+      ++stats_.pdos_disabled;
+    }
+  }
+  return Status::Ok();
+}
+
+const std::map<std::uint32_t, std::int64_t>* Master::applied(NodeId id) const {
+  if (node_index_[id] < 0) return nullptr;
+  return &nodes_[static_cast<std::size_t>(node_index_[id])]->applied;
+}
+
+std::vector<std::uint16_t> Master::disabled_pdos(NodeId id) const {
+  if (node_index_[id] < 0) return {};
+  return nodes_[static_cast<std::size_t>(node_index_[id])]->disabled;
+}
+
+Status Master::write_dcf(NodeId id, const std::string& path) const {
+  if (node_index_[id] < 0) {
+    return Status::Error(ErrorCode::kNotFound, "node %u: not in the configuration", unsigned{id});
+  }
+  const NodeRt& n = *nodes_[static_cast<std::size_t>(node_index_[id])];
+  eds::Eds description;
+  if (n.config.eds_data) {
+    description = *n.config.eds_data;
+  } else {
+    // No EDS: a description of the objects the master wrote, typed by their size.
+    auto e = eds::Eds::parse(
+        "[MandatoryObjects]\nSupportedObjects=0\n[OptionalObjects]\nSupportedObjects=0\n"
+        "[ManufacturerObjects]\nSupportedObjects=0\n[1000]\nParameterName=Device type\n"
+        "DataType=0x0007\nAccessType=ro\n",
+        "(no EDS: objects written by the master)");
+    if (!e.ok()) return e.status();
+    description = std::move(*e);
+    for (const auto& [key, size] : n.applied_size) {
+      const ObjectAddress a{static_cast<std::uint16_t>(key >> 8),
+                            static_cast<std::uint8_t>(key & 0xFF)};
+      const eds::Object* existing = description.object(a.index);
+      eds::Object o = existing != nullptr ? *existing : eds::Object{};
+      o.index = a.index;
+      char name[32];
+      std::snprintf(name, sizeof name, "Object 0x%04X", unsigned{a.index});
+      if (o.name.empty()) o.name = name;
+      eds::SubObject sub;
+      sub.address = a;
+      std::snprintf(name, sizeof name, "0x%04X:%02X", unsigned{a.index}, unsigned{a.sub});
+      sub.name = name;
+      sub.data_type = size == 1   ? eds::type::kUnsigned8
+                      : size == 2 ? eds::type::kUnsigned16
+                                  : eds::type::kUnsigned32;
+      sub.access = eds::Access::kRw;
+      std::erase_if(o.subs, [&](const eds::SubObject& x) { return x.address.sub == a.sub; });
+      o.subs.push_back(sub);
+      std::sort(o.subs.begin(), o.subs.end(), [](const eds::SubObject& x, const eds::SubObject& y) {
+        return x.address.sub < y.address.sub;
+      });
+      if (o.subs.size() == 1 && a.sub == 0) {
+        o.code = eds::ObjectCode::kVar;
+      } else {
+        o.code = eds::ObjectCode::kRecord;
+        // A record needs its sub-index 0 (highest sub-index supported).
+        if (o.subs.front().address.sub != 0) {
+          eds::SubObject count;
+          count.address = {a.index, 0};
+          count.name = "Highest sub-index supported";
+          count.data_type = eds::type::kUnsigned8;
+          count.access = eds::Access::kRo;
+          o.subs.insert(o.subs.begin(), count);
+        }
+        o.subs.front().default_value = std::to_string(o.subs.back().address.sub);
+      }
+      description.put(std::move(o));
+    }
+  }
+  eds::Commissioning c;
+  c.node_id = id;
+  c.node_name = n.config.name;
+  c.bitrate = config_.bitrate;
+  c.network_name = config_.interface;
+  return eds::write_text_file(path, eds::to_dcf(description, c, n.applied));
+}
+
+Status Master::write_dcfs(const std::string& dir) const {
+  for (const auto& n : nodes_) {
+    Status s = write_dcf(n->config.id, dir + "/" + n->config.name + ".dcf");
+    if (!s.ok()) return s;
+  }
+  return Status::Ok();
+}
+
+void Master::restart_link(void* self) {
+  auto* m = static_cast<Master*>(self);
+  if (!m->link_) return;
+  const can::RecoveryOutcome o = m->link_->recover();
+  Event e;
+  e.time = m->hooks_.now();
+  if (o.action == can::RecoveryOutcome::Action::kFailed) {
+    ++m->stats_.link_restart_failures;
+    e.type = EventType::kLinkRestartFailed;
+    e.value = static_cast<std::uint32_t>(o.error);
+  } else {
+    ++m->stats_.link_restarts;
+    e.type = EventType::kLinkRestarted;
+    e.value = static_cast<std::uint32_t>(o.action);
+  }
+  m->events_.push(e);
+}
+
+Status Master::enable_link_restart() {
+  auto link = can::CanLink::open(config_.interface);
+  if (!link.ok()) return link.status();
+  can::LinkInfo info;
+  Status s = (*link)->query(info);
+  if (!s.ok()) return s;
+  link_ = std::move(*link);
+  bus_sup_.set_restart_hook(&Master::restart_link, this);
   return Status::Ok();
 }
 

@@ -46,6 +46,10 @@ std::string_view to_string(EventType t) {
       return "SYNC overrun";
     case EventType::kTxFailed:
       return "transmit failed";
+    case EventType::kLinkRestarted:
+      return "link restarted after bus-off";
+    case EventType::kLinkRestartFailed:
+      return "link restart after bus-off failed";
   }
   return "invalid";
 }
@@ -129,7 +133,11 @@ bool HeartbeatProducer::poll(Timestamp now, NmtState state, can::Frame& frame) {
     next_ = now;
   }
   if (now < next_) return false;
-  next_ = now + period_;
+  // The next one is due a period after this one was due, not after it was sent: polled once per
+  // cycle, "now + period" made every heartbeat late by up to a cycle (60 ms for 50 ms at a 20 ms
+  // cycle). A caller late by whole periods gets one heartbeat, not a burst.
+  const auto late = (now - next_) / period_;
+  next_ += period_ * (late + 1);
   frame = make_frame(cob_id_, 1);
   frame.data[0] = static_cast<std::uint8_t>(state);
   return true;

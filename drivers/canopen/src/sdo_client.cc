@@ -81,6 +81,7 @@ Status SdoClient::begin(Timestamp now) {
   last_now_ = now;
   attempt_ = 1;
   transfer_stale_ = 0;
+  server_abort_ = 0;
   state_ = State::kBusy;
   result_ = Status::Ok();
   if (now < quiet_until_) {
@@ -170,6 +171,7 @@ void SdoClient::fail(Status s) {
 void SdoClient::finish() {
   state_ = State::kDone;
   result_ = Status::Ok();
+  if (op_ == Op::kDownload && download_observer_) download_observer_(addr_, buf_);
 }
 
 void SdoClient::cancel() {
@@ -263,6 +265,7 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
                                            code == abort_code::kTimeout);
     if (phase_ == Phase::kInitiate && (!(mux == addr_) || echo)) return discard(f);
     abort_sent_ = 0;
+    server_abort_ = code;
     const std::string_view text = sdo_abort_text(code);
     fail(Status::Error(ErrorCode::kAborted, "node %u: SDO %s 0x%04X:%02X aborted: 0x%08X %.*s",
                        unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub},

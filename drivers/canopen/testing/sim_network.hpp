@@ -14,7 +14,8 @@ namespace cdpr::canopen::testing {
 
 class SimNetwork {
  public:
-  SimNetwork() : bus_(clock_), master_ep_(bus_.endpoint("master")) {}
+  explicit SimNetwork(can::VirtualBusOptions options = {})
+      : bus_(clock_, options), master_ep_(bus_.endpoint("master")) {}
 
   can::CanBus& master_bus() { return *master_ep_; }
   can::VirtualCanBus& bus() { return bus_; }

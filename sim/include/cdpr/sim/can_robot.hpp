@@ -8,10 +8,14 @@
 //
 // Nodes: the `cia402` nodes in configuration order are the drives of cables 1..m
 // (cdpr_canopen_slave's Drive402); the channels of the `force_sensor` nodes (the values their
-// TPDOs map, in node then mapping order) are the force sensors of cables 1..m. Every node has the
-// identity object 0x1018 (vendor, product code, revision, serial = node id), 0x1008 = "cdpr-sim
-// <name>", its producer heartbeat 0x1017 preset to the configured period (so a node is heard
-// before a master configures it) and every object the configuration maps or writes at boot.
+// TPDOs map, in node then mapping order) are the force sensors of cables 1..m. A node whose
+// configuration names an EDS (`eds:`, e.g. config/eds/cdpr-sim-drive.eds in canopen-mini.yaml)
+// has exactly the object dictionary the EDS describes, with its defaults: the drives start with
+// their default PDO mappings enabled, as real drives do, and the master must disable what it does
+// not use. Without an EDS a node has the model's objects plus every object the configuration maps
+// or writes at boot. Every node has the identity object 0x1018 (vendor, product code, revision,
+// serial = node id), 0x1008 = "cdpr-sim <name>" and its producer heartbeat 0x1017 preset to the
+// configured period (so a node is heard before a master configures it; kept across NMT resets).
 //
 // On each SYNC: the drives apply their RPDOs (CSP: position actual := target) and send their
 // TPDOs (statusword, position actual), then the physics steps with the drives' positions (counts)

@@ -5,6 +5,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -15,6 +16,10 @@
 #include "cdpr/status.hpp"
 
 namespace cdpr::canopen {
+
+namespace eds {
+class Eds;
+}
 
 using std::chrono::nanoseconds;
 
@@ -68,6 +73,10 @@ struct NodeConfig {
   std::vector<SdoWrite> sdo_writes;  // extra start-up writes, after the PDOs
   DriveConfig drive;
   ForceConfig force;
+  // The device's EDS/DCF (CiA 306), `eds:` in the YAML, relative to the YAML file's directory;
+  // empty: none. Loaded and checked against the configuration at load (eds_check.hpp).
+  std::string eds;
+  std::shared_ptr<const eds::Eds> eds_data;
 };
 
 struct MasterConfig {
@@ -86,6 +95,10 @@ struct MasterConfig {
   double bus_load_warning = 0.7;
   bool reset_communication = true;  // boot starts with NMT reset communication to all nodes
   bool quick_stop_on_fault = true;  // a faulted or lost node quick-stops every drive
+  // At boot, invalidate every RPDO/TPDO of a node that the configuration does not use (default
+  // mappings that real drives ship enabled). Not a YAML field: off only to measure what the
+  // defaults cost (docs/canopen.md, bus load).
+  bool disable_unused_pdos = true;
   std::vector<NodeConfig> nodes;
 
   std::uint32_t heartbeat_cob_id() const {
@@ -99,7 +112,8 @@ Result<MasterConfig> parse_config(std::string_view yaml, std::string_view source
 Result<MasterConfig> load_config(const std::string& path);
 
 // Checks what parsing cannot: unique node ids and COB-IDs, PDO sizes, drive and force-sensor
-// mappings, heartbeat timeouts longer than the producer period.
+// mappings, heartbeat timeouts longer than the producer period. (parse_config also checks every
+// node that names an EDS against it: check_eds in eds_check.hpp.)
 Status validate(const MasterConfig& config);
 
 }  // namespace cdpr::canopen

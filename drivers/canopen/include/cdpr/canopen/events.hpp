@@ -39,6 +39,8 @@ enum class EventType : std::uint8_t {
   kDriveStuck,         // node's drive did not follow (supervisor timeout)
   kSyncOverrun,        // value = SYNC periods missed because cycle() came late
   kTxFailed,           // value = frame id that could not be queued
+  kLinkRestarted,      // bus-off recovery through the link; value = can::RecoveryOutcome action
+  kLinkRestartFailed,  // value = errno of the last attempt
 };
 
 std::string_view to_string(EventType t);

@@ -12,10 +12,13 @@
 
 #include <array>
 #include <functional>
+#include <map>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "cdpr/can/can_bus.hpp"
+#include "cdpr/can/can_link.hpp"
 #include "cdpr/canopen/bus_supervisor.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/canopen/devices.hpp"
@@ -40,6 +43,9 @@ struct MasterStats {
   std::uint64_t emcys = 0;
   std::uint64_t tx_failures = 0;
   std::uint64_t unknown_frames = 0;
+  std::uint64_t pdos_disabled = 0;  // unused PDOs found enabled at boot and disabled
+  std::uint64_t link_restarts = 0;  // bus-off recoveries through the link (netlink)
+  std::uint64_t link_restart_failures = 0;
 };
 
 class Master {
@@ -48,11 +54,29 @@ class Master {
   static Result<std::unique_ptr<Master>> create(can::CanBus& bus, MasterConfig config,
                                                 MasterHooks hooks);
 
-  // Start-up: reset communication, wait for boot-ups, configure every node, start them, start
-  // SYNC. Errors name the node and the step.
+  // Start-up: the master's own boot-up message, reset communication, wait for boot-ups, configure
+  // every node, start them, start SYNC. Errors name the node and the step.
   Status boot();
-  // Configures one node through SDO (heartbeats, 0x6007, PDOs, mode, extra writes). Part of boot.
+  // Configures one node through SDO (heartbeats, 0x1019 when SYNC carries a counter, 0x6007,
+  // disabling of every PDO the configuration does not use, PDOs, mode, extra writes). Part of
+  // boot.
   Status configure_node(NodeId id);
+
+  // A DCF (CiA 306) of what the master applied to a node: its EDS (or, without one, the objects
+  // written) with ParameterValue = the last value the master wrote. write_dcfs writes one per
+  // node, `<dir>/<node name>.dcf`.
+  Status write_dcf(NodeId id, const std::string& path) const;
+  Status write_dcfs(const std::string& dir) const;
+  // Values the master wrote to a node and the node confirmed (ObjectAddress::key() -> value).
+  const std::map<std::uint32_t, std::int64_t>* applied(NodeId id) const;
+  // The PDOs (comm parameter indices, 0x14xx/0x18xx) the last boot found enabled on a node
+  // although the configuration does not use them, and disabled.
+  std::vector<std::uint16_t> disabled_pdos(NodeId id) const;
+
+  // Bus-off recovery through the kernel: when the interface (config().interface) has no
+  // restart-ms, the master restarts it through rtnetlink once the recovery wait is over
+  // (docs/canopen.md, bus-off). Needs CAP_NET_ADMIN for the restart itself.
+  Status enable_link_restart();
 
   // The RT cycle.
   void cycle(Timestamp now);
@@ -110,7 +134,12 @@ class Master {
     std::unique_ptr<SdoClient> sdo;
     int drive = -1;
     int force = -1;
+    std::map<std::uint32_t, std::int64_t> applied;  // confirmed downloads (for the DCF)
+    std::map<std::uint32_t, std::uint8_t> applied_size;
+    std::vector<std::uint16_t> disabled;  // comm indices of PDOs disabled at boot
   };
+  Status disable_unused_pdos(NodeRt& n);
+  static void restart_link(void* self);
 
   class MasterPump final : public Pump {
    public:
@@ -153,6 +182,7 @@ class Master {
   bool running_ = false;
   bool faulted_ = false;
   Timestamp next_cycle_{0};
+  std::unique_ptr<can::CanLink> link_;  // enable_link_restart()
 };
 
 }  // namespace cdpr::canopen

@@ -90,8 +90,15 @@ class HeartbeatProducer {
   HeartbeatProducer(std::uint32_t cob_id, std::chrono::nanoseconds period)
       : cob_id_(cob_id), period_(period) {}
   bool enabled() const { return period_.count() > 0; }
-  // True (and `frame` filled) when a heartbeat is due.
+  // True (and `frame` filled) when a heartbeat is due. Heartbeats are due every period from the
+  // first poll on, whatever the polling cycle (no drift).
   bool poll(Timestamp now, NmtState state, can::Frame& frame);
+  // The boot-up message (state 0x00) the master sends once before its first heartbeat.
+  can::Frame boot_up() const {
+    can::Frame f = make_frame(cob_id_, 1);
+    f.data[0] = static_cast<std::uint8_t>(NmtState::kBootUp);
+    return f;
+  }
 
  private:
   std::uint32_t cob_id_ = 0x77F;

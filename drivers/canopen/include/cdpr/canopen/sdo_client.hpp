@@ -109,6 +109,14 @@ class SdoClient {
   // Answers discarded because they cannot belong to the running attempt (late answers to an
   // aborted attempt or an earlier transfer), since construction.
   std::uint64_t stale_answers() const { return stale_answers_; }
+  // The abort code with which the server ended the last transfer (0: it did not abort it).
+  std::uint32_t server_abort_code() const { return server_abort_; }
+  // Called with the object and the data of every download the server confirmed (the master keeps
+  // what it applied for the DCF). Empty: none. The call itself does not allocate.
+  using DownloadObserver = std::function<void(ObjectAddress, std::span<const std::uint8_t>)>;
+  void set_download_observer(DownloadObserver observer) {
+    download_observer_ = std::move(observer);
+  }
 
   // Blocking interface (start-up/maintenance). Errors name node, object and reason.
   Result<std::vector<std::uint8_t>> upload(ObjectAddress a, Pump& pump);
@@ -178,6 +186,8 @@ class SdoClient {
   Timestamp last_now_{0};         // latest time seen (for cancel() without a time)
   std::uint32_t abort_sent_ = 0;  // code of our last abort until the server answered anything
   std::uint64_t stale_answers_ = 0;
+  std::uint32_t server_abort_ = 0;
+  DownloadObserver download_observer_;
   std::uint32_t transfer_stale_ = 0;  // stale answers during the running transfer
   std::uint8_t last_stale_cmd_ = 0;
   ObjectAddress last_stale_mux_{};

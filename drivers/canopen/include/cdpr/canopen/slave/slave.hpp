@@ -1,13 +1,18 @@
 // A CANopen slave (CiA 301 subset) for tests and the virtual robot: object dictionary, SDO
 // server (expedited and segmented), NMT state machine with boot-up and heartbeat producer,
 // master-heartbeat consumer (0x1016), PDOs configured through the dictionary (0x1400/0x1600,
-// 0x1800/0x1A00) and SYNC handling, EMCY producer. Plus a CiA 402 drive model (Drive402) and
-// fault injection to test masters against misbehaving nodes.
+// 0x1800/0x1A00; a change takes effect at once, in any NMT state), synchronous (types 0..240) and
+// event-driven TPDOs (254/255: on change and by event timer, with the inhibit time), SYNC handling
+// with the SYNC counter check (0x1019), EMCY producer (0x1014) with "error reset" after an error
+// is gone. NMT reset communication restores 0x1000..0x1FFF to their defaults, reset node every
+// object. The dictionary can come from an EDS (load_eds). Plus a CiA 402 drive model (Drive402)
+// and fault injection to test masters against misbehaving nodes.
 //
 // Single-threaded: the owner calls step(now) to process what the node's bus endpoint received and
 // to produce heartbeats. Not real-time (it allocates): it stands in for real devices.
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <deque>
@@ -20,6 +25,11 @@
 #include "cdpr/can/can_bus.hpp"
 #include "cdpr/canopen/pdo.hpp"
 #include "cdpr/canopen/types.hpp"
+#include "cdpr/status.hpp"
+
+namespace cdpr::canopen::eds {
+class Eds;
+}
 
 namespace cdpr::canopen::slave {
 
@@ -27,8 +37,10 @@ enum class Access : std::uint8_t { kRo, kWo, kRw, kConst };
 
 struct Entry {
   std::vector<std::uint8_t> data;
+  std::vector<std::uint8_t> default_data;  // restored by NMT reset (communication or node)
   Access access = Access::kRw;
   bool variable_size = false;  // VISIBLE_STRING / DOMAIN
+  bool mappable = true;        // may be mapped into a PDO (EDS PDOMapping)
   // Called before a write is accepted; returns 0 or the SDO abort code.
   std::function<std::uint32_t(std::span<const std::uint8_t>)> validate;
   // Called after a write was stored.
@@ -39,12 +51,20 @@ class ObjectDictionary {
  public:
   Entry& add(ObjectAddress a, DataType type, std::int64_t value, Access access = Access::kRw);
   Entry& add_string(ObjectAddress a, std::string_view value, Access access = Access::kRo);
+  // An entry of `bytes` raw bytes (types the typed add() does not cover, e.g. UNSIGNED64).
+  Entry& add_raw(ObjectAddress a, std::vector<std::uint8_t> bytes, Access access = Access::kRw);
   bool has_index(std::uint16_t index) const;
   Entry* find(ObjectAddress a);
   const Entry* find(ObjectAddress a) const;
   // Typed access for the application (no access checks); 0 if the entry does not exist.
   std::int64_t get(ObjectAddress a, bool is_signed = false) const;
   void set(ObjectAddress a, std::int64_t value);
+  // Sets the value and the default it returns to after an NMT reset.
+  void set_default(ObjectAddress a, std::int64_t value);
+  // Restores the defaults of every entry with an index in [lo, hi].
+  void restore_defaults(std::uint16_t lo, std::uint16_t hi);
+  // Every entry's address, in order.
+  std::vector<ObjectAddress> addresses() const;
 
   // SDO semantics: 0 or an abort code.
   std::uint32_t read(ObjectAddress a, std::vector<std::uint8_t>& out) const;
@@ -83,12 +103,23 @@ class SlaveNode {
   void power_on(Timestamp now);
   // Processes received frames and produces heartbeats.
   void step(Timestamp now);
+  // Sends an EMCY on the COB-ID of 0x1014 (nothing while it is invalid) and sets 0x1001.
   void send_emcy(std::uint16_t code, std::uint8_t error_register,
                  std::array<std::uint8_t, 5> manufacturer = {});
+  // The error is gone: 0x1001 := 0 and EMCY 0x0000 "error reset / no error" (CiA 301, 7.2.7.1).
+  void clear_errors();
+
+  // Makes the dictionary the one an EDS describes: every EDS entry exists with the EDS's type
+  // size, access, PDO mapping flag and default value ($NODEID resolved); entries the device model
+  // defines keep their behaviour. Fails naming the object if an EDS entry's size contradicts the
+  // model or the model needs an object the EDS does not describe. Call before power_on().
+  Status load_eds(const eds::Eds& eds);
 
   std::uint64_t syncs() const { return syncs_; }
   std::uint64_t sdo_requests() const { return sdo_requests_; }  // processed (not dropped/held)
   std::uint64_t rpdos_applied() const { return rpdos_applied_; }
+  std::uint64_t tpdos_sent() const { return tpdos_sent_; }
+  std::uint64_t emcys_sent() const { return emcys_sent_; }
   bool master_lost() const { return master_lost_; }
 
  protected:
@@ -110,18 +141,32 @@ class SlaveNode {
   void sdo_send(can::Frame& f);
   void reset_communication(Timestamp now);
   void apply_rpdo(std::size_t i, Timestamp now);
-  void send_tpdos();
-  void build_pdos();
+  void send_sync_tpdos();
+  void send_event_tpdos(Timestamp now);
+  void refresh_pdo(bool tpdo, int n);
+  void refresh_pdos();
   void send(const can::Frame& f);
 
   struct Pdo {
+    bool valid = false;
     std::uint32_t cob_id = 0;
     std::uint8_t type = 0;
+    std::chrono::nanoseconds inhibit{0};      // TPDO: at least this between two transmissions
+    std::chrono::nanoseconds event_timer{0};  // TPDO 254/255: at least one frame per period
     std::vector<std::pair<ObjectAddress, std::uint8_t>> map;  // object, bytes
     std::array<std::uint8_t, 8> pending{};
     bool has_pending = false;
     std::uint32_t sync_count = 0;
+    // TPDO: what was sent last and when (event-driven and type 0 send on change).
+    bool sent = false;
+    std::array<std::uint8_t, 8> last{};
+    std::uint8_t last_dlc = 0;
+    Timestamp last_time{0};
   };
+  static constexpr int kPdos = 4;
+  std::uint8_t tpdo_data(const Pdo& p, std::array<std::uint8_t, 8>& out) const;
+  void transmit_tpdo(Pdo& p, const std::array<std::uint8_t, 8>& data, std::uint8_t dlc,
+                     Timestamp now);
 
   can::CanBus& bus_;
   NodeId id_;
@@ -132,8 +177,8 @@ class SlaveNode {
   Timestamp master_last_{0};
   bool master_heard_ = false;
   bool master_lost_ = false;
-  std::vector<Pdo> rpdos_, tpdos_;
-  std::uint64_t syncs_ = 0, rpdos_applied_ = 0, sdo_requests_ = 0;
+  std::array<Pdo, kPdos> rpdos_{}, tpdos_{};
+  std::uint64_t syncs_ = 0, rpdos_applied_ = 0, sdo_requests_ = 0, tpdos_sent_ = 0, emcys_sent_ = 0;
   Timestamp now_{0};
   struct HeldRequest {
     Timestamp due;
@@ -152,7 +197,9 @@ class SlaveNode {
 // CSP (actual follows 0x607A at each SYNC), profile position (moves at 0x6081 per second, new
 // set-point handshake), homing (method 35/37: current position becomes 0x607C, on the rising edge
 // of bit 4), delayed or missing 0x6061 confirmation, quick stop,
-// fault injection with EMCY, 0x6007 reaction to a lost master.
+// fault injection with EMCY (and EMCY 0x0000 after the fault reset), 0x6007 reaction to a lost
+// master. Statusword bit 12 in CSP: target position used (1 while OPERATION_ENABLED). 0x6502
+// lists the modes it supports (PP, HM, CSP).
 class Drive402 : public SlaveNode {
  public:
   Drive402(can::CanBus& bus, NodeId id, std::int32_t initial_position = 0);
