@@ -30,7 +30,7 @@ namespace {
 
 using namespace cdpr;
 using namespace cdpr::controller;
-using Clock = std::chrono::steady_clock;
+using WallClock = std::chrono::steady_clock;
 
 long status_kib(const char* key) {
   std::ifstream in("/proc/self/status");
@@ -58,9 +58,9 @@ std::vector<double> time_cycles(testing::VirtualCell& cell, int n, F&& f) {
   std::vector<double> us;
   us.reserve(static_cast<std::size_t>(n));
   for (int c = 0; c < n; ++c) {
-    const auto t0 = Clock::now();
+    const auto t0 = WallClock::now();
     f();
-    us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+    us.push_back(std::chrono::duration<double, std::micro>(WallClock::now() - t0).count());
     const can::Timestamp next = cell.clock.now() + cell.network.sync_period;
     while (cell.clock.now() < next) cell.idle();
   }
@@ -140,7 +140,7 @@ int main(int argc, char** argv) {
   cell.run_until([&] { return d.state() == DaemonState::kHolding; }, 5.0);
   cell.pace(true);
   const double t0 = cell.seconds();
-  const auto w0 = Clock::now();
+  const auto w0 = WallClock::now();
   const Reply r = cell.request("calibrate");
   if (!r.ok) {
     std::fprintf(stderr, "daemon_bench: calibrate: %s\n", r.message.c_str());
@@ -153,7 +153,7 @@ int main(int argc, char** argv) {
         const DaemonState s = d.state();
         if (s == DaemonState::kIdentifying && t_identify < 0) {
           t_identify = cell.seconds();
-          w_identify = std::chrono::duration<double>(Clock::now() - w0).count();
+          w_identify = std::chrono::duration<double>(WallClock::now() - w0).count();
         }
         if (s == DaemonState::kAwaitingAcceptance || s == DaemonState::kFault ||
             (s == DaemonState::kHolding && t_identify >= 0)) {
@@ -163,7 +163,7 @@ int main(int argc, char** argv) {
         return false;
       },
       1200.0);
-  const double wall = std::chrono::duration<double>(Clock::now() - w0).count();
+  const double wall = std::chrono::duration<double>(WallClock::now() - w0).count();
   const nlohmann::json st = d.status();
   if (d.state() != DaemonState::kAwaitingAcceptance) {
     std::fprintf(stderr, "daemon_bench: the calibration did not finish: %s\n", st.dump().c_str());
