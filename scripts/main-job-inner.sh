@@ -42,7 +42,7 @@ identity: {vendor_id: 0x00CD9001, drive_product_code: 0x402, force_product_code:
 motion: {max_linear_velocity: 0.2, max_linear_acceleration: 0.6, max_linear_jerk: 6,
          max_angular_velocity: 0.6, max_angular_acceleration: 2, max_angular_jerk: 20}
 measuring: {poses: 25, laser_samples: 10, average_cycles: 10, settle_window_s: 0.2,
-            noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 1}
+            noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 3}
 acceptance: {mode: manual}
 control: {socket: $sock}
 YAML

@@ -211,12 +211,13 @@ class Session {
       return it == r.end() ? std::string() : " " + render_scalar(*it);
     };
     if (inv_.cmd == "calibrate") {
-      return inv_.args.value("dry_run", false) ? "calibration dry run done"
-                                               : "calibration" + version("version") + " started";
+      return inv_.args.value("dry_run", false)
+                 ? "calibration dry run done"
+                 : "calibration" + version("calibration") + " started";
     }
     if (inv_.cmd == "abort") return "abort requested";
-    if (inv_.cmd == "accept") return "calibration" + version("version") + " accepted";
-    if (inv_.cmd == "reject") return "calibration" + version("version") + " rejected";
+    if (inv_.cmd == "accept") return "calibration" + version("calibration") + " accepted";
+    if (inv_.cmd == "reject") return "calibration" + version("calibration") + " rejected";
     if (inv_.cmd == "geometry_rollback") {
       return "geometry rolled back to version " + render_scalar(inv_.args["version"]);
     }
@@ -315,7 +316,9 @@ class Session {
     if (!started.ok()) return transport_failed(started.status());
     if (!started->is_ok()) return refused(*started);
     const json& start = started->result();
-    const json version = start.value("version", json());
+    // The run to follow: cdprd numbers calibrations ("calibration"); "version" for older daemons.
+    const char* const key = start.contains("calibration") ? "calibration" : "version";
+    const json version = start.value(key, json());
     if (!inv_.json_out) {
       out_ << headline(start) << "\n" << render_result(start) << std::flush;
     }
@@ -343,7 +346,7 @@ class Session {
       }
       if (ev->type != "calibration") continue;
       const json& d = ev->data;
-      if (!version.is_null() && d.value("version", json()) != version) continue;  // another run
+      if (!version.is_null() && d.value(key, json()) != version) continue;  // another run
       const std::string outcome = d.value("outcome", "");
       int code = -1;
       if (outcome == "applied") {

@@ -220,8 +220,9 @@ std::string event_line(const control::ControlEvent& ev) {
     return m.empty() ? s : s + ": " + m;
   }
   if (ev.type == "calibration") {
-    std::string s =
-        "calibration " + str_field(d, "version", "?") + ": " + str_field(d, "outcome", "?");
+    std::string s = "calibration " +
+                    str_field(d, "calibration", str_field(d, "version", "?").c_str()) + ": " +
+                    str_field(d, "outcome", "?");
     if (const auto g = d.find("gates_passed"); g != d.end() && g->is_boolean()) {
       s += g->get<bool>() ? " (gates passed)" : " (gates failed)";
     }

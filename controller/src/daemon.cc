@@ -18,9 +18,9 @@
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/calibration/winch.hpp"
 #include "cdpr/config/robot_config.hpp"
-#include "cdpr/io/atomic_file.hpp"
 #include "cdpr/controller/calibration_report.hpp"
 #include "cdpr/controller/path_check.hpp"
+#include "cdpr/io/atomic_file.hpp"
 
 namespace cdpr::controller {
 namespace fs = std::filesystem;
@@ -542,7 +542,7 @@ void Daemon::service() {
       seq = swap_seq_;
     }
     if (target && s.command_done >= seq) {
-      std::string outcome_msg;
+      int calibration = 0;
       {
         std::lock_guard lock(mu_);
         active_version_ = *target;
@@ -553,11 +553,13 @@ void Daemon::service() {
         if (calibration_ && calibration_->outcome == "applying") {
           calibration_->outcome = "applied";
           calibration_->proposed_version = *target;
+          calibration = calibration_->id;
         }
       }
       spdlog::info("geometry version {} applied; largest target step {:.1f} counts", *target,
                    s.largest_reference_step);
       publish("calibration", {{"version", *target},
+                              {"calibration", calibration > 0 ? json(calibration) : json(nullptr)},
                               {"outcome", "applied"},
                               {"largest_step_counts", s.largest_reference_step},
                               {"message", swap_why_}});
@@ -630,7 +632,8 @@ Status Daemon::regulate_tensions(int pose_index) {
   }
   const int m = g->model.num_cables();
   std::array<double, kMaxAxes> trim{};
-  for (int iteration = 0; iteration < 6; ++iteration) {
+  constexpr int kRegulationSteps = 4;
+  for (int iteration = 0; iteration < kRegulationSteps; ++iteration) {
     const std::uint64_t id = rt_->request_average();
     const int n = std::max(3, config_.measuring.average_cycles / 2);
     if (Status s = wait_rt(
@@ -653,8 +656,10 @@ Status Daemon::regulate_tensions(int pose_index) {
       const double want = std::clamp(f, lo, std::max(lo, hi));
       if (want == f) continue;
       inside = false;
-      spdlog::debug("pose {}: regulation {}: cable {} at {:.2f} N, band [{:.1f}, {:.1f}] N, trim {:.0f} counts",
-                    pose_index, iteration, i + 1, f, lo, hi, trim[k]);
+      spdlog::debug(
+          "pose {}: regulation {}: cable {} at {:.2f} N, band [{:.1f}, {:.1f}] N, trim {:.0f} "
+          "counts",
+          pose_index, iteration, i + 1, f, lo, hi, trim[k]);
       const double ea = c.ea > 0.0 ? c.ea : 1e9;
       const double length =
           c.routing_length +
@@ -679,9 +684,9 @@ Status Daemon::regulate_tensions(int pose_index) {
     if (Status s = hold_still(true); !s.ok()) return s;
   }
   spdlog::warn(
-      "pose {}: a tension is still outside [f_min - {:.1f}, f_max + {:.1f}] N after 6 "
+      "pose {}: a tension is still outside [f_min - {:.1f}, f_max + {:.1f}] N after {} "
       "regulation steps",
-      pose_index, band, band);
+      pose_index, band, band, kRegulationSteps);
   return Status::Ok();
 }
 
@@ -937,12 +942,15 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   ctx.measuring_s = now_s() - t0;
   const json summary = calibration_json(out, ctx);
   Status wrote = io::write_file_atomically(dir + "/report.json", summary.dump(2) + "\n");
-  if (wrote.ok()) wrote = io::write_file_atomically(dir + "/report.html", calibration_html(out, ctx));
+  if (wrote.ok())
+    wrote = io::write_file_atomically(dir + "/report.html", calibration_html(out, ctx));
   if (wrote.ok()) {
-    wrote = io::write_file_atomically(dir + "/model_before.yaml", config::save_robot_config(g->model));
+    wrote =
+        io::write_file_atomically(dir + "/model_before.yaml", config::save_robot_config(g->model));
   }
   if (wrote.ok()) {
-    wrote = io::write_file_atomically(dir + "/model_after.yaml", config::save_robot_config(out.model));
+    wrote =
+        io::write_file_atomically(dir + "/model_after.yaml", config::save_robot_config(out.model));
   }
   if (!wrote.ok()) return fail(wrote);
   {
@@ -1140,7 +1148,7 @@ Reply Daemon::cmd_reject(const PeerInfo& peer) {
                    {"peer", {{"pid", peer.pid}, {"uid", peer.uid}, {"gid", peer.gid}}},
                    {"time", recording::utc_timestamp()}};
   (void)io::write_file_atomically(store_->calibration_dir(id) + "/decision.json",
-                              decision.dump(2) + "\n");
+                                  decision.dump(2) + "\n");
   spdlog::info("reject: calibration {} (pid {} uid {} gid {})", id, peer.pid, peer.uid, peer.gid);
   publish("calibration", {{"calibration", id},
                           {"version", nullptr},

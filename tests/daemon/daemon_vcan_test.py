@@ -18,7 +18,7 @@ loopback; cdprd starts from config/mini.yaml. Checked, in this order, all throug
 """
 import json
 import os
-import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -72,7 +72,8 @@ def holding(version=None):
 
 
 def write_configs():
-    os.makedirs(WORK, exist_ok=True)
+    shutil.rmtree(WORK, ignore_errors=True)  # a fresh state directory every run
+    os.makedirs(WORK)
     with open(f"{WORK}/laser.yaml", "w") as f:
         f.write(f"name: sim-laser\ntransport: tcp\nhost: 127.0.0.1\nport: {PORT}\nslave_id: 1\n"
                 f"response_timeout: 0.2\npoll_rate: 50\n"
@@ -157,9 +158,10 @@ try:
     rc, out, err = ctl("--timeout", "1500", "calibrate", "--wait", timeout=1600)
     print(out, err)
     check(rc == 0, f"calibrate --wait exits 0 (got {rc}) in {time.time() - t0:.0f} s")
-    rc, out, err = ctl("accept")
-    check(rc == 0, f"accept ({out.strip()}{err.strip()})")
-    wait_for(lambda: holding(2), 60, "holding with geometry version 2")
+    accepted = ctl_json("accept")
+    v2 = accepted["version"]
+    check(v2 == 2, f"accept: the calibration becomes geometry version {v2}")
+    wait_for(lambda: holding(v2), 60, f"holding with geometry version {v2}")
     s = ctl_json("status")
     cal = ctl_json("report")["calibration"]
     ev = subprocess.run([SIM, "--config", f"{SRC}/config/mini.yaml", "--scenario",
@@ -176,7 +178,7 @@ try:
     target = [0.05, -0.04, 0.03]
     rc, out, err = ctl("move", *map(str, target))
     check(rc == 0, f"move accepted ({err.strip()})")
-    wait_for(lambda: holding(2) and abs(ctl_json("status")["rt"]["commanded_pose"][0] - target[0]) < 1e-9,
+    wait_for(lambda: holding(v2) and abs(ctl_json("status")["rt"]["commanded_pose"][0] - target[0]) < 1e-9,
              60, "holding at the move's target")
     p = true_pose(f"{WORK}/cdpr-sim.log")
     err_mm = 1e3 * sum((a - b) ** 2 for a, b in zip(p[:3], target)) ** 0.5
@@ -187,9 +189,9 @@ try:
     daemon.wait(timeout=30)
     os.path.exists(SOCK) and os.unlink(SOCK)
     daemon = start_daemon(daemon_log)
-    wait_for(lambda: holding(2), 60, "holding with version 2 after the restart")
+    wait_for(lambda: holding(v2), 60, f"holding with version {v2} after the restart")
     s = ctl_json("status")
-    check(s["geometry_version"] == 2, f"restart: geometry version {s['geometry_version']} active")
+    check(s["geometry_version"] == v2, f"restart: geometry version {s['geometry_version']} active")
 
     # 5. A second calibration, rejected.
     rc, out, err = ctl("--timeout", "900", "calibrate", "--poses", f"{WORK}/few-poses.csv", "--wait",
@@ -197,7 +199,7 @@ try:
     check(rc in (0, 5), f"a short calibration ends awaiting acceptance (exit {rc}: {err.strip()[:200]})")
     rc, out, err = ctl("reject")
     check(rc == 0, f"reject ({err.strip()})")
-    wait_for(lambda: holding(2), 60, "holding with version 2 after the reject")
+    wait_for(lambda: holding(v2), 60, f"holding with version {v2} after the reject")
 
     # 6. Rollback to the nominal geometry.
     rc, out, err = ctl("geometry", "rollback", "1")

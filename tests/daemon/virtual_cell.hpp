@@ -37,7 +37,7 @@ using namespace std::chrono_literals;
 struct CellSettings {
   std::string measuring =
       "{poses: 25, laser_samples: 5, laser_interval_s: 0.002, average_cycles: 25, "
-      "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 1}";
+      "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 3}";
   std::string identification = "{bootstrap: 30}";
   std::string acceptance = "{mode: manual}";
   std::string extra;

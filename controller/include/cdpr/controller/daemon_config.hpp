@@ -62,7 +62,7 @@ struct MeasuringSettings {
   double settle_timeout_s = 10.0;
   // N: after settling, the measured tensions are regulated into [f_min - band, f_max + band]
   // (length trims, mostly internal force); 0: off.
-  double tension_band = 1.0;
+  double tension_band = 3.0;
   int extra_pose_rounds = 1;  // rounds of extra poses the mismatch locator may ask for
   // Noise of ONE reading of each sensor; the recording states the noise of the averages.
   double noise_length_m = 1e-6;
