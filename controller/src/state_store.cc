@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -72,7 +73,13 @@ std::vector<int> numbers_in(const std::string& dir, std::string_view suffix) {
   return out;
 }
 
+std::atomic<BeforeRenameHook> before_rename_hook{nullptr};
+
 }  // namespace
+
+void set_before_rename_hook(BeforeRenameHook hook) {
+  before_rename_hook.store(hook);
+}
 
 Status write_file_atomically(const std::string& path, std::string_view text) {
   std::string tmpl = path + ".tmp.XXXXXX";
@@ -85,6 +92,7 @@ Status write_file_atomically(const std::string& path, std::string_view text) {
   if (s.ok() && ::fchmod(fd, 0644) != 0) s = errno_status("cannot chmod", tmp);
   if (s.ok() && ::fsync(fd) != 0) s = errno_status("cannot fsync", tmp);
   if (::close(fd) != 0 && s.ok()) s = errno_status("cannot close", tmp);
+  if (BeforeRenameHook hook = before_rename_hook.load(); s.ok() && hook != nullptr) hook(path);
   if (s.ok() && ::rename(tmp.c_str(), path.c_str()) != 0)
     s = errno_status("cannot rename to", path);
   if (!s.ok()) {

@@ -14,6 +14,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -99,13 +100,23 @@ class VirtualCell {
     return Status::Ok();
   }
 
-  // The robot between two SYNCs (and the laser's distance follows the physics).
+  // The robot between two SYNCs (and the laser's distance follows the physics). While
+  // `robot_dead` the robot takes nothing in and sends nothing (as if cdpr-sim were killed);
+  // `laser_status` overrides the laser's status (e.g. kNoTarget) while set.
   void idle() {
     clock.advance(250us);
+    if (robot_dead) {  // what the master sends is lost
+      can::Frame f;
+      while (robot_ep_->receive(f, std::chrono::nanoseconds(0)).ok()) {
+      }
+      return;
+    }
     robot->step(clock.now());
     const sim::LaserChannel l = physics->state().lasers.front();
-    slave->set_distance(l.true_distance, l.status);
+    slave->set_distance(l.true_distance, laser_status.value_or(l.status));
   }
+  bool robot_dead = false;
+  std::optional<sim::LaserStatus> laser_status;
 
   // One SYNC period: the daemon's RT cycle, then the robot until the next one; the supervisor
   // every 5 cycles. While the worker identifies, the CPU is left to it (the robot holds).

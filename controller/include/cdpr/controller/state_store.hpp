@@ -27,6 +27,11 @@ namespace cdpr::controller {
 
 // Writes `text` to `path` atomically (see above).
 Status write_file_atomically(const std::string& path, std::string_view text);
+// Tests only (the fault matrix): called with the target path after the temporary file is written
+// and fsynced, before the rename, e.g. to kill the process exactly there as a power loss would.
+// nullptr (the default): none.
+using BeforeRenameHook = void (*)(const std::string& path);
+void set_before_rename_hook(BeforeRenameHook hook);
 Result<std::string> read_text_file(const std::string& path);
 
 // A file that grows by whole records, each made durable (fsync) before append() returns.
