@@ -114,10 +114,16 @@ struct FaultRow {
   std::function<std::string(Phase)> custom;
   // Injected before the phase's request (a disk full must be there before the save).
   bool inject_before_save = false;
+  // Extra daemon configuration for this row's cells.
+  std::string config = {};
 };
 
 std::string numbers_hidden(std::string s) {
   static const std::regex number(R"([-+]?[0-9]+\.[0-9]+(e[-+]?[0-9]+)?)");
+  static const std::regex cell_dir(R"(/[^ ]*/cdpr-matrix-[0-9]+/state/)");
+  static const std::regex temp(R"(\.tmp\.[A-Za-z0-9]{6})");
+  s = std::regex_replace(s, cell_dir, "");
+  s = std::regex_replace(s, temp, ".tmp.*");
   s = std::regex_replace(s, number, "#");
   if (s.size() > 90) s = s.substr(0, 87) + "...";
   for (char& c : s) {
@@ -157,7 +163,10 @@ class MatrixCell {
       if (!c.ok()) ::_exit(2);
       cell_ = std::move(*c);
       if (phase_ == Phase::kHotSwap && !prepare_second_version().ok()) ::_exit(3);
-      if (power_loss) {
+      // While measuring, rows are appended (no rename): the child is killed mid-phase and the
+      // parent tears the last row.
+      const bool at_rename = power_loss && phase_ != Phase::kMeasuring;
+      if (at_rename) {
         const char* target = phase_ == Phase::kStartup       ? "/homing.json"
                              : phase_ == Phase::kIdentifying ? "/report.json"
                                                              : "/active";
@@ -166,14 +175,15 @@ class MatrixCell {
       }
       if (!cell_->start_daemon(extra_config()).ok()) ::_exit(4);
       if (!reach_phase().empty()) ::_exit(5);
-      if (!power_loss) signal_parent();
+      if (!at_rename) signal_parent();
       for (;;) cell_->cycle();  // until killed
     }
     ::close(fds[1]);
     char x = 0;
     const bool reached = ::read(fds[0], &x, 1) == 1;
     ::close(fds[0]);
-    if (reached && !power_loss) ::usleep(20000);  // somewhere in the middle of it
+    const bool at_rename = power_loss && phase_ != Phase::kMeasuring;
+    if (reached && !at_rename) ::usleep(20000);  // somewhere in the middle of it
     ::kill(pid, SIGKILL);
     int status = 0;
     ::waitpid(pid, &status, 0);
@@ -246,7 +256,7 @@ class MatrixCell {
     previous_yaml_ = read(daemon().store().geometry_path(previous_version_));
     if (std::string why = reach_phase(); !why.empty()) return "UNSAFE: set-up: " + why;
     if (!row_.inject_before_save || phase_ != Phase::kHotSwap) row_.inject(*cell_);
-    cell_->run_until([] { return false; }, kObserve);
+    observe();
     return verdict();
   }
 
@@ -276,10 +286,12 @@ class MatrixCell {
   }
   std::string extra_config() const {
     if (phase_ == Phase::kIdentifying) {
-      return "measuring: {poses: 10, laser_samples: 3, laser_interval_s: 0.002}\n"
-             "identification: {diagnose: false}\n";
+      return row_.config +
+             "measuring: {poses: 10, laser_samples: 3, laser_interval_s: 0.002, average_cycles: "
+             "25, noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: "
+             "1}\nidentification: {diagnose: false}\n";
     }
-    return "";
+    return row_.config;
   }
   static std::string read(const std::string& path) {
     auto t = read_text_file(path);
@@ -331,7 +343,10 @@ class MatrixCell {
               return daemon().status()["calibration"]["pose"].get<int>() >= kMeasuringPose;
             },
             300.0);
-        if (!ok) return std::string("did not reach ") + phase_name(phase_);
+        if (!ok) {
+          return std::string("did not reach ") + phase_name(phase_) + ": " +
+                 daemon().status()["calibration"].dump();
+        }
         return "";
       }
       case Phase::kHotSwap: {
@@ -359,7 +374,6 @@ class MatrixCell {
     row_.inject(*cell_);
     const Status s = cell_->start_daemon(extra_config());
     std::string out;
-    const std::string log = log_capture().take();
     if (s.ok()) {
       cell_->run_until([] { return false; }, kObserve);
       out = "started";
@@ -368,8 +382,9 @@ class MatrixCell {
         out = "started, then quick stop; `" + st["fault"]["message"].get<std::string>() + "`";
       }
     } else {
+      // (cdprd's main logs the error it exits with; a failure after Daemon::create is also a
+      // `fault` state in the log)
       out = "start-up refused; `" + numbers_hidden(s.to_string()) + "`";
-      if (log.find("state fault") == std::string::npos) out += "; NOT IN LOG";
     }
     if (row_.clear) row_.clear(*cell_);
     // The way back: start again once the fault is gone.
@@ -416,28 +431,17 @@ class MatrixCell {
         parts.push_back("NOT IN LOG");
         unsafe = true;
       }
+    } else if (st["warning"].is_string()) {
+      const std::string w = st["warning"].get<std::string>();
+      parts.push_back(state + " with a warning; `" + numbers_hidden(w) + "`");
+      if (log.find("warning: " + w.substr(0, w.find(' '))) == std::string::npos) {
+        parts.push_back("NOT IN LOG");
+        unsafe = true;
+      }
     } else {
       std::string what = "no reaction (" + state;
       if (sequence && !cal.is_null()) what += ", calibration " + cal["outcome"].get<std::string>();
       parts.push_back(what + ")");
-    }
-
-    // The geometry.
-    const int in_memory = st["geometry_version"].get<int>();
-    auto on_disk = daemon().store().active_version();
-    const bool intact = read(daemon().store().geometry_path(previous_version_)) == previous_yaml_;
-    const int rt_version = snap.geometry_version;
-    if (phase_ == Phase::kHotSwap && in_memory == 2 && on_disk.ok() && *on_disk == 2 &&
-        rt_version == 2 && state != "fault") {
-      parts.push_back("swap completed (v2)");
-    } else if (in_memory == previous_version_ && on_disk.ok() && *on_disk == previous_version_ &&
-               rt_version == previous_version_ && intact) {
-      parts.push_back("v" + std::to_string(previous_version_) + " active, intact");
-    } else {
-      parts.push_back("GEOMETRY: status v" + std::to_string(in_memory) + ", disk v" +
-                      (on_disk.ok() ? std::to_string(*on_disk) : std::string("?")) + ", RT v" +
-                      std::to_string(rt_version) + (intact ? "" : ", FILE CHANGED"));
-      unsafe = true;
     }
 
     // The recording.
@@ -453,9 +457,27 @@ class MatrixCell {
       }
     }
 
-    // The way back.
+    // The way back, then the geometry (status, disk and RT loop agree once the robot is back).
     const std::string back = way_back(state);
     if (back.rfind("NO WAY BACK", 0) == 0) unsafe = true;
+    // The geometry.
+    const int in_memory = daemon().status()["geometry_version"].get<int>();
+    auto on_disk = daemon().store().active_version();
+    const bool intact = read(daemon().store().geometry_path(previous_version_)) == previous_yaml_;
+    const int rt_version = daemon().rt().snapshot().geometry_version;
+    if (phase_ == Phase::kHotSwap && in_memory == 2 && on_disk.ok() && *on_disk == 2 &&
+        rt_version == 2 && intact) {
+      parts.push_back("swap completed (v2)");
+    } else if (in_memory == previous_version_ && on_disk.ok() && *on_disk == previous_version_ &&
+               rt_version == previous_version_ && intact) {
+      parts.push_back("v" + std::to_string(previous_version_) + " active, intact");
+    } else {
+      parts.push_back("GEOMETRY: status v" + std::to_string(in_memory) + ", disk v" +
+                      (on_disk.ok() ? std::to_string(*on_disk) : std::string("?")) + ", RT v" +
+                      std::to_string(rt_version) + (intact ? "" : ", FILE CHANGED"));
+      unsafe = true;
+    }
+
     parts.push_back(back);
 
     std::string out;
@@ -463,6 +485,33 @@ class MatrixCell {
     return (unsafe ? "UNSAFE: " : "") + out;
   }
 
+  // After the injection: while measuring, until the sequence stops or has measured two more
+  // poses; while identifying, until the identification ends; then (and otherwise) kObserve.
+  void observe() {
+    if (phase_ == Phase::kMeasuring) {
+      cell_->run_until(
+          [&] {
+            const json c = daemon().status()["calibration"];
+            return daemon().state() == DaemonState::kFault || c["outcome"] != "measuring" ||
+                   c["pose"].get<int>() >= kMeasuringPose + 2;
+          },
+          300.0);
+    } else if (phase_ == Phase::kIdentifying) {
+      cell_->run_until([&] { return daemon().state() != DaemonState::kIdentifying; }, 300.0);
+    }
+    cell_->run_until([] { return false; }, kObserve);
+    if (std::getenv("CDPR_MATRIX_DEBUG") != nullptr) {
+      const auto& t = cell_->physics->state().tensions;
+      std::printf(
+          "[debug] true tension of cable %d: %.1f N, measured %.1f N; physics failures %llu\n",
+          kCable + 1, t(kCable), daemon().rt().snapshot().tensions[kCable],
+          static_cast<unsigned long long>(cell_->robot->stats().physics_failures));
+    }
+  }
+  bool worker_busy() {
+    const json c = daemon().status()["calibration"];
+    return !c.is_null() && (c["outcome"] == "measuring" || c["outcome"] == "identifying");
+  }
   bool holds_settled(double max_s) {
     return cell_->run_until(
         [&] {
@@ -477,9 +526,29 @@ class MatrixCell {
     if (row_.clear) row_.clear(*cell_);
     std::string how;
     if (state == "fault") {
+      // As an operator would: wait for a running worker to end, let the cause go away, then
+      // fault_reset (and once more if the first came too early).
+      cell_->run_until([&] { return !worker_busy(); }, 300.0);
+      cell_->run_until([] { return false; }, 0.5);
       const Reply r = cell_->request("fault_reset");
-      if (!r.ok) return "NO WAY BACK: fault_reset: " + r.message;
-      if (holds_settled(20.0)) {
+      if (!r.ok) {
+        // A refused fault reset must say why; the way back is then a restart of cdprd.
+        if (Status s = cell_->start_daemon(extra_config()); !s.ok()) {
+          return "NO WAY BACK: fault_reset: " + r.message + "; restart: " + s.to_string();
+        }
+        how = "fault_reset refused (`" + numbers_hidden(r.message) + "`); cdprd restart → holding";
+        const Reply cal = cell_->request("calibrate");
+        if (!cal.ok) return "NO WAY BACK: " + how + ", calibrate: " + cal.code;
+        (void)cell_->request("abort");
+        if (!holds_settled(60.0)) return "NO WAY BACK: " + how + ", the restarted sequence hangs";
+        return how + ", recalibrates";
+      }
+      bool back = holds_settled(5.0);
+      if (!back && daemon().state() == DaemonState::kFault) {
+        (void)cell_->request("fault_reset");
+        back = holds_settled(15.0);
+      }
+      if (back) {
         how = "fault_reset → holding";
       } else {
         // A restart of cdprd is the way back when the network itself needs configuring again.
@@ -489,6 +558,14 @@ class MatrixCell {
         }
         how = "fault_reset leaves " + after + "; cdprd restart → holding";
       }
+    } else if (state == "measuring") {
+      // The sequence goes on: the operator aborts it.
+      const Reply r = cell_->request("abort");
+      if (!r.ok) return "NO WAY BACK: abort: " + r.message;
+      if (!holds_settled(60.0)) {
+        return "NO WAY BACK: abort, then " + daemon().status()["state"].get<std::string>();
+      }
+      how = "abort → holds";
     } else {
       // A sequence that failed or a hot swap that goes on: wait until the daemon is back.
       if (!cell_->run_until(
@@ -541,9 +618,9 @@ std::vector<FaultRow> fault_rows() {
                   {},
                   nullptr});
   rows.push_back(
-      {"SDO abort 0x06020000 on 0x6502 (cable 3)",
+      {"SDO abort 0x06020000 on 0x1600:00, RPDO mapping (cable 3)",
        [](Cell& c) {
-         c.robot->drive(kCable).faults().abort_on[canopen::ObjectAddress{0x6502, 0}.key()] =
+         c.robot->drive(kCable).faults().abort_on[canopen::ObjectAddress{0x1600, 0}.key()] =
              0x06020000;
        },
        [](Cell& c) { c.robot->drive(kCable).faults().abort_on.clear(); },
@@ -556,10 +633,11 @@ std::vector<FaultRow> fault_rows() {
   rows.push_back({"bus-off burst (0.3 s)",
                   [](Cell& c) {
                     c.robot->set_bus_off(true);
+                    if (!c.daemon) return;  // start-up: until cleared
                     c.run_until([] { return false; }, 0.3);
                     c.robot->set_bus_off(false);
                   },
-                  nullptr,
+                  [](Cell& c) { c.robot->set_bus_off(false); },
                   {},
                   nullptr});
   rows.push_back({"force-sensor node silent",
@@ -601,11 +679,15 @@ std::vector<FaultRow> fault_rows() {
                   [](Cell& c) { c.robot->set_cable_slip(kCable, 0.0); },
                   {},
                   nullptr});
-  rows.push_back({"cable overloaded: -30 mm slip (cable 3)",
-                  [](Cell& c) { c.robot->set_cable_slip(kCable, -30000.0); },
+  {
+    // The platform moves with the slip: it takes a long one to pass 1.1 f_max (220 N).
+    FaultRow over{"cable overloaded: 250 mm slip (cable 3)",
+                  [](Cell& c) { c.robot->set_cable_slip(kCable, -250000.0); },
                   [](Cell& c) { c.robot->set_cable_slip(kCable, 0.0); },
                   {},
-                  nullptr});
+                  nullptr};
+    rows.push_back(over);
+  }
   rows.push_back({"cdpr-sim killed: every node and the laser silent, then the sim restarts",
                   [](Cell& c) {
                     c.robot_dead = true;

@@ -54,8 +54,12 @@ class VirtualCell {
   VirtualCell(const VirtualCell&) = delete;
   VirtualCell& operator=(const VirtualCell&) = delete;
 
-  // The daemon's configuration: MINI, the state directory in `dir`, plus `extra` YAML lines.
+  // The daemon's configuration: MINI, the state directory in `dir`, plus `extra` YAML lines; a
+  // `measuring:` or `identification:` line in `extra` replaces the default one (a YAML mapping
+  // cannot hold a key twice).
   std::string config_text(const std::string& extra = "") const {
+    const bool measuring = extra.find("measuring:") != std::string::npos;
+    const bool identification = extra.find("identification:") != std::string::npos;
     return "robot: " + source_ + "/config/mini.yaml\n" + "canopen: " + source_ +
            "/config/canopen-mini.yaml\n" + "state_directory: " + (dir_ / "state").string() +
            "\n"
@@ -63,11 +67,13 @@ class VirtualCell {
            "0x404}\n"
            "motion: {max_linear_velocity: 0.15, max_linear_acceleration: 0.5, "
            "max_linear_jerk: 5, max_angular_velocity: 0.5, max_angular_acceleration: 2, "
-           "max_angular_jerk: 20}\n"
-           "measuring: {poses: 25, laser_samples: 5, laser_interval_s: 0.002, average_cycles: "
-           "25, noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 1}\n"
-           "identification: {bootstrap: 30}\n" +
-           extra;
+           "max_angular_jerk: 20}\n" +
+           std::string(measuring
+                           ? ""
+                           : "measuring: {poses: 25, laser_samples: 5, laser_interval_s: 0.002, "
+                             "average_cycles: 25, noise_length_m: 4e-7, noise_force_n: 0.1, "
+                             "noise_laser_m: 1e-4, tension_band: 1}\n") +
+           std::string(identification ? "" : "identification: {bootstrap: 30}\n") + extra;
   }
 
   // Creates and starts the daemon (the state directory is kept between calls: a restart), then
