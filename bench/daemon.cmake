@@ -4,3 +4,10 @@ add_executable(daemon_bench ${CMAKE_CURRENT_LIST_DIR}/daemon_bench.cc)
 target_include_directories(daemon_bench PRIVATE ${PROJECT_SOURCE_DIR}/tests/daemon)
 target_link_libraries(daemon_bench PRIVATE cdpr_daemon cdpr_sim cdpr_options)
 target_compile_definitions(daemon_bench PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
+
+# daemon_soak: the daemon and the virtual robot for 30 minutes of simulated motion with repeated
+# calibrations, accepts, rejects and rollbacks; RSS, fds and the cycle's compute time (docs/reliability.md).
+add_executable(daemon_soak ${CMAKE_CURRENT_LIST_DIR}/daemon_soak.cc)
+target_include_directories(daemon_soak PRIVATE ${PROJECT_SOURCE_DIR}/tests/daemon)
+target_link_libraries(daemon_soak PRIVATE cdpr_daemon cdpr_sim cdpr_options spdlog::spdlog)
+target_compile_definitions(daemon_soak PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")

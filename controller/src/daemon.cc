@@ -188,7 +188,29 @@ Status Daemon::load_state() {
   }
   active_version_ = *active;
   active_ = make_geometry(*active, *model);
+  repair_recordings();
   return Status::Ok();
+}
+
+void Daemon::repair_recordings() {
+  // Rows are appended whole with an fsync each; only a power loss in the middle of an append
+  // leaves part of a row, without its newline, at the end. It is cut off, so the recording reads
+  // back with every row measured before.
+  for (int id : store_->calibrations()) {
+    const std::string path = store_->calibration_dir(id) + "/recording.csv";
+    auto text = read_text_file(path);
+    if (!text.ok() || text->empty() || text->back() == '\n') continue;
+    const std::size_t keep = text->rfind('\n') + 1;  // npos + 1 == 0: nothing whole
+    std::error_code ec;
+    fs::resize_file(path, keep, ec);
+    if (ec) {
+      spdlog::error("{}: torn last row ({} bytes) could not be cut off: {}", path,
+                    text->size() - keep, ec.message());
+    } else {
+      spdlog::warn("{}: torn last row ({} bytes, a power loss while it was written) cut off", path,
+                   text->size() - keep);
+    }
+  }
 }
 
 void Daemon::set_state(DaemonState s, const std::string& reason) {
@@ -350,14 +372,36 @@ Status Daemon::start() {
     set_state(DaemonState::kFault, "start-up: " + s.to_string());
     return s;
   }
-  if (Status s = master_->enable_all(std::chrono::seconds(10)); !s.ok()) {
-    set_state(DaemonState::kFault, "start-up: " + s.to_string());
-    return s;
+  Status enabled = master_->enable_all(std::chrono::seconds(10));
+  bool any_fault = false;
+  for (const canopen::Drive& d : master_->drives()) {
+    any_fault = any_fault || d.state() == canopen::cia402::State::kFault;
+  }
+  if (!enabled.ok() && any_fault) {
+    // A fault latched from before the start (a quick stop, a power dip) is reset once; a drive
+    // that faults again makes the start-up fail.
+    spdlog::warn("start-up: {}; resetting the drive faults once", enabled.to_string());
+    master_->clear_fault();
+    for (canopen::Drive& d : master_->drives()) d.reset_fault();
+    enabled = master_->enable_all(std::chrono::seconds(10));
+    if (enabled.ok()) {
+      // What the first attempt reported is logged here, not latched by the RT loop.
+      canopen::Event e;
+      while (master_->events().pop(e)) {
+        spdlog::warn("start-up: node {}: {} (before the fault reset)", int{e.node},
+                     canopen::to_string(e.type));
+      }
+    }
+  }
+  if (!enabled.ok()) {
+    set_state(DaemonState::kFault, "start-up: " + enabled.to_string());
+    return enabled;
   }
   if (Status s = home(); !s.ok()) {
     set_state(DaemonState::kFault, "start-up: " + s.to_string());
     return s;
   }
+  running_since_ = io_.clock->now();  // boot-ups after this are reboots
   set_state(DaemonState::kHolding,
             "started with geometry version " + std::to_string(active_version_));
   return Status::Ok();
@@ -442,6 +486,10 @@ Status Daemon::hold_still(bool abortable) {
 }
 
 Status Daemon::activate(int version, const json& why, const PeerInfo* peer) {
+  if (const RtSnapshot r = rt_->snapshot(); r.fault.kind != FaultKind::kNone) {
+    return Status(ErrorCode::kFailedPrecondition,
+                  "the robot is in fault (" + fault_text(r.fault) + "): run fault-reset first");
+  }
   auto model = store_->load_geometry(version);
   if (!model.ok()) return model.status();
   json w = why;
@@ -484,11 +532,19 @@ void Daemon::service() {
                     ev.emcy.error_register);
       what += buf;
     }
+    if (ev.type == canopen::EventType::kBootUp && running_since_.count() > 0 &&
+        ev.time > running_since_) {
+      // A node that boots while the daemon runs has lost its configuration (PDO mapping, CSP):
+      // only a restart of cdprd configures it again.
+      std::lock_guard lock(mu_);
+      rebooted_nodes_.insert(int{ev.node});
+    }
     const bool serious =
-        ev.type == canopen::EventType::kEmcy || ev.type == canopen::EventType::kHeartbeatLost ||
-        ev.type == canopen::EventType::kBusOff || ev.type == canopen::EventType::kDriveFault ||
-        ev.type == canopen::EventType::kDriveStuck || ev.type == canopen::EventType::kRxOverflow ||
-        ev.type == canopen::EventType::kSyncOverrun || ev.type == canopen::EventType::kTxFailed;
+        ev.type == canopen::EventType::kBootUp || ev.type == canopen::EventType::kEmcy ||
+        ev.type == canopen::EventType::kHeartbeatLost || ev.type == canopen::EventType::kBusOff ||
+        ev.type == canopen::EventType::kDriveFault || ev.type == canopen::EventType::kDriveStuck ||
+        ev.type == canopen::EventType::kRxOverflow || ev.type == canopen::EventType::kSyncOverrun ||
+        ev.type == canopen::EventType::kTxFailed;
     if (serious) {
       spdlog::warn("CANopen: node {}: {}", int{ev.node}, what);
       publish("log",
@@ -498,18 +554,73 @@ void Daemon::service() {
     }
   }
   const RtSnapshot s = rt_->snapshot();
+  // A slack cable is named (status "warning", the log, a `warning` event) but does not stop the
+  // robot: an 8-cable robot keeps control with one slack cable (docs/daemon.md).
+  std::string warning;
+  for (int i = 0; i < s.num_cables && warning.empty(); ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    if (s.slack_cycles[k] >= config_.tension_watch.cycles) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "slack_cable on cable %d at %.1f N", i + 1, s.tensions[k]);
+      warning = buf;
+    }
+  }
+  bool new_warning = false;
+  std::string old_warning;
+  {
+    std::lock_guard lock(mu_);
+    // A slack cable stays the same warning while its tension changes.
+    const auto stem = [](const std::string& w) { return w.substr(0, w.find(" at ")); };
+    if (stem(warning) != stem(warning_)) {
+      new_warning = true;
+      old_warning = warning_;
+    }
+    warning_ = warning;
+  }
+  if (new_warning) {
+    if (!warning.empty()) {
+      spdlog::warn("warning: {}", warning);
+      publish("warning", {{"warning", "slack_cable"}, {"message", warning}});
+    } else {
+      spdlog::info("warning cleared: {}", old_warning);
+      publish("warning", {{"warning", nullptr}, {"message", "cleared: " + old_warning}});
+    }
+  }
   DaemonState st = state();
   if (s.fault.kind != FaultKind::kNone && st != DaemonState::kFault &&
       st != DaemonState::kStarting) {
     const std::string text = fault_text(s.fault);
+    std::optional<int> interrupted;
+    int previous = 0;
     {
       std::lock_guard lock(mu_);
       last_fault_ = s.fault;
       fault_text_ = text;
+      interrupted = swap_target_;
       swap_target_.reset();
+      previous = active_version_;
+      if (interrupted && calibration_ && calibration_->outcome == "applying") {
+        calibration_->outcome = "failed";
+        calibration_->message = "hot swap interrupted by a fault: " + text;
+      }
     }
     abort_ = true;
     spdlog::error("fault: {}", text);
+    if (interrupted && *interrupted != previous) {
+      // The new version was made durable before the swap; the swap did not complete, so the
+      // previous version is the active one again, on disk too (the RT loop gets it back at the
+      // fault reset, see below).
+      const Status r = store_->activate(
+          previous, {{"why", "hot swap to version " + std::to_string(*interrupted) +
+                                 " interrupted by a fault: " + text}});
+      if (r.ok()) {
+        spdlog::warn("hot swap to geometry version {} interrupted; version {} stays active",
+                     *interrupted, previous);
+      } else {
+        spdlog::error("hot swap interrupted; cannot make version {} active again: {}", previous,
+                      r.to_string());
+      }
+    }
     publish("fault", {{"fault", to_string(s.fault.kind)},
                       {"node", s.fault.node},
                       {"cable", s.fault.cable + 1},
@@ -529,6 +640,12 @@ void Daemon::service() {
     c->type = MotionCommand::Type::kReference;
     c->pose = *pose;
     c->from_actual = true;
+    {
+      // The active geometry explicitly: a hot swap the fault interrupted may have handed the RT
+      // loop the new one already.
+      std::lock_guard lock(mu_);
+      c->geometry = active_;
+    }
     post(std::move(c));
     set_state(DaemonState::kHolding, "fault reset; holding where the platform stopped");
     return;
@@ -716,6 +833,7 @@ Status Daemon::measure_pose(const Pose& pose, double reference_tension,
   }
   const RtSnapshot r = rt_->snapshot();
   if (!r.settled) return Status(ErrorCode::kAborted, "the platform moved while it was measured");
+
   const Geometry* g;
   {
     std::lock_guard lock(mu_);
@@ -925,6 +1043,17 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
     set_state(DaemonState::kIdentifying, "calibration " + std::to_string(id) + ": identifying");
   }
 
+  // A fault or an abort while the worker identified ends the sequence here (the recording is
+  // kept): nothing may await acceptance, let alone be accepted automatically, while the robot
+  // is stopped or the operator asked to stop.
+  if (const RtSnapshot r = rt_->snapshot(); r.fault.kind != FaultKind::kNone) {
+    return fail(
+        Status(ErrorCode::kAborted, "robot fault while identifying: " + fault_text(r.fault)));
+  }
+  if (abort_.load()) {
+    return fail(Status(ErrorCode::kAborted, "identification: aborted by the operator"));
+  }
+
   // The result and the gates.
   CalibrationOutcome out =
       evaluate_calibration(g->model, set, *report, diagnosis.ok() ? &*diagnosis : nullptr,
@@ -1018,6 +1147,7 @@ json Daemon::status() const {
       {"one_cycle_motion_counts", config_.motion.max_cable_speed *
                                       std::chrono::duration<double>(network_.sync_period).count() /
                                       winch_metres_per_count(active_->model.winches[0])}};
+  j["warning"] = warning_.empty() ? json(nullptr) : json(warning_);
   j["loop"] = loop_figures_;
   if (calibration_) {
     j["calibration"] = {{"id", calibration_->id},
@@ -1332,6 +1462,17 @@ Reply Daemon::handle(const std::string& cmd, const json& args, const PeerInfo& p
     if (cmd == "fault_reset") {
       if (state() != DaemonState::kFault) {
         return Reply::failure("invalid_state", "no fault to reset");
+      }
+      {
+        std::lock_guard lock(mu_);
+        if (!rebooted_nodes_.empty()) {
+          std::string nodes;
+          for (int n : rebooted_nodes_) nodes += (nodes.empty() ? "" : ", ") + std::to_string(n);
+          spdlog::warn("fault reset refused: node(s) {} rebooted while the daemon ran", nodes);
+          return Reply::failure("fault", "node(s) " + nodes +
+                                             " rebooted and lost their configuration: restart "
+                                             "cdprd");
+        }
       }
       spdlog::info("fault reset requested by pid {} uid {} gid {}", peer.pid, peer.uid, peer.gid);
       if (worker_.joinable() && !worker_running_.load()) worker_.join();

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -72,6 +73,7 @@ std::vector<int> numbers_in(const std::string& dir, std::string_view suffix) {
   std::sort(out.begin(), out.end());
   return out;
 }
+
 
 }  // namespace
 

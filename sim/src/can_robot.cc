@@ -198,6 +198,9 @@ Result<std::unique_ptr<CanRobot>> CanRobot::create(can::CanBus& bus,
   }
   r->fault_applied_.assign(sc.faults.size(), false);
   r->fault_active_.assign(sc.faults.size(), false);
+  r->force_fault_.assign(static_cast<std::size_t>(m), ForceChannelFault::kNone);
+  r->force_fault_raw_.assign(static_cast<std::size_t>(m), 0.0);
+  r->slip_counts_.assign(static_cast<std::size_t>(m), 0.0);
   return r;
 }
 
@@ -272,28 +275,43 @@ void CanRobot::apply_faults(double t) {
                       f.abort_code);
         break;
       }
-      case FaultKind::kBusOff: {
-        can::Frame e;
-        e.error = true;
-        e.dlc = 8;
-        if (active) {
-          e.error_class = can::error_class::kBusOff;
-          (void)bus_.send(e);
-          bus_off_ = true;
-          waiting_.clear();
-        } else {
-          bus_off_ = false;
-          e.error_class = can::error_class::kRestarted;
-          (void)bus_.send(e);
-        }
+      case FaultKind::kBusOff:
+        set_bus_off(active);
         std::snprintf(buf, sizeof buf, "bus %s", active ? "off" : "restarted");
         break;
-      }
       default:
         continue;
     }
     say(t, buf);
   }
+}
+
+void CanRobot::set_bus_off(bool on) {
+  if (on == bus_off_) return;
+  can::Frame e;
+  e.error = true;
+  e.dlc = 8;
+  if (on) {
+    e.error_class = can::error_class::kBusOff;
+    (void)bus_.send(e);
+    bus_off_ = true;
+    waiting_.clear();
+  } else {
+    bus_off_ = false;
+    e.error_class = can::error_class::kRestarted;
+    (void)bus_.send(e);
+  }
+}
+
+void CanRobot::set_force_fault(int cable, ForceChannelFault fault, double raw) {
+  if (cable < 0 || cable >= num_cables()) return;
+  force_fault_[static_cast<std::size_t>(cable)] = fault;
+  force_fault_raw_[static_cast<std::size_t>(cable)] = raw;
+}
+
+void CanRobot::set_cable_slip(int cable, double counts) {
+  if (cable < 0 || cable >= num_cables()) return;
+  slip_counts_[static_cast<std::size_t>(cable)] = counts;
 }
 
 void CanRobot::deliver(const can::Frame& f) {
@@ -303,7 +321,9 @@ void CanRobot::deliver(const can::Frame& f) {
 void CanRobot::step_physics(double t) {
   const int m = num_cables();
   Eigen::VectorXd counts(m);
-  for (int i = 0; i < m; ++i) counts(i) = drive(i).position();
+  for (int i = 0; i < m; ++i) {
+    counts(i) = drive(i).position() + slip_counts_[static_cast<std::size_t>(i)];
+  }
   const Status st = physics_.step(counts, t);
   if (!st.ok()) {
     ++stats_.physics_failures;
@@ -316,7 +336,10 @@ void CanRobot::step_physics(double t) {
   ++stats_.physics_steps;
   const PhysicsState& s = physics_.state();
   for (std::size_t k = 0; k < force_channels_.size(); ++k) {
-    const double raw = s.force_raw(static_cast<int>(k));
+    if (force_fault_[k] == ForceChannelFault::kStuck) continue;
+    const double raw = force_fault_[k] == ForceChannelFault::kRaw
+                           ? force_fault_raw_[k]
+                           : s.force_raw(static_cast<int>(k));
     if (!std::isfinite(raw)) continue;
     const ForceChannel& ch = force_channels_[k];
     ch.node->od().set(ch.object, saturate(raw, ch.type));

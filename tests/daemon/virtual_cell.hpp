@@ -14,6 +14,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -79,6 +80,32 @@ class VirtualCell {
            "\nacceptance: " + s.acceptance + "\n" + s.extra;
   }
 
+  // The same from YAML lines: a `measuring:`, `identification:` or `acceptance:` line replaces
+  // that group, other lines are added.
+  Status start_daemon(const std::string& lines) {
+    Settings s;
+    std::string rest;
+    std::size_t pos = 0;
+    while (pos < lines.size()) {
+      std::size_t end = lines.find('\n', pos);
+      if (end == std::string::npos) end = lines.size();
+      const std::string line = lines.substr(pos, end - pos);
+      pos = end + 1;
+      auto group = [&](const char* key, std::string& out) {
+        const std::string k = std::string(key) + ":";
+        if (line.rfind(k, 0) != 0) return false;
+        out = line.substr(k.size());
+        return true;
+      };
+      if (!group("measuring", s.measuring) && !group("identification", s.identification) &&
+          !group("acceptance", s.acceptance) && !line.empty()) {
+        rest += line + "\n";
+      }
+    }
+    s.extra = rest;
+    return start_daemon(s);
+  }
+
   // Creates and starts the daemon (the state directory is kept between calls: a restart), then
   // cycles until it holds.
   Status start_daemon(const Settings& settings = {}) {
@@ -109,13 +136,23 @@ class VirtualCell {
     return Status::Ok();
   }
 
-  // The robot between two SYNCs (and the laser's distance follows the physics).
+  // The robot between two SYNCs (and the laser's distance follows the physics). While
+  // `robot_dead` the robot takes nothing in and sends nothing (as if cdpr-sim were killed);
+  // `laser_status` overrides the laser's status (e.g. kNoTarget) while set.
   void idle() {
     clock.advance(250us);
+    if (robot_dead) {  // what the master sends is lost
+      can::Frame f;
+      while (robot_ep_->receive(f, std::chrono::nanoseconds(0)).ok()) {
+      }
+      return;
+    }
     robot->step(clock.now());
     const sim::LaserChannel l = physics->state().lasers.front();
-    slave->set_distance(l.true_distance, l.status);
+    slave->set_distance(l.true_distance, laser_status.value_or(l.status));
   }
+  bool robot_dead = false;
+  std::optional<sim::LaserStatus> laser_status;
 
   // One SYNC period: the daemon's RT cycle, then the robot until the next one; the supervisor
   // every 5 cycles. While the worker identifies, the CPU is left to it (the robot holds).

@@ -83,6 +83,14 @@ Result<std::string> write_temporary(const std::string& path, std::string_view co
 
 }  // namespace
 
+namespace {
+std::atomic<BeforeRenameHook> g_before_rename{nullptr};
+}  // namespace
+
+void set_before_rename_hook(BeforeRenameHook hook) {
+  g_before_rename.store(hook);
+}
+
 Status write_file_atomically(const std::string& path, std::string_view contents) {
   AtomicFileSet one;
   CDPR_RETURN_IF_ERROR(one.stage(path, contents));
@@ -106,6 +114,7 @@ Status AtomicFileSet::stage(const std::string& path, std::string_view contents) 
 Status AtomicFileSet::commit() {
   std::vector<std::string> directories;
   for (std::size_t k = 0; k < files_.size(); ++k) {
+    if (BeforeRenameHook hook = g_before_rename.load(); hook != nullptr) hook(files_[k].target);
     if (::rename(files_[k].temp.c_str(), files_[k].target.c_str()) != 0) {
       const Status s = os_error(errno, "replace", files_[k].target);
       files_.erase(files_.begin(), files_.begin() + static_cast<std::ptrdiff_t>(k));

@@ -23,6 +23,7 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -131,6 +132,7 @@ class Daemon {
 
   Daemon(DaemonConfig config, DaemonIo io);
   Status load_state();
+  void repair_recordings();
   Status check_identities();
   Status home();
   void set_state(DaemonState s, const std::string& reason);
@@ -190,6 +192,9 @@ class Daemon {
   std::string swap_why_;
   RtFault last_fault_;
   std::string fault_text_;
+  can::Timestamp running_since_{0};  // end of start-up (set once, before the RT loop runs)
+  std::set<int> rebooted_nodes_;     // nodes that booted while the daemon ran (need a restart)
+  std::string warning_;  // a condition that is named but does not stop the robot (a slack cable)
   nlohmann::json loop_figures_ = nlohmann::json::object();
   std::function<void(const nlohmann::json&)> sink_;
   std::thread worker_;

@@ -29,6 +29,10 @@
 //   bus_off         while active nothing is sent or received; an error frame with the bus-off
 //                   class is sent when it starts and one with "restarted" when it ends
 //   cable_overload  the physics latches the trip; the cable's drive then faults with EMCY `emcy`
+// On demand (tests choose the moment, e.g. the fault matrix): set_bus_off, a force channel stuck
+// at its last reading or forced to a raw value (set_force_fault), a cable slipping on its drum
+// (set_cable_slip: the physics sees the drive's position plus the slip, the encoder does not), and
+// through drive()/node() the slaves' own faults (inject_fault, faults().silent, abort_on).
 // Single-threaded; not real-time (it allocates), it stands in for devices.
 #pragma once
 
@@ -71,6 +75,13 @@ struct CanRobotStats {
   std::uint64_t frames_dropped_bus_off = 0;
 };
 
+// A force channel's misbehaviour on demand.
+enum class ForceChannelFault : std::uint8_t {
+  kNone,
+  kStuck,  // the channel keeps its last raw reading
+  kRaw,    // the channel reads a fixed raw value (e.g. the limit of its type: out of range)
+};
+
 class CanRobot {
  public:
   // `network` describes the nodes (validated here: as many cia402 nodes as cables, force
@@ -89,6 +100,11 @@ class CanRobot {
   bool wait(std::chrono::nanoseconds timeout);
   // Applies the faults due at `now`, takes in every received frame and runs the nodes.
   void step(Timestamp now);
+
+  // On-demand faults (see the file comment).
+  void set_bus_off(bool on);
+  void set_force_fault(int cable, ForceChannelFault fault, double raw = 0.0);
+  void set_cable_slip(int cable, double counts);
 
   double scenario_time(Timestamp now) const;
   int num_cables() const { return static_cast<int>(drives_.size()); }
@@ -126,6 +142,9 @@ class CanRobot {
   std::vector<bool> overload_tripped_;                   // per cable
   std::vector<bool> fault_applied_;                      // per scenario fault (one-shots)
   std::vector<bool> fault_active_;                       // per scenario fault (windows)
+  std::vector<ForceChannelFault> force_fault_;           // per cable (on demand)
+  std::vector<double> force_fault_raw_;                  // per cable, for kRaw
+  std::vector<double> slip_counts_;                      // per cable (on demand)
   std::deque<can::Frame> waiting_;                       // received by wait()
   Timestamp t0_{0};
   double last_t_ = 0.0;

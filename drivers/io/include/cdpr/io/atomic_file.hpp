@@ -37,6 +37,12 @@ namespace cdpr::io {
 // Replaces (or creates) `path` with `contents`, atomically.
 Status write_file_atomically(const std::string& path, std::string_view contents);
 
+// Tests only (fault injection, e.g. a power loss between write and rename): called with each
+// target path after its temporary file is written and flushed, just before it is renamed over the
+// target. nullptr (the default): none.
+using BeforeRenameHook = void (*)(const std::string& target);
+void set_before_rename_hook(BeforeRenameHook hook);
+
 // Outputs of one command, written together.
 class AtomicFileSet {
  public:

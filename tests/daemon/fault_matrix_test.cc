@@ -1,0 +1,863 @@
+// The fault matrix (issue 17): every fault injected in every phase of cdprd's work, the outcome
+// observed and written as a table. The table is generated here and committed as
+// docs/reliability.md; the test fails when a cell's outcome differs from the committed table (run
+// with CDPR_UPDATE_RELIABILITY=1 to rewrite it after a deliberate change), and when a cell ends
+// unsafe (the robot not stopped or held, the geometry changed, the recording lost, no way back).
+//
+// Most cells run in-process (tests/daemon/virtual_cell.hpp: cdprd's Daemon and the virtual robot
+// on the in-process bus with a manual clock, faults injected on demand at the chosen moment).
+// The process-level cells fork: a child process runs the cell and is SIGKILLed mid-phase, the
+// parent restarts the daemon on the same state directory; disk full is RLIMIT_FSIZE; a power loss
+// during a save is a forked writer killed while it writes the temporary file (before the rename).
+//
+// CDPR_MATRIX_ONLY=<substring of a fault's name> runs only those rows (and does not compare).
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spdlog/sinks/ostream_sink.h>
+#include <spdlog/spdlog.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/controller/daemon.hpp"
+#include "cdpr/controller/state_store.hpp"
+#include "cdpr/recording/recording.hpp"
+#include "cdpr/io/atomic_file.hpp"
+#include "virtual_cell.hpp"
+
+namespace cdpr::controller {
+namespace {
+
+using namespace std::chrono_literals;
+using json = nlohmann::json;
+namespace fs = std::filesystem;
+
+const std::string kSource = CDPR_SOURCE_DIR;
+constexpr int kCable = 2;          // 0-based: cable 3, node 3
+constexpr int kForceNode = 9;      // config/canopen-mini.yaml
+constexpr int kMeasuringPose = 3;  // the fault comes while pose 4 of 25 is measured
+constexpr double kObserve = 3.0;   // s of robot time between the injection and the verdict
+
+enum class Phase { kStartup, kHolding, kMoving, kMeasuring, kIdentifying, kHotSwap };
+const std::vector<Phase> kPhases = {Phase::kStartup,   Phase::kHolding,     Phase::kMoving,
+                                    Phase::kMeasuring, Phase::kIdentifying, Phase::kHotSwap};
+const char* phase_name(Phase p) {
+  switch (p) {
+    case Phase::kStartup:
+      return "start-up";
+    case Phase::kHolding:
+      return "holding";
+    case Phase::kMoving:
+      return "moving";
+    case Phase::kMeasuring:
+      return "measuring pose 4 of 25";
+    case Phase::kIdentifying:
+      return "identifying";
+    case Phase::kHotSwap:
+      return "hot swap";
+  }
+  return "?";
+}
+
+// What the log said (every cell's daemon logs through spdlog's default logger).
+class LogCapture {
+ public:
+  LogCapture() {
+    sink_ = std::make_shared<spdlog::sinks::ostream_sink_mt>(text_);
+    logger_ = std::make_shared<spdlog::logger>("matrix", sink_);
+    logger_->set_level(spdlog::level::info);
+    spdlog::set_default_logger(logger_);
+  }
+  std::string take() {
+    std::lock_guard lock(mu_);
+    logger_->flush();
+    std::string s = text_.str();
+    text_.str("");
+    return s;
+  }
+
+ private:
+  std::mutex mu_;
+  std::ostringstream text_;
+  std::shared_ptr<spdlog::sinks::ostream_sink_mt> sink_;
+  std::shared_ptr<spdlog::logger> logger_;
+};
+
+LogCapture& log_capture() {
+  static LogCapture c;
+  return c;
+}
+
+using Cell = testing::VirtualCell;
+
+// One row of the matrix: how to inject the fault and how to take it away again.
+struct FaultRow {
+  std::string name;
+  std::function<void(Cell&)> inject;
+  std::function<void(Cell&)> clear;
+  // Phases where it does not apply, with the reason.
+  std::map<Phase, std::string> not_applicable;
+  // Process-level rows run their own cells.
+  std::function<std::string(Phase)> custom;
+  // Injected before the phase's request (a disk full must be there before the save).
+  bool inject_before_save = false;
+  // Extra daemon configuration for this row's cells.
+  std::string config = {};
+};
+
+std::string numbers_hidden(std::string s) {
+  static const std::regex number(R"([-+]?[0-9]+\.[0-9]+(e[-+]?[0-9]+)?)");
+  static const std::regex cell_dir(R"(/[^ ]*/cdpr-matrix-[0-9]+/state/)");
+  static const std::regex temp(R"(\.tmp\.[A-Za-z0-9]{6})");
+  s = std::regex_replace(s, cell_dir, "");
+  s = std::regex_replace(s, temp, ".tmp.*");
+  s = std::regex_replace(s, number, "#");
+  if (s.size() > 90) s = s.substr(0, 87) + "...";
+  for (char& c : s) {
+    if (c == '|' || c == '\n') c = ' ';
+  }
+  return s;
+}
+
+// The state a cell is in, and the verdict.
+class MatrixCell {
+ public:
+  MatrixCell(const FaultRow& row, Phase phase) : row_(row), phase_(phase) {
+    dir_ = fs::temp_directory_path() / ("cdpr-matrix-" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  ~MatrixCell() {
+    cell_.reset();
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+
+  // Process level: a child process runs the cell to the phase and is SIGKILLed there (`power_loss`:
+  // exactly between a save's write and its rename, through the state store's test hook); then
+  // the daemon restarts on the same state directory (the virtual robot restarts with it: it lived
+  // in the child) and the state directory is judged.
+  std::string run_killed(bool power_loss) {
+    int fds[2];
+    if (::pipe(fds) != 0) return "UNSAFE: pipe";
+    std::fflush(stdout);
+    const pid_t pid = ::fork();
+    if (pid < 0) return "UNSAFE: fork";
+    if (pid == 0) {
+      ::close(fds[0]);
+      signal_fd() = fds[1];
+      auto c = Cell::create(kSource, dir_);
+      if (!c.ok()) ::_exit(2);
+      cell_ = std::move(*c);
+      if (phase_ == Phase::kHotSwap && !prepare_second_version().ok()) ::_exit(3);
+      // While measuring, rows are appended (no rename): the child is killed mid-phase and the
+      // parent tears the last row.
+      const bool at_rename = power_loss && phase_ != Phase::kMeasuring;
+      if (at_rename) {
+        const char* target = phase_ == Phase::kStartup       ? "/homing.json"
+                             : phase_ == Phase::kIdentifying ? "/report.json"
+                                                             : "/active";
+        std::snprintf(kill_target(), 64, "%s", target);
+        io::set_before_rename_hook(&MatrixCell::stop_here);
+      }
+      if (!cell_->start_daemon(extra_config()).ok()) ::_exit(4);
+      if (!reach_phase().empty()) ::_exit(5);
+      if (!at_rename) signal_parent();
+      for (;;) cell_->cycle();  // until killed
+    }
+    ::close(fds[1]);
+    char x = 0;
+    const bool reached = ::read(fds[0], &x, 1) == 1;
+    ::close(fds[0]);
+    const bool at_rename = power_loss && phase_ != Phase::kMeasuring;
+    if (reached && !at_rename) ::usleep(20000);  // somewhere in the middle of it
+    ::kill(pid, SIGKILL);
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    if (!reached) {
+      return "UNSAFE: the child did not reach the phase (exit " +
+             std::to_string(WIFEXITED(status) ? WEXITSTATUS(status) : -1) + ")";
+    }
+    std::vector<std::string> parts;
+    parts.push_back(power_loss ? "killed between write and rename" : "SIGKILL");
+    // A power loss while a row is appended tears it: half a row without its newline.
+    const std::string rec_path =
+        (dir_ / "state" / "calibrations" / "000001" / "recording.csv").string();
+    if (power_loss && phase_ == Phase::kMeasuring) {
+      std::ofstream torn(rec_path, std::ios::app);
+      torn << "4,0.0123,0.45";
+      parts.back() = "torn last row";
+    }
+    std::size_t temps = 0;
+    for (const auto& e : fs::recursive_directory_iterator(dir_ / "state")) {
+      if (e.path().filename().string().find(".tmp.") != std::string::npos) ++temps;
+    }
+    if (temps > 0) parts.push_back(std::to_string(temps) + " temp file left");
+    bool unsafe = false;
+    auto c = Cell::create(kSource, dir_);
+    if (!c.ok()) return "UNSAFE: cell: " + c.status().to_string();
+    cell_ = std::move(*c);
+    if (Status s = cell_->start_daemon(extra_config()); !s.ok()) {
+      return "UNSAFE: " + parts.front() + "; restart: " + numbers_hidden(s.to_string());
+    }
+    const int v = daemon().status()["geometry_version"].get<int>();
+    auto v1 = daemon().store().load_geometry(1);
+    const bool intact = v1.ok() && Cell::anchor_rms(*v1, cell_->nominal) == 0.0;
+    parts.push_back("restart → holding, v" + std::to_string(v) + (intact ? "" : ", V1 CHANGED"));
+    if (!intact || (v != 1 && phase_ != Phase::kHotSwap)) unsafe = true;
+    if (fs::exists(rec_path)) {
+      auto r = recording::read_recording(rec_path);
+      if (r.ok()) {
+        parts.push_back("recording " + std::to_string(r->poses.size()) + " rows readable");
+      } else {
+        parts.push_back("RECORDING UNREADABLE: " + numbers_hidden(r.status().to_string()));
+        unsafe = true;
+      }
+    }
+    const Reply cal = cell_->request("calibrate");
+    (void)cell_->request("abort");
+    if (!cal.ok || !holds_settled(60.0)) {
+      parts.push_back("NO WAY BACK: calibrate " + cal.code);
+      unsafe = true;
+    } else {
+      parts.push_back("recalibrates");
+    }
+    std::string out;
+    for (std::size_t i = 0; i < parts.size(); ++i) out += (i ? "; " : "") + parts[i];
+    return (unsafe ? "UNSAFE: " : "") + out;
+  }
+
+  std::string run() {
+    auto c = Cell::create(kSource, dir_);
+    if (!c.ok()) return "UNSAFE: cell: " + c.status().to_string();
+    cell_ = std::move(*c);
+    (void)log_capture().take();
+    if (phase_ == Phase::kHotSwap) {
+      if (Status s = prepare_second_version(); !s.ok()) return "UNSAFE: set-up: " + s.to_string();
+    }
+    if (phase_ == Phase::kStartup) return run_startup();
+    if (Status s = cell_->start_daemon(extra_config()); !s.ok()) {
+      return "UNSAFE: set-up: " + s.to_string();
+    }
+    previous_version_ = daemon().status()["geometry_version"].get<int>();
+    previous_yaml_ = read(daemon().store().geometry_path(previous_version_));
+    if (std::string why = reach_phase(); !why.empty()) return "UNSAFE: set-up: " + why;
+    if (!row_.inject_before_save || phase_ != Phase::kHotSwap) row_.inject(*cell_);
+    observe();
+    return verdict();
+  }
+
+ private:
+  Daemon& daemon() { return *cell_->daemon; }
+  static int& signal_fd() {
+    static int fd = -1;
+    return fd;
+  }
+  static char* kill_target() {
+    static char target[64] = {};
+    return target;
+  }
+  static void signal_parent() {
+    const char x = 'x';
+    (void)!::write(signal_fd(), &x, 1);
+  }
+  // The before-rename hook in the child: tell the parent, then wait for the SIGKILL.
+  static void stop_here(const std::string& path) {
+    const std::string target = kill_target();
+    if (path.size() < target.size() ||
+        path.compare(path.size() - target.size(), target.size(), target) != 0) {
+      return;
+    }
+    signal_parent();
+    for (;;) ::pause();
+  }
+  std::string extra_config() const {
+    if (phase_ == Phase::kIdentifying) {
+      return row_.config +
+             "measuring: {poses: 10, laser_samples: 3, laser_interval_s: 0.002, average_cycles: "
+             "25, noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: "
+             "1}\nidentification: {diagnose: false}\n";
+    }
+    return row_.config;
+  }
+  static std::string read(const std::string& path) {
+    auto t = read_text_file(path);
+    return t.ok() ? *t : std::string();
+  }
+
+  // v1: the nominal description (active), v2: the measured geometry, to hot-swap to.
+  Status prepare_second_version() {
+    auto store = StateStore::open((dir_ / "state").string());
+    if (!store.ok()) return store.status();
+    auto measured = config::load_robot_config(kSource + "/config/mini-measured.yaml");
+    if (!measured.ok()) return measured.status();
+    auto v1 = store->add_geometry(cell_->nominal, {{"source", "nominal"}});
+    if (!v1.ok()) return v1.status();
+    auto v2 = store->add_geometry(*measured, {{"source", "test"}});
+    if (!v2.ok()) return v2.status();
+    return store->activate(*v1, {{"why", "fault matrix"}});
+  }
+
+  std::string reach_phase() {
+    switch (phase_) {
+      case Phase::kStartup:
+      case Phase::kHolding:
+        cell_->run_until([] { return false; }, 0.5);
+        return "";
+      case Phase::kMoving: {
+        const Pose home = cell_->nominal.home;
+        const Reply r =
+            cell_->request("move", {{"pose",
+                                     {home.position.x() + 0.05, home.position.y() - 0.04,
+                                      home.position.z() + 0.03, 0.0, 0.0, 0.0}}});
+        if (!r.ok) return "move: " + r.message;
+        if (!cell_->run_until([&] { return daemon().rt().snapshot().mode == RtMode::kMoving; },
+                              2.0)) {
+          return "the move did not start";
+        }
+        cell_->run_until([] { return false; }, 0.2);
+        return "";
+      }
+      case Phase::kMeasuring:
+      case Phase::kIdentifying: {
+        const Reply r = cell_->request("calibrate");
+        if (!r.ok) return "calibrate: " + r.message;
+        const bool ok = cell_->run_until(
+            [&] {
+              if (phase_ == Phase::kIdentifying) {
+                return daemon().state() == DaemonState::kIdentifying;
+              }
+              return daemon().status()["calibration"]["pose"].get<int>() >= kMeasuringPose;
+            },
+            300.0);
+        if (!ok) {
+          return std::string("did not reach ") + phase_name(phase_) + ": " +
+                 daemon().status()["calibration"].dump();
+        }
+        return "";
+      }
+      case Phase::kHotSwap: {
+        if (row_.inject_before_save) row_.inject(*cell_);
+        const Reply r = cell_->request("geometry_rollback", {{"version", 2}});
+        if (!r.ok) {
+          refused_ = "rollback refused: " + r.code + "; `" + numbers_hidden(r.message) + "`";
+          return "";
+        }
+        // Inject while the targets slew to the new geometry (or, if the slew is shorter than a
+        // cycle of observation, as soon as it was taken).
+        cell_->run_until(
+            [&] {
+              const RtSnapshot s = daemon().rt().snapshot();
+              return s.mode == RtMode::kSlewing || s.geometry_version == 2;
+            },
+            5.0);
+        return "";
+      }
+    }
+    return "";
+  }
+
+  std::string run_startup() {
+    row_.inject(*cell_);
+    const Status s = cell_->start_daemon(extra_config());
+    std::string out;
+    if (s.ok()) {
+      cell_->run_until([] { return false; }, kObserve);
+      out = "started";
+      const json st = daemon().status();
+      if (st["state"] == "fault") {
+        out = "started, then quick stop; `" + st["fault"]["message"].get<std::string>() + "`";
+      }
+    } else {
+      // (cdprd's main logs the error it exits with; a failure after Daemon::create is also a
+      // `fault` state in the log)
+      out = "start-up refused; `" + numbers_hidden(s.to_string()) + "`";
+    }
+    if (row_.clear) row_.clear(*cell_);
+    // The way back: start again once the fault is gone.
+    const Status again = cell_->start_daemon(extra_config());
+    if (!again.ok()) return "UNSAFE: " + out + "; restart after the fault: " + again.to_string();
+    const int v = daemon().status()["geometry_version"].get<int>();
+    return out + "; restart → holding, geometry v" + std::to_string(v);
+  }
+
+  std::string verdict() {
+    std::vector<std::string> parts;
+    bool unsafe = false;
+    const json st = daemon().status();
+    const RtSnapshot snap = daemon().rt().snapshot();
+    const std::string log = log_capture().take();
+    const std::string state = st["state"].get<std::string>();
+    const json cal = st["calibration"];
+    const bool sequence = phase_ == Phase::kMeasuring || phase_ == Phase::kIdentifying;
+
+    // The reaction and its name.
+    std::string named;
+    if (!refused_.empty()) {
+      parts.push_back(refused_ + " (" + state + ")");
+    } else if (state == "fault") {
+      named = st["fault"]["fault"].get<std::string>();
+      const int node = st["fault"]["node"].get<int>(), cable = st["fault"]["cable"].get<int>();
+      if (node > 0) named += " node " + std::to_string(node);
+      if (cable > 0) named += " cable " + std::to_string(cable);
+      parts.push_back(
+          std::string(snap.mode == RtMode::kDisabled ? "quick stop" : "FAULT, NOT STOPPED") +
+          "; `" + named + "`");
+      if (snap.mode != RtMode::kDisabled) unsafe = true;
+      if (log.find("fault: " + st["fault"]["fault"].get<std::string>()) == std::string::npos) {
+        parts.push_back("NOT IN LOG");
+        unsafe = true;
+      }
+    } else if (sequence && !cal.is_null() &&
+               (cal["outcome"] == "failed" || cal["outcome"] == "aborted")) {
+      named = numbers_hidden(cal["message"].get<std::string>());
+      parts.push_back(std::string(state == "holding" ? "hold" : state) + ", calibration " +
+                      cal["outcome"].get<std::string>() + "; `" + named + "`");
+      if (log.find("calibration " + std::to_string(cal["id"].get<int>()) + ": " +
+                   cal["outcome"].get<std::string>()) == std::string::npos) {
+        parts.push_back("NOT IN LOG");
+        unsafe = true;
+      }
+    } else if (st["warning"].is_string() && state != "measuring") {
+      // (while measuring, a cable can be slack for a moment before the tension regulation takes
+      // it up: a passing warning, not the fault's outcome)
+      const std::string w = st["warning"].get<std::string>();
+      parts.push_back(state + " with a warning; `" + numbers_hidden(w) + "`");
+      if (log.find("warning: " + w.substr(0, w.find(' '))) == std::string::npos) {
+        parts.push_back("NOT IN LOG");
+        unsafe = true;
+      }
+    } else {
+      std::string what = "no reaction (" + state;
+      if (sequence && !cal.is_null()) what += ", calibration " + cal["outcome"].get<std::string>();
+      parts.push_back(what + ")");
+    }
+
+    // The recording.
+    if (sequence && !cal.is_null()) {
+      const std::string rec =
+          daemon().store().calibration_dir(cal["id"].get<int>()) + "/recording.csv";
+      auto r = recording::read_recording(rec);
+      if (r.ok()) {
+        parts.push_back("recording " + std::to_string(r->poses.size()) + " rows readable");
+      } else {
+        parts.push_back("RECORDING UNREADABLE");
+        unsafe = true;
+      }
+    }
+
+    // The way back, then the geometry (status, disk and RT loop agree once the robot is back).
+    const std::string back = way_back(state);
+    if (back.rfind("NO WAY BACK", 0) == 0) unsafe = true;
+    // The geometry.
+    const int in_memory = daemon().status()["geometry_version"].get<int>();
+    auto on_disk = daemon().store().active_version();
+    const bool intact = read(daemon().store().geometry_path(previous_version_)) == previous_yaml_;
+    const int rt_version = daemon().rt().snapshot().geometry_version;
+    if (phase_ == Phase::kHotSwap && in_memory == 2 && on_disk.ok() && *on_disk == 2 &&
+        rt_version == 2 && intact) {
+      parts.push_back("swap completed (v2)");
+    } else if (in_memory == previous_version_ && on_disk.ok() && *on_disk == previous_version_ &&
+               rt_version == previous_version_ && intact) {
+      parts.push_back("v" + std::to_string(previous_version_) + " active, intact");
+    } else {
+      parts.push_back("GEOMETRY: status v" + std::to_string(in_memory) + ", disk v" +
+                      (on_disk.ok() ? std::to_string(*on_disk) : std::string("?")) + ", RT v" +
+                      std::to_string(rt_version) + (intact ? "" : ", FILE CHANGED"));
+      unsafe = true;
+    }
+
+    parts.push_back(back);
+
+    std::string out;
+    for (std::size_t i = 0; i < parts.size(); ++i) out += (i ? "; " : "") + parts[i];
+    return (unsafe ? "UNSAFE: " : "") + out;
+  }
+
+  // After the injection: while measuring, until the sequence stops or has measured two more
+  // poses; while identifying, until the identification ends; then (and otherwise) kObserve.
+  void observe() {
+    if (phase_ == Phase::kMeasuring) {
+      cell_->run_until(
+          [&] {
+            const json c = daemon().status()["calibration"];
+            return daemon().state() == DaemonState::kFault || c["outcome"] != "measuring" ||
+                   c["pose"].get<int>() >= kMeasuringPose + 2;
+          },
+          300.0);
+    } else if (phase_ == Phase::kIdentifying) {
+      cell_->run_until([&] { return daemon().state() != DaemonState::kIdentifying; }, 300.0);
+    }
+    cell_->run_until([] { return false; }, kObserve);
+    if (std::getenv("CDPR_MATRIX_DEBUG") != nullptr) {
+      const auto& t = cell_->physics->state().tensions;
+      std::printf(
+          "[debug] true tension of cable %d: %.1f N, measured %.1f N; physics failures %llu\n",
+          kCable + 1, t(kCable), daemon().rt().snapshot().tensions[kCable],
+          static_cast<unsigned long long>(cell_->robot->stats().physics_failures));
+    }
+  }
+  bool worker_busy() {
+    const json c = daemon().status()["calibration"];
+    return !c.is_null() && (c["outcome"] == "measuring" || c["outcome"] == "identifying");
+  }
+  bool holds_settled(double max_s) {
+    return cell_->run_until(
+        [&] {
+          return daemon().state() == DaemonState::kHolding &&
+                 daemon().rt().snapshot().mode == RtMode::kHolding &&
+                 daemon().rt().snapshot().settled;
+        },
+        max_s);
+  }
+
+  std::string way_back(const std::string& state) {
+    if (row_.clear) row_.clear(*cell_);
+    std::string how;
+    if (state == "fault") {
+      // As an operator would: wait for a running worker to end, let the cause go away, then
+      // fault_reset (and once more if the first came too early).
+      cell_->run_until([&] { return !worker_busy(); }, 300.0);
+      cell_->run_until([] { return false; }, 0.5);
+      const Reply r = cell_->request("fault_reset");
+      if (!r.ok) {
+        // A refused fault reset must say why; the way back is then a restart of cdprd.
+        if (Status s = cell_->start_daemon(extra_config()); !s.ok()) {
+          return "NO WAY BACK: fault_reset: " + r.message + "; restart: " + s.to_string();
+        }
+        how = "fault_reset refused (`" + numbers_hidden(r.message) + "`); cdprd restart → holding";
+        const Reply cal = cell_->request("calibrate");
+        if (!cal.ok) return "NO WAY BACK: " + how + ", calibrate: " + cal.code;
+        (void)cell_->request("abort");
+        if (!holds_settled(60.0)) return "NO WAY BACK: " + how + ", the restarted sequence hangs";
+        return how + ", recalibrates";
+      }
+      bool back = holds_settled(5.0);
+      if (!back && daemon().state() == DaemonState::kFault) {
+        (void)cell_->request("fault_reset");
+        back = holds_settled(15.0);
+      }
+      if (back) {
+        how = "fault_reset → holding";
+      } else {
+        // A restart of cdprd is the way back when the network itself needs configuring again.
+        const std::string after = daemon().status()["state"].get<std::string>();
+        if (Status s = cell_->start_daemon(extra_config()); !s.ok()) {
+          return "NO WAY BACK: fault_reset, then " + after + "; restart: " + s.to_string();
+        }
+        how = "fault_reset leaves " + after + "; cdprd restart → holding";
+      }
+    } else if (state == "measuring") {
+      // The sequence goes on: the operator aborts it.
+      const Reply r = cell_->request("abort");
+      if (!r.ok) return "NO WAY BACK: abort: " + r.message;
+      if (!holds_settled(60.0)) {
+        return "NO WAY BACK: abort, then " + daemon().status()["state"].get<std::string>();
+      }
+      how = "abort → holds";
+    } else {
+      // A sequence that failed or a hot swap that goes on: wait until the daemon is back.
+      if (!cell_->run_until(
+              [&] {
+                const DaemonState s = daemon().state();
+                return s == DaemonState::kHolding || s == DaemonState::kAwaitingAcceptance;
+              },
+              phase_ == Phase::kIdentifying ? 120.0 : 30.0)) {
+        return "NO WAY BACK: stays " + daemon().status()["state"].get<std::string>();
+      }
+      if (daemon().state() == DaemonState::kAwaitingAcceptance) {
+        const Reply r = cell_->request("reject");
+        if (!r.ok) return "NO WAY BACK: reject: " + r.message;
+        how = "sequence completed, rejected";
+      } else {
+        how = "holds";
+      }
+      if (!holds_settled(20.0)) {
+        return "NO WAY BACK: " + how + ", then " + daemon().status()["state"].get<std::string>();
+      }
+    }
+    // Restart the sequence (it is taken, then aborted) and move.
+    const Reply cal = cell_->request("calibrate");
+    if (!cal.ok) return "NO WAY BACK: " + how + ", calibrate: " + cal.code;
+    (void)cell_->request("abort");
+    if (!holds_settled(60.0)) return "NO WAY BACK: " + how + ", the restarted sequence hangs";
+    return how + ", recalibrates";
+  }
+
+  const FaultRow& row_;
+  Phase phase_;
+  fs::path dir_;
+  std::unique_ptr<Cell> cell_;
+  int previous_version_ = 0;
+  std::string previous_yaml_;
+  std::string refused_;  // the request that starts the phase was refused (with its reason)
+};
+
+std::vector<FaultRow> fault_rows() {
+  std::vector<FaultRow> rows;
+  const std::string only_startup = "n/a: SDO is used only at start-up";
+  rows.push_back({"drive fault with EMCY 0x2310 (cable 3)",
+                  [](Cell& c) { c.robot->drive(kCable).inject_fault(0x2310); },
+                  nullptr,
+                  {},
+                  nullptr});
+  rows.push_back({"drive silent: heartbeat lost (cable 3)",
+                  [](Cell& c) { c.robot->drive(kCable).faults().silent = true; },
+                  [](Cell& c) { c.robot->drive(kCable).faults().silent = false; },
+                  {},
+                  nullptr});
+  rows.push_back(
+      {"SDO abort 0x06020000 on 0x1600:00, RPDO mapping (cable 3)",
+       [](Cell& c) {
+         c.robot->drive(kCable).faults().abort_on[canopen::ObjectAddress{0x1600, 0}.key()] =
+             0x06020000;
+       },
+       [](Cell& c) { c.robot->drive(kCable).faults().abort_on.clear(); },
+       {{Phase::kHolding, only_startup},
+        {Phase::kMoving, only_startup},
+        {Phase::kMeasuring, only_startup},
+        {Phase::kIdentifying, only_startup},
+        {Phase::kHotSwap, only_startup}},
+       nullptr});
+  rows.push_back({"bus-off burst (0.3 s)",
+                  [](Cell& c) {
+                    c.robot->set_bus_off(true);
+                    if (!c.daemon) return;  // start-up: until cleared
+                    c.run_until([] { return false; }, 0.3);
+                    c.robot->set_bus_off(false);
+                  },
+                  [](Cell& c) { c.robot->set_bus_off(false); },
+                  {},
+                  nullptr});
+  rows.push_back({"force-sensor node silent",
+                  [](Cell& c) { c.robot->node(kForceNode).faults().silent = true; },
+                  [](Cell& c) { c.robot->node(kForceNode).faults().silent = false; },
+                  {},
+                  nullptr});
+  rows.push_back({"force reading stuck (cable 3)",
+                  [](Cell& c) { c.robot->set_force_fault(kCable, sim::ForceChannelFault::kStuck); },
+                  [](Cell& c) { c.robot->set_force_fault(kCable, sim::ForceChannelFault::kNone); },
+                  {},
+                  nullptr});
+  rows.push_back(
+      {"force reading out of range: raw 32767 (cable 3)",
+       [](Cell& c) { c.robot->set_force_fault(kCable, sim::ForceChannelFault::kRaw, 32767.0); },
+       [](Cell& c) { c.robot->set_force_fault(kCable, sim::ForceChannelFault::kNone); },
+       {},
+       nullptr});
+  auto laser = [](sim::LaserFaultMode mode) {
+    return [mode](Cell& c) { c.slave->set_fault(mode); };
+  };
+  auto laser_ok = [](Cell& c) {
+    c.slave->set_fault(sim::LaserFaultMode::kNone);
+    c.laser_status.reset();
+  };
+  rows.push_back({"laser timeout", laser(sim::LaserFaultMode::kTimeout), laser_ok, {}, nullptr});
+  rows.push_back({"laser garbage", laser(sim::LaserFaultMode::kGarbage), laser_ok, {}, nullptr});
+  rows.push_back(
+      {"laser out of range", laser(sim::LaserFaultMode::kOutOfRange), laser_ok, {}, nullptr});
+  rows.push_back({"laser \"no target\"",
+                  [](Cell& c) { c.laser_status = sim::LaserStatus::kNoTarget; },
+                  laser_ok,
+                  {},
+                  nullptr});
+  // A cable slipping on its drum: the true cable is longer (slack) or shorter (overload) than
+  // the encoder says.
+  rows.push_back({"cable slack: 20 mm slip (cable 3)",
+                  [](Cell& c) { c.robot->set_cable_slip(kCable, 20000.0); },
+                  [](Cell& c) { c.robot->set_cable_slip(kCable, 0.0); },
+                  {},
+                  nullptr});
+  {
+    // The platform moves with the slip: it takes a long one to pass 1.1 f_max (220 N).
+    FaultRow over{"cable overloaded: 250 mm slip (cable 3)",
+                  [](Cell& c) { c.robot->set_cable_slip(kCable, -250000.0); },
+                  [](Cell& c) { c.robot->set_cable_slip(kCable, 0.0); },
+                  {},
+                  nullptr};
+    rows.push_back(over);
+  }
+  rows.push_back({"cdpr-sim killed: every node and the laser silent, then the sim restarts",
+                  [](Cell& c) {
+                    c.robot_dead = true;
+                    c.slave->set_fault(sim::LaserFaultMode::kTimeout);
+                  },
+                  [](Cell& c) {
+                    c.robot_dead = false;
+                    c.slave->set_fault(sim::LaserFaultMode::kNone);
+                    c.robot->power_on(c.clock.now());  // the nodes boot again
+                  },
+                  {},
+                  nullptr});
+  {
+    FaultRow kill{"SIGKILL of cdprd, then restart", nullptr, nullptr, {}, nullptr};
+    kill.not_applicable[Phase::kStartup] = "not covered";
+    kill.custom = [](Phase p) {
+      const FaultRow none{"kill", nullptr, nullptr, {}, nullptr};
+      MatrixCell cell(none, p);
+      return cell.run_killed(false);
+    };
+    rows.push_back(kill);
+  }
+  {
+    // Disk full: every write to a regular file fails (RLIMIT_FSIZE 0, SIGXFSZ ignored).
+    static struct rlimit saved {};
+    FaultRow full{"disk full while saving",
+                  [](Cell&) {
+                    ::signal(SIGXFSZ, SIG_IGN);
+                    ::getrlimit(RLIMIT_FSIZE, &saved);
+                    struct rlimit none = saved;
+                    none.rlim_cur = 0;
+                    ::setrlimit(RLIMIT_FSIZE, &none);
+                  },
+                  [](Cell&) { ::setrlimit(RLIMIT_FSIZE, &saved); },
+                  {},
+                  nullptr};
+    full.not_applicable[Phase::kHolding] = "n/a: nothing is saved while holding";
+    full.not_applicable[Phase::kMoving] = "n/a: nothing is saved while moving";
+    full.inject_before_save = true;
+    rows.push_back(full);
+  }
+  {
+    FaultRow loss{
+        "power loss during a save (kill between write and rename)", nullptr, nullptr, {}, nullptr};
+    loss.not_applicable[Phase::kHolding] = "n/a: nothing is saved while holding";
+    loss.not_applicable[Phase::kMoving] = "n/a: nothing is saved while moving";
+    loss.custom = [](Phase p) {
+      const FaultRow none{"power loss", nullptr, nullptr, {}, nullptr};
+      MatrixCell cell(none, p);
+      return cell.run_killed(true);
+    };
+    rows.push_back(loss);
+  }
+  return rows;
+}
+
+// The table, as markdown: one row per fault, one column per phase.
+std::string table(const std::vector<FaultRow>& rows,
+                  const std::map<std::pair<std::string, Phase>, std::string>& cells) {
+  std::string t = "| fault |";
+  for (Phase p : kPhases) t += std::string(" ") + phase_name(p) + " |";
+  t += "\n| --- |";
+  for (std::size_t i = 0; i < kPhases.size(); ++i) t += " --- |";
+  t += "\n";
+  for (const FaultRow& r : rows) {
+    t += "| " + r.name + " |";
+    for (Phase p : kPhases) {
+      auto it = cells.find({r.name, p});
+      t += " " + (it == cells.end() ? std::string("not covered") : it->second) + " |";
+    }
+    t += "\n";
+  }
+  return t;
+}
+
+// The cells of a committed table: (fault, column index) -> text.
+std::map<std::pair<std::string, std::size_t>, std::string> parse_table(const std::string& text) {
+  std::map<std::pair<std::string, std::size_t>, std::string> out;
+  std::istringstream in(text);
+  std::string line;
+  const std::string begin = "<!-- fault matrix: generated -->";
+  bool inside = false;
+  while (std::getline(in, line)) {
+    if (line == begin) inside = true;
+    if (line == "<!-- end of the generated fault matrix -->") break;
+    if (!inside || line.rfind("| ", 0) != 0 || line.rfind("| fault |", 0) == 0) continue;
+    std::vector<std::string> fields;
+    std::size_t pos = 1;
+    while (pos < line.size()) {
+      const std::size_t bar = line.find(" |", pos);
+      if (bar == std::string::npos) break;
+      std::string f = line.substr(pos, bar - pos);
+      while (!f.empty() && f.front() == ' ') f.erase(f.begin());
+      fields.push_back(f);
+      pos = bar + 2;
+    }
+    if (fields.size() < 2) continue;
+    for (std::size_t i = 1; i < fields.size(); ++i) out[{fields[0], i - 1}] = fields[i];
+  }
+  return out;
+}
+
+TEST(FaultMatrix, EveryFaultInEveryPhaseEndsSafeAndMatchesDocsReliability) {
+  (void)log_capture();
+  const char* only = std::getenv("CDPR_MATRIX_ONLY");
+  std::vector<FaultRow> rows = fault_rows();
+  std::map<std::pair<std::string, Phase>, std::string> cells;
+  const auto wall0 = std::chrono::steady_clock::now();
+  for (const FaultRow& row : rows) {
+    if (only != nullptr && row.name.find(only) == std::string::npos) continue;
+    for (Phase p : kPhases) {
+      std::string out;
+      if (auto na = row.not_applicable.find(p); na != row.not_applicable.end()) {
+        out = na->second;
+      } else {
+        const auto t0 = std::chrono::steady_clock::now();
+        if (row.custom) {
+          out = row.custom(p);
+        } else {
+          MatrixCell cell(row, p);
+          out = cell.run();
+        }
+        std::printf("[matrix] %-45s | %-22s | %5.1f s | %s\n", row.name.c_str(), phase_name(p),
+                    std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+                    out.c_str());
+        std::fflush(stdout);
+      }
+      EXPECT_EQ(out.find("UNSAFE"), std::string::npos) << row.name << " / " << phase_name(p);
+      cells[{row.name, p}] = out;
+    }
+  }
+  std::printf("[matrix] %zu cells in %.0f s wall\n", cells.size(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count());
+  const std::string generated = table(rows, cells);
+  {
+    std::ofstream out("reliability-matrix.md");
+    out << generated;
+  }
+  if (only != nullptr) return;
+  const std::string doc_path = kSource + "/docs/reliability.md";
+  auto committed = read_text_file(doc_path);
+  if (std::getenv("CDPR_UPDATE_RELIABILITY") != nullptr) {
+    ASSERT_TRUE(committed.ok()) << doc_path;
+    const std::string begin = "<!-- fault matrix: generated -->\n";
+    const std::string end = "<!-- end of the generated fault matrix -->\n";
+    const std::size_t a = committed->find(begin), b = committed->find(end);
+    ASSERT_TRUE(a != std::string::npos && b != std::string::npos && a < b) << doc_path;
+    const std::string text =
+        committed->substr(0, a + begin.size()) + generated + committed->substr(b);
+    ASSERT_TRUE(write_file_atomically(doc_path, text).ok());
+    std::printf("[matrix] %s rewritten\n", doc_path.c_str());
+    return;
+  }
+  ASSERT_TRUE(committed.ok()) << "docs/reliability.md is missing";
+  const auto want = parse_table(*committed);
+  const auto got = parse_table("<!-- fault matrix: generated -->\n" + generated);
+  for (const auto& [key, text] : got) {
+    auto it = want.find(key);
+    ASSERT_NE(it, want.end()) << "docs/reliability.md has no cell for " << key.first << " / "
+                              << phase_name(kPhases[key.second]);
+    EXPECT_EQ(it->second, text) << "the outcome of " << key.first << " / "
+                                << phase_name(kPhases[key.second])
+                                << " differs from docs/reliability.md (CDPR_UPDATE_RELIABILITY=1 "
+                                   "rewrites it after a deliberate change)";
+  }
+  EXPECT_EQ(want.size(), got.size()) << "docs/reliability.md has cells the matrix does not make";
+}
+
+}  // namespace
+}  // namespace cdpr::controller
