@@ -8,5 +8,4 @@ if(TARGET cdpr_sim)
   target_link_libraries(mismatch_bench
     PRIVATE cdpr_sim cdpr_report cdpr_calibration cdpr_calibration_testing Threads::Threads
             cdpr_options)
-  target_include_directories(mismatch_bench PRIVATE ${CMAKE_SOURCE_DIR}/calibration/src)
 endif()

@@ -43,7 +43,7 @@
 #include "cdpr/sim/lockstep_io.hpp"
 #include "cdpr/sim/physics.hpp"
 #include "cdpr/sim/scenario.hpp"
-#include "identification_scenario.hpp"
+#include "testing/identification_scenario.hpp"
 
 namespace {
 

@@ -8,7 +8,7 @@
 
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/report/format.hpp"
-#include "identification_scenario.hpp"
+#include "testing/identification_scenario.hpp"
 
 namespace cdpr::report {
 namespace {
