@@ -4,4 +4,3 @@
 #   build/<dir>/bench/identification_bench [--seeds N] [--quick]
 add_executable(identification_bench ${CMAKE_CURRENT_LIST_DIR}/identification_bench.cc)
 target_link_libraries(identification_bench PRIVATE cdpr_calibration cdpr_calibration_testing cdpr_options)
-target_include_directories(identification_bench PRIVATE ${CMAKE_SOURCE_DIR}/calibration/src)

@@ -25,7 +25,7 @@
 #include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/calibration/simulate.hpp"
-#include "identification_scenario.hpp"
+#include "testing/identification_scenario.hpp"
 
 namespace {
 

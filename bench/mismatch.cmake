@@ -6,6 +6,6 @@
 if(TARGET cdpr_sim)
   add_executable(mismatch_bench ${CMAKE_CURRENT_LIST_DIR}/mismatch_bench.cc)
   target_link_libraries(mismatch_bench
-    PRIVATE cdpr_sim cdpr_calibration cdpr_calibration_testing Threads::Threads cdpr_options)
-  target_include_directories(mismatch_bench PRIVATE ${CMAKE_SOURCE_DIR}/calibration/src)
+    PRIVATE cdpr_sim cdpr_report cdpr_calibration cdpr_calibration_testing Threads::Threads
+            cdpr_options)
 endif()

@@ -39,10 +39,11 @@
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/calibration/winch.hpp"
 #include "cdpr/recording/recording.hpp"
+#include "cdpr/report/report.hpp"
 #include "cdpr/sim/lockstep_io.hpp"
 #include "cdpr/sim/physics.hpp"
 #include "cdpr/sim/scenario.hpp"
-#include "identification_scenario.hpp"
+#include "testing/identification_scenario.hpp"
 
 namespace {
 
@@ -558,6 +559,14 @@ Magnitude calibrate_magnitude(const Robot& r, const std::string& key) {
 // One blind run.
 // ------------------------------------------------------------------------------------------------
 
+// The diagnosis as the reports render it (drivers/report), for --verbose.
+std::string diagnosis_text(const Diagnosis& d, const cdpr::RobotModel& nominal,
+                           const cdpr::MeasurementSet& set) {
+  cdpr::report::ReportContext c;
+  c.title = "mismatch_bench";
+  return cdpr::report::diagnosis_text(d, nominal, set, c);
+}
+
 struct RunResult {
   bool ok = false;
   std::string error;
@@ -573,7 +582,7 @@ struct RunResult {
   double len_rms_before = 0, len_rms_after = 0;  // "cable lengths" channel, m
   double param_error = std::nan("");             // RMS relative error of the fitted parameters
   double seconds = 0;
-  std::string text;  // Diagnosis::Text() (printed with --verbose)
+  std::string text;  // the diagnosis's text report (printed with --verbose)
 };
 
 std::vector<std::string> accepted_families(const Diagnosis& d) {
@@ -644,7 +653,7 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     return out;
   }
   out.ok = true;
-  out.text = d->Text();
+  out.text = diagnosis_text(*d, r.nominal.robot, *set);
   out.verdict = d->verdict;
   out.held_before = d->held_out_rms_before;
   out.held_after = d->held_out_rms_after;
@@ -729,7 +738,8 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
         out.held_before = d2->held_out_rms_before;
         out.held_after = d2->held_out_rms_after;
       }
-      out.text += "\n--- after the follow-up poses ---\n" + d2->Text();
+      out.text +=
+          "\n--- after the follow-up poses ---\n" + diagnosis_text(*d2, r.nominal.robot, *set2);
     }
   }
   out.seconds = seconds_since(t0);

@@ -3,10 +3,9 @@
 set(_fit ${CMAKE_CURRENT_LIST_DIR}/cdpr-fit)
 add_library(cdpr_fit_app STATIC ${_fit}/app.cc ${_fit}/common.cc ${_fit}/cmd_simulate.cc
                                 ${_fit}/cmd_calibrate.cc ${_fit}/cmd_fit_sensors.cc
-                                ${_fit}/cmd_design.cc ${_fit}/cmd_diagnose.cc
-                                ${_fit}/diagnose_report.cc)
+                                ${_fit}/cmd_design.cc ${_fit}/cmd_diagnose.cc)
 target_include_directories(cdpr_fit_app PUBLIC ${_fit})
-target_link_libraries(cdpr_fit_app PUBLIC cdpr_recording cdpr_config cdpr_io cdpr_calibration
+target_link_libraries(cdpr_fit_app PUBLIC cdpr_recording cdpr_config cdpr_io cdpr_report cdpr_calibration
                                           nlohmann_json::nlohmann_json CLI11::CLI11 spdlog::spdlog
                                    PRIVATE cdpr_options)
 

@@ -21,7 +21,6 @@
 
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/recording/recording.hpp"
-#include "diagnose_report.hpp"
 #include "fit_process.hpp"
 
 namespace {
@@ -256,20 +255,6 @@ TEST_F(Diagnose, UsageErrorsExitWithTwo) {
   const Process help = fit({"diagnose", "--help"});
   EXPECT_EQ(help.status, 0);
   EXPECT_THAT(help.out, HasSubstr("--validate"));
-}
-
-TEST(DiagnoseReport, HtmlEscapingCoversMarkupAndQuotes) {
-  EXPECT_EQ(cdpr::fit::html_escape("a<b>&\"c'd"), "a&lt;b&gt;&amp;&quot;c&#39;d");
-  EXPECT_EQ(cdpr::fit::html_escape("EA = 21.4 +- 0.6 kN"), "EA = 21.4 +- 0.6 kN");
-}
-
-TEST(DiagnoseReport, EachEffectIsPlottedAgainstItsExplainingVariable) {
-  using cdpr::fit::explaining_variable;
-  EXPECT_EQ(explaining_variable("elasticity").name, "tension x loaded length");
-  EXPECT_EQ(explaining_variable("compliance").name, "tension");
-  EXPECT_EQ(explaining_variable("drum scale").name, "loaded length");
-  EXPECT_EQ(explaining_variable("encoder drift").name, "time");
-  EXPECT_EQ(explaining_variable("laser plane").name, "pose index");
 }
 
 }  // namespace

@@ -1,4 +1,4 @@
-// The benchmark's MINI scenario (calibration/src/identification_scenario.hpp,
+// The benchmark's MINI scenario (calibration/testing/identification_scenario.hpp,
 // mini_config_scenario) must be the shipped robot: its nominal model equal to config/mini.yaml and
 // its truth equal to config/mini-measured.yaml as loaded by cdpr_config, so that the figures of
 // bench/identification_bench are those of the configs `cdpr-fit` is run on.
@@ -7,7 +7,7 @@
 #include <string>
 
 #include "cdpr/config/robot_config.hpp"
-#include "identification_scenario.hpp"
+#include "testing/identification_scenario.hpp"
 
 namespace {
 

@@ -8,6 +8,7 @@
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/io/atomic_file.hpp"
 #include "cdpr/recording/recording.hpp"
+#include "cdpr/report/report.hpp"
 #include "commands.hpp"
 #include "common.hpp"
 
@@ -95,46 +96,10 @@ std::vector<std::string> estimated_items(const IdentificationOptions& o) {
 
 namespace {
 
-// Per cable ||a_i - a_true,i|| (m).
-Eigen::VectorXd anchor_errors(const RobotModel& model, const RobotModel& truth) {
-  return (model.frame_anchors - truth.frame_anchors).colwise().norm().transpose();
-}
-
-double rms(const Eigen::VectorXd& v) {
-  return v.size() == 0 ? 0.0 : std::sqrt(v.squaredNorm() / static_cast<double>(v.size()));
-}
-
-nlohmann::json identifiability_json(const IdentifiabilityReport& r) {
-  nlohmann::json dirs = nlohmann::json::array();
-  for (const ParameterDirection& d : r.directions) {
-    nlohmann::json comps = nlohmann::json::array();
-    for (const DirectionComponent& c : d.components) {
-      comps.push_back({{"description", c.description}, {"weight", c.weight}});
-    }
-    dirs.push_back({{"singular_value", d.singular_value},
-                    {"null", d.null},
-                    {"gauge", d.gauge},
-                    {"description", d.description},
-                    {"components", comps}});
-  }
-  return {{"identifiable", r.identifiable()},
-          {"rank", r.rank},
-          {"parameters", r.num_parameters},
-          {"residuals", r.num_residuals},
-          {"condition_number", number_or_null(r.condition_number)},
-          {"singular_values", to_json(r.singular_values)},
-          {"normalized_singular_values", to_json(r.normalized_singular_values)},
-          {"o1", r.o1},
-          {"o2", r.o2},
-          {"o3", r.o3},
-          {"o4", r.o4},
-          {"o5", r.o5},
-          {"weak_or_null_directions", dirs}};
-}
-
 // Writes the calibrated config (with a comment header) and the JSON report together: both or,
-// when one cannot be written, neither (io::AtomicFileSet). Records the config in the JSON.
-Status write_outputs(const CalibrateArgs& args, const RobotModel& calibrated, nlohmann::json* j) {
+// when one cannot be written, neither (io::AtomicFileSet).
+Status write_outputs(const CalibrateArgs& args, const RobotModel& calibrated,
+                     const nlohmann::json& j) {
   io::AtomicFileSet outputs;
   if (!args.out.empty()) {
     const std::string yaml = "# Calibrated by cdpr-fit calibrate --method " + args.method +
@@ -144,9 +109,8 @@ Status write_outputs(const CalibrateArgs& args, const RobotModel& calibrated, nl
                              "offsets and scales.\n" +
                              config::save_robot_config(calibrated);
     CDPR_RETURN_IF_ERROR(outputs.stage(args.out, yaml));
-    (*j)["calibrated_config"] = args.out;
   }
-  if (!args.report.empty()) CDPR_RETURN_IF_ERROR(outputs.stage(args.report, j->dump(2) + "\n"));
+  if (!args.report.empty()) CDPR_RETURN_IF_ERROR(outputs.stage(args.report, j.dump(2) + "\n"));
   return outputs.commit();
 }
 
@@ -162,65 +126,33 @@ Result<std::optional<RobotModel>> load_truth(const CalibrateArgs& args, const Ro
   return std::optional<RobotModel>(std::move(*t));
 }
 
-// Anchor errors vs the truth into the JSON and a text table.
-std::string truth_comparison(const CalibrateArgs& args, const RobotModel& nominal,
-                             const RobotModel& calibrated, const RobotModel& truth,
-                             nlohmann::json* j) {
-  const Eigen::VectorXd before = anchor_errors(nominal, truth);
-  const Eigen::VectorXd after = anchor_errors(calibrated, truth);
-  (*j)["anchor_error_vs_truth"] = {{"truth", args.truth},
-                                   {"nominal_m", to_json(before)},
-                                   {"calibrated_m", to_json(after)},
-                                   {"nominal_rms_m", rms(before)},
-                                   {"calibrated_rms_m", rms(after)},
-                                   {"nominal_max_m", before.maxCoeff()},
-                                   {"calibrated_max_m", after.maxCoeff()}};
-  std::ostringstream t;
-  t << "\nFrame anchor error vs " << args.truth << " (m):\n  cable    nominal  calibrated\n";
-  for (Eigen::Index i = 0; i < before.size(); ++i) {
-    char line[96];
-    std::snprintf(line, sizeof line, "  %5ld  %9.3e   %9.3e\n", static_cast<long>(i + 1), before(i),
-                  after(i));
-    t << line;
-  }
-  t << "  RMS    " << fmt(rms(before), 4) << " -> " << fmt(rms(after), 4) << " m\n";
-  return t.str();
+// The report's context from the command line.
+report::ReportContext context_of(const CalibrateArgs& args, const recording::Recording& rec,
+                                 const std::vector<std::string>& warnings) {
+  report::ReportContext c;
+  c.title = "cdpr-fit calibrate";
+  c.config = args.config;
+  c.config_hash = hash_or_unknown(args.config);
+  c.recording = args.recording;
+  c.recording_hash = hash_or_unknown(args.recording);
+  for (const recording::RecordedPose& p : rec.poses) c.pose_indices.push_back(p.index);
+  c.method = args.method;
+  c.gauge = args.gauge;
+  c.loss = args.loss;
+  c.home_pose_row = args.home_pose;
+  c.max_iterations = args.max_iterations;
+  c.calibrated_config = args.out;
+  c.truth = args.truth;
+  c.warnings = warnings;
+  return c;
 }
 
-std::string anchor_table(const RobotModel& nominal, const RobotModel& calibrated) {
-  std::ostringstream h;
-  h << "\nFrame anchors (m):\n  cable   nominal                         calibrated\n";
-  for (int i = 0; i < nominal.num_cables(); ++i) {
-    char line[160];
-    const auto a = nominal.frame_anchors.col(i);
-    const auto b = calibrated.frame_anchors.col(i);
-    std::snprintf(line, sizeof line, "  %5d   [%8.5f, %8.5f, %8.5f]   [%8.5f, %8.5f, %8.5f]\n",
-                  i + 1, a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
-    h << line;
-  }
-  return h.str();
-}
-
-std::string tail_text(const CalibrateArgs& args, const std::vector<std::string>& warnings) {
-  std::ostringstream h;
-  if (!warnings.empty()) {
-    h << "\nWarnings:\n";
-    for (const std::string& w : warnings) h << "  - " << w << "\n";
-  }
-  if (!args.out.empty()) h << "\nwrote " << args.out << "\n";
-  if (!args.report.empty()) h << "wrote " << args.report << "\n";
-  return h.str();
-}
-
-nlohmann::json inputs_json(const CalibrateArgs& args, const RobotModel& nominal,
-                           const MeasurementSet& set) {
-  return {{"config", args.config},
-          {"config_hash", hash_or_unknown(args.config)},
-          {"recording", args.recording},
-          {"recording_hash", hash_or_unknown(args.recording)},
-          {"poses", set.num_poses()},
-          {"cables", nominal.num_cables()},
-          {"lasers", static_cast<int>(nominal.lasers.size())}};
+// "wrote ..." lines after the report's text.
+std::string wrote_text(const CalibrateArgs& args) {
+  std::string h;
+  if (!args.out.empty()) h += "\nwrote " + args.out + "\n";
+  if (!args.report.empty()) h += "wrote " + args.report + "\n";
+  return h;
 }
 
 // The paper's method (paper_method.hpp): anchors only, no covariance.
@@ -254,55 +186,27 @@ Result<Output> calibrate_paper(const CalibrateArgs& args, const RobotModel& nomi
   auto truth = load_truth(args, nominal);
   if (!truth.ok()) return truth.status();
   const CalibratedModel initial = CalibratedModel::FromRobot(nominal);
-  auto report = paper_method(initial, set, options);
-  if (!report.ok()) {
-    return with_context(report.status(), "calibrating " + args.config + " from " + args.recording);
+  auto result = paper_method(initial, set, options);
+  if (!result.ok()) {
+    return with_context(result.status(), "calibrating " + args.config + " from " + args.recording);
   }
-  const PaperMethodReport& r = *report;
+  const PaperMethodReport& r = *result;
   if (!r.converged) warnings.push_back("the paper's iteration did not converge: " + r.termination);
   // identify() and paper_method() already fold the identified reading model into the winches
   // (IdentificationReport::estimate); folding it again would double the offsets.
-  const RobotModel& calibrated = r.estimate.robot;
-  nlohmann::json poses = nlohmann::json::array();
-  for (std::size_t j = 0; j < r.poses.size(); ++j) {
-    poses.push_back({{"pose", rec.poses[j].index},
-                     {"estimate", to_json(Eigen::VectorXd(r.poses[j].vector()))}});
-  }
-  nlohmann::json j = {
-      {"command", "calibrate"},
-      {"method", "paper"},
-      {"inputs", inputs_json(args, nominal, set)},
-      {"options",
-       {{"estimate", options.parameters.size() == 0 ? "paper-anchors" : "anchors"},
-        {"home_pose_row", args.home_pose},
-        {"max_iterations", args.max_iterations},
-        {"lambda", options.lambda}}},
-      {"converged", r.converged},
-      {"termination", r.termination},
-      {"iterations", r.iterations},
-      {"fk_solves", r.fk_solves},
-      {"error_norm_m", {{"initial", r.initial_error_norm}, {"final", r.final_error_norm}}},
-      {"error_history_m", r.error_history},
-      {"time_s", r.time_s},
-      {"std_devs", nullptr},
-      {"frame_anchors",
-       {{"nominal", to_json(nominal.frame_anchors)},
-        {"calibrated", to_json(calibrated.frame_anchors)}}},
-      {"poses", poses},
-      {"warnings", warnings},
-      {"trustworthy", r.converged && warnings.empty()},
-  };
-  const std::string truth_text =
-      truth->has_value() ? truth_comparison(args, nominal, calibrated, **truth, &j) : "";
-  CDPR_RETURN_IF_ERROR(write_outputs(args, calibrated, &j));
-  std::ostringstream h;
-  h << "cdpr-fit calibrate --method paper: " << args.config << " + " << args.recording << " ("
-    << set.num_poses() << " poses)\n\n"
-    << r.Summary() << "\n(the paper's method gives no standard deviations)\n"
-    << anchor_table(nominal, calibrated) << truth_text << tail_text(args, warnings);
+  report::PaperReportInput in;
+  in.before = &initial;
+  in.paper = &r;
+  in.set = &set;
+  in.truth = truth->has_value() ? &**truth : nullptr;
+  in.estimate = options.parameters.size() == 0 ? "paper-anchors" : "anchors";
+  in.lambda = options.lambda;
+  in.context = context_of(args, rec, warnings);
+  nlohmann::json j = report::paper_method_json(in);
+  CDPR_RETURN_IF_ERROR(write_outputs(args, r.estimate.robot, j));
   Output out;
   out.json = std::move(j);
-  out.human = h.str();
+  out.human = report::paper_method_text(in) + wrote_text(args);
   return out;
 }
 
@@ -384,106 +288,34 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   const CalibratedModel initial = CalibratedModel::FromRobot(*nominal);
   // Identifiability of the choice at the commanded poses (named directions for the report).
   auto ident = analyze_identifiability(initial, *set, options);
-  auto report = identify(initial, *set, options);
-  if (!report.ok()) {
-    return with_context(report.status(), "calibrating " + args.config + " from " + args.recording);
+  auto result = identify(initial, *set, options);
+  if (!result.ok()) {
+    return with_context(result.status(), "calibrating " + args.config + " from " + args.recording);
   }
-  const IdentificationReport& r = *report;
+  const IdentificationReport& r = *result;
   for (const std::string& w : r.warnings) warnings.push_back(w);
   // identify() and paper_method() already fold the identified reading model into the winches
   // (IdentificationReport::estimate); folding it again would double the offsets.
   const RobotModel& calibrated = r.estimate.robot;
 
-  // ---- JSON report ------------------------------------------------------------------------
-  nlohmann::json params = nlohmann::json::array();
-  for (const ParameterEstimate& p : r.parameters) {
-    params.push_back({{"name", p.name},
-                      {"unit", p.unit},
-                      {"initial", p.initial},
-                      {"value", p.value},
-                      {"std_dev", number_or_null(p.std_dev)}});
-  }
-  nlohmann::json residuals = nlohmann::json::array();
-  for (std::size_t j = 0; j < r.residuals.size(); ++j) {
-    const PoseResiduals& pr = r.residuals[j];
-    residuals.push_back(
-        {{"row", j},
-         {"pose", rec->poses[j].index},
-         {"length_m", to_json(pr.length_m)},
-         {"length_normalized", to_json(pr.length_normalized)},
-         {"laser_m", to_json(pr.laser_m)},
-         {"laser_normalized", to_json(pr.laser_normalized)},
-         {"wrench_si", to_json(Eigen::VectorXd(pr.wrench_si))},
-         {"wrench_normalized", to_json(Eigen::VectorXd(pr.wrench_normalized))},
-         {"reference_normalized", to_json(Eigen::VectorXd(pr.reference_normalized))}});
-  }
-  nlohmann::json poses = nlohmann::json::array();
-  for (std::size_t j = 0; j < r.poses.size(); ++j) {
-    poses.push_back({{"pose", rec->poses[j].index},
-                     {"estimate", to_json(Eigen::VectorXd(r.poses[j].vector()))},
-                     {"std_dev", j < r.pose_std.size() ? to_json(Eigen::VectorXd(r.pose_std[j]))
-                                                       : nlohmann::json(nullptr)}});
-  }
-  nlohmann::json j = {
-      {"command", "calibrate"},
-      {"method", args.method},
-      {"inputs", inputs_json(args, *nominal, *set)},
-      {"options",
-       {{"estimate", estimated_items(options)},
-        {"gauge", args.gauge},
-        {"loss", args.loss},
-        {"home_pose_row", args.home_pose},
-        {"max_iterations", args.max_iterations}}},
-      {"noise",
-       {{"length_m", set->noise.sigma_length},
-        {"laser_m", set->noise.sigma_laser},
-        {"force_n", set->noise.sigma_force}}},
-      {"converged", r.converged},
-      {"termination", r.termination},
-      {"iterations", r.iterations},
-      {"cost", {{"initial", r.initial_cost}, {"final", r.final_cost}}},
-      {"chi2", r.chi2},
-      {"dof", r.dof},
-      {"residual_count", r.num_residuals},
-      {"parameter_count", r.num_parameters},
-      {"rms",
-       {{"length_m", r.rms_length_m}, {"laser_m", r.rms_laser_m}, {"wrench_n", r.rms_wrench_n}}},
-      {"rank", r.rank},
-      {"condition_number", number_or_null(r.condition_number)},
-      {"solve_time_s", r.solve_time_s},
-      {"estimate", params},
-      {"frame_anchors",
-       {{"nominal", to_json(nominal->frame_anchors)},
-        {"calibrated", to_json(calibrated.frame_anchors)}}},
-      {"length_offsets_m", to_json(r.estimate.readings.length_offsets)},
-      {"length_scales", to_json(r.estimate.readings.length_scales)},
-      {"poses", poses},
-      {"residuals", residuals},
-      {"warnings", warnings},
-      {"trustworthy", r.converged && warnings.empty()},
-  };
+  report::CalibrationReportInput in;
+  in.before = &initial;
+  in.after = &r.estimate;
+  in.identification = &r;
+  in.set = &*set;
   if (ident.ok()) {
-    j["identifiability"] = identifiability_json(*ident);
+    in.identifiability = &*ident;
   } else {
-    j["identifiability"] = {{"error", std::string(ident.status().message())}};
+    in.identifiability_error = std::string(ident.status().message());
   }
-  const std::string truth_text =
-      truth->has_value() ? truth_comparison(args, *nominal, calibrated, **truth, &j) : "";
-  CDPR_RETURN_IF_ERROR(write_outputs(args, calibrated, &j));
-
-  // ---- human text ---------------------------------------------------------------------------
-  std::ostringstream h;
-  h << "cdpr-fit calibrate: " << args.config << " + " << args.recording << " (" << set->num_poses()
-    << " poses, " << nominal->num_cables() << " cables, " << nominal->lasers.size() << " laser"
-    << (nominal->lasers.size() == 1 ? "" : "s") << ")\n";
-  h << "estimating:";
-  for (const std::string& e : estimated_items(options)) h << " " << e;
-  h << "\n\n" << r.FullReport();
-  if (ident.ok()) h << "\nIdentifiability:\n" << ident->Summary() << "\n";
-  h << anchor_table(*nominal, calibrated) << truth_text << tail_text(args, warnings);
+  in.truth = truth->has_value() ? &**truth : nullptr;
+  in.context = context_of(args, *rec, warnings);
+  in.context.estimated = estimated_items(options);
+  nlohmann::json j = report::identification_json(in);
+  CDPR_RETURN_IF_ERROR(write_outputs(args, calibrated, j));
   Output out;
   out.json = std::move(j);
-  out.human = h.str();
+  out.human = report::identification_text(in) + wrote_text(args);
   return out;
 }
 

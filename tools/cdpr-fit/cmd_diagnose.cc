@@ -9,9 +9,9 @@
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/io/atomic_file.hpp"
 #include "cdpr/recording/recording.hpp"
+#include "cdpr/report/report.hpp"
 #include "commands.hpp"
 #include "common.hpp"
-#include "diagnose_report.hpp"
 
 namespace cdpr::fit {
 
@@ -164,7 +164,8 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
   }
   const Diagnosis& d = *result;
 
-  DiagnoseContext c;
+  report::ReportContext c;
+  c.title = "cdpr-fit diagnose";
   c.config = args.config;
   c.config_hash = hash_or_unknown(args.config);
   c.recording = args.recording;
@@ -173,9 +174,6 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
     c.validation = args.validate;
     c.validation_hash = hash_or_unknown(args.validate);
   }
-  c.poses = primary->set.num_poses();
-  c.cables = nominal->num_cables();
-  c.lasers = static_cast<int>(nominal->lasers.size());
   c.estimated = estimated_items(identification);
   c.seed = args.seed;
   c.bootstrap = args.bootstrap;
@@ -190,14 +188,10 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
   c.warnings = warnings;
   for (const std::string& w : d.before.warnings) c.warnings.push_back("identification: " + w);
 
-  const CableMisfit misfit = cable_misfit(d, nominal->num_cables());
   Output out;
   out.exit_status = exit_status_of(d.verdict);
-  out.json = diagnosis_json(d, c, misfit);
+  out.json = report::diagnosis_json(d, *nominal, primary->set, c);
   out.json["exit_status"] = out.exit_status;
-  out.json["noise"] = {{"length_m", primary->set.noise.sigma_length},
-                       {"laser_m", primary->set.noise.sigma_laser},
-                       {"force_n", primary->set.noise.sigma_force}};
   out.json["json_report"] =
       args.json_report.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.json_report);
   out.json["html_report"] = args.html.empty() ? nlohmann::json(nullptr) : nlohmann::json(args.html);
@@ -212,15 +206,15 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
     }
     const std::string yaml =
         "# Calibrated by cdpr-fit diagnose from " + args.config + " and " + args.recording + " (" +
-        recording::utc_timestamp() + "); verdict " + verdict_key(d.verdict) + ".\n" +
+        recording::utc_timestamp() + "); verdict " + report::verdict_key(d.verdict) + ".\n" +
         "# Named effects: " + (effects.empty() ? std::string("none") : effects) + ".\n" +
         "# Winch length_offset and drum size include the identified encoder offsets and scales.\n" +
         config::save_robot_config(d.model_after.robot);
     CDPR_RETURN_IF_ERROR(outputs.stage(args.out, yaml));
   }
   if (!args.html.empty()) {
-    const std::vector<ResidualPlot> plots = residual_plots(d, primary->set);
-    CDPR_RETURN_IF_ERROR(outputs.stage(args.html, diagnosis_html(d, c, plots, misfit)));
+    CDPR_RETURN_IF_ERROR(
+        outputs.stage(args.html, report::diagnosis_html(d, *nominal, primary->set, c)));
   }
   if (!args.json_report.empty()) {
     nlohmann::json file = out.json;
@@ -230,11 +224,11 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
   CDPR_RETURN_IF_ERROR(outputs.commit());
 
   std::ostringstream h;
-  h << diagnosis_text(d, c) << "\n";
+  h << report::diagnosis_text(d, *nominal, primary->set, c) << "\n";
   if (!c.calibrated_config.empty()) h << "wrote " << args.out << "\n";
   if (!args.json_report.empty()) h << "wrote " << args.json_report << "\n";
   if (!args.html.empty()) h << "wrote " << args.html << "\n";
-  h << "exit status " << out.exit_status << " (" << verdict_key(d.verdict) << ")\n";
+  h << "exit status " << out.exit_status << " (" << report::verdict_key(d.verdict) << ")\n";
   out.human = h.str();
   return out;
 }

@@ -121,7 +121,7 @@ struct FitForceArgs {
 Result<Output> fit_force_sensor(const FitForceArgs& args);
 
 // ---------------------------------------------------------------------------------------------
-// diagnose (the mismatch locator, calibration/include/cdpr/calibration/diagnosis.hpp)
+// diagnose (the mismatch locator, calibration/mismatch/include/cdpr/calibration/diagnosis.hpp)
 // ---------------------------------------------------------------------------------------------
 struct DiagnoseArgs {
   std::string config;       // nominal robot (YAML)

@@ -8,6 +8,7 @@
 
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/report/format.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr::fit {
@@ -21,18 +22,15 @@ std::string hash_or_unknown(const std::string& path);
 // Status with "<context>: " in front (Status::prepend trips -Wformat-truncation in GCC 12).
 Status with_context(const Status& s, const std::string& context);
 
-// JSON arrays of Eigen vectors/matrices (NaN and infinity become null).
-nlohmann::json to_json(const Eigen::VectorXd& v);
-nlohmann::json to_json(const Eigen::Matrix3Xd& m);  // list of columns
-nlohmann::json number_or_null(double v);
+// JSON arrays of Eigen vectors/matrices (NaN and infinity become null), numbers for people.
+using report::fmt;
+using report::number_or_null;
+using report::to_json;
 
 // Applies --estimate items (estimate_names()) to `options`; an empty list keeps its defaults.
 Status apply_estimate(const std::vector<std::string>& names, int num_cables,
                       IdentificationOptions* options);
 // The estimated items of `options`, for reports.
 std::vector<std::string> estimated_items(const IdentificationOptions& options);
-
-// A number for humans: "%.*g".
-std::string fmt(double v, int digits = 6);
 
 }  // namespace cdpr::fit

@@ -1,15 +1,17 @@
-#include "diagnose_report.hpp"
-
+// The renderings of a Diagnosis: JSON, text and the HTML page of cdpr-fit diagnose.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <sstream>
 
-#include "cdpr/calibration/kinematics.hpp"
-#include "common.hpp"
+#include "cdpr/calibration/residual_explanation.hpp"
+#include "cdpr/report/format.hpp"
+#include "cdpr/report/report.hpp"
+#include "report_internal.hpp"
+#include "svg.hpp"
 
-namespace cdpr::fit {
+namespace cdpr::report {
 
 namespace {
 
@@ -42,26 +44,6 @@ std::string pose_text(const Pose& p) {
   std::snprintf(buf, sizeof buf, "x %.4f y %.4f z %.4f m, roll %.4f pitch %.4f yaw %.4f rad",
                 p.position.x(), p.position.y(), p.position.z(), p.rpy.x(), p.rpy.y(), p.rpy.z());
   return buf;
-}
-
-double rms_of(const std::vector<double>& v) {
-  double s = 0.0;
-  int n = 0;
-  for (double x : v) {
-    if (!std::isfinite(x)) continue;
-    s += x * x;
-    ++n;
-  }
-  return n == 0 ? kNaN : std::sqrt(s / n);
-}
-
-// The family of a candidate id, from the refitted candidates or the screen.
-std::string family_of(const Diagnosis& d, const std::string& id) {
-  for (const EffectFit& e : d.candidates) {
-    if (e.id == id) return e.family;
-  }
-  if (const CandidateScreen* c = d.screen.find(id)) return c->family;
-  return "";
 }
 
 nlohmann::json effect_json(const EffectFit& e) {
@@ -128,195 +110,7 @@ nlohmann::json vector_json(const std::vector<double>& v) {
   return a;
 }
 
-// ---- SVG ------------------------------------------------------------------------------------
-
-struct Range {
-  double lo = 0.0, hi = 1.0;
-};
-
-Range range_of(const std::vector<const std::vector<double>*>& values) {
-  double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-  for (const auto* v : values) {
-    for (double x : *v) {
-      if (!std::isfinite(x)) continue;
-      lo = std::min(lo, x);
-      hi = std::max(hi, x);
-    }
-  }
-  if (!(lo <= hi)) return {0.0, 1.0};
-  if (hi - lo < 1e-12 * std::max(1.0, std::abs(hi))) {
-    const double pad = hi == 0.0 ? 0.5 : std::abs(hi) * 0.05;
-    return {lo - pad, hi + pad};
-  }
-  const double pad = 0.04 * (hi - lo);
-  return {lo - pad, hi + pad};
-}
-
-// Tick positions at 1, 2 or 5 times a power of ten, about five of them.
-std::vector<double> ticks(const Range& r) {
-  const double span = r.hi - r.lo;
-  const double raw = span / 5.0;
-  const double p = std::pow(10.0, std::floor(std::log10(raw)));
-  double step = p;
-  for (double f : {1.0, 2.0, 5.0, 10.0}) {
-    step = f * p;
-    if (span / step <= 6.0) break;
-  }
-  std::vector<double> t;
-  for (double v = std::ceil(r.lo / step) * step; v <= r.hi + 1e-9 * step; v += step) {
-    t.push_back(std::abs(v) < 1e-12 * step ? 0.0 : v);
-  }
-  return t;
-}
-
-struct Frame {
-  double left = 64, right = 16, top = 46, bottom = 48;
-  double width = 640, height = 340;
-  Range x, y;
-  double px(double v) const { return left + (v - x.lo) / (x.hi - x.lo) * (width - left - right); }
-  double py(double v) const { return top + (y.hi - v) / (y.hi - y.lo) * (height - top - bottom); }
-};
-
-std::string coord(double v) {
-  return printf_string("%.1f", v);
-}
-
-// Axes, grid, tick labels, axis titles and the plot title.
-std::string axes(const Frame& f, const std::string& title, const std::string& xlabel,
-                 const std::string& ylabel, bool x_ticks = true) {
-  std::ostringstream s;
-  // About 80 characters fit beside nothing else at this width; longer titles are shortened.
-  const std::string shown_title = title.size() > 84 ? title.substr(0, 81) + "..." : title;
-  s << "<text x=\"" << coord(f.left) << "\" y=\"18\" class=\"t\">" << html_escape(shown_title)
-    << "</text>\n";
-  for (double t : ticks(f.y)) {
-    s << "<line x1=\"" << coord(f.left) << "\" x2=\"" << coord(f.width - f.right) << "\" y1=\""
-      << coord(f.py(t)) << "\" y2=\"" << coord(f.py(t)) << "\" class=\"g\"/>"
-      << "<text x=\"" << coord(f.left - 6) << "\" y=\"" << coord(f.py(t) + 4)
-      << "\" text-anchor=\"end\">" << html_escape(fmt(t, 4)) << "</text>\n";
-  }
-  if (x_ticks) {
-    for (double t : ticks(f.x)) {
-      s << "<line x1=\"" << coord(f.px(t)) << "\" x2=\"" << coord(f.px(t)) << "\" y1=\""
-        << coord(f.top) << "\" y2=\"" << coord(f.height - f.bottom) << "\" class=\"g\"/>"
-        << "<text x=\"" << coord(f.px(t)) << "\" y=\"" << coord(f.height - f.bottom + 16)
-        << "\" text-anchor=\"middle\">" << html_escape(fmt(t, 4)) << "</text>\n";
-    }
-  }
-  s << "<rect x=\"" << coord(f.left) << "\" y=\"" << coord(f.top) << "\" width=\""
-    << coord(f.width - f.left - f.right) << "\" height=\"" << coord(f.height - f.top - f.bottom)
-    << "\" class=\"a\"/>\n";
-  s << "<text x=\"" << coord((f.left + f.width - f.right) / 2) << "\" y=\"" << coord(f.height - 10)
-    << "\" text-anchor=\"middle\">" << html_escape(xlabel) << "</text>\n";
-  const double cy = (f.top + f.height - f.bottom) / 2;
-  s << "<text x=\"14\" y=\"" << coord(cy) << "\" text-anchor=\"middle\" transform=\"rotate(-90 14 "
-    << coord(cy) << ")\">" << html_escape(ylabel) << "</text>\n";
-  return s.str();
-}
-
-std::string horizontal_line(const Frame& f, double y, const std::string& cls) {
-  if (y < f.y.lo || y > f.y.hi) return "";
-  return "<line x1=\"" + coord(f.left) + "\" x2=\"" + coord(f.width - f.right) + "\" y1=\"" +
-         coord(f.py(y)) + "\" y2=\"" + coord(f.py(y)) + "\" class=\"" + cls + "\"/>\n";
-}
-
-std::string legend(const Frame& f, const std::vector<std::pair<std::string, std::string>>& items) {
-  std::ostringstream s;
-  double x = f.width - f.right - 8;
-  for (auto it = items.rbegin(); it != items.rend(); ++it) {
-    const double w = 14.0 + 7.0 * static_cast<double>(it->first.size());
-    x -= w;
-    s << "<rect x=\"" << coord(x) << "\" y=\"26\" width=\"10\" height=\"10\" class=\"" << it->second
-      << "\"/><text x=\"" << coord(x + 13) << "\" y=\"35\">" << html_escape(it->first)
-      << "</text>\n";
-  }
-  return s.str();
-}
-
-// Each plot carries its style, so that it also reads correctly when saved on its own.
-constexpr const char* kSvgStyle =
-    "<style>text{font-family:sans-serif;font-size:11px;fill:#222}.t{font-size:13px;"
-    "font-weight:bold}.g{stroke:#eee}.a{fill:none;stroke:#888}.z{stroke:#444}"
-    ".d{stroke:#999;stroke-dasharray:4 3}.b{fill:#1f77b4;fill-opacity:.45;stroke:#1f77b4}"
-    ".f{fill:#d62728;fill-opacity:.75;stroke:none}</style>\n";
-
-std::string svg_open(const Frame& f, const std::string& label) {
-  return "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"" + coord(f.width) + "\" height=\"" +
-         coord(f.height) + "\" viewBox=\"0 0 " + coord(f.width) + " " + coord(f.height) +
-         "\" role=\"img\" aria-label=\"" + html_escape(label) + "\">\n" + kSvgStyle +
-         "<rect width=\"100%\" height=\"100%\" fill=\"#fff\"/>\n";
-}
-
-std::string scatter_svg(const ResidualPlot& p) {
-  Frame f;
-  f.x = range_of({&p.x});
-  f.y = range_of({&p.before, &p.after});
-  f.y.lo = std::min(f.y.lo, -3.0);
-  f.y.hi = std::max(f.y.hi, 3.0);
-  const std::string xlabel = p.variable + (p.unit.empty() ? "" : " (" + p.unit + ")");
-  std::ostringstream s;
-  s << svg_open(f, p.title);
-  s << axes(f, p.title, xlabel, "length residual / sigma");
-  s << horizontal_line(f, 0.0, "z") << horizontal_line(f, 2.0, "d")
-    << horizontal_line(f, -2.0, "d");
-  auto points = [&](const std::vector<double>& y, const std::string& cls, double r) {
-    for (std::size_t k = 0; k < p.x.size() && k < y.size(); ++k) {
-      if (!std::isfinite(p.x[k]) || !std::isfinite(y[k])) continue;
-      s << "<circle cx=\"" << coord(f.px(p.x[k])) << "\" cy=\"" << coord(f.py(y[k])) << "\" r=\""
-        << r << "\" class=\"" << cls << "\"><title>cable " << p.cable[k] + 1 << ": "
-        << html_escape(fmt(y[k], 3)) << "</title></circle>\n";
-    }
-  };
-  points(p.before, "b", 3.0);
-  points(p.after, "f", 2.2);
-  std::vector<std::pair<std::string, std::string>> items = {{"before", "b"}};
-  if (!p.after.empty()) items.push_back({"after", "f"});
-  s << legend(f, items) << "</svg>\n";
-  return s.str();
-}
-
-std::string bars_svg(const CableMisfit& m) {
-  Frame f;
-  f.x = {0.0, static_cast<double>(m.before.size())};
-  f.y = range_of({&m.before, &m.after});
-  f.y.lo = 0.0;
-  f.y.hi = std::max(f.y.hi, 1.5);
-  std::ostringstream s;
-  const std::string title = "misfit per cable: length residual RMS in sigmas (1 = noise)";
-  s << svg_open(f, title) << axes(f, title, "cable", "RMS / sigma", false);
-  s << horizontal_line(f, 1.0, "d");
-  const double slot = (f.width - f.left - f.right) / std::max<double>(1.0, f.x.hi);
-  const bool two = !m.after.empty();
-  const double w = slot * (two ? 0.36 : 0.6);
-  for (std::size_t i = 0; i < m.before.size(); ++i) {
-    const double x0 = f.left + slot * static_cast<double>(i) + slot * (two ? 0.12 : 0.2);
-    auto bar = [&](double x, double v, const std::string& cls, const std::string& what) {
-      if (!std::isfinite(v)) return;
-      s << "<rect x=\"" << coord(x) << "\" y=\"" << coord(f.py(v)) << "\" width=\"" << coord(w)
-        << "\" height=\"" << coord(f.py(0.0) - f.py(v)) << "\" class=\"" << cls
-        << "\"><title>cable " << i + 1 << " " << what << ": " << html_escape(fmt(v, 3))
-        << "</title></rect>\n";
-    };
-    bar(x0, m.before[i], "b", "before");
-    if (two && i < m.after.size()) bar(x0 + w, m.after[i], "f", "after");
-    s << "<text x=\"" << coord(f.left + slot * (static_cast<double>(i) + 0.5)) << "\" y=\""
-      << coord(f.height - f.bottom + 16) << "\" text-anchor=\"middle\">" << i + 1 << "</text>\n";
-  }
-  std::vector<std::pair<std::string, std::string>> items = {{"before", "b"}};
-  if (two) items.push_back({"after", "f"});
-  s << legend(f, items) << "</svg>\n";
-  return s.str();
-}
-
 // ---- HTML helpers ---------------------------------------------------------------------------
-
-std::string td(const std::string& text, bool numeric = false) {
-  return std::string(numeric ? "<td class=\"n\">" : "<td>") + html_escape(text) + "</td>";
-}
-
-std::string th(const std::string& text) {
-  return "<th>" + html_escape(text) + "</th>";
-}
 
 // Extra poses to measure (separating or follow-up) as an HTML table / text lines.
 std::string pose_table_html(const std::vector<Pose>& poses,
@@ -348,47 +142,7 @@ std::string p_text(double p) {
   return std::isfinite(p) ? fmt(p, 3) : "-";
 }
 
-constexpr const char* kStyle = R"(
-body{font-family:sans-serif;max-width:1000px;margin:1em auto;padding:0 1em;color:#222}
-h1{font-size:1.4em}h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
-.verdict{padding:.6em 1em;border-radius:4px;font-weight:bold}
-.v-no_mismatch{background:#e3f4e3}.v-mismatch_named,.v-mismatch_unexplained{background:#fde8d7}
-.v-inconclusive{background:#eee}
-table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 8px}
-th{background:#f4f4f4}td.n{text-align:right;font-variant-numeric:tabular-nums}
-tr.acc td{font-weight:bold}
-svg{display:block;margin:.5em 0}
-.small{color:#555;font-size:.9em}
-)";
-
 }  // namespace
-
-std::string html_escape(const std::string& s) {
-  std::string o;
-  o.reserve(s.size());
-  for (char c : s) {
-    switch (c) {
-      case '&':
-        o += "&amp;";
-        break;
-      case '<':
-        o += "&lt;";
-        break;
-      case '>':
-        o += "&gt;";
-        break;
-      case '"':
-        o += "&quot;";
-        break;
-      case '\'':
-        o += "&#39;";
-        break;
-      default:
-        o += c;
-    }
-  }
-  return o;
-}
 
 std::string verdict_key(Diagnosis::Verdict v) {
   switch (v) {
@@ -404,124 +158,25 @@ std::string verdict_key(Diagnosis::Verdict v) {
   return "unknown";
 }
 
-ExplainingVariable explaining_variable(const std::string& family) {
-  if (family == "elasticity" || family == "nonlinear elasticity") {
-    return {"tension x loaded length", "N m"};
-  }
-  if (family == "compliance" || family == "force sensor gain" || family == "force sensor offset") {
-    return {"tension", "N"};
-  }
-  if (family == "drum scale") return {"loaded length", "m"};
-  if (family == "encoder drift" || family == "transmission drift" || family == "creep") {
-    return {"time", "s"};
-  }
-  return {"pose index", ""};
-}
+namespace {
 
-std::vector<ResidualPlot> residual_plots(const Diagnosis& d, const MeasurementSet& set) {
-  // The effects to plot: accepted ones, else the top refitted candidate, else the top screened.
-  std::vector<std::pair<std::string, std::string>> effects;  // id, name
-  for (const EffectFit& e : d.accepted) effects.push_back({e.id, e.name});
-  if (effects.empty() && !d.candidates.empty()) {
-    effects.push_back({d.candidates.front().id, d.candidates.front().name});
-  }
-  if (effects.empty() && !d.screen.candidates.empty() && !d.screen.candidates.front().modelled) {
-    effects.push_back({d.screen.candidates.front().id, d.screen.candidates.front().name});
-  }
-  if (effects.empty()) effects.push_back({"", "length residuals"});
-
-  const RobotModel& robot = d.before.estimate.robot;
-  const int m = robot.num_cables();
-  KinematicsData kin(m);
-  std::vector<ResidualPlot> plots;
-  for (const auto& [id, name] : effects) {
-    ResidualPlot p;
-    p.effect_id = id;
-    p.title = id.empty() ? name : name + " [" + id + "]";
-    const ExplainingVariable var = explaining_variable(family_of(d, id));
-    p.variable = var.name;
-    p.unit = var.unit;
-    const bool have_after =
-        d.after.has_value() && d.after->residuals.size() == d.before.residuals.size();
-    const std::size_t n = std::min(set.poses.size(), d.before.residuals.size());
-    for (std::size_t j = 0; j < n; ++j) {
-      const PoseMeasurement& meas = set.poses[j];
-      const bool ik_ok =
-          j < d.before.poses.size() && inverse_kinematics(robot, d.before.poses[j], kin);
-      const Eigen::VectorXd& rb = d.before.residuals[j].length_normalized;
-      for (int i = 0; i < m && i < rb.size(); ++i) {
-        if (!std::isfinite(rb(i))) continue;
-        const double tension =
-            meas.tensions.size() > i ? meas.tensions(i) : std::numeric_limits<double>::quiet_NaN();
-        const double loaded =
-            ik_ok ? robot.cables[static_cast<std::size_t>(i)].routing_length + kin.lengths(i)
-                  : kNaN;
-        double x = static_cast<double>(j);
-        if (var.name == "tension x loaded length") {
-          x = tension * loaded;
-        } else if (var.name == "tension") {
-          x = tension;
-        } else if (var.name == "loaded length") {
-          x = loaded;
-        } else if (var.name == "time") {
-          x = std::isfinite(meas.time) ? meas.time : kNaN;
-        }
-        if (!std::isfinite(x)) continue;
-        p.x.push_back(x);
-        p.cable.push_back(i);
-        p.before.push_back(rb(i));
-        if (have_after) {
-          const Eigen::VectorXd& ra = d.after->residuals[j].length_normalized;
-          p.after.push_back(i < ra.size() ? ra(i) : kNaN);
-        }
-      }
-    }
-    if (p.x.empty() && var.name != "pose index") {
-      // The variable is not available (no tensions, no time): fall back to the pose index.
-      ResidualPlot q;
-      q.effect_id = p.effect_id;
-      q.title = p.title + " (" + var.name + " not recorded)";
-      q.variable = "pose index";
-      for (std::size_t j = 0; j < n; ++j) {
-        const Eigen::VectorXd& rb = d.before.residuals[j].length_normalized;
-        for (int i = 0; i < rb.size(); ++i) {
-          if (!std::isfinite(rb(i))) continue;
-          q.x.push_back(static_cast<double>(j));
-          q.cable.push_back(i);
-          q.before.push_back(rb(i));
-          if (have_after) {
-            const Eigen::VectorXd& ra = d.after->residuals[j].length_normalized;
-            q.after.push_back(i < ra.size() ? ra(i) : kNaN);
-          }
-        }
-      }
-      p = std::move(q);
-    }
-    plots.push_back(std::move(p));
-  }
-  return plots;
-}
+// Residual RMS per cable in sigmas before and after the accepted effects.
+struct CableMisfit {
+  std::vector<double> before, after;  // `after` empty without a refit
+};
 
 CableMisfit cable_misfit(const Diagnosis& d, int num_cables) {
-  auto per_cable = [&](const std::vector<PoseResiduals>& res) {
-    std::vector<double> out;
-    for (int i = 0; i < num_cables; ++i) {
-      std::vector<double> v;
-      for (const PoseResiduals& r : res) {
-        if (i < r.length_normalized.size()) v.push_back(r.length_normalized(i));
-      }
-      out.push_back(rms_of(v));
-    }
-    return out;
-  };
   CableMisfit m;
-  m.before = per_cable(d.before.residuals);
-  if (d.after) m.after = per_cable(d.after->residuals);
+  m.before = cable_rms(d.before.residuals, num_cables);
+  if (d.after) m.after = cable_rms(d.after->residuals, num_cables);
   return m;
 }
 
-nlohmann::json diagnosis_json(const Diagnosis& d, const DiagnoseContext& c,
-                              const CableMisfit& misfit) {
+}  // namespace
+
+nlohmann::json diagnosis_json(const Diagnosis& d, const RobotModel& nominal,
+                              const MeasurementSet& set, const ReportContext& c) {
+  const CableMisfit misfit = cable_misfit(d, nominal.num_cables());
   nlohmann::json candidates = nlohmann::json::array();
   for (const EffectFit& e : d.candidates) candidates.push_back(effect_json(e));
   nlohmann::json accepted = nlohmann::json::array();
@@ -603,9 +258,9 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const DiagnoseContext& c,
          c.validation.empty() ? nlohmann::json(nullptr) : nlohmann::json(c.validation)},
         {"validation_hash",
          c.validation.empty() ? nlohmann::json(nullptr) : nlohmann::json(c.validation_hash)},
-        {"poses", c.poses},
-        {"cables", c.cables},
-        {"lasers", c.lasers}}},
+        {"poses", set.num_poses()},
+        {"cables", nominal.num_cables()},
+        {"lasers", static_cast<int>(nominal.lasers.size())}}},
       {"options",
        {{"estimate", c.estimated},
         {"seed", c.seed},
@@ -642,13 +297,20 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const DiagnoseContext& c,
       {"calibrated_config",
        c.calibrated_config.empty() ? nlohmann::json(nullptr) : nlohmann::json(c.calibrated_config)},
       {"warnings", c.warnings},
+      {"noise",
+       {{"length_m", set.noise.sigma_length},
+        {"laser_m", set.noise.sigma_laser},
+        {"force_n", set.noise.sigma_force}}},
   };
 }
 
-std::string diagnosis_text(const Diagnosis& d, const DiagnoseContext& c) {
+std::string diagnosis_text(const Diagnosis& d, const RobotModel& nominal, const MeasurementSet& set,
+                           const ReportContext& c) {
+  const int lasers = static_cast<int>(nominal.lasers.size());
   std::ostringstream h;
-  h << "cdpr-fit diagnose: " << c.config << " + " << c.recording << " (" << c.poses << " poses, "
-    << c.cables << " cables, " << c.lasers << " laser" << (c.lasers == 1 ? "" : "s") << ")\n";
+  h << c.title << ": " << c.config << " + " << c.recording << " (" << set.num_poses() << " poses, "
+    << nominal.num_cables() << " cables, " << lasers << " laser" << (lasers == 1 ? "" : "s")
+    << ")\n";
   if (!c.validation.empty()) h << "validation recording: " << c.validation << "\n";
   h << "\nverdict: " << verdict_key(d.verdict) << "\n" << d.headline << "\n";
   if (!d.findings.empty()) {
@@ -726,17 +388,26 @@ std::string diagnosis_text(const Diagnosis& d, const DiagnoseContext& c) {
   return h.str();
 }
 
-std::string diagnosis_html(const Diagnosis& d, const DiagnoseContext& c,
-                           const std::vector<ResidualPlot>& plots, const CableMisfit& misfit) {
+std::string diagnosis_html(const Diagnosis& d, const RobotModel& nominal, const MeasurementSet& set,
+                           const ReportContext& c) {
+  std::ostringstream h;
+  h << page_head(c.title + ": " + c.recording);
+  h << diagnosis_html_body(d, nominal, set, c);
+  h << "</body>\n</html>\n";
+  return h.str();
+}
+
+std::string diagnosis_html_body(const Diagnosis& d, const RobotModel& nominal,
+                                const MeasurementSet& set, const ReportContext& c) {
+  const std::vector<ExplainedResiduals> plots = explained_residuals(d, set);
+  const CableMisfit misfit = cable_misfit(d, nominal.num_cables());
+  const int lasers = static_cast<int>(nominal.lasers.size());
   std::ostringstream h;
   const std::string key = verdict_key(d.verdict);
-  h << "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
-    << "<title>cdpr-fit diagnose: " << html_escape(c.recording) << "</title>\n<style>" << kStyle
-    << "</style>\n</head>\n<body>\n";
   h << "<h1>Mismatch diagnosis</h1>\n<p class=\"small\">config " << html_escape(c.config) << " ("
     << html_escape(c.config_hash) << "), recording " << html_escape(c.recording) << " ("
-    << html_escape(c.recording_hash) << "), " << c.poses << " poses, " << c.cables << " cables, "
-    << c.lasers << (c.lasers == 1 ? " laser" : " lasers");
+    << html_escape(c.recording_hash) << "), " << set.num_poses() << " poses, "
+    << nominal.num_cables() << " cables, " << lasers << (lasers == 1 ? " laser" : " lasers");
   if (!c.validation.empty()) h << ", validation " << html_escape(c.validation);
   h << "; estimated:";
   for (const std::string& e : c.estimated) h << " " << html_escape(e);
@@ -772,15 +443,31 @@ std::string diagnosis_html(const Diagnosis& d, const DiagnoseContext& c,
        "identification (before) and with the accepted effects modelled (after). Dashed: "
        "&plusmn;2 sigma.</p>\n";
   bool any_points = false;
-  for (const ResidualPlot& p : plots) {
+  for (const ExplainedResiduals& p : plots) {
     if (p.x.empty()) continue;
-    h << scatter_svg(p);
+    svg::Scatter plot;
+    plot.title = p.title;
+    plot.xlabel = p.variable + (p.unit.empty() ? "" : " (" + p.unit + ")");
+    plot.ylabel = "length residual / sigma";
+    plot.x = p.x;
+    plot.cable = p.cable;
+    plot.before = p.before;
+    plot.after = p.after;
+    h << svg::scatter(plot);
     any_points = true;
   }
   if (!any_points) h << "<p>No residuals to plot (the standard identification was not run).</p>\n";
   bool any_misfit = false;
   for (double v : misfit.before) any_misfit = any_misfit || std::isfinite(v);
-  if (any_misfit) h << "<h2>Misfit per cable</h2>\n" << bars_svg(misfit);
+  if (any_misfit) {
+    svg::Bars bars;
+    bars.title = "misfit per cable: length residual RMS in sigmas (1 = noise)";
+    bars.xlabel = "cable";
+    bars.ylabel = "RMS / sigma";
+    bars.before = misfit.before;
+    bars.after = misfit.after;
+    h << "<h2>Misfit per cable</h2>\n" << svg::bars(bars);
+  }
 
   if (!d.channels.empty()) {
     h << "<h2>Residual RMS per channel</h2>\n<table>\n<tr>" << th("channel") << th("before")
@@ -849,8 +536,7 @@ std::string diagnosis_html(const Diagnosis& d, const DiagnoseContext& c,
   if (!c.calibrated_config.empty()) {
     h << "<p class=\"small\">Calibrated config: " << html_escape(c.calibrated_config) << "</p>\n";
   }
-  h << "</body>\n</html>\n";
   return h.str();
 }
 
-}  // namespace cdpr::fit
+}  // namespace cdpr::report

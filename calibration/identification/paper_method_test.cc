@@ -3,7 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "cdpr/calibration/simulate.hpp"
-#include "identification_scenario.hpp"
+#include "testing/identification_scenario.hpp"
 
 namespace cdpr {
 namespace {

@@ -611,30 +611,6 @@ const char* to_string(Diagnosis::Verdict v) {
   return "unknown";
 }
 
-std::string Diagnosis::Text() const {
-  std::string s = format("Verdict: %s. %s\n", to_string(verdict), headline.c_str());
-  for (const auto& f : findings) s += "- " + f + "\n";
-  if (!candidates.empty()) {
-    s += format("\n%-28s %6s %4s %10s %10s %9s %9s %10s %10s\n", "candidate", "incl", "k", "chi2",
-                "LRT", "p", "dBIC", "CV before", "CV after");
-    for (const auto& c : candidates) {
-      s += format("%-28s %6.2f %4d %10.1f %10.1f %9.3g %9.1f %8.3f mm %7.3f mm%s\n", c.id.c_str(),
-                  c.inclusion_probability, c.extra_parameters, c.chi2_after, c.lrt_statistic,
-                  c.lrt_p_value, c.bic_delta, 1e3 * c.cv_rms_before, 1e3 * c.cv_rms_after,
-                  c.accepted ? " *" : "");
-    }
-  }
-  s += format("\n%-22s %5s %12s %12s\n", "channel", "unit", "RMS before", "RMS after");
-  for (const auto& c : channels) {
-    s += format("%-22s %5s %12.4g %12.4g\n", c.channel.c_str(), c.unit.c_str(), c.before, c.after);
-  }
-  if (!held_out_source.empty()) {
-    s += format("held-out (%s) length RMS: %.4f mm before, %.4f mm after\n",
-                held_out_source.c_str(), 1e3 * held_out_rms_before, 1e3 * held_out_rms_after);
-  }
-  return s;
-}
-
 Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet& set,
                            const MeasurementSet* validation,
                            const IdentificationOptions& identification,

@@ -8,7 +8,7 @@
 
 #include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/simulate.hpp"
-#include "identification_scenario.hpp"
+#include "testing/identification_scenario.hpp"
 
 namespace cdpr {
 namespace {

@@ -2,7 +2,7 @@
 
 #include <gtest/gtest.h>
 
-#include "identification_scenario.hpp"
+#include "testing/identification_scenario.hpp"
 
 namespace cdpr {
 namespace {

@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "cdpr/calibration/simulate.hpp"
-#include "identification_scenario.hpp"
+#include "testing/identification_scenario.hpp"
 
 namespace cdpr {
 namespace {

@@ -12,8 +12,8 @@
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
-#include "identification_scenario.hpp"
-#include "mismatch_test_data.hpp"
+#include "testing/identification_scenario.hpp"
+#include "testing/mismatch_test_data.hpp"
 
 namespace cdpr {
 namespace {

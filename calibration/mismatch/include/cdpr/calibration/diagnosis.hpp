@@ -209,7 +209,7 @@ struct Diagnosis {
   bool mismatch_found() const {
     return verdict == Verdict::kMismatchNamed || verdict == Verdict::kMismatchUnexplained;
   }
-  std::string Text() const;  // the verdict, findings, tables, as text for people
+  // Rendered for people (text, JSON, HTML) by drivers/report (cdpr/report/report.hpp).
 };
 
 const char* to_string(Diagnosis::Verdict v);

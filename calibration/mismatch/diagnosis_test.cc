@@ -13,8 +13,8 @@
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
-#include "identification_scenario.hpp"
-#include "mismatch_test_data.hpp"
+#include "testing/identification_scenario.hpp"
+#include "testing/mismatch_test_data.hpp"
 
 namespace cdpr {
 namespace {
@@ -23,6 +23,14 @@ using testing::conceal_hooke;
 using testing::rigid_mini;
 using testing::RigidMini;
 using testing::simulate;
+
+// The verdict, headline and findings, for failure messages (the reports render a Diagnosis in
+// drivers/report).
+std::string trace(const Diagnosis& d) {
+  std::string s = std::string("verdict: ") + to_string(d.verdict) + ". " + d.headline + "\n";
+  for (const std::string& f : d.findings) s += "- " + f + "\n";
+  return s;
+}
 
 DiagnosisOptions quick_options() {
   DiagnosisOptions o;
@@ -54,7 +62,7 @@ TEST(Diagnosis, NullDataGivesNoMismatchAcrossSeeds) {
     ASSERT_TRUE(diag.ok()) << diag.status().to_string();
     if (diag->verdict != Diagnosis::Verdict::kNoMismatch) {
       ++false_findings;
-      std::printf("seed %d:\n%s\n", seed, diag->Text().c_str());
+      std::printf("seed %d:\n%s\n", seed, trace(*diag).c_str());
     }
     EXPECT_TRUE(diag->accepted.empty());
     EXPECT_FALSE(diag->mismatch_found() && !diag->accepted.empty());
@@ -76,7 +84,7 @@ TEST(Diagnosis, ConcealedHookeElasticityIsNamedModelledAndPredictsBetter) {
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   ASSERT_TRUE(diag.ok()) << diag.status().to_string();
-  SCOPED_TRACE(diag->Text());
+  SCOPED_TRACE(trace(*diag));
   std::printf("diagnose (MINI, 25 poses, 100 resamples): %.2f s wall\n", seconds);
   EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kMismatchNamed);
   const EffectFit* hooke = accepted(*diag, "hooke_shared");
@@ -115,7 +123,7 @@ TEST(Diagnosis, ConfoundedElasticityAndComplianceGetBothFitsAndSeparatingPoses) 
   o.decisive_bic = std::numeric_limits<double>::infinity();
   auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, o);
   ASSERT_TRUE(diag.ok()) << diag.status().to_string();
-  SCOPED_TRACE(diag->Text());
+  SCOPED_TRACE(trace(*diag));
   const ConfoundedFinding* pair = confounded(*diag, "hooke_shared", "compliance_shared");
   ASSERT_NE(pair, nullptr);
   EXPECT_GT(pair->correlation, o.screen.confound_threshold);
@@ -141,7 +149,7 @@ TEST(Diagnosis, SuspectWithoutANamedEffectGetsFeasibleFollowUpPosesThatAddInform
   o.suspect_p = 1.0;  // every unnamed candidate is a suspect: the lowest p-value is taken
   auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, o);
   ASSERT_TRUE(diag.ok()) << diag.status().to_string();
-  SCOPED_TRACE(diag->Text());
+  SCOPED_TRACE(trace(*diag));
   ASSERT_TRUE(diag->accepted.empty());
   ASSERT_TRUE(diag->follow_up.has_value());
   const FollowUp& fu = *diag->follow_up;
@@ -162,7 +170,7 @@ TEST(Diagnosis, SuspectWithoutANamedEffectGetsFeasibleFollowUpPosesThatAddInform
     EXPECT_TRUE(simple_tension_distribution(diag->before.estimate.robot, p, f_ref).ok());
   }
   // The text says what to do.
-  EXPECT_NE(diag->Text().find("follow-up poses"), std::string::npos);
+  EXPECT_NE(trace(*diag).find("follow-up poses"), std::string::npos);
 
   // No suspect below the threshold, or follow-up switched off: nothing proposed.
   o.suspect_p = 0.0;
@@ -183,7 +191,7 @@ TEST(Diagnosis, CorrelatedCandidateThatFitsDecisivelyWorseIsNotReportedAsConfoun
   const DiagnosisOptions o = quick_options();
   auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, o);
   ASSERT_TRUE(diag.ok()) << diag.status().to_string();
-  SCOPED_TRACE(diag->Text());
+  SCOPED_TRACE(trace(*diag));
   // The screen finds the two column spaces correlated ...
   bool correlated = false;
   for (const auto& p : diag->screen.confounded) {
@@ -214,7 +222,7 @@ TEST(Diagnosis, ConcealedDrumScaleErrorIsNamedWithItsValue) {
   }
   auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, quick_options());
   ASSERT_TRUE(diag.ok()) << diag.status().to_string();
-  SCOPED_TRACE(diag->Text());
+  SCOPED_TRACE(trace(*diag));
   EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kMismatchNamed);
   const EffectFit* drum = accepted(*diag, "drum_scale_per_cable");
   ASSERT_NE(drum, nullptr);
@@ -242,7 +250,7 @@ TEST(Diagnosis, ConcealedCommonDrumScaleErrorIsNamedAndModelled) {
   for (auto& p : sim.set.poses) p.cable_lengths *= 1.0 + kScale;
   auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, quick_options());
   ASSERT_TRUE(diag.ok()) << diag.status().to_string();
-  SCOPED_TRACE(diag->Text());
+  SCOPED_TRACE(trace(*diag));
   EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kMismatchNamed);
   ASSERT_FALSE(diag->accepted.empty());
   const EffectFit& f = diag->accepted.front();
@@ -292,7 +300,7 @@ TEST(Diagnosis, ValidationRecordingIsTheHeldOutSet) {
   conceal_hooke(d, val, 5.0e4);
   auto diag = diagnose(d.s.nominal, sim.set, &val.set, {}, quick_options());
   ASSERT_TRUE(diag.ok()) << diag.status().to_string();
-  SCOPED_TRACE(diag->Text());
+  SCOPED_TRACE(trace(*diag));
   EXPECT_EQ(diag->held_out_source, "validation recording");
   EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kMismatchNamed);
   EXPECT_LT(diag->held_out_rms_after, 0.5 * diag->held_out_rms_before);

@@ -1,0 +1,87 @@
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include "cdpr/report/format.hpp"
+#include "report_internal.hpp"
+#include "svg.hpp"
+
+namespace cdpr::report {
+namespace {
+
+constexpr const char* kStyle = R"(
+body{font-family:sans-serif;max-width:1000px;margin:1em auto;padding:0 1em;color:#222}
+h1{font-size:1.4em}h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
+.verdict{padding:.6em 1em;border-radius:4px;font-weight:bold}
+.v-no_mismatch{background:#e3f4e3}.v-mismatch_named,.v-mismatch_unexplained{background:#fde8d7}
+.v-inconclusive{background:#eee}
+table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 8px}
+th{background:#f4f4f4}td.n{text-align:right;font-variant-numeric:tabular-nums}
+tr.acc td{font-weight:bold}
+svg{display:block;margin:.5em 0}
+.small{color:#555;font-size:.9em}
+)";
+
+double rms_of(const std::vector<double>& v) {
+  double s = 0.0;
+  int n = 0;
+  for (double x : v) {
+    if (!std::isfinite(x)) continue;
+    s += x * x;
+    ++n;
+  }
+  return n == 0 ? std::numeric_limits<double>::quiet_NaN() : std::sqrt(s / n);
+}
+
+}  // namespace
+
+nlohmann::json number_or_null(double v) {
+  if (!std::isfinite(v)) return nullptr;
+  return v;
+}
+
+nlohmann::json to_json(const Eigen::VectorXd& v) {
+  nlohmann::json a = nlohmann::json::array();
+  for (Eigen::Index i = 0; i < v.size(); ++i) a.push_back(number_or_null(v(i)));
+  return a;
+}
+
+nlohmann::json to_json(const Eigen::Matrix3Xd& m) {
+  nlohmann::json a = nlohmann::json::array();
+  for (Eigen::Index c = 0; c < m.cols(); ++c) a.push_back(to_json(Eigen::VectorXd(m.col(c))));
+  return a;
+}
+
+std::string fmt(double v, int digits) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
+  return buf;
+}
+
+std::vector<double> cable_rms(const std::vector<PoseResiduals>& residuals, int num_cables) {
+  std::vector<double> out;
+  for (int i = 0; i < num_cables; ++i) {
+    std::vector<double> v;
+    for (const PoseResiduals& r : residuals) {
+      if (i < r.length_normalized.size()) v.push_back(r.length_normalized(i));
+    }
+    out.push_back(rms_of(v));
+  }
+  return out;
+}
+
+std::string page_head(const std::string& title) {
+  return std::string("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n") +
+         "<title>" + html_escape(title) + "</title>\n<style>" + kStyle +
+         "</style>\n</head>\n<body>\n";
+}
+
+std::string td(const std::string& text, bool numeric) {
+  return std::string(numeric ? "<td class=\"n\">" : "<td>") + html_escape(text) + "</td>";
+}
+
+std::string th(const std::string& text) {
+  return "<th>" + html_escape(text) + "</th>";
+}
+
+}  // namespace cdpr::report
