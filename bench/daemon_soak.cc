@@ -33,7 +33,7 @@ namespace {
 
 using namespace cdpr;
 using namespace cdpr::controller;
-using Clock = std::chrono::steady_clock;
+using WallClock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
 
 // RSS after handing free heap back to the system (malloc_trim), so that what is counted is
@@ -71,11 +71,11 @@ struct Soak {
 
   // One SYNC period, the daemon's cycle timed (the robot and the supervisor are not).
   void cycle() {
-    const auto t0 = Clock::now();
+    const auto t0 = WallClock::now();
     const double c0 = thread_cpu_us();
     cell.daemon->cycle(cell.clock.now());
     cycle_cpu_us.push_back(thread_cpu_us() - c0);
-    cycle_us.push_back(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+    cycle_us.push_back(std::chrono::duration<double, std::micro>(WallClock::now() - t0).count());
     const can::Timestamp next = cell.clock.now() + cell.network.sync_period;
     while (cell.clock.now() < next) cell.idle();
     if (++n_ % 5 == 0) cell.daemon->service();
@@ -158,7 +158,7 @@ int main(int argc, char** argv) {
     Soak soak(cell);
     const double period_us =
         std::chrono::duration<double, std::micro>(cell.network.sync_period).count();
-    const auto wall0 = Clock::now();
+    const auto wall0 = WallClock::now();
     const double t0 = cell.seconds();
     long rss_start = -1, rss_mid = -1;
     int fds_start = -1, fds_mid = -1;
@@ -225,8 +225,9 @@ int main(int argc, char** argv) {
     std::printf(
         "[soak] robot time %.1f min in %.0f s wall; %d calibrations (%d accepted, %d "
         "rejected, %d failed), %d rollbacks, %d moves\n",
-        (cell.seconds() - t0) / 60.0, std::chrono::duration<double>(Clock::now() - wall0).count(),
-        soak.calibrations, soak.accepted, soak.rejected, soak.failures, soak.rollbacks, soak.moves);
+        (cell.seconds() - t0) / 60.0,
+        std::chrono::duration<double>(WallClock::now() - wall0).count(), soak.calibrations,
+        soak.accepted, soak.rejected, soak.failures, soak.rollbacks, soak.moves);
     std::printf(
         "[soak] RSS %ld KiB after round 0, %ld KiB half-way, %ld KiB at the end (%+ld KiB)\n",
         rss_start, rss_mid, rss_end, rss_end - rss_start);

@@ -11,7 +11,7 @@ target_include_directories(cdpr_daemon PUBLIC ${_d}/include)
 target_link_libraries(cdpr_daemon
   PUBLIC cdpr_io cdpr_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording
          cdpr_calibration nlohmann_json::nlohmann_json Threads::Threads
-  PRIVATE spdlog::spdlog cdpr_yaml cdpr_io cdpr_options)
+  PRIVATE spdlog::spdlog cdpr_yaml cdpr_report cdpr_options)
 
 cdpr_add_gtest(NAME daemon_config_test SOURCES ${_d}/src/daemon_config_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.cc LIBS cdpr_daemon)

@@ -251,125 +251,32 @@ json calibration_json(const CalibrationOutcome& o, const CalibrationReportContex
           {"length_residuals_normalized", residuals}};
 }
 
-std::string calibration_html(const CalibrationOutcome& o, const CalibrationReportContext& c) {
+std::string calibration_html(const CalibrationOutcome& o, const CalibrationReportContext& c,
+                             const std::string& report_page) {
+  // The decision first: verdict, gates, next step; then the calibration report the library
+  // renders (cdpr-fit's page: anchors before/after with their standard deviations, residuals per
+  // cable and pose, the named effects and the residuals against what would explain them).
   std::ostringstream h;
-  const int m = static_cast<int>(o.model.cables.size());
-  h << "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>cdprd calibration "
-    << c.calibration
-    << "</title>\n<style>body{font-family:sans-serif;max-width:70em;margin:1em auto;"
-       "padding:0 1em}table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:2px 6px;"
-       "text-align:right}th{background:#eee}.pass{color:#060}.fail{color:#a00;font-weight:bold}"
-       "</style></head><body>\n";
-  h << "<h1>Calibration " << c.calibration << " of " << escape(o.model.name) << "</h1>\n";
-  h << "<p><strong class=\"" << (o.gates_passed ? "pass" : "fail") << "\">"
+  h << "<section id=\"cdprd-decision\">\n<h1>cdprd calibration " << c.calibration << " of "
+    << escape(o.model.name) << "</h1>\n";
+  h << "<p><strong style=\"color:" << (o.gates_passed ? "#060" : "#a00") << "\">"
     << (o.gates_passed ? "Every gate passed" : "Gates failed: " + escape(o.failed_gates))
     << "</strong>. " << escape(o.verdict) << "</p>\n";
   h << "<p>Next step: <code>cdprctl accept</code> or <code>cdprctl reject</code>.</p>\n";
-  h << "<h2>Gates</h2><table><tr><th>gate</th><th>result</th><th>detail</th></tr>\n";
+  h << "<table><tr><th>gate</th><th>result</th><th>detail</th></tr>\n";
   for (const Gate& g : o.gates) {
-    h << "<tr><td>" << g.name << "</td><td class=\"" << (g.passed ? "pass\">pass" : "fail\">fail")
-      << "</td><td style=\"text-align:left\">" << escape(g.text) << "</td></tr>\n";
+    h << "<tr><td>" << g.name << "</td><td>" << (g.passed ? "pass" : "<strong>fail</strong>")
+      << "</td><td>" << escape(g.text) << "</td></tr>\n";
   }
-  h << "</table>\n<h2>Named effects</h2>\n";
-  if (o.named_effects.empty())
-    h << "<p>None.</p>\n";
-  else {
-    h << "<ul>";
-    for (const auto& e : o.named_effects) h << "<li>" << escape(e) << "</li>";
-    h << "</ul>\n";
-  }
-  // Anchor changes with their uncertainty: one bar per cable (change in mm), whisker = 3 sigma.
-  double vmax = 1e-6;
-  std::vector<double> change(static_cast<std::size_t>(m)), sig(static_cast<std::size_t>(m));
-  for (int i = 0; i < m; ++i) {
-    const auto k = static_cast<std::size_t>(i);
-    change[k] = (o.model.frame_anchors.col(static_cast<Eigen::Index>(k)) -
-                 o.before.frame_anchors.col(static_cast<Eigen::Index>(k)))
-                    .norm() *
-                1e3;
-    const double sx = anchor_std(o.fit, i, 'x'), sy = anchor_std(o.fit, i, 'y'),
-                 sz = anchor_std(o.fit, i, 'z');
-    const double s =
-        std::sqrt((std::isfinite(sx) ? sx * sx : 0.0) + (std::isfinite(sy) ? sy * sy : 0.0) +
-                  (std::isfinite(sz) ? sz * sz : 0.0)) *
-        1e3;
-    sig[k] = s;
-    vmax = std::max(vmax, change[k] + 3.0 * s);
-  }
-  const int W = 640, H = 220, left = 50, bottom = 30;
-  const double bw = (W - left - 10.0) / std::max(m, 1);
-  h << "<h2>Frame anchors: change against the active model</h2>\n<svg role=\"img\" aria-label=\""
-       "anchor change per cable in millimetres with 3-sigma whiskers\" width=\""
-    << W << "\" height=\"" << H << "\" viewBox=\"0 0 " << W << " " << H << "\">\n";
-  h << "<line x1=\"" << left << "\" y1=\"" << H - bottom << "\" x2=\"" << W - 5 << "\" y2=\""
-    << H - bottom << "\" stroke=\"black\"/>\n";
-  for (int i = 0; i < m; ++i) {
-    const auto k = static_cast<std::size_t>(i);
-    const double x = left + bw * i + bw * 0.2;
-    const double y = (H - bottom) - (H - bottom - 10.0) * change[k] / vmax;
-    const double ys = (H - bottom) - (H - bottom - 10.0) * (change[k] + 3.0 * sig[k]) / vmax;
-    h << "<rect x=\"" << x << "\" y=\"" << y << "\" width=\"" << bw * 0.6 << "\" height=\""
-      << (H - bottom) - y << "\" fill=\"#4a7ab5\"><title>cable " << i + 1 << ": "
-      << fmt("%.3f", change[k]) << " mm +- " << fmt("%.3f", sig[k]) << " mm</title></rect>\n";
-    h << "<line x1=\"" << x + bw * 0.3 << "\" y1=\"" << y << "\" x2=\"" << x + bw * 0.3
-      << "\" y2=\"" << ys << "\" stroke=\"black\"/>\n";
-    h << "<text x=\"" << x + bw * 0.3 << "\" y=\"" << H - 10 << "\" font-size=\"11\" "
-      << "text-anchor=\"middle\">" << i + 1 << "</text>\n";
-  }
-  h << "<text x=\"4\" y=\"14\" font-size=\"11\">" << fmt("%.2f", vmax) << " mm</text>\n</svg>\n";
-  h << "<table><tr><th>cable</th><th>before x, y, z (m)</th><th>after x, y, z (m)</th>"
-       "<th>change (mm)</th><th>std (mm)</th></tr>\n";
-  for (int i = 0; i < m; ++i) {
-    const auto k = static_cast<std::size_t>(i);
-    const Eigen::Vector3d& b = o.before.frame_anchors.col(static_cast<Eigen::Index>(k));
-    const Eigen::Vector3d& a = o.model.frame_anchors.col(static_cast<Eigen::Index>(k));
-    h << "<tr><td>" << i + 1 << "</td><td>" << fmt("%.5f", b.x()) << ", " << fmt("%.5f", b.y())
-      << ", " << fmt("%.5f", b.z()) << "</td><td>" << fmt("%.5f", a.x()) << ", "
-      << fmt("%.5f", a.y()) << ", " << fmt("%.5f", a.z()) << "</td><td>" << fmt("%.3f", change[k])
-      << "</td><td>" << fmt("%.3f", sig[k]) << "</td></tr>\n";
-  }
-  h << "</table>\n";
-  // Residual heat map: poses (columns) x cables (rows), normalised length residuals.
-  const auto& res = o.fit->residuals;
-  const int n = static_cast<int>(res.size());
-  const int cw = std::max(6, std::min(24, 600 / std::max(n, 1))), ch = 18;
-  h << "<h2>Cable-length residuals of the final fit (residual / sigma)</h2>\n<svg role=\"img\" "
-       "aria-label=\"heat map of normalised cable-length residuals, cables by poses\" width=\""
-    << 40 + cw * n << "\" height=\"" << 20 + ch * m << "\">\n";
-  for (int i = 0; i < m; ++i) {
-    h << "<text x=\"2\" y=\"" << 14 + ch * i << "\" font-size=\"11\">c" << i + 1 << "</text>\n";
-    for (int j = 0; j < n; ++j) {
-      const auto& v = res[static_cast<std::size_t>(j)].length_normalized;
-      const double r = i < v.size() ? v(i) : std::numeric_limits<double>::quiet_NaN();
-      std::string colour = "#ddd";
-      if (std::isfinite(r)) {
-        const double t = std::clamp(std::abs(r) / 3.0, 0.0, 1.0);
-        const int shade = static_cast<int>(255 * (1.0 - t));
-        char buf[16];
-        if (r >= 0)
-          std::snprintf(buf, sizeof buf, "#ff%02x%02x", shade, shade);
-        else
-          std::snprintf(buf, sizeof buf, "#%02x%02xff", shade, shade);
-        colour = buf;
-      }
-      h << "<rect x=\"" << 30 + cw * j << "\" y=\"" << 2 + ch * i << "\" width=\"" << cw - 1
-        << "\" height=\"" << ch - 1 << "\" fill=\"" << colour << "\"><title>pose " << j
-        << ", cable " << i + 1 << ": " << fmt("%.2f", r) << " sigma</title></rect>\n";
-    }
-  }
-  h << "</svg>\n<p>Red: the cable reads longer than the model, blue: shorter; full colour at "
-       "3 sigma.</p>\n";
-  h << "<h2>Fit</h2><p>chi2 " << fmt("%.1f", o.fit->chi2) << " on " << o.fit->dof
-    << " degrees of freedom; length RMS " << fmt("%.4f", o.fit->rms_length_m * 1e3)
-    << " mm, laser RMS " << fmt("%.4f", o.fit->rms_laser_m * 1e3) << " mm, equilibrium RMS "
-    << fmt("%.3f", o.fit->rms_wrench_n) << " N; " << o.poses << " poses.</p>\n";
-  h << "<h2>Provenance</h2><p>" << escape(c.daemon)
-    << "; geometry version before: " << c.geometry_version << "; recording <code>"
-    << escape(c.recording) << "</code>; robot " << escape(c.robot_config) << "; network "
-    << escape(c.canopen_config) << "; laser " << escape(c.laser_config) << "; started "
-    << escape(c.started) << ".</p>\n";
-  h << "</body></html>\n";
-  return h.str();
+  h << "</table>\n<p>" << escape(c.daemon) << "; geometry version before: " << c.geometry_version
+    << "; recording <code>" << escape(c.recording) << "</code>; " << o.poses << " poses; started "
+    << escape(c.started) << ".</p>\n</section>\n";
+  std::string page = report_page;
+  const std::size_t body = page.find("<body>");
+  if (body == std::string::npos)
+    return "<!DOCTYPE html>\n<html><body>\n" + h.str() + "</body></html>\n";
+  page.insert(body + 6, "\n" + h.str());
+  return page;
 }
 
 }  // namespace cdpr::controller

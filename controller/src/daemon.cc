@@ -21,6 +21,7 @@
 #include "cdpr/controller/calibration_report.hpp"
 #include "cdpr/controller/path_check.hpp"
 #include "cdpr/io/atomic_file.hpp"
+#include "cdpr/report/report.hpp"
 
 namespace cdpr::controller {
 namespace fs = std::filesystem;
@@ -1069,10 +1070,30 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   ctx.daemon_config = config_.file;
   ctx.started = rec.metadata.get(recording::key::kDate);
   ctx.measuring_s = now_s() - t0;
-  const json summary = calibration_json(out, ctx);
+  // The calibration report of cdpr-fit (the library), under the daemon's decision.
+  const CalibratedModel after_model = diagnosis.ok() ? diagnosis->model_after : report->estimate;
+  report::CalibrationReportInput rin;
+  rin.before = &initial;
+  rin.after = &after_model;
+  rin.identification = &*report;
+  rin.set = &set;
+  rin.diagnosis = diagnosis.ok() ? &*diagnosis : nullptr;
+  rin.context.title = "cdprd calibration " + std::to_string(id);
+  rin.context.config = store_->geometry_path(g->version);
+  rin.context.config_hash = rec.metadata.get(recording::key::kConfigHash);
+  rin.context.recording = rec_path;
+  if (auto h = recording::file_hash(rec_path); h.ok()) rin.context.recording_hash = *h;
+  rin.context.bootstrap = config_.identification.bootstrap;
+  rin.context.folds = config_.identification.folds;
+  const report::Rendered rendered = report::render_calibration_report(rin);
+  json summary = calibration_json(out, ctx);
+  summary["calibration_report"] = rendered.json;
   Status wrote = io::write_file_atomically(dir + "/report.json", summary.dump(2) + "\n");
-  if (wrote.ok())
-    wrote = io::write_file_atomically(dir + "/report.html", calibration_html(out, ctx));
+  if (wrote.ok()) {
+    wrote =
+        io::write_file_atomically(dir + "/report.html", calibration_html(out, ctx, rendered.html));
+  }
+  if (wrote.ok()) wrote = io::write_file_atomically(dir + "/report.txt", rendered.text);
   if (wrote.ok()) {
     wrote =
         io::write_file_atomically(dir + "/model_before.yaml", config::save_robot_config(g->model));

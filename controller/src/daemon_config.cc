@@ -1,9 +1,9 @@
 #include "cdpr/controller/daemon_config.hpp"
 
-#include "cdpr/config/yaml_reader.hpp"
-
 #include <cmath>
 #include <filesystem>
+
+#include "cdpr/config/yaml_reader.hpp"
 
 namespace cdpr::controller {
 namespace {
@@ -48,19 +48,19 @@ Status read_identity(const YamlField& n, IdentitySettings& id) {
 
 Status read_motion(const YamlField& n, MotionSettings& m) {
   if (!n.present()) return Status::Ok();
-  CDPR_RETURN_IF_ERROR(n.check_keys({"max_linear_velocity", "max_linear_acceleration",
-                                     "max_linear_jerk", "max_angular_velocity",
-                                     "max_angular_acceleration", "max_angular_jerk",
-                                     "tension_margin", "max_cable_speed",
-                                     "max_cable_acceleration"}));
-  CDPR_RETURN_IF_ERROR(in_range(n, "max_linear_velocity", 1e-4, 10.0, "m/s", m.max_linear_velocity));
+  CDPR_RETURN_IF_ERROR(
+      n.check_keys({"max_linear_velocity", "max_linear_acceleration", "max_linear_jerk",
+                    "max_angular_velocity", "max_angular_acceleration", "max_angular_jerk",
+                    "tension_margin", "max_cable_speed", "max_cable_acceleration"}));
+  CDPR_RETURN_IF_ERROR(
+      in_range(n, "max_linear_velocity", 1e-4, 10.0, "m/s", m.max_linear_velocity));
   CDPR_RETURN_IF_ERROR(
       in_range(n, "max_linear_acceleration", 1e-4, 100.0, "m/s^2", m.max_linear_acceleration));
   CDPR_RETURN_IF_ERROR(in_range(n, "max_linear_jerk", 1e-3, 1e4, "m/s^3", m.max_linear_jerk));
   CDPR_RETURN_IF_ERROR(
       in_range(n, "max_angular_velocity", 1e-4, 10.0, "rad/s", m.max_angular_velocity));
-  CDPR_RETURN_IF_ERROR(in_range(n, "max_angular_acceleration", 1e-4, 100.0, "rad/s^2",
-                                m.max_angular_acceleration));
+  CDPR_RETURN_IF_ERROR(
+      in_range(n, "max_angular_acceleration", 1e-4, 100.0, "rad/s^2", m.max_angular_acceleration));
   CDPR_RETURN_IF_ERROR(in_range(n, "max_angular_jerk", 1e-3, 1e4, "rad/s^3", m.max_angular_jerk));
   CDPR_RETURN_IF_ERROR(in_range(n, "tension_margin", 0.0, 1e5, "N", m.tension_margin));
   CDPR_RETURN_IF_ERROR(in_range(n, "max_cable_speed", 1e-4, 10.0, "m/s", m.max_cable_speed));
@@ -77,11 +77,11 @@ Status read_tension_watch(const YamlField& n, TensionWatch& t) {
 
 Status read_measuring(const YamlField& n, const std::string& dir, MeasuringSettings& m) {
   if (!n.present()) return Status::Ok();
-  CDPR_RETURN_IF_ERROR(n.check_keys(
-      {"poses", "pose_file", "laser_samples", "laser_interval_s", "average_cycles",
-       "settle_window_s", "settle_position_tolerance", "settle_tension_tolerance",
-       "settle_timeout_s", "tension_band", "extra_pose_rounds", "noise_length_m", "noise_force_n",
-       "noise_laser_m"}));
+  CDPR_RETURN_IF_ERROR(
+      n.check_keys({"poses", "pose_file", "laser_samples", "laser_interval_s", "average_cycles",
+                    "settle_window_s", "settle_position_tolerance", "settle_tension_tolerance",
+                    "settle_timeout_s", "tension_band", "extra_pose_rounds", "noise_length_m",
+                    "noise_force_n", "noise_laser_m"}));
   CDPR_RETURN_IF_ERROR(n.optional("poses", m.poses, 7, 1000));
   CDPR_RETURN_IF_ERROR(n.optional("pose_file", m.pose_file));
   m.pose_file = resolve(dir, m.pose_file);
@@ -103,10 +103,10 @@ Status read_measuring(const YamlField& n, const std::string& dir, MeasuringSetti
 
 Status read_identification(const YamlField& n, IdentificationSettings& s) {
   if (!n.present()) return Status::Ok();
-  CDPR_RETURN_IF_ERROR(n.check_keys({"frame_anchors", "platform_anchors", "length_offsets",
-                                     "length_scales", "force_gains", "force_offsets",
-                                     "laser_origin", "laser_direction", "laser_plane", "diagnose",
-                                     "bootstrap", "folds"}));
+  CDPR_RETURN_IF_ERROR(
+      n.check_keys({"frame_anchors", "platform_anchors", "length_offsets", "length_scales",
+                    "force_gains", "force_offsets", "laser_origin", "laser_direction",
+                    "laser_plane", "diagnose", "bootstrap", "folds"}));
   IdentificationOptions& o = s.options;
   CDPR_RETURN_IF_ERROR(n.optional("frame_anchors", o.estimate_frame_anchors));
   CDPR_RETURN_IF_ERROR(n.optional("platform_anchors", o.estimate_platform_anchors));
@@ -124,9 +124,9 @@ Status read_identification(const YamlField& n, IdentificationSettings& s) {
 
 Status read_acceptance(const YamlField& n, AcceptanceGates& g) {
   if (!n.present()) return Status::Ok();
-  CDPR_RETURN_IF_ERROR(n.check_keys({"mode", "min_fit_p_value", "max_anchor_change_m",
-                                     "max_predicted_position_error_m",
-                                     "allow_unresolved_mismatch"}));
+  CDPR_RETURN_IF_ERROR(
+      n.check_keys({"mode", "min_fit_p_value", "max_anchor_change_m",
+                    "max_predicted_position_error_m", "allow_unresolved_mismatch"}));
   int mode = g.mode == AcceptanceMode::kAuto ? 1 : 0;
   CDPR_RETURN_IF_ERROR(n.optional_choice("mode", mode, {"manual", "auto"}));
   g.mode = mode == 1 ? AcceptanceMode::kAuto : AcceptanceMode::kManual;
@@ -150,10 +150,9 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   c.file = doc.file();
   const YamlField root = doc.root();
   CDPR_RETURN_IF_ERROR(root.expect_map("a mapping of daemon settings"));
-  CDPR_RETURN_IF_ERROR(root.check_keys({"robot", "canopen", "laser", "can_interface",
-                                        "state_directory", "realtime", "identity", "motion",
-                                        "tension_watch", "measuring", "identification",
-                                        "acceptance", "control"}));
+  CDPR_RETURN_IF_ERROR(root.check_keys(
+      {"robot", "canopen", "laser", "can_interface", "state_directory", "realtime", "identity",
+       "motion", "tension_watch", "measuring", "identification", "acceptance", "control"}));
   const std::string dir = std::filesystem::path(c.file).parent_path().string();
   CDPR_ASSIGN_OR_RETURN(YamlField robot, root.required("robot", "the robot description"));
   CDPR_ASSIGN_OR_RETURN(c.robot, robot.text());

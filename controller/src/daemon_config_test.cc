@@ -60,8 +60,9 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
   auto mode =
       parse_daemon_config("robot: r\ncanopen: n\nacceptance: {mode: sometimes}\n", "d.yaml");
   ASSERT_FALSE(mode.ok());
-  EXPECT_NE(mode.status().to_string().find("acceptance.mode: 'sometimes' is not one of manual, auto"),
-            std::string::npos)
+  EXPECT_NE(
+      mode.status().to_string().find("acceptance.mode: 'sometimes' is not one of manual, auto"),
+      std::string::npos)
       << mode.status().to_string();
 
   auto twice = parse_daemon_config("robot: r\ncanopen: n\nmotion: {}\nmotion: {}\n", "d.yaml");

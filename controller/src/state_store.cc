@@ -74,7 +74,6 @@ std::vector<int> numbers_in(const std::string& dir, std::string_view suffix) {
   return out;
 }
 
-
 }  // namespace
 
 Result<std::string> read_text_file(const std::string& path) {
@@ -189,7 +188,7 @@ Status StateStore::activate(int version, nlohmann::json why) {
     return Status::Error(ErrorCode::kNotFound, "geometry version %d does not exist", version);
   }
   if (Status s = io::write_file_atomically((fs::path(dir_) / "active").string(),
-                                       std::to_string(version) + "\n");
+                                           std::to_string(version) + "\n");
       !s.ok()) {
     return s;
   }

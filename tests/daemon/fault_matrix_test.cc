@@ -35,8 +35,8 @@
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/controller/daemon.hpp"
 #include "cdpr/controller/state_store.hpp"
-#include "cdpr/recording/recording.hpp"
 #include "cdpr/io/atomic_file.hpp"
+#include "cdpr/recording/recording.hpp"
 #include "virtual_cell.hpp"
 
 namespace cdpr::controller {
@@ -122,9 +122,10 @@ struct FaultRow {
 std::string numbers_hidden(std::string s) {
   static const std::regex number(R"([-+]?[0-9]+\.[0-9]+(e[-+]?[0-9]+)?)");
   static const std::regex cell_dir(R"(/[^ ]*/cdpr-matrix-[0-9]+/state/)");
-  static const std::regex temp(R"(\.tmp\.[A-Za-z0-9]{6})");
+  // Temporary files of cdpr/io/atomic_file.hpp: ".<name>.tmp-<pid>-<n>".
+  static const std::regex temp(R"(\.tmp-[0-9]+-[0-9]+)");
   s = std::regex_replace(s, cell_dir, "");
-  s = std::regex_replace(s, temp, ".tmp.*");
+  s = std::regex_replace(s, temp, ".tmp-*");
   s = std::regex_replace(s, number, "#");
   if (s.size() > 90) s = s.substr(0, 87) + "...";
   for (char& c : s) {
@@ -204,7 +205,7 @@ class MatrixCell {
     }
     std::size_t temps = 0;
     for (const auto& e : fs::recursive_directory_iterator(dir_ / "state")) {
-      if (e.path().filename().string().find(".tmp.") != std::string::npos) ++temps;
+      if (e.path().filename().string().find(".tmp-") != std::string::npos) ++temps;
     }
     if (temps > 0) parts.push_back(std::to_string(temps) + " temp file left");
     bool unsafe = false;
@@ -840,7 +841,7 @@ TEST(FaultMatrix, EveryFaultInEveryPhaseEndsSafeAndMatchesDocsReliability) {
     ASSERT_TRUE(a != std::string::npos && b != std::string::npos && a < b) << doc_path;
     const std::string text =
         committed->substr(0, a + begin.size()) + generated + committed->substr(b);
-    ASSERT_TRUE(write_file_atomically(doc_path, text).ok());
+    ASSERT_TRUE(io::write_file_atomically(doc_path, text).ok());
     std::printf("[matrix] %s rewritten\n", doc_path.c_str());
     return;
   }

@@ -76,8 +76,9 @@ class VirtualCell {
            "motion: {max_linear_velocity: 0.15, max_linear_acceleration: 0.5, "
            "max_linear_jerk: 5, max_angular_velocity: 0.5, max_angular_acceleration: 2, "
            "max_angular_jerk: 20}\n"
-           "measuring: " + s.measuring + "\nidentification: " + s.identification +
-           "\nacceptance: " + s.acceptance + "\n" + s.extra;
+           "measuring: " +
+           s.measuring + "\nidentification: " + s.identification + "\nacceptance: " + s.acceptance +
+           "\n" + s.extra;
   }
 
   // The same from YAML lines: a `measuring:`, `identification:` or `acceptance:` line replaces

@@ -1,5 +1,6 @@
 // What cdprd makes of one calibration: the proposed model, the acceptance gates and the report
-// a person reads before accepting (JSON for scripts, one self-contained HTML page with plots).
+// a person reads before accepting (JSON for scripts, one self-contained HTML page with plots: the
+// decision on top of the calibration report that cdpr-fit also writes, cdpr/report/report.hpp).
 //
 // Gates (DaemonConfig::acceptance): the chi-square p-value of the final fit (its degrees of
 // freedom accounted for), the largest frame-anchor change against the active model, the
@@ -59,6 +60,9 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
                                         const IdentificationOptions& options);
 
 nlohmann::json calibration_json(const CalibrationOutcome& o, const CalibrationReportContext& c);
-std::string calibration_html(const CalibrationOutcome& o, const CalibrationReportContext& c);
+// The page a person reads before accepting: the verdict, the gates and the next step, inserted at
+// the top of `report_page` (the calibration report of cdpr/report/report.hpp).
+std::string calibration_html(const CalibrationOutcome& o, const CalibrationReportContext& c,
+                             const std::string& report_page);
 
 }  // namespace cdpr::controller
