@@ -210,14 +210,18 @@ class Session {
       const auto it = r.find(key);
       return it == r.end() ? std::string() : " " + render_scalar(*it);
     };
+    // cdprd numbers calibrations ("calibration"); "version" from older daemons.
+    auto number = [&] {
+      const std::string c = version("calibration");
+      return c.empty() ? version("version") : c;
+    };
     if (inv_.cmd == "calibrate") {
-      return inv_.args.value("dry_run", false)
-                 ? "calibration dry run done"
-                 : "calibration" + version("calibration") + " started";
+      return inv_.args.value("dry_run", false) ? "calibration dry run done"
+                                               : "calibration" + number() + " started";
     }
     if (inv_.cmd == "abort") return "abort requested";
-    if (inv_.cmd == "accept") return "calibration" + version("calibration") + " accepted";
-    if (inv_.cmd == "reject") return "calibration" + version("calibration") + " rejected";
+    if (inv_.cmd == "accept") return "calibration" + number() + " accepted";
+    if (inv_.cmd == "reject") return "calibration" + number() + " rejected";
     if (inv_.cmd == "geometry_rollback") {
       return "geometry rolled back to version " + render_scalar(inv_.args["version"]);
     }
