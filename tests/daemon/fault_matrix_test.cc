@@ -19,6 +19,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -852,10 +853,22 @@ TEST(FaultMatrix, EveryFaultInEveryPhaseEndsSafeAndMatchesDocsReliability) {
     auto it = want.find(key);
     ASSERT_NE(it, want.end()) << "docs/reliability.md has no cell for " << key.first << " / "
                               << phase_name(kPhases[key.second]);
-    EXPECT_EQ(it->second, text) << "the outcome of " << key.first << " / "
-                                << phase_name(kPhases[key.second])
-                                << " differs from docs/reliability.md (CDPR_UPDATE_RELIABILITY=1 "
-                                   "rewrites it after a deliberate change)";
+    // A cell whose outcome depends on the timing of real threads (the laser driver polls in real
+    // time while the robot's clock is manual) lists its possible outcomes separated by " OR ".
+    std::vector<std::string> allowed;
+    for (std::size_t from = 0;;) {
+      const std::size_t at = it->second.find(" OR ", from);
+      allowed.push_back(
+          it->second.substr(from, at == std::string::npos ? std::string::npos : at - from));
+      if (at == std::string::npos) break;
+      from = at + 4;
+    }
+    const bool one_of = std::find(allowed.begin(), allowed.end(), text) != allowed.end();
+    EXPECT_TRUE(one_of) << "got: " << text << "\nwant: " << it->second << "\n"
+                        << "the outcome of " << key.first << " / "
+                        << phase_name(kPhases[key.second])
+                        << " differs from docs/reliability.md (CDPR_UPDATE_RELIABILITY=1 "
+                           "rewrites it after a deliberate change)";
   }
   EXPECT_EQ(want.size(), got.size()) << "docs/reliability.md has cells the matrix does not make";
 }
