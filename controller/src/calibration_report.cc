@@ -7,6 +7,8 @@
 
 #include "cdpr/calibration/mismatch.hpp"
 #include "cdpr/calibration/predicted_accuracy.hpp"
+#include "cdpr/report/format.hpp"
+#include "cdpr/report/report.hpp"
 
 namespace cdpr::controller {
 using json = nlohmann::json;
@@ -34,43 +36,6 @@ double anchor_std(const IdentificationReport* fit, int cable, char axis) {
   return std::numeric_limits<double>::quiet_NaN();
 }
 
-std::string escape(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    switch (c) {
-      case '&':
-        o += "&amp;";
-        break;
-      case '<':
-        o += "&lt;";
-        break;
-      case '>':
-        o += "&gt;";
-        break;
-      case '"':
-        o += "&quot;";
-        break;
-      default:
-        o += c;
-    }
-  }
-  return o;
-}
-
-const char* verdict_key_of(Diagnosis::Verdict v) {
-  switch (v) {
-    case Diagnosis::Verdict::kNoMismatch:
-      return "no_mismatch";
-    case Diagnosis::Verdict::kMismatchNamed:
-      return "mismatch_named";
-    case Diagnosis::Verdict::kMismatchUnexplained:
-      return "mismatch_unexplained";
-    case Diagnosis::Verdict::kInconclusive:
-      return "inconclusive";
-  }
-  return "?";
-}
-
 }  // namespace
 
 CalibrationOutcome evaluate_calibration(const RobotModel& before, const MeasurementSet& set,
@@ -88,7 +53,7 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
     o.model = diagnosis->model_after.robot;
     if (diagnosis->after) o.fit = &*diagnosis->after;
     o.verdict = diagnosis->headline;
-    o.verdict_key = verdict_key_of(diagnosis->verdict);
+    o.verdict_key = report::verdict_key(diagnosis->verdict);
     for (const EffectFit& e : diagnosis->accepted) {
       o.named_effects.push_back(e.name + (e.modelled_in_config ? "" : " (not carried)"));
     }
@@ -258,19 +223,21 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
   // cable and pose, the named effects and the residuals against what would explain them).
   std::ostringstream h;
   h << "<section id=\"cdprd-decision\">\n<h1>cdprd calibration " << c.calibration << " of "
-    << escape(o.model.name) << "</h1>\n";
+    << report::html_escape(o.model.name) << "</h1>\n";
   h << "<p><strong style=\"color:" << (o.gates_passed ? "#060" : "#a00") << "\">"
-    << (o.gates_passed ? "Every gate passed" : "Gates failed: " + escape(o.failed_gates))
-    << "</strong>. " << escape(o.verdict) << "</p>\n";
+    << (o.gates_passed ? "Every gate passed"
+                       : "Gates failed: " + report::html_escape(o.failed_gates))
+    << "</strong>. " << report::html_escape(o.verdict) << "</p>\n";
   h << "<p>Next step: <code>cdprctl accept</code> or <code>cdprctl reject</code>.</p>\n";
   h << "<table><tr><th>gate</th><th>result</th><th>detail</th></tr>\n";
   for (const Gate& g : o.gates) {
     h << "<tr><td>" << g.name << "</td><td>" << (g.passed ? "pass" : "<strong>fail</strong>")
-      << "</td><td>" << escape(g.text) << "</td></tr>\n";
+      << "</td><td>" << report::html_escape(g.text) << "</td></tr>\n";
   }
-  h << "</table>\n<p>" << escape(c.daemon) << "; geometry version before: " << c.geometry_version
-    << "; recording <code>" << escape(c.recording) << "</code>; " << o.poses << " poses; started "
-    << escape(c.started) << ".</p>\n</section>\n";
+  h << "</table>\n<p>" << report::html_escape(c.daemon)
+    << "; geometry version before: " << c.geometry_version << "; recording <code>"
+    << report::html_escape(c.recording) << "</code>; " << o.poses << " poses; started "
+    << report::html_escape(c.started) << ".</p>\n</section>\n";
   std::string page = report_page;
   const std::size_t body = page.find("<body>");
   if (body == std::string::npos)
