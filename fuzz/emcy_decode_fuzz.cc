@@ -17,7 +17,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     f.error = (flags & 4) != 0;
     f.id = f.extended
                ? (std::uint32_t{data[0]} | std::uint32_t{data[1]} << 8 |
-                  std::uint32_t{flags >> 3} << 16) &
+                  static_cast<std::uint32_t>(flags >> 3) << 16) &
                      cdpr::can::kMaxExtendedId
                : (std::uint32_t{data[0]} | std::uint32_t{data[1]} << 8) & cdpr::can::kMaxStandardId;
     f.dlc = static_cast<std::uint8_t>(data[3] % (cdpr::can::kMaxDlc + 1));

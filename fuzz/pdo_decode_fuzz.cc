@@ -48,6 +48,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const bool decoded = layout->decode(f, image);
     CDPR_FUZZ_CHECK(decoded == (f.dlc >= layout->dlc()), "decodes exactly the long frames");
     if (!decoded) continue;
+    // An object mapped twice shares one variable: the last field wins, so the ranges and the
+    // round trip are only checked when every object is mapped once.
+    if (!distinct) continue;
     for (const auto& field : layout->fields()) {
       const std::int64_t v = image.get(field.slot);
       if (field.is_signed) {
@@ -58,13 +61,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
                         "an unsigned value is in its type's range");
       }
     }
-    if (distinct) {
-      cdpr::can::Frame out;
-      layout->encode(image, out);
-      CDPR_FUZZ_CHECK(out.dlc == layout->dlc(), "encode writes the mapping's size");
-      for (std::size_t i = 0; i < layout->dlc(); ++i) {
-        CDPR_FUZZ_CHECK(out.data[i] == f.data[i], "decode then encode gives the same bytes");
-      }
+    cdpr::can::Frame out;
+    layout->encode(image, out);
+    CDPR_FUZZ_CHECK(out.dlc == layout->dlc(), "encode writes the mapping's size");
+    for (std::size_t i = 0; i < layout->dlc(); ++i) {
+      CDPR_FUZZ_CHECK(out.data[i] == f.data[i], "decode then encode gives the same bytes");
     }
   }
   return 0;
