@@ -12,8 +12,9 @@ of cdprd (/proc/PID/fd) is looked up in the kernel's tables of its network names
 (/proc/PID/net/{tcp,tcp6,udp,udp6,raw,raw6,packet,unix,netlink}) and `ss`:
   - TCP: only connections to 127.0.0.1:PORT (the configured laser), never LISTEN;
   - UDP, raw IP and packet sockets: none;
-  - Unix: the control socket's path (listening and accepted), or unnamed (socketpair); no abstract
-    name (reachable without file permissions) and no other path;
+  - Unix: the control socket (bound as <path>.tmp<pid>, then renamed to <path>; listening and
+    accepted), or unnamed (socketpair); no abstract name (reachable without file permissions), no
+    other path, and exactly one listening socket;
   - netlink: allowed (kernel only, not reachable from the network);
   - a socket in none of these tables is CAN (AF_CAN has no such table): at least one expected.
 """
@@ -80,7 +81,8 @@ def tables(pid):
             found[f[9]] = (kind, {"local": hex_addr(f[1]), "remote": hex_addr(f[2]), "state": f[3]})
     for line in open(f"/proc/{pid}/net/unix").read().splitlines()[1:]:
         f = line.split()
-        found[f[6]] = ("unix", {"path": f[7] if len(f) > 7 else "", "state": f[5]})
+        found[f[6]] = ("unix", {"path": f[7] if len(f) > 7 else "", "state": f[5],
+                                "listening": int(f[3], 16) & 0x10000 != 0})
     for kind, col in (("packet", 8), ("netlink", 9)):
         try:
             for line in open(f"/proc/{pid}/net/{kind}").read().splitlines()[1:]:
@@ -149,13 +151,15 @@ try:
         elif kind == "unix":
             path = d["path"]
             check(not path.startswith("@"), f"fd {fd}: no abstract Unix socket ({path})")
-            check(path in ("", SOCK), f"fd {fd}: Unix socket is the control socket or unnamed "
-                                      f"(got '{path}')")
+            # The server binds under a temporary name beside the socket and renames it into
+            # place (docs/control-protocol.md); the kernel keeps the name it was bound to.
+            check(path in ("", SOCK, f"{SOCK}.tmp{pid}"),
+                  f"fd {fd}: Unix socket is the control socket or unnamed (got '{path}')")
         elif kind == "can?":
             can_sockets += 1
     check(can_sockets >= 1, f"{can_sockets} CAN socket(s) (sockets in no IP/Unix/packet table)")
     listening_unix = [i for _, i in inodes if known.get(i, ("", {}))[0] == "unix"
-                      and known[i][1]["path"] == SOCK and known[i][1]["state"] == "01"]
+                      and known[i][1]["listening"]]
     check(len(listening_unix) == 1, f"one listening control socket ({len(listening_unix)})")
     # The same through ss: nothing of cdprd's listens on TCP or UDP.
     ss = subprocess.run(["ss", "-H", "-ltunp"], capture_output=True, text=True)
