@@ -6,6 +6,8 @@ set -euo pipefail
 PACKAGES=(
   # toolchain
   build-essential cmake ninja-build pkg-config clang-format clang-tidy
+  # libFuzzer targets (fuzz/, preset fuzz): clang and its sanitizer/fuzzer runtimes
+  clang libclang-rt-14-dev
   # libraries
   libeigen3-dev libceres-dev libspdlog-dev libfmt-dev libmodbus-dev libyaml-cpp-dev
   nlohmann-json3-dev libcli11-dev libgtest-dev libgmock-dev libbenchmark-dev libsystemd-dev

@@ -211,6 +211,61 @@ TEST(ControlProtocol, RequestEncoderAndParserAgree) {
   EXPECT_EQ(p.request->args["to"], json(2));
 }
 
+// Security: the daemon never opens a path that comes from a request. The protocol enforces it:
+// versions are integers (a path, a file name or a number in a string is refused), no command takes
+// a field that could name a file, and the only string argument is the pose list's content.
+TEST(ControlProtocol, RefusesPathLikeValuesWhereAVersionIsExpected) {
+  const json path_like[] = {"../../etc/passwd",   "/etc/shadow", "1/../../x", "000001.yaml",
+                            "geometry/000001",    "1",           "",          json::array({1}),
+                            json{{"path", ".."}}, 1.5,           -1,          0};
+  std::size_t checked = 0;
+  for (const CommandSpec& c : commands()) {
+    for (const ArgSpec& a : c.args) {
+      if (a.type != ArgType::kVersion) continue;
+      for (const json& v : path_like) {
+        json args = json::object();
+        for (const ArgSpec& other : c.args) {
+          if (other.type == ArgType::kVersion) args[std::string(other.name)] = 1;
+        }
+        args[std::string(a.name)] = v;
+        const std::string line = json{{"id", 1}, {"cmd", c.name}, {"args", args}}.dump();
+        const ParsedRequest p = parse_request(line);
+        ASSERT_FALSE(p.request.has_value()) << line;
+        EXPECT_EQ(p.error_code, ControlErrorCode::kBadRequest) << line;
+        EXPECT_NE(p.error_message.find(std::string(a.name)), std::string::npos) << p.error_message;
+        ++checked;
+      }
+    }
+  }
+  // geometry_show, geometry_diff (from, to), geometry_rollback, report.
+  EXPECT_EQ(checked, 5 * std::size(path_like));
+}
+
+TEST(ControlProtocol, NoCommandTakesAFieldThatCouldNameAFile) {
+  const char* fields[] = {"path",   "file",  "poses", "pose_file", "output", "state_directory",
+                          "socket", "config"};
+  for (const CommandSpec& c : commands()) {
+    for (const char* f : fields) {
+      const std::string line =
+          json{{"id", 1}, {"cmd", c.name}, {"args", {{f, "/etc/passwd"}}}}.dump();
+      const ParsedRequest p = parse_request(line);
+      ASSERT_FALSE(p.request.has_value()) << line;
+      EXPECT_EQ(p.error_code, ControlErrorCode::kBadRequest) << line;
+    }
+  }
+  // Every string argument in the table is reviewed here: a new one must be content, not a path.
+  const std::set<std::string> content_strings = {"poses_csv"};
+  for (const CommandSpec& c : commands()) {
+    for (const ArgSpec& a : c.args) {
+      if (a.type == ArgType::kString) {
+        EXPECT_EQ(content_strings.count(std::string(a.name)), 1u)
+            << c.name << " takes the string argument " << a.name
+            << ": if it can name a file, the daemon must not open it";
+      }
+    }
+  }
+}
+
 TEST(ControlProtocol, RandomBytesNeverCrashTheParser) {
   std::mt19937 rng(12345);
   std::uniform_int_distribution<int> byte(0, 255), len(0, 200);

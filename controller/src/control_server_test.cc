@@ -439,6 +439,68 @@ TEST_F(ControlServerTest, RefusesPrivilegedCommandsFromOutsidersBeforeTheHandler
   EXPECT_NE(log.str().find("refused stop from pid"), std::string::npos) << log.str();
 }
 
+// Every privileged command of the table (not just a sample), each with valid args, is refused
+// for an outsider before the handler; every other command reaches the handler.
+TEST_F(ControlServerTest, RefusesEveryPrivilegedCommandOfTheTableFromOutsiders) {
+  ControlServerOptions o = options();
+  std::optional<std::pair<uid_t, gid_t>> outsider;
+  if (::geteuid() == 0) {
+    o.mode = 0666;
+    outsider = {65534, 65534};
+  } else {
+    o.allow_own_uid = false;
+    const group* root_group = ::getgrgid(0);
+    ASSERT_NE(root_group, nullptr);
+    o.group = root_group->gr_name;
+    const auto mine = groups_of_uid(::geteuid());
+    ASSERT_EQ(std::find(mine.begin(), mine.end(), gid_t{0}), mine.end());
+  }
+  start(o);
+  std::vector<std::string> lines;
+  std::vector<std::string> names;
+  std::size_t privileged = 0;
+  for (const CommandSpec& c : commands()) {
+    json args = json::object();
+    for (const ArgSpec& a : c.args) {
+      if (!a.required) continue;
+      switch (a.type) {
+        case ArgType::kBool:
+          args[std::string(a.name)] = true;
+          break;
+        case ArgType::kString:
+          args[std::string(a.name)] = "";
+          break;
+        case ArgType::kVersion:
+          args[std::string(a.name)] = 1;
+          break;
+        case ArgType::kPose:
+          args[std::string(a.name)] = json::array({0, 0, 0, 0, 0, 0});
+          break;
+      }
+    }
+    lines.push_back(json{{"id", lines.size()}, {"cmd", c.name}, {"args", args}}.dump());
+    names.emplace_back(c.name);
+    privileged += c.privileged ? 1 : 0;
+  }
+  const ChildOutcome out = run_as(outsider, o.path, lines);
+  const ControlServerStats stats = server_->stats();
+  server_->stop();
+  ASSERT_TRUE(out.connected) << out.connect_error;
+  ASSERT_EQ(out.replies.size(), lines.size());
+  std::vector<std::string> handled;
+  for (const auto& r : seen()) handled.push_back(r.cmd);
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    const bool refused = out.replies[i]["ok"] == json(false) &&
+                         out.replies[i]["error"]["code"] == json("not_permitted");
+    EXPECT_EQ(refused, is_privileged(names[i])) << names[i] << ": " << out.replies[i].dump();
+    EXPECT_EQ(std::count(handled.begin(), handled.end(), names[i]), is_privileged(names[i]) ? 0 : 1)
+        << names[i];
+  }
+  EXPECT_GE(privileged,
+            8u);  // calibrate abort accept reject geometry_rollback stop fault_reset move
+  EXPECT_EQ(stats.refused, privileged);
+}
+
 TEST_F(ControlServerTest, AllowsPrivilegedCommandsToGroupMembersAndLogsThem) {
   std::ostringstream log;
   auto previous = spdlog::default_logger();

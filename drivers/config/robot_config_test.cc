@@ -249,6 +249,24 @@ TEST(RobotConfig, WrittenFileCarriesTheHeaderAndLoadsBackExactly) {
   EXPECT_THAT(std::string(bad.message()), HasSubstr("/nonexistent/dir/robot.yaml"));
 }
 
+// Found by fuzz/robot_config (input kept in fuzz/regressions/robot_config/): a pulley axis that is
+// not a unit vector with a reference that is not perpendicular to it loaded into a frame whose
+// saved reference moved by an ulp at every further load and save.
+TEST(RobotConfig, SaveThenLoadIsExactForAPulleyGivenWithATiltedAxisAndAnObliqueReference) {
+  std::string text = read_text(source_path("config/mini.yaml"));
+  const std::string given = "pulley: {axis: [0, 0, 1], reference: [-0.5, -0.378, 0]}";
+  const std::size_t at = text.find(given);
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, given.size(), "pulley: {axis: [4, 0, 1], reference: [-0.5, -0.378, 0]}");
+  const Result<RobotModel> model = parse_robot_config(text, "tilted.yaml");
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  const std::string saved = save_robot_config(*model);
+  const Result<RobotModel> again = parse_robot_config(saved, "saved.yaml");
+  ASSERT_TRUE(again.ok()) << again.status().to_string() << "\n" << saved;
+  expect_identical(*model, *again);
+  EXPECT_EQ(save_robot_config(*again), saved);
+}
+
 TEST(RobotConfig, SaveKeepsNumbersThatNeedAllSeventeenDigits) {
   Result<RobotModel> model = load_robot_config(source_path("config/mini.yaml"));
   ASSERT_TRUE(model.ok()) << model.status().to_string();

@@ -216,7 +216,13 @@ PulleyModel Parser::parse_pulley(const YamlField& cable) {
   if (!(ex.norm() > 1e-9 * r.norm())) {
     take(reference.error("expected a direction not parallel to the pulley axis"));
   }
-  if (std::abs(along) > 1e-14 || std::abs(ex.norm() - 1.0) > 1e-14) ex.normalize();
+  // A reference that is already unit and perpendicular to round-off (what save_robot_config
+  // writes) is kept bit for bit: projecting it again would move it by an ulp at every load.
+  if (std::abs(along) <= 1e-14 && std::abs(r.norm() - 1.0) <= 1e-14) {
+    ex = r;
+  } else if (std::abs(along) > 1e-14 || std::abs(ex.norm() - 1.0) > 1e-14) {
+    ex.normalize();
+  }
   p.frame.col(0) = ex;
   p.frame.col(1) = ez.cross(ex);
   p.frame.col(2) = ez;

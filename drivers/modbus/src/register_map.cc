@@ -250,7 +250,17 @@ Interpretation interpret(const RegisterMap& map, std::span<const std::uint16_t> 
 
   if (map.quality) {
     if (map.quality_in_block()) {
-      quality = block[static_cast<std::size_t>(map.quality->address - map.block_start())];
+      // A short answer may end before the quality register even when the value is in it.
+      const auto q_offset = static_cast<std::size_t>(map.quality->address - map.block_start());
+      if (q_offset >= block.size()) {
+        out.status = ReadingStatus::kCommError;
+        out.detail =
+            Status::Error(ErrorCode::kInternal,
+                          "laser '%s': answer has %zu registers, quality register needs offset %zu",
+                          n, block.size(), q_offset);
+        return out;
+      }
+      quality = block[q_offset];
     }
     if (quality) {
       out.quality = quality;

@@ -242,6 +242,23 @@ TEST(Interpret, ShortAnswerIsAnErrorNotACrash) {
   EXPECT_EQ(interpret(m, std::vector<std::uint16_t>{}).status, ReadingStatus::kCommError);
 }
 
+// Found by fuzz/modbus_decode (input kept in fuzz/regressions/modbus_decode/): the value fits in
+// a short answer but the quality register after it does not; it was read past the block's end.
+TEST(Interpret, ShortAnswerWithoutTheQualityRegisterIsAnErrorNotAnOverread) {
+  RegisterMap m = u16_map();
+  m.address = 100;
+  m.quality = QualityRegister{101, 0xFFFF, {0}, {1}};
+  ASSERT_TRUE(m.validate().ok()) << m.validate().to_string();
+  ASSERT_TRUE(m.quality_in_block());
+  ASSERT_EQ(m.block_count(), 2);
+  const std::vector<std::uint16_t> only_the_value{10000};
+  const Interpretation in = interpret(m, only_the_value);
+  EXPECT_EQ(in.status, ReadingStatus::kCommError);
+  EXPECT_NE(in.detail.message().find("quality register"), std::string_view::npos)
+      << in.detail.message();
+  EXPECT_EQ(interpret(m, std::vector<std::uint16_t>{10000, 0}).status, ReadingStatus::kOk);
+}
+
 TEST(RegisterMapValidate, ExplicitBlockAndBase) {
   RegisterMap m = u16_map();
   m.address_base = 1;
