@@ -4,7 +4,7 @@ set(_ctl ${CMAKE_CURRENT_LIST_DIR})
 add_library(cdpr_control STATIC ${_ctl}/src/control_protocol.cc ${_ctl}/src/control_server.cc
                                 ${_ctl}/src/control_client.cc)
 target_include_directories(cdpr_control PUBLIC ${_ctl}/include)
-target_link_libraries(cdpr_control PUBLIC cdpr_status nlohmann_json::nlohmann_json spdlog::spdlog
+target_link_libraries(cdpr_control PUBLIC cdpr_core nlohmann_json::nlohmann_json spdlog::spdlog
                                           Threads::Threads
                                    PRIVATE cdpr_options)
 
@@ -21,5 +21,5 @@ cdpr_add_gtest(NAME control_server_test SOURCES ${_ctl}/src/control_server_test.
                LIBS cdpr_control spdlog::spdlog)
 cdpr_add_gtest(NAME control_client_test SOURCES ${_ctl}/src/control_client_test.cc
                LIBS cdpr_control)
-cdpr_add_gtest(NAME cdprctl_test SOURCES ${_ctl}/cdprctl/app_test.cc
+cdpr_add_gtest(NAME control_cdprctl_test SOURCES ${_ctl}/cdprctl/app_test.cc
                LIBS cdpr_ctl_app cdpr_control spdlog::spdlog)

@@ -6,7 +6,7 @@ add_library(cdpr_motion STATIC ${CMAKE_CURRENT_LIST_DIR}/src/trajectory.cc
                                ${CMAKE_CURRENT_LIST_DIR}/src/path_check.cc
                                ${CMAKE_CURRENT_LIST_DIR}/src/slew.cc)
 target_include_directories(cdpr_motion PUBLIC ${CMAKE_CURRENT_LIST_DIR}/include)
-target_link_libraries(cdpr_motion PUBLIC cdpr_calibration cdpr_status PRIVATE cdpr_options)
+target_link_libraries(cdpr_motion PUBLIC cdpr_calibration cdpr_core PRIVATE cdpr_options)
 
 cdpr_add_gtest(NAME motion_trajectory_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src/trajectory_test.cc
                LIBS cdpr_motion cdpr_test_support)

@@ -17,15 +17,15 @@ target_include_directories(cdpr_rt PUBLIC
   ${CDPR_CONTROLLER_DIR}/include
   $<TARGET_PROPERTY:cdpr_modbus,INTERFACE_INCLUDE_DIRECTORIES>)
 target_link_libraries(cdpr_rt
-  PUBLIC cdpr_status Threads::Threads
+  PUBLIC cdpr_core Threads::Threads
   PRIVATE PkgConfig::SYSTEMD cdpr_options)
 
-cdpr_add_gtest(NAME cdpr_rt_cycle_stats_test
+cdpr_add_gtest(NAME rt_cycle_stats_test
                SOURCES ${CDPR_CONTROLLER_DIR}/src/cycle_stats_test.cc
                LIBS cdpr_rt cdpr_test_support)
-cdpr_add_gtest(NAME cdpr_rt_thread_test
+cdpr_add_gtest(NAME rt_thread_test
                SOURCES ${CDPR_CONTROLLER_DIR}/src/rt_thread_test.cc
                LIBS cdpr_rt cdpr_test_support)
-cdpr_add_gtest(NAME cdpr_rt_sd_notify_test
+cdpr_add_gtest(NAME rt_sd_notify_test
                SOURCES ${CDPR_CONTROLLER_DIR}/src/sd_notify_test.cc
                LIBS cdpr_rt)

@@ -23,7 +23,7 @@ using namespace std::chrono_literals;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   FuzzedDataProvider in(data, size);
-  can::ManualClock clock;
+  cdpr::ManualClock clock;
   can::VirtualCanBus bus(clock);
   auto master = bus.endpoint("master");
   auto server = bus.endpoint("server");

@@ -96,7 +96,7 @@ Status write_file_atomically(const std::string& path, std::string_view content) 
     (void)::fsync(dfd);
     ::close(dfd);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Result<std::string> read_text_file(const std::string& path) {

@@ -136,7 +136,7 @@ int main(int argc, char** argv) {
     spdlog::warn("no laser configured: the daemon can drive the robot but not calibrate it");
   }
 
-  static const can::SteadyClock clock;
+  static const cdpr::SteadyClock clock;
   DaemonIo io;
   io.bus = bus->get();
   io.laser = laser.get();

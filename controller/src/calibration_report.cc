@@ -101,9 +101,9 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
     pa.box.center = o.model.home.position;
     // The pose set was planned feasible for the model it was measured with; the bound hardly
     // depends on the geometry's few millimetres of change.
-    auto acc = predict_accuracy(CalibratedModel::FromRobot(before), poses, set.noise, pa);
+    auto acc = predict_accuracy(CalibratedModel::from_robot(before), poses, set.noise, pa);
     if (!acc.ok())
-      acc = predict_accuracy(CalibratedModel::FromRobot(o.model), poses, set.noise, pa);
+      acc = predict_accuracy(CalibratedModel::from_robot(o.model), poses, set.noise, pa);
     g.limit = gates.max_predicted_position_error_m;
     if (acc.ok()) {
       g.value = acc->position_rms_m;

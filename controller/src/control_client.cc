@@ -38,7 +38,7 @@ Status wait_fd(int fd, short events, const ControlClient::Deadline& deadline,
     if (cancel != nullptr && cancel->load()) return Status(ErrorCode::kAborted, "interrupted");
     const int ms = slice_ms(deadline);
     if (ms == -2) {
-      return Status::Error(ErrorCode::kTimeout, "no %s from cdprd before the timeout", what);
+      return Status::error(ErrorCode::kTimeout, "no %s from cdprd before the timeout", what);
     }
     pollfd p{fd, events, 0};
     const int rc = ::poll(&p, 1, ms);
@@ -46,7 +46,7 @@ Status wait_fd(int fd, short events, const ControlClient::Deadline& deadline,
       if (errno == EINTR) continue;
       return Status(ErrorCode::kIoError, "poll: " + errno_text(errno));
     }
-    if (rc > 0) return Status::Ok();
+    if (rc > 0) return Status::success();
   }
 }
 
@@ -148,7 +148,7 @@ Status ControlClient::send_raw(std::string_view bytes, Deadline deadline) {
     }
     return Status(ErrorCode::kIoError, "send: " + errno_text(errno));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Result<std::string> ControlClient::read_line(Deadline deadline, const std::atomic<bool>* cancel) {

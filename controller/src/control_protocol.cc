@@ -208,7 +208,7 @@ std::optional<std::size_t> find_invalid_utf8(std::string_view text) {
 
 Status validate_args(const CommandSpec& spec, const nlohmann::json& args) {
   if (!args.is_object()) {
-    return Status::Error(ErrorCode::kInvalidArgument, "\"args\" of %.*s must be an object",
+    return Status::error(ErrorCode::kInvalidArgument, "\"args\" of %.*s must be an object",
                          static_cast<int>(spec.name.size()), spec.name.data());
   }
   for (const auto& [key, value] : args.items()) {
@@ -229,7 +229,7 @@ Status validate_args(const CommandSpec& spec, const nlohmann::json& args) {
     }
     if (!has_type(value, a->type)) {
       const std::string_view t = type_name(a->type);
-      return Status::Error(ErrorCode::kInvalidArgument, "args.%.*s of %.*s must be %.*s",
+      return Status::error(ErrorCode::kInvalidArgument, "args.%.*s of %.*s must be %.*s",
                            static_cast<int>(a->name.size()), a->name.data(),
                            static_cast<int>(spec.name.size()), spec.name.data(),
                            static_cast<int>(t.size()), t.data());
@@ -238,13 +238,13 @@ Status validate_args(const CommandSpec& spec, const nlohmann::json& args) {
   for (const auto& a : spec.args) {
     if (a.required && !args.contains(a.name)) {
       const std::string_view t = type_name(a.type);
-      return Status::Error(ErrorCode::kInvalidArgument, "%.*s needs args.%.*s (%.*s)",
+      return Status::error(ErrorCode::kInvalidArgument, "%.*s needs args.%.*s (%.*s)",
                            static_cast<int>(spec.name.size()), spec.name.data(),
                            static_cast<int>(a.name.size()), a.name.data(),
                            static_cast<int>(t.size()), t.data());
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 ParsedRequest parse_request(std::string_view line) {

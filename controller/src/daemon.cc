@@ -125,7 +125,7 @@ Result<std::unique_ptr<Daemon>> Daemon::create(DaemonConfig config, DaemonIo io)
   if (Status s = d->load_state(); !s.ok()) return s;
 
   canopen::MasterHooks hooks;
-  const can::Clock* clock = d->io_.clock;
+  const cdpr::Clock* clock = d->io_.clock;
   hooks.now = [clock] { return clock->now(); };
   hooks.idle = d->io_.idle;
   auto master = canopen::Master::create(*d->io_.bus, d->network_, hooks);
@@ -175,7 +175,7 @@ Status Daemon::load_state() {
     }
     active = *v;
   } else if (!active.ok()) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "%s: geometry versions exist but none is active (file 'active' missing);"
                          " restore it or remove the folder to start from the nominal geometry",
                          config_.state_directory.c_str());
@@ -183,14 +183,14 @@ Status Daemon::load_state() {
   auto model = store_->load_geometry(*active);
   if (!model.ok()) return model.status();
   if (model->num_cables() != nominal_.num_cables()) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "active geometry version %d has %d cables, %s has %d", *active,
                          model->num_cables(), config_.robot.c_str(), nominal_.num_cables());
   }
   active_version_ = *active;
   active_ = make_geometry(*active, *model);
   repair_recordings();
-  return Status::Ok();
+  return Status::success();
 }
 
 void Daemon::repair_recordings() {
@@ -272,14 +272,14 @@ Status Daemon::check_identities() {
     if (n.kind == canopen::NodeKind::kCia402Drive) expected_product = want.drive_product_code;
     if (n.kind == canopen::NodeKind::kForceSensor) expected_product = want.force_product_code;
     if (want.vendor_id != 0 && *vendor != want.vendor_id) {
-      return Status::Error(ErrorCode::kFailedPrecondition,
+      return Status::error(ErrorCode::kFailedPrecondition,
                            "node %d (%s): vendor id 0x%08X, the config (%s, identity.vendor_id) "
                            "expects 0x%08X",
                            int{n.id}, n.name.c_str(), *vendor, config_.file.c_str(),
                            want.vendor_id);
     }
     if (expected_product != 0 && *product != expected_product) {
-      return Status::Error(ErrorCode::kFailedPrecondition,
+      return Status::error(ErrorCode::kFailedPrecondition,
                            "node %d (%s): product code 0x%08X, the config (%s) expects 0x%08X",
                            int{n.id}, n.name.c_str(), *product, config_.file.c_str(),
                            expected_product);
@@ -287,7 +287,7 @@ Status Daemon::check_identities() {
     spdlog::info("node {} ({}): vendor 0x{:08X}, product 0x{:08X}", int{n.id}, n.name, *vendor,
                  *product);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Result<Pose> Daemon::pose_from_encoders(const RobotModel& model) {
@@ -360,7 +360,7 @@ Status Daemon::home() {
   c->pose = pose;
   c->from_actual = true;
   post(std::move(c));
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Daemon::start() {
@@ -405,7 +405,7 @@ Status Daemon::start() {
   running_since_ = io_.clock->now();  // boot-ups after this are reboots
   set_state(DaemonState::kHolding,
             "started with geometry version " + std::to_string(active_version_));
-  return Status::Ok();
+  return Status::success();
 }
 
 std::uint64_t Daemon::post(std::unique_ptr<MotionCommand> c) {
@@ -431,15 +431,15 @@ Status Daemon::wait_rt(const std::function<bool(const RtSnapshot&)>& done, doubl
   for (;;) {
     const RtSnapshot s = rt_->snapshot();
     if (s.fault.kind != FaultKind::kNone) {
-      return Status::Error(ErrorCode::kAborted, "%s: robot fault: %s", what,
+      return Status::error(ErrorCode::kAborted, "%s: robot fault: %s", what,
                            fault_text(s.fault).c_str());
     }
     if (abortable && abort_.load()) {
-      return Status::Error(ErrorCode::kAborted, "%s: aborted by the operator", what);
+      return Status::error(ErrorCode::kAborted, "%s: aborted by the operator", what);
     }
-    if (done(s)) return Status::Ok();
+    if (done(s)) return Status::success();
     if (now_s() - t0 > timeout_s || std::chrono::steady_clock::now() > wall_end) {
-      return Status::Error(ErrorCode::kTimeout, "%s: not done within %.1f s", what, timeout_s);
+      return Status::error(ErrorCode::kTimeout, "%s: not done within %.1f s", what, timeout_s);
     }
     std::this_thread::sleep_for(io_.poll);
   }
@@ -518,7 +518,7 @@ Status Daemon::activate(int version, const json& why, const PeerInfo* peer) {
     swap_why_ = w.value("why", std::string("activation"));
   }
   set_state(DaemonState::kApplying, "hot swap to geometry version " + std::to_string(version));
-  return Status::Ok();
+  return Status::success();
 }
 
 void Daemon::service() {
@@ -719,7 +719,7 @@ Result<std::vector<Pose>> Daemon::plan_poses(const std::string& poses_csv) {
     PoseDesignOptions o;
     o.num_poses = config_.measuring.poses;
     fit_design_box_to_robot(g->model, o);
-    auto d = design_poses(CalibratedModel::FromRobot(g->model), o);
+    auto d = design_poses(CalibratedModel::from_robot(g->model), o);
     if (!d.ok()) return d.status();
     poses = d->poses;
   }
@@ -742,7 +742,7 @@ Result<std::vector<Pose>> Daemon::plan_poses(const std::string& poses_csv) {
 
 Status Daemon::regulate_tensions(int pose_index) {
   const double band = config_.measuring.tension_band;
-  if (band <= 0.0 || master_->force_sensors().empty()) return Status::Ok();
+  if (band <= 0.0 || master_->force_sensors().empty()) return Status::success();
   const Geometry* g;
   {
     std::lock_guard lock(mu_);
@@ -789,7 +789,7 @@ Status Daemon::regulate_tensions(int pose_index) {
           -(want + (want > f ? 1.5 : -1.5) * band - f) * length / ea * (1 << iteration);
       trim[k] += winch_counts_change<double>(g->model.winches[k], dl);
     }
-    if (inside) return Status::Ok();
+    if (inside) return Status::success();
     auto c = std::make_unique<MotionCommand>();
     c->type = MotionCommand::Type::kTrim;
     c->trim = trim;
@@ -805,7 +805,7 @@ Status Daemon::regulate_tensions(int pose_index) {
       "pose {}: a tension is still outside [f_min - {:.1f}, f_max + {:.1f}] N after {} "
       "regulation steps",
       pose_index, band, band, kRegulationSteps);
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Daemon::measure_pose(const Pose& pose, double reference_tension,
@@ -854,7 +854,7 @@ Status Daemon::measure_pose(const Pose& pose, double reference_tension,
   row.lasers = Eigen::VectorXd::Constant(static_cast<int>(g->model.lasers.size()), laser);
   row.reference = Pose{Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN()),
                        Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN())};
-  return Status::Ok();
+  return Status::success();
 }
 
 void Daemon::finish_calibration(const std::string& outcome, const std::string& message) {
@@ -978,7 +978,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
                {"tensions", tensions},
                {"laser_m", row.lasers.size() > 0 ? json(row.lasers(0)) : json(nullptr)}});
     }
-    return Status::Ok();
+    return Status::success();
   };
 
   auto fail = [&](const Status& s) {
@@ -997,7 +997,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
 
   // Identification and diagnosis; extra poses when the locator asks for them.
   set_state(DaemonState::kIdentifying, "calibration " + std::to_string(id) + ": identifying");
-  const CalibratedModel initial = CalibratedModel::FromRobot(g->model);
+  const CalibratedModel initial = CalibratedModel::from_robot(g->model);
   Result<Diagnosis> diagnosis = Status(ErrorCode::kInternal, "not run");
   Result<IdentificationReport> report = Status(ErrorCode::kInternal, "not run");
   MeasurementSet set;

@@ -21,13 +21,13 @@ std::string resolve(const std::string& base_dir, const std::string& p) {
 Status in_range(const YamlField& map, std::string_view key, double lo, double hi,
                 std::string_view unit, double& out) {
   const YamlField f = map[key];
-  if (!f.present()) return Status::Ok();
+  if (!f.present()) return Status::success();
   CDPR_ASSIGN_OR_RETURN(out, f.number_in(lo, hi, unit));
-  return Status::Ok();
+  return Status::success();
 }
 
 Status read_realtime(const YamlField& n, RealtimeSettings& rt) {
-  if (!n.present()) return Status::Ok();
+  if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(n.check_keys({"priority", "cpu", "sync_period_ms", "lock_memory"}));
   CDPR_RETURN_IF_ERROR(n.optional("priority", rt.priority, 0, 99));
   CDPR_RETURN_IF_ERROR(n.optional("cpu", rt.cpu, -1, 1023));
@@ -38,7 +38,7 @@ Status read_realtime(const YamlField& n, RealtimeSettings& rt) {
 }
 
 Status read_identity(const YamlField& n, IdentitySettings& id) {
-  if (!n.present()) return Status::Ok();
+  if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(n.check_keys({"vendor_id", "drive_product_code", "force_product_code"}));
   constexpr std::int64_t kMax = 0xFFFFFFFFLL;
   CDPR_RETURN_IF_ERROR(n.optional("vendor_id", id.vendor_id, 0, kMax));
@@ -47,7 +47,7 @@ Status read_identity(const YamlField& n, IdentitySettings& id) {
 }
 
 Status read_motion(const YamlField& n, MotionSettings& m) {
-  if (!n.present()) return Status::Ok();
+  if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(
       n.check_keys({"max_linear_velocity", "max_linear_acceleration", "max_linear_jerk",
                     "max_angular_velocity", "max_angular_acceleration", "max_angular_jerk",
@@ -68,7 +68,7 @@ Status read_motion(const YamlField& n, MotionSettings& m) {
 }
 
 Status read_tension_watch(const YamlField& n, TensionWatch& t) {
-  if (!n.present()) return Status::Ok();
+  if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(n.check_keys({"slack_below", "overload_above", "cycles"}));
   CDPR_RETURN_IF_ERROR(in_range(n, "slack_below", 0.0, 1e6, "N", t.slack_below));
   CDPR_RETURN_IF_ERROR(in_range(n, "overload_above", 0.0, 1e7, "N", t.overload_above));
@@ -76,7 +76,7 @@ Status read_tension_watch(const YamlField& n, TensionWatch& t) {
 }
 
 Status read_measuring(const YamlField& n, const std::string& dir, MeasuringSettings& m) {
-  if (!n.present()) return Status::Ok();
+  if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(
       n.check_keys({"poses", "pose_file", "laser_samples", "laser_interval_s", "average_cycles",
                     "settle_window_s", "settle_position_tolerance", "settle_tension_tolerance",
@@ -102,7 +102,7 @@ Status read_measuring(const YamlField& n, const std::string& dir, MeasuringSetti
 }
 
 Status read_identification(const YamlField& n, IdentificationSettings& s) {
-  if (!n.present()) return Status::Ok();
+  if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(
       n.check_keys({"frame_anchors", "platform_anchors", "length_offsets", "length_scales",
                     "force_gains", "force_offsets", "laser_origin", "laser_direction",
@@ -123,7 +123,7 @@ Status read_identification(const YamlField& n, IdentificationSettings& s) {
 }
 
 Status read_acceptance(const YamlField& n, AcceptanceGates& g) {
-  if (!n.present()) return Status::Ok();
+  if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(
       n.check_keys({"mode", "min_fit_p_value", "max_anchor_change_m",
                     "max_predicted_position_error_m", "allow_unresolved_mismatch"}));
@@ -138,7 +138,7 @@ Status read_acceptance(const YamlField& n, AcceptanceGates& g) {
 }
 
 Status read_control(const YamlField& n, const std::string& dir, ControlSettings& c) {
-  if (!n.present()) return Status::Ok();
+  if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(n.check_keys({"socket", "group"}));
   CDPR_RETURN_IF_ERROR(n.optional("socket", c.socket));
   c.socket = resolve(dir, c.socket);

@@ -31,12 +31,12 @@ Status band(const RobotModel& model, double margin, CableVector& lo, CableVector
     lo(i) = c.f_min + margin;
     hi(i) = c.f_max - margin;
     if (!(lo(i) <= hi(i))) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "cable %d: f_min %g N + margin %g N exceeds f_max %g N - margin", i + 1,
                            c.f_min, margin, c.f_max);
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 // " - margin 10 N" when there is a margin.
@@ -76,7 +76,7 @@ Status explain_infeasible(const RobotModel& model, const KinematicsData& kinemat
     }
     if (worst >= 0) {
       margin_text(margin, "-", extra, sizeof extra);
-      return Status::Error(ErrorCode::kOutOfRange, "cable %d would need %.1f N > f_max %g N%s",
+      return Status::error(ErrorCode::kOutOfRange, "cable %d would need %.1f N > f_max %g N%s",
                            worst + 1, r.tensions(worst),
                            model.cables[static_cast<std::size_t>(worst)].f_max, extra);
     }
@@ -95,7 +95,7 @@ Status explain_infeasible(const RobotModel& model, const KinematicsData& kinemat
     }
     if (worst >= 0) {
       margin_text(margin, "+", extra, sizeof extra);
-      return Status::Error(ErrorCode::kOutOfRange, "cable %d would need %.1f N < f_min %g N%s",
+      return Status::error(ErrorCode::kOutOfRange, "cable %d would need %.1f N < f_min %g N%s",
                            worst + 1, r.tensions(worst),
                            model.cables[static_cast<std::size_t>(worst)].f_min, extra);
     }
@@ -126,7 +126,7 @@ Verdict check_point(const RobotModel& model, const Eigen::Vector3d& position,
         const bool above = position(k) > box.max()(k);
         v.failure = Failure::kBox;
         v.reason =
-            Status::Error(ErrorCode::kOutOfRange, "%c = %.4f m %s %.4f m", kAxis[k], position(k),
+            Status::error(ErrorCode::kOutOfRange, "%c = %.4f m %s %.4f m", kAxis[k], position(k),
                           above ? ">" : "<", above ? box.max()(k) : box.min()(k));
         return v;
       }
@@ -135,7 +135,7 @@ Verdict check_point(const RobotModel& model, const Eigen::Vector3d& position,
   if (!inverse_kinematics(model, position, rotation, kinematics)) {
     v.failure = Failure::kDegenerate;
     v.reason =
-        Status::Error(ErrorCode::kNumericalFailure,
+        Status::error(ErrorCode::kNumericalFailure,
                       "cable %d is degenerate (its platform anchor is on its frame anchor or "
                       "inside its pulley circle)",
                       kinematics.invalid_cable + 1);
@@ -172,30 +172,30 @@ Status validate_options(const RobotModel& model, const PathCheckOptions& options
                         double* reference) {
   const int m = model.num_cables();
   if (m < 1 || m > kMaxCables || static_cast<int>(model.cables.size()) != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "path check: the model has %d cables and %d cable descriptions (1 to %d "
                          "cables supported)",
                          m, static_cast<int>(model.cables.size()), kMaxCables);
   }
   if (!(std::isfinite(options.max_linear_step) && options.max_linear_step > 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "path check: max_linear_step must be finite and > 0 (got %g)",
                          options.max_linear_step);
   }
   if (!(std::isfinite(options.max_angular_step) && options.max_angular_step > 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "path check: max_angular_step must be finite and > 0 (got %g)",
                          options.max_angular_step);
   }
   if (!(std::isfinite(options.tension_margin) && options.tension_margin >= 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "path check: tension_margin must be finite and >= 0 (got %g)",
                          options.tension_margin);
   }
   *reference = std::isnan(options.reference_tension) ? default_reference_tension(model)
                                                      : options.reference_tension;
   if (!(std::isfinite(*reference) && *reference > 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "path check: reference_tension must be finite and > 0 (got %g)",
                          *reference);
   }
@@ -209,7 +209,7 @@ Status validate_options(const RobotModel& model, const PathCheckOptions& options
   if (Status s = band(model, options.tension_margin, lo, hi); !s.ok()) {
     return s.prepend("path check: ");
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 // "(0.300, 0.000, 0.000) m, (0.0, 0.0, 0.0) deg"
@@ -225,18 +225,18 @@ Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
                      double reference_tension, double margin, TensionPlan& plan) {
   plan.outcome = ForceDistributionOutcome::kInvalidInput;
   if (!sizes_ok(model, kinematics)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "tension plan: model with %d cables (1 to %d supported) or scratch data "
                          "of another size",
                          model.num_cables(), kMaxCables);
   }
   if (!(std::isfinite(reference_tension) && reference_tension > 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "tension plan: reference tension must be finite and > 0 (got %g)",
                          reference_tension);
   }
   if (!(std::isfinite(margin) && margin >= 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "tension plan: margin must be finite and >= 0 (got %g)", margin);
   }
   CableVector lo, hi;
@@ -251,7 +251,7 @@ Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
     plan.tensions = r.tensions;
     plan.reference = scale * reference_tension;
     plan.cables_at_limits = r.cables_at_limits;
-    if (r.feasible() && r.cables_at_limits == 0) return Status::Ok();
+    if (r.feasible() && r.cables_at_limits == 0) return Status::success();
     switch (r.outcome) {
       case ForceDistributionOutcome::kDegenerate:
         return Status(ErrorCode::kNumericalFailure, r.status.message()).prepend("tension plan: ");
@@ -266,7 +266,7 @@ Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
         break;
     }
   }
-  if (plan.outcome == ForceDistributionOutcome::kFeasible) return Status::Ok();
+  if (plan.outcome == ForceDistributionOutcome::kFeasible) return Status::success();
   return Status(ErrorCode::kOutOfRange,
                 "tension plan: the QP found no tensions within the cable limits");
 }
@@ -283,7 +283,7 @@ Status check_pose(const RobotModel& model, const Pose& pose, const PathCheckOpti
   TensionPlan plan;
   const Verdict v = check_point(model, pose.position, rotation_from_rpy<double>(pose.rpy),
                                 reference, options, kinematics, plan, summary, 0.0);
-  if (v.failure == Failure::kNone) return Status::Ok();
+  if (v.failure == Failure::kNone) return Status::success();
   const char* what = v.failure == Failure::kBox          ? "is outside the workspace box"
                      : v.failure == Failure::kDegenerate ? "is not reachable"
                      : v.failure == Failure::kWrench ? "is outside the wrench-feasible workspace"
@@ -291,7 +291,7 @@ Status check_pose(const RobotModel& model, const Pose& pose, const PathCheckOpti
   char where[160];
   pose_text(pose, where, sizeof where);
   const std::string_view reason = v.reason.message();
-  return Status::Error(v.reason.code(), "pose %s %s: %.*s", where, what,
+  return Status::error(v.reason.code(), "pose %s %s: %.*s", where, what,
                        static_cast<int>(reason.size()), reason.data());
 }
 
@@ -304,7 +304,7 @@ Status check_path(const RobotModel& model, const PoseTrajectory& trajectory,
       std::max({1.0, std::ceil(trajectory.linear_distance() / options.max_linear_step),
                 std::ceil(trajectory.angular_distance() / options.max_angular_step)});
   if (points > kMaxPoints) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "path check: %.3g points for a move of %g m and %g rad (steps %g m, %g "
                          "rad too small)",
                          points, trajectory.linear_distance(), trajectory.angular_distance(),
@@ -328,11 +328,11 @@ Status check_path(const RobotModel& model, const PoseTrajectory& trajectory,
     char target[160];
     pose_text(trajectory.to(), target, sizeof target);
     const std::string_view reason = v.reason.message();
-    return Status::Error(v.reason.code(), "move to %s %s at s = %.3f (%.3f, %.3f, %.3f) m: %.*s",
+    return Status::error(v.reason.code(), "move to %s %s at s = %.3f (%.3f, %.3f, %.3f) m: %.*s",
                          target, what, s, position.x(), position.y(), position.z(),
                          static_cast<int>(reason.size()), reason.data());
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status command_counts(const RobotModel& model, const Pose& pose, double reference_tension,
@@ -340,13 +340,13 @@ Status command_counts(const RobotModel& model, const Pose& pose, double referenc
   const int m = model.num_cables();
   if (!sizes_ok(model, data.kinematics) || data.cable.counts.size() != m ||
       data.cable.kinematics.lengths.size() != m || static_cast<int>(model.winches.size()) != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "command: model with %d cables (1 to %d supported) or command data of "
                          "another size",
                          m, kMaxCables);
   }
   if (!inverse_kinematics(model, pose, data.kinematics)) {
-    return Status::Error(ErrorCode::kNumericalFailure,
+    return Status::error(ErrorCode::kNumericalFailure,
                          "command: cable %d is degenerate at the pose",
                          data.kinematics.invalid_cable + 1);
   }
@@ -355,7 +355,7 @@ Status command_counts(const RobotModel& model, const Pose& pose, double referenc
     return s.prepend("command: ");
   }
   inverse_kinematics_compensated(model, pose, data.plan.tensions, data.cable);
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace cdpr

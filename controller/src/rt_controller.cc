@@ -50,23 +50,23 @@ Result<std::unique_ptr<RtController>> RtController::create(canopen::Master& mast
                                                            const RtControllerOptions& options) {
   const int m = initial.model.num_cables();
   if (m < 1 || m > kMaxAxes) {
-    return Status::Error(ErrorCode::kInvalidArgument, "the robot has %d cables (1..%d supported)",
+    return Status::error(ErrorCode::kInvalidArgument, "the robot has %d cables (1..%d supported)",
                          m, kMaxAxes);
   }
   if (static_cast<int>(master.drives().size()) != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "the CANopen network has %d drives, the robot '%s' has %d cables",
                          static_cast<int>(master.drives().size()), initial.model.name.c_str(), m);
   }
   if (!master.force_sensors().empty() &&
       static_cast<int>(master.force_sensors()[0].channels()) != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "force node %d has %d channels, the robot has %d cables",
                          int{master.force_sensors()[0].node()},
                          static_cast<int>(master.force_sensors()[0].channels()), m);
   }
   if (options.settle_cycles < 1 || options.settle_cycles > kMaxWindow) {
-    return Status::Error(ErrorCode::kInvalidArgument, "settle window of %d cycles (1..%d)",
+    return Status::error(ErrorCode::kInvalidArgument, "settle window of %d cycles (1..%d)",
                          options.settle_cycles, kMaxWindow);
   }
   return std::unique_ptr<RtController>(new RtController(master, initial, options));

@@ -278,28 +278,28 @@ RtSetup prepare_realtime(const RtOptions& options) {
 
 Status validate(const RtOptions& o) {
   if (o.period <= nanoseconds{0} || o.period > std::chrono::seconds{10}) {
-    return Status::Error(ErrorCode::kOutOfRange, "period %lld ns is outside (0, 10 s]",
+    return Status::error(ErrorCode::kOutOfRange, "period %lld ns is outside (0, 10 s]",
                          static_cast<long long>(o.period.count()));
   }
   const int hi = sched_get_priority_max(SCHED_FIFO);
   if (o.priority < 0 || o.priority > hi) {
-    return Status::Error(ErrorCode::kOutOfRange,
+    return Status::error(ErrorCode::kOutOfRange,
                          "priority %d is outside 0..%d (0: normal scheduler)", o.priority, hi);
   }
   if (o.cpu < -1 || o.cpu >= CPU_SETSIZE) {
-    return Status::Error(ErrorCode::kOutOfRange, "cpu %d is outside -1..%d (-1: not pinned)", o.cpu,
+    return Status::error(ErrorCode::kOutOfRange, "cpu %d is outside -1..%d (-1: not pinned)", o.cpu,
                          CPU_SETSIZE - 1);
   }
   constexpr std::size_t kMaxStack = 64u << 20, kMaxHeap = std::size_t{16} << 30;
   if (o.prefault_stack_bytes > kMaxStack) {
-    return Status::Error(ErrorCode::kOutOfRange, "prefault_stack_bytes %zu is above %zu",
+    return Status::error(ErrorCode::kOutOfRange, "prefault_stack_bytes %zu is above %zu",
                          o.prefault_stack_bytes, kMaxStack);
   }
   if (o.prefault_heap_bytes > kMaxHeap) {
-    return Status::Error(ErrorCode::kOutOfRange, "prefault_heap_bytes %zu is above %zu",
+    return Status::error(ErrorCode::kOutOfRange, "prefault_heap_bytes %zu is above %zu",
                          o.prefault_heap_bytes, kMaxHeap);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -409,10 +409,10 @@ Status RtLoop::start() {
     thread_ = std::thread([this] { run(); });
   } catch (const std::system_error& e) {
     running_.store(false, std::memory_order_release);
-    return Status::Error(ErrorCode::kUnavailable, "cannot create the RT thread: %s", e.what());
+    return Status::error(ErrorCode::kUnavailable, "cannot create the RT thread: %s", e.what());
   }
   set_up_.wait(false, std::memory_order_acquire);
-  return Status::Ok();
+  return Status::success();
 }
 
 void RtLoop::stop() {

@@ -22,16 +22,16 @@ std::string SystemdNotifier::one_line(std::string_view text) {
 }
 
 Status SystemdNotifier::send(const std::string& state) {
-  if (!enabled()) return Status::Ok();
+  if (!enabled()) return Status::success();
   const int r = sd_notify(0, state.c_str());
   if (r < 0) {
     const char* socket = std::getenv("NOTIFY_SOCKET");
     const char* name = strerrorname_np(-r);
-    return Status::Error(ErrorCode::kIoError, "sd_notify to NOTIFY_SOCKET=%s failed: %s (%s)",
+    return Status::error(ErrorCode::kIoError, "sd_notify to NOTIFY_SOCKET=%s failed: %s (%s)",
                          socket != nullptr ? socket : "", name != nullptr ? name : "?",
                          std::strerror(-r));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status SystemdNotifier::ready(std::string_view status) {

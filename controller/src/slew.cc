@@ -23,23 +23,23 @@ Status SlewLimiter::configure(double cycle_time, std::span<const double> max_vel
                               std::span<const double> max_acceleration) {
   const std::size_t n = max_velocity.size();
   if (n < 1 || n > static_cast<std::size_t>(kMaxSlewAxes) || max_acceleration.size() != n) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "slew limiter: %zu velocity and %zu acceleration limits (1 to %d axes, "
                          "one of each per axis)",
                          n, max_acceleration.size(), kMaxSlewAxes);
   }
   if (!positive_finite(cycle_time)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "slew limiter: cycle_time must be finite and > 0 (got %g)", cycle_time);
   }
   for (std::size_t i = 0; i < n; ++i) {
     if (!positive_finite(max_velocity[i])) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "slew limiter: axis %zu: max_velocity must be finite and > 0 (got %g)",
                            i + 1, max_velocity[i]);
     }
     if (!positive_finite(max_acceleration[i])) {
-      return Status::Error(
+      return Status::error(
           ErrorCode::kInvalidArgument,
           "slew limiter: axis %zu: max_acceleration must be finite and > 0 (got %g)", i + 1,
           max_acceleration[i]);
@@ -54,13 +54,13 @@ Status SlewLimiter::configure(double cycle_time, std::span<const double> max_vel
   command_.fill(0.0);
   velocity_.fill(0.0);
   target_.fill(0.0);
-  return Status::Ok();
+  return Status::success();
 }
 
 Status SlewLimiter::configure(int axes, double cycle_time, double max_velocity,
                               double max_acceleration) {
   if (axes < 1 || axes > kMaxSlewAxes) {
-    return Status::Error(ErrorCode::kInvalidArgument, "slew limiter: %d axes (1 to %d supported)",
+    return Status::error(ErrorCode::kInvalidArgument, "slew limiter: %d axes (1 to %d supported)",
                          axes, kMaxSlewAxes);
   }
   std::array<double, kMaxSlewAxes> v{}, a{};
@@ -73,7 +73,7 @@ Status SlewLimiter::configure(int axes, double cycle_time, double max_velocity,
 
 Status SlewLimiter::reset(std::span<const double> position) noexcept {
   if (position.size() != size() || axes_ == 0 || !all_finite(position)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "slew limiter: reset with %zu finite values expected (configured axes: "
                          "%d)",
                          size(), axes_);
@@ -83,18 +83,18 @@ Status SlewLimiter::reset(std::span<const double> position) noexcept {
     target_[i] = position[i];
     velocity_[i] = 0.0;
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status SlewLimiter::set_target(std::span<const double> target) noexcept {
   if (target.size() != size() || axes_ == 0 || !all_finite(target)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "slew limiter: target with %zu finite values expected (configured axes: "
                          "%d)",
                          size(), axes_);
   }
   std::copy(target.begin(), target.end(), target_.begin());
-  return Status::Ok();
+  return Status::success();
 }
 
 double SlewLimiter::stopping_velocity(double distance, double dv, double dt) noexcept {
@@ -152,7 +152,7 @@ Status cable_count_limits(const RobotModel& model, const MotionLimits& limits,
   if (m < 1 || m > kMaxSlewAxes || model.winches.size() != n ||
       model.platform_anchors.cols() != m || max_velocity.size() != n ||
       max_acceleration.size() != n) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "cable count limits: %d cables (1 to %d), %zu winches, outputs of %zu "
                          "and %zu",
                          m, kMaxSlewAxes, model.winches.size(), max_velocity.size(),
@@ -163,7 +163,7 @@ Status cable_count_limits(const RobotModel& model, const MotionLimits& limits,
     const double radius = model.platform_anchors.col(i).norm();
     const double counts_per_metre = 1.0 / winch_metres_per_count(model.winches[k]);
     if (!positive_finite(counts_per_metre)) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "cable count limits: winch %d has no finite counts per metre", i + 1);
     }
     max_velocity[k] =
@@ -172,7 +172,7 @@ Status cable_count_limits(const RobotModel& model, const MotionLimits& limits,
         (limits.max_linear_acceleration + radius * limits.max_angular_acceleration) *
         counts_per_metre;
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace cdpr

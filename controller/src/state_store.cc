@@ -23,7 +23,7 @@ namespace fs = std::filesystem;
 namespace {
 
 Status errno_status(const char* what, const std::string& path) {
-  return Status::Error(ErrorCode::kIoError, "%s %s: %s", what, path.c_str(), std::strerror(errno));
+  return Status::error(ErrorCode::kIoError, "%s %s: %s", what, path.c_str(), std::strerror(errno));
 }
 
 Status write_all(int fd, std::string_view text, const std::string& path) {
@@ -36,7 +36,7 @@ Status write_all(int fd, std::string_view text, const std::string& path) {
     }
     done += static_cast<std::size_t>(n);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status fsync_directory(const std::string& path) {
@@ -46,7 +46,7 @@ Status fsync_directory(const std::string& path) {
   const int r = ::fsync(fd);
   ::close(fd);
   if (r != 0) return errno_status("cannot fsync directory", dir);
-  return Status::Ok();
+  return Status::success();
 }
 
 std::string numbered(int n) {
@@ -78,7 +78,7 @@ std::vector<int> numbers_in(const std::string& dir, std::string_view suffix) {
 
 Result<std::string> read_text_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return Status::Error(ErrorCode::kNotFound, "%s: cannot open", path.c_str());
+  if (!in) return Status::error(ErrorCode::kNotFound, "%s: cannot open", path.c_str());
   std::ostringstream s;
   s << in.rdbuf();
   return s.str();
@@ -101,7 +101,7 @@ Status AppendOnlyFile::append(std::string_view record) {
   if (fd_ < 0) return Status(ErrorCode::kFailedPrecondition, "append to a closed file");
   if (Status s = write_all(fd_, record, path_); !s.ok()) return s;
   if (::fdatasync(fd_) != 0) return errno_status("cannot fsync", path_);
-  return Status::Ok();
+  return Status::success();
 }
 
 void AppendOnlyFile::close() {
@@ -115,7 +115,7 @@ Result<StateStore> StateStore::open(const std::string& directory) {
     const fs::path p = fs::path(directory) / sub;
     fs::create_directories(p, ec);
     if (ec) {
-      return Status::Error(ErrorCode::kIoError, "state directory %s: %s", p.string().c_str(),
+      return Status::error(ErrorCode::kIoError, "state directory %s: %s", p.string().c_str(),
                            ec.message().c_str());
     }
   }
@@ -152,7 +152,7 @@ Result<int> StateStore::add_geometry(const RobotModel& model, nlohmann::json met
 Result<RobotModel> StateStore::load_geometry(int version) const {
   const std::string path = geometry_path(version);
   if (!fs::exists(path)) {
-    return Status::Error(ErrorCode::kNotFound, "geometry version %d does not exist (%s)", version,
+    return Status::error(ErrorCode::kNotFound, "geometry version %d does not exist (%s)", version,
                          path.c_str());
   }
   return config::load_robot_config(path);
@@ -163,7 +163,7 @@ Result<nlohmann::json> StateStore::geometry_meta(int version) const {
   auto text = read_text_file(path);
   if (!text.ok()) return text.status();
   nlohmann::json j = nlohmann::json::parse(*text, nullptr, false);
-  if (j.is_discarded()) return Status::Error(ErrorCode::kParseError, "%s: not JSON", path.c_str());
+  if (j.is_discarded()) return Status::error(ErrorCode::kParseError, "%s: not JSON", path.c_str());
   return j;
 }
 
@@ -174,10 +174,10 @@ Result<int> StateStore::active_version() const {
   if (!text.ok()) return text.status();
   int v = 0;
   if (std::sscanf(text->c_str(), "%d", &v) != 1 || v < 1) {
-    return Status::Error(ErrorCode::kParseError, "%s: expected a version number", path.c_str());
+    return Status::error(ErrorCode::kParseError, "%s: expected a version number", path.c_str());
   }
   if (!fs::exists(geometry_path(v))) {
-    return Status::Error(ErrorCode::kNotFound, "%s names version %d, which does not exist",
+    return Status::error(ErrorCode::kNotFound, "%s names version %d, which does not exist",
                          path.c_str(), v);
   }
   return v;
@@ -185,7 +185,7 @@ Result<int> StateStore::active_version() const {
 
 Status StateStore::activate(int version, nlohmann::json why) {
   if (!fs::exists(geometry_path(version))) {
-    return Status::Error(ErrorCode::kNotFound, "geometry version %d does not exist", version);
+    return Status::error(ErrorCode::kNotFound, "geometry version %d does not exist", version);
   }
   if (Status s = io::write_file_atomically((fs::path(dir_) / "active").string(),
                                            std::to_string(version) + "\n");
@@ -225,13 +225,13 @@ Result<std::vector<double>> StateStore::load_offsets() const {
   if (!text.ok()) return text.status();
   nlohmann::json j = nlohmann::json::parse(*text, nullptr, false);
   if (j.is_discarded() || !j.contains("offsets_counts") || !j["offsets_counts"].is_array()) {
-    return Status::Error(ErrorCode::kParseError, "%s: expected {\"offsets_counts\": [...]}",
+    return Status::error(ErrorCode::kParseError, "%s: expected {\"offsets_counts\": [...]}",
                          path.c_str());
   }
   std::vector<double> out;
   for (const auto& v : j["offsets_counts"]) {
     if (!v.is_number()) {
-      return Status::Error(ErrorCode::kParseError, "%s: offsets must be numbers", path.c_str());
+      return Status::error(ErrorCode::kParseError, "%s: offsets must be numbers", path.c_str());
     }
     out.push_back(v.get<double>());
   }
@@ -244,7 +244,7 @@ Result<int> StateStore::new_calibration() {
   std::error_code ec;
   fs::create_directories(calibration_dir(id), ec);
   if (ec) {
-    return Status::Error(ErrorCode::kIoError, "cannot create %s: %s", calibration_dir(id).c_str(),
+    return Status::error(ErrorCode::kIoError, "cannot create %s: %s", calibration_dir(id).c_str(),
                          ec.message().c_str());
   }
   return id;

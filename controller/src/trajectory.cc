@@ -16,7 +16,7 @@ bool positive_finite(double x) {
 }
 
 Status invalid_limit(const char* field, double value) {
-  return Status::Error(ErrorCode::kInvalidArgument,
+  return Status::error(ErrorCode::kInvalidArgument,
                        "motion limits: %s must be finite and > 0 (got %g)", field, value);
 }
 
@@ -52,18 +52,18 @@ Status MotionLimits::validate() const {
   for (const auto& f : fields) {
     if (!positive_finite(f.value)) return invalid_limit(f.name, f.value);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Result<DoubleSProfile> DoubleSProfile::plan(double distance, double max_velocity,
                                             double max_acceleration, double max_jerk) {
   if (!std::isfinite(distance) || distance < 0.0) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "double-S profile: distance must be finite and >= 0 (got %g)", distance);
   }
   if (!positive_finite(max_velocity) || !positive_finite(max_acceleration) ||
       !positive_finite(max_jerk)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "double-S profile: limits must be finite and > 0 (velocity %g, "
                          "acceleration %g, jerk %g)",
                          max_velocity, max_acceleration, max_jerk);

@@ -81,7 +81,7 @@ TEST(Eds, ReadsAHandWrittenVendorStyleEds) {
 
 Status parse_error(const std::string& text) {
   auto e = Eds::parse(text, "bad.eds");
-  return e.ok() ? Status::Ok() : e.status();
+  return e.ok() ? Status::success() : e.status();
 }
 
 TEST(Eds, ErrorsNameFileLineAndObject) {

@@ -247,7 +247,7 @@ TEST_F(SdoTest, LateAnswerOfAFailedTransferDoesNotLeakIntoTheNext) {
 }
 
 TEST(SdoClientStateMachine, RejectsSecondTransferAndIgnoresOtherNodes) {
-  can::ManualClock clock;
+  cdpr::ManualClock clock;
   can::VirtualCanBus bus(clock);
   auto a = bus.endpoint("a");
   auto b = bus.endpoint("b");
@@ -269,7 +269,7 @@ TEST(SdoClientStateMachine, RejectsSecondTransferAndIgnoresOtherNodes) {
 }
 
 TEST(SdoClientStateMachine, DiscardsAnswersThatCannotBelongToTheAttempt) {
-  can::ManualClock clock;
+  cdpr::ManualClock clock;
   can::VirtualCanBus bus(clock);
   auto a = bus.endpoint("a");
   auto b = bus.endpoint("b");

@@ -89,7 +89,7 @@ class CanRobotTest : public ::testing::Test {
     return out;
   }
 
-  can::ManualClock clock;
+  cdpr::ManualClock clock;
   can::VirtualCanBus bus{clock};
   std::unique_ptr<can::VirtualCanEndpoint> master_ep = bus.endpoint("master");
   std::unique_ptr<can::VirtualCanEndpoint> robot_ep = bus.endpoint("cdpr-sim");

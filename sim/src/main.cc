@@ -122,7 +122,7 @@ int main(int argc, char** argv) {
         sum += d * d;
         worst = std::max(worst, d);
       }
-      const cdpr::CalibratedModel controller = cdpr::CalibratedModel::FromRobot(*model);
+      const cdpr::CalibratedModel controller = cdpr::CalibratedModel::from_robot(*model);
       auto homed = cdpr::homed_truth(true_robot, *model);
       if (!homed.ok()) return fail(path + ": " + homed.status().to_string());
       cdpr::AccuracyBox box;

@@ -134,7 +134,7 @@ class VirtualCell {
     if (!run_until([&] { return daemon->rt().snapshot().mode == RtMode::kHolding; }, 5.0)) {
       return Status(ErrorCode::kTimeout, "the daemon did not hold within 5 s after start-up");
     }
-    return Status::Ok();
+    return Status::success();
   }
 
   // The robot between two SYNCs (and the laser's distance follows the physics). While
@@ -227,7 +227,7 @@ class VirtualCell {
     return std::sqrt((a.frame_anchors - b.frame_anchors).colwise().squaredNorm().mean());
   }
 
-  can::ManualClock clock;
+  cdpr::ManualClock clock;
   RobotModel nominal;
   sim::Scenario scenario;
   std::unique_ptr<sim::Physics> physics;

@@ -123,17 +123,17 @@ std::size_t CanLink::build_restart_request(std::uint8_t* buf, std::size_t size, 
 
 Result<std::unique_ptr<CanLink>> CanLink::open(const std::string& ifname) {
   if (ifname.empty() || ifname.size() >= IFNAMSIZ) {
-    return Status::Error(ErrorCode::kInvalidArgument, "'%s': not a valid interface name",
+    return Status::error(ErrorCode::kInvalidArgument, "'%s': not a valid interface name",
                          ifname.c_str());
   }
   const unsigned index = if_nametoindex(ifname.c_str());
   if (index == 0) {
-    return Status::Error(ErrorCode::kNotFound, "%s: no such interface (%s)", ifname.c_str(),
+    return Status::error(ErrorCode::kNotFound, "%s: no such interface (%s)", ifname.c_str(),
                          errtext(errno));
   }
   const int fd = ::socket(AF_NETLINK, SOCK_RAW | SOCK_CLOEXEC, NETLINK_ROUTE);
   if (fd < 0) {
-    return Status::Error(ErrorCode::kIoError, "%s: netlink socket: %s", ifname.c_str(),
+    return Status::error(ErrorCode::kIoError, "%s: netlink socket: %s", ifname.c_str(),
                          errtext(errno));
   }
   // Answers come at once; a bounded wait keeps a lost answer from blocking the caller.
@@ -144,7 +144,7 @@ Result<std::unique_ptr<CanLink>> CanLink::open(const std::string& ifname) {
   if (::bind(fd, reinterpret_cast<const sockaddr*>(&local), sizeof(local)) < 0) {
     const int err = errno;
     ::close(fd);
-    return Status::Error(ErrorCode::kIoError, "%s: netlink bind: %s", ifname.c_str(), errtext(err));
+    return Status::error(ErrorCode::kIoError, "%s: netlink bind: %s", ifname.c_str(), errtext(err));
   }
   return std::unique_ptr<CanLink>(new CanLink(fd, ifname, static_cast<int>(index)));
 }
@@ -280,40 +280,40 @@ RecoveryOutcome CanLink::recover() {
 
 Status CanLink::query(LinkInfo& out) {
   const int err = query_errno(out);
-  if (err == 0) return Status::Ok();
-  return Status::Error(ErrorCode::kIoError, "%s: netlink query: %s", name_.c_str(), errtext(err));
+  if (err == 0) return Status::success();
+  return Status::error(ErrorCode::kIoError, "%s: netlink query: %s", name_.c_str(), errtext(err));
 }
 
 Status CanLink::restart() {
   const int err = restart_errno();
-  if (err == 0) return Status::Ok();
+  if (err == 0) return Status::success();
   switch (err) {
     case EOPNOTSUPP:
-      return Status::Error(ErrorCode::kUnavailable,
+      return Status::error(ErrorCode::kUnavailable,
                            "%s: the kernel refuses a CAN controller restart (%s): not a CAN "
                            "controller (vcan?)",
                            name_.c_str(), errtext(err));
     case EINVAL:
-      return Status::Error(ErrorCode::kFailedPrecondition,
+      return Status::error(ErrorCode::kFailedPrecondition,
                            "%s: restart refused (%s): restart-ms is set, the kernel restarts it",
                            name_.c_str(), errtext(err));
     case EBUSY:
-      return Status::Error(ErrorCode::kFailedPrecondition,
+      return Status::error(ErrorCode::kFailedPrecondition,
                            "%s: restart refused (%s): the controller is not bus-off", name_.c_str(),
                            errtext(err));
     case EPERM:
     case EACCES:
-      return Status::Error(ErrorCode::kUnavailable, "%s: restart refused (%s): needs CAP_NET_ADMIN",
+      return Status::error(ErrorCode::kUnavailable, "%s: restart refused (%s): needs CAP_NET_ADMIN",
                            name_.c_str(), errtext(err));
     default:
-      return Status::Error(ErrorCode::kIoError, "%s: restart: %s", name_.c_str(), errtext(err));
+      return Status::error(ErrorCode::kIoError, "%s: restart: %s", name_.c_str(), errtext(err));
   }
 }
 
 Status CanLink::set_up(bool up) {
   const int err = set_up_errno(up);
-  if (err == 0) return Status::Ok();
-  return Status::Error(
+  if (err == 0) return Status::success();
+  return Status::error(
       err == EPERM || err == EACCES ? ErrorCode::kUnavailable : ErrorCode::kIoError,
       "%s: set %s: %s", name_.c_str(), up ? "up" : "down", errtext(err));
 }

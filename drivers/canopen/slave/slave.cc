@@ -267,7 +267,7 @@ Status SlaveNode::load_eds(const eds::Eds& description) {
         e = size == 0 ? &od_.add_string(sub.address, sub.default_value, access)
                       : &od_.add_raw(sub.address, bytes, access);
       } else if (size != 0 && (e->variable_size || e->data.size() != bytes.size())) {
-        return Status::Error(ErrorCode::kInvalidArgument,
+        return Status::error(ErrorCode::kInvalidArgument,
                              "%s: node %u: the device model has %zu bytes here, the EDS says %s",
                              description.where(sub).c_str(), unsigned{id_}, e->data.size(),
                              std::string(eds::type_name(sub.data_type)).c_str());
@@ -282,7 +282,7 @@ Status SlaveNode::load_eds(const eds::Eds& description) {
   }
   for (const ObjectAddress a : od_.addresses()) {
     if (described.count(a.key()) == 0) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "%s: node %u: the device model needs 0x%04X:%02X, which the EDS does "
                            "not describe",
                            description.source().c_str(), unsigned{id_}, unsigned{a.index},
@@ -290,7 +290,7 @@ Status SlaveNode::load_eds(const eds::Eds& description) {
     }
   }
   refresh_pdos();
-  return Status::Ok();
+  return Status::success();
 }
 
 void SlaveNode::send(const can::Frame& f) {

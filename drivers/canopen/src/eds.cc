@@ -260,7 +260,7 @@ Result<std::int64_t> Eds::value(const SubObject& s, NodeId node, bool configured
   if (trim(text).empty()) return std::int64_t{0};
   std::int64_t v = 0;
   if (!parse_integer(text, node, v)) {
-    return Status::Error(ErrorCode::kParseError, "%s: value '%s' is not an integer",
+    return Status::error(ErrorCode::kParseError, "%s: value '%s' is not an integer",
                          where(s).c_str(), text.c_str());
   }
   return v;
@@ -278,10 +278,10 @@ class Reader {
 
   Status error(int line, const std::string& section, const std::string& what) const {
     if (section.empty()) {
-      return Status::Error(ErrorCode::kParseError, "%s:%d: %s", source_.c_str(), line,
+      return Status::error(ErrorCode::kParseError, "%s:%d: %s", source_.c_str(), line,
                            what.c_str());
     }
-    return Status::Error(ErrorCode::kParseError, "%s:%d: [%s]: %s", source_.c_str(), line,
+    return Status::error(ErrorCode::kParseError, "%s:%d: [%s]: %s", source_.c_str(), line,
                          section.c_str(), what.c_str());
   }
 
@@ -320,7 +320,7 @@ class Reader {
       if (s.get(key) != nullptr) return error(n, s.name, "key '" + key + "' appears twice");
       s.keys.push_back({key, Line{std::string(trim(l.substr(eq + 1))), n}});
     }
-    return Status::Ok();
+    return Status::success();
   }
 
   const RawSection* section(std::string_view name) const {
@@ -337,7 +337,7 @@ class Reader {
     const Line* v = s.get(lower(key));
     present = v != nullptr;
     if (v == nullptr) {
-      return required ? error(s.line, s.name, std::string(key) + " is missing") : Status::Ok();
+      return required ? error(s.line, s.name, std::string(key) + " is missing") : Status::success();
     }
     std::int64_t x = 0;
     if (!parse_integer(v->value, 1, x) || lower(v->value).find("$nodeid") != std::string::npos) {
@@ -349,7 +349,7 @@ class Reader {
                        std::to_string(hi));
     }
     out = x;
-    return Status::Ok();
+    return Status::success();
   }
 
   // Fills the value fields of a sub-object from a section (VAR object or [XXXXsubN]).
@@ -358,8 +358,7 @@ class Reader {
     std::int64_t v = 0;
     if (const Line* n = s.get("parametername")) e.name = n->value;
     if (e.name.empty()) return error(s.line, s.name, "ParameterName is missing");
-    Status st = number(s, "DataType", true, 0, 0xFFFF, v, present);
-    if (!st.ok()) return st;
+    CDPR_RETURN_IF_ERROR(number(s, "DataType", true, 0, 0xFFFF, v, present));
     e.data_type = static_cast<std::uint16_t>(v);
     if (type_size(e.data_type) < 0) {
       char b[96];
@@ -386,30 +385,27 @@ class Reader {
       return error(acc->line, s.name,
                    "AccessType '" + acc->value + "' is not ro, wo, rw, rwr, rww or const");
     }
-    st = number(s, "PDOMapping", false, 0, 1, v, present);
-    if (!st.ok()) return st;
+    CDPR_RETURN_IF_ERROR(number(s, "PDOMapping", false, 0, 1, v, present));
     e.pdo_mapping = present && v != 0;
     if (const Line* d = s.get("defaultvalue")) {
       e.default_value = d->value;
-      st = check_value(s, d->line, "DefaultValue", e, d->value);
-      if (!st.ok()) return st;
+      CDPR_RETURN_IF_ERROR(check_value(s, d->line, "DefaultValue", e, d->value));
     }
     if (const Line* p = s.get("parametervalue")) {
       e.parameter_value = p->value;
-      st = check_value(s, p->line, "ParameterValue", e, p->value);
-      if (!st.ok()) return st;
+      CDPR_RETURN_IF_ERROR(check_value(s, p->line, "ParameterValue", e, p->value));
     }
     if (const Line* l = s.get("lowlimit")) e.low_limit = l->value;
     if (const Line* h = s.get("highlimit")) e.high_limit = h->value;
     e.line = s.line;
-    return Status::Ok();
+    return Status::success();
   }
 
   // A numeric value must parse and fit its type for every node id.
   Status check_value(const RawSection& s, int line, const char* key, const SubObject& e,
                      const std::string& text) const {
     const int size = type_size(e.data_type);
-    if (size == 0 || trim(text).empty()) return Status::Ok();  // strings, domains, empty
+    if (size == 0 || trim(text).empty()) return Status::success();  // strings, domains, empty
     if (e.data_type == type::kReal32 || e.data_type == type::kReal64) {
       char* end = nullptr;
       const std::string t(trim(text));
@@ -417,7 +413,7 @@ class Reader {
       if (end == t.c_str() || *end != '\0') {
         return error(line, s.name, std::string(key) + " '" + t + "' is not a number");
       }
-      return Status::Ok();
+      return Status::success();
     }
     for (NodeId node : {NodeId{1}, kMaxNodeId}) {
       std::int64_t v = 0;
@@ -436,7 +432,7 @@ class Reader {
             std::string(key) + " " + text + " does not fit " + std::string(type_name(e.data_type)));
       }
     }
-    return Status::Ok();
+    return Status::success();
   }
 
   Status object(const RawSection& s, std::uint16_t index, Object& o) const {
@@ -444,8 +440,7 @@ class Reader {
     o.line = s.line;
     bool present = false;
     std::int64_t v = 0;
-    Status st = number(s, "ObjectType", false, 0, 0xFF, v, present);
-    if (!st.ok()) return st;
+    CDPR_RETURN_IF_ERROR(number(s, "ObjectType", false, 0, 0xFF, v, present));
     const std::int64_t code = present ? v : 0x7;
     switch (code) {
       case 0x0:
@@ -464,7 +459,7 @@ class Reader {
     }
     if (const Line* n = s.get("parametername")) o.name = n->value;
     if (o.name.empty()) return error(s.line, s.name, "ParameterName is missing");
-    if (o.code == ObjectCode::kNull) return Status::Ok();
+    if (o.code == ObjectCode::kNull) return Status::success();
     if (o.code == ObjectCode::kVar || o.code == ObjectCode::kDomain ||
         o.code == ObjectCode::kDefType) {
       RawSection copy = s;
@@ -476,19 +471,16 @@ class Reader {
       }
       SubObject e;
       e.address = {index, 0};
-      st = entry(copy, e);
-      if (!st.ok()) return st;
+      CDPR_RETURN_IF_ERROR(entry(copy, e));
       o.subs.push_back(std::move(e));
-      return Status::Ok();
+      return Status::success();
     }
     // ARRAY, RECORD, DEFSTRUCT: sub-objects.
     std::int64_t compact = 0;
-    st = number(s, "CompactSubObj", false, 0, 254, compact, present);
-    if (!st.ok()) return st;
+    CDPR_RETURN_IF_ERROR(number(s, "CompactSubObj", false, 0, 254, compact, present));
     if (compact > 0) return compact_subs(s, index, static_cast<int>(compact), o);
     std::int64_t sub_number = 0;
-    st = number(s, "SubNumber", true, 0, 255, sub_number, present);
-    if (!st.ok()) return st;
+    CDPR_RETURN_IF_ERROR(number(s, "SubNumber", true, 0, 255, sub_number, present));
     char prefix[8];
     std::snprintf(prefix, sizeof prefix, "%04x", unsigned{index});
     for (const RawSection& r : sections_) {
@@ -498,8 +490,7 @@ class Reader {
       if (!is_hex(sub_s) || sub_s.size() > 2) return error(r.line, r.name, "bad sub-index");
       SubObject e;
       e.address = {index, static_cast<std::uint8_t>(std::strtoul(sub_s.c_str(), nullptr, 16))};
-      st = entry(r, e);
-      if (!st.ok()) return st;
+      CDPR_RETURN_IF_ERROR(entry(r, e));
       o.subs.push_back(std::move(e));
     }
     std::sort(o.subs.begin(), o.subs.end(),
@@ -512,7 +503,7 @@ class Reader {
     if (o.subs.empty() || o.subs.front().address.sub != 0) {
       return error(s.line, s.name, "no sub-index 0 ([" + s.name + "sub0])");
     }
-    return Status::Ok();
+    return Status::success();
   }
 
   // CompactSubObj=N: sub 0 holds N, subs 1..N share the object's type and access; names and
@@ -520,8 +511,7 @@ class Reader {
   Status compact_subs(const RawSection& s, std::uint16_t index, int n, Object& o) const {
     SubObject proto;
     proto.address = {index, 1};
-    Status st = entry(s, proto);
-    if (!st.ok()) return st;
+    CDPR_RETURN_IF_ERROR(entry(s, proto));
     SubObject count;
     count.address = {index, 0};
     count.name = "NrOfObjects";
@@ -545,23 +535,21 @@ class Reader {
       if (vs != nullptr) {
         if (const Line* l = vs->get(std::to_string(k))) {
           e.default_value = l->value;
-          st = check_value(*vs, l->line, "DefaultValue", e, l->value);
-          if (!st.ok()) return st;
+          CDPR_RETURN_IF_ERROR(check_value(*vs, l->line, "DefaultValue", e, l->value));
         }
       }
       o.subs.push_back(std::move(e));
     }
-    return Status::Ok();
+    return Status::success();
   }
 
   // [MandatoryObjects] etc.: SupportedObjects=N and 1..N=index; every listed object has a section.
   Status object_list(const char* name, std::set<std::uint16_t>& listed) const {
     const RawSection* s = section(name);
-    if (s == nullptr) return Status::Ok();
+    if (s == nullptr) return Status::success();
     std::int64_t n = 0;
     bool present = false;
-    Status st = number(*s, "SupportedObjects", true, 0, 0xFFFF, n, present);
-    if (!st.ok()) return st;
+    CDPR_RETURN_IF_ERROR(number(*s, "SupportedObjects", true, 0, 0xFFFF, n, present));
     for (std::int64_t k = 1; k <= n; ++k) {
       const Line* l = s->get(std::to_string(k));
       if (l == nullptr) {
@@ -581,7 +569,7 @@ class Reader {
       }
       listed.insert(static_cast<std::uint16_t>(index));
     }
-    return Status::Ok();
+    return Status::success();
   }
 
   Status build(Eds& eds, std::map<std::uint16_t, Object>& objects, Section& file_info,
@@ -596,16 +584,14 @@ class Reader {
     copy(section("DeviceComissioning"), commissioning);
     std::set<std::uint16_t> listed;
     for (const char* list : {"MandatoryObjects", "OptionalObjects", "ManufacturerObjects"}) {
-      Status st = object_list(list, listed);
-      if (!st.ok()) return st;
+      CDPR_RETURN_IF_ERROR(object_list(list, listed));
     }
     for (const RawSection& s : sections_) {
       const std::string n = lower(s.name);
       if (n.size() == 4 && is_hex(n)) {
         const auto index = static_cast<std::uint16_t>(std::strtoul(n.c_str(), nullptr, 16));
         Object o;
-        Status st = object(s, index, o);
-        if (!st.ok()) return st;
+        CDPR_RETURN_IF_ERROR(object(s, index, o));
         if (!listed.empty() && listed.count(index) == 0 && index >= 0x1000) {
           return error(s.line, s.name,
                        "object is not listed in [MandatoryObjects], [OptionalObjects] or "
@@ -622,7 +608,7 @@ class Reader {
       }
     }
     if (objects.empty()) return error(1, "", "no object sections ([1000], ...)");
-    return Status::Ok();
+    return Status::success();
   }
 
  private:
@@ -637,17 +623,16 @@ Result<Eds> Eds::parse(std::string_view text, std::string_view source) {
   Eds eds;
   eds.source_ = std::string(source);
   Reader r(eds.source_);
-  Status s = r.split(text);
-  if (!s.ok()) return s;
-  s = r.build(eds, eds.objects_, eds.file_info_, eds.device_info_, eds.commissioning_);
-  if (!s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(r.split(text));
+  CDPR_RETURN_IF_ERROR(
+      r.build(eds, eds.objects_, eds.file_info_, eds.device_info_, eds.commissioning_));
   return eds;
 }
 
 Result<Eds> Eds::load(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
-    return Status::Error(ErrorCode::kNotFound, "%s: cannot open the EDS/DCF file: %s", path.c_str(),
+    return Status::error(ErrorCode::kNotFound, "%s: cannot open the EDS/DCF file: %s", path.c_str(),
                          std::strerror(errno));
   }
   std::stringstream ss;
@@ -781,21 +766,21 @@ Status write_text_file(const std::string& path, std::string_view text) {
   {
     std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
     if (!out) {
-      return Status::Error(ErrorCode::kIoError, "%s: cannot write: %s", tmp.c_str(),
+      return Status::error(ErrorCode::kIoError, "%s: cannot write: %s", tmp.c_str(),
                            std::strerror(errno));
     }
     out.write(text.data(), static_cast<std::streamsize>(text.size()));
     out.flush();
     if (!out) {
-      return Status::Error(ErrorCode::kIoError, "%s: write failed: %s", tmp.c_str(),
+      return Status::error(ErrorCode::kIoError, "%s: write failed: %s", tmp.c_str(),
                            std::strerror(errno));
     }
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    return Status::Error(ErrorCode::kIoError, "%s: rename from %s failed: %s", path.c_str(),
+    return Status::error(ErrorCode::kIoError, "%s: rename from %s failed: %s", path.c_str(),
                          tmp.c_str(), std::strerror(errno));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace cdpr::canopen::eds

@@ -118,7 +118,7 @@ std::vector<PlannedAccess> planned_accesses(const MasterConfig& config, const No
 
 Status check_against_eds(const MasterConfig& config, const NodeConfig& node, const eds::Eds& e) {
   auto fail = [&](const PlannedAccess& a, const std::string& why) {
-    return Status::Error(ErrorCode::kInvalidArgument, "%s: the master %s, but %s",
+    return Status::error(ErrorCode::kInvalidArgument, "%s: the master %s, but %s",
                          node_name(node).c_str(), use(a).c_str(), why.c_str());
   };
   for (const PlannedAccess& a : planned_accesses(config, node)) {
@@ -169,16 +169,15 @@ Status check_against_eds(const MasterConfig& config, const NodeConfig& node, con
       }
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status check_eds(const MasterConfig& config) {
   for (const NodeConfig& n : config.nodes) {
     if (!n.eds_data) continue;
-    Status s = check_against_eds(config, n, *n.eds_data);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(check_against_eds(config, n, *n.eds_data));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 std::vector<int> pdo_numbers(const NodeConfig& node, PdoDirection direction) {

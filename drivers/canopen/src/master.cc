@@ -20,8 +20,7 @@ Master::Master(can::CanBus& bus, MasterConfig config, MasterHooks hooks)
 
 Result<std::unique_ptr<Master>> Master::create(can::CanBus& bus, MasterConfig config,
                                                MasterHooks hooks) {
-  Status s = validate(config);
-  if (!s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(validate(config));
   if (!hooks.now)
     return Status(ErrorCode::kInvalidArgument, "CANopen master: hooks.now is not set");
   std::unique_ptr<Master> m(new Master(bus, std::move(config), std::move(hooks)));
@@ -235,23 +234,23 @@ Status Master::wait_for(const std::function<bool()>& done, std::chrono::nanoseco
   const Timestamp start = hooks_.now();
   while (!done()) {
     if (hooks_.now() - start >= timeout) {
-      return Status::Error(ErrorCode::kTimeout, "%s: not done after %.0f ms", what, to_ms(timeout));
+      return Status::error(ErrorCode::kTimeout, "%s: not done after %.0f ms", what, to_ms(timeout));
     }
     pump_step();
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Master::nmt(NmtCommand cmd, NodeId node_id) {
   const Timestamp now = hooks_.now();
   Status s = bus_.send(nmt_frame(cmd, node_id));
   if (!s.ok()) {
-    return Status::Error(ErrorCode::kIoError, "NMT %s to node %u: %.*s", to_string(cmd).data(),
+    return Status::error(ErrorCode::kIoError, "NMT %s to node %u: %.*s", to_string(cmd).data(),
                          unsigned{node_id}, static_cast<int>(s.message().size()),
                          s.message().data());
   }
   (void)now;
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Master::boot() {
@@ -262,7 +261,7 @@ Status Master::boot() {
   {
     const Status up = bus_.send(heartbeat_.boot_up());
     if (!up.ok()) {
-      return Status::Error(ErrorCode::kIoError, "master boot-up message: %.*s",
+      return Status::error(ErrorCode::kIoError, "master boot-up message: %.*s",
                            static_cast<int>(up.message().size()), up.message().data());
     }
   }
@@ -291,18 +290,16 @@ Status Master::boot() {
     };
     s = wait_for([&] { return missing(booted).empty(); }, config_.boot_timeout, "boot-up");
     if (!s.ok()) {
-      return Status::Error(ErrorCode::kTimeout,
+      return Status::error(ErrorCode::kTimeout,
                            "node %s: no boot-up within %.0f ms after NMT reset communication",
                            missing(booted).c_str(), to_ms(config_.boot_timeout));
     }
   }
   for (auto& n : nodes_) {
-    Status s = configure_node(n->config.id);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(configure_node(n->config.id));
   }
   for (auto& n : nodes_) {
-    Status s = nmt(NmtCommand::kStart, n->config.id);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(nmt(NmtCommand::kStart, n->config.id));
   }
   auto operational = [&](std::size_t i) {
     const NodeConfig& c = nodes_[i]->config;
@@ -311,7 +308,7 @@ Status Master::boot() {
   Status s =
       wait_for([&] { return missing(operational).empty(); }, config_.boot_timeout, "NMT start");
   if (!s.ok()) {
-    return Status::Error(ErrorCode::kTimeout,
+    return Status::error(ErrorCode::kTimeout,
                          "node %s: not OPERATIONAL within %.0f ms after NMT start",
                          missing(operational).c_str(), to_ms(config_.boot_timeout));
   }
@@ -325,81 +322,73 @@ Status Master::boot() {
   sync_.start(now);
   next_cycle_ = now;
   running_ = true;
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Master::configure_node(NodeId id) {
   NodeRt* n = node(id);
   if (n == nullptr) {
-    return Status::Error(ErrorCode::kNotFound, "node %u: not in the configuration", unsigned{id});
+    return Status::error(ErrorCode::kNotFound, "node %u: not in the configuration", unsigned{id});
   }
   const NodeConfig& c = n->config;
   SdoClient& sdo = *n->sdo;
-  Status s;
   if (c.heartbeat_period.count() > 0) {
-    s = sdo.write<std::uint16_t>(
-        {0x1017, 0}, static_cast<std::uint16_t>(std::lround(to_ms(c.heartbeat_period))), pump_);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(sdo.write<std::uint16_t>(
+        {0x1017, 0}, static_cast<std::uint16_t>(std::lround(to_ms(c.heartbeat_period))), pump_));
   }
   if (c.master_heartbeat_timeout.count() > 0) {
     const auto ms = static_cast<std::uint32_t>(std::lround(to_ms(c.master_heartbeat_timeout)));
-    s = sdo.write<std::uint32_t>({0x1016, 1}, (std::uint32_t{config_.master_id} << 16) | ms, pump_);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(sdo.write<std::uint32_t>(
+        {0x1016, 1}, (std::uint32_t{config_.master_id} << 16) | ms, pump_));
   }
   // A SYNC with a counter byte needs the node's 0x1019 to agree, or it raises EMCY 0x8240 and
   // leaves OPERATIONAL (CiA 301, 7.5.2.22).
   if (config_.sync_counter_overflow >= 2) {
-    s = sdo.write<std::uint8_t>({0x1019, 0}, config_.sync_counter_overflow, pump_);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(
+        sdo.write<std::uint8_t>({0x1019, 0}, config_.sync_counter_overflow, pump_));
   }
   if (c.kind == NodeKind::kCia402Drive) {
-    s = sdo.write<std::int16_t>(cia402::obj::kAbortConnectionOption,
-                                c.drive.abort_connection_option, pump_);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(sdo.write<std::int16_t>(cia402::obj::kAbortConnectionOption,
+                                                 c.drive.abort_connection_option, pump_));
     if (c.drive.quick_stop_option) {
-      s = sdo.write<std::int16_t>(cia402::obj::kQuickStopOption, *c.drive.quick_stop_option, pump_);
-      if (!s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(sdo.write<std::int16_t>(cia402::obj::kQuickStopOption,
+                                                   *c.drive.quick_stop_option, pump_));
     }
   }
   if (config_.disable_unused_pdos) {
-    s = disable_unused_pdos(*n);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(disable_unused_pdos(*n));
   }
   for (const auto* list : {&c.rpdos, &c.tpdos}) {
     for (const PdoConfig& p : *list) {
-      s = configure_pdo(sdo, pump_, p);
-      if (!s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(configure_pdo(sdo, pump_, p));
     }
   }
   if (c.kind == NodeKind::kCia402Drive) {
     if (c.drive.profile_velocity != 0) {
-      s = sdo.write<std::uint32_t>(cia402::obj::kProfileVelocity, c.drive.profile_velocity, pump_);
-      if (!s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(
+          sdo.write<std::uint32_t>(cia402::obj::kProfileVelocity, c.drive.profile_velocity, pump_));
     }
     if (c.drive.profile_acceleration != 0) {
-      s = sdo.write<std::uint32_t>(cia402::obj::kProfileAcceleration, c.drive.profile_acceleration,
-                                   pump_);
-      if (!s.ok()) return s;
-      s = sdo.write<std::uint32_t>(cia402::obj::kProfileDeceleration, c.drive.profile_acceleration,
-                                   pump_);
-      if (!s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(sdo.write<std::uint32_t>(cia402::obj::kProfileAcceleration,
+                                                    c.drive.profile_acceleration, pump_));
+      CDPR_RETURN_IF_ERROR(sdo.write<std::uint32_t>(cia402::obj::kProfileDeceleration,
+                                                    c.drive.profile_acceleration, pump_));
     }
     if (c.drive.mode == Mode::kHoming) {
-      s = sdo.write<std::int8_t>(cia402::obj::kHomingMethod, c.drive.homing_method, pump_);
-      if (!s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(
+          sdo.write<std::int8_t>(cia402::obj::kHomingMethod, c.drive.homing_method, pump_));
     }
   }
   for (const SdoWrite& w : c.sdo_writes) {
     std::uint8_t b[4];
     put_le(b, static_cast<std::uint32_t>(w.value), size_of(w.type));
-    s = sdo.download(w.object, std::span<const std::uint8_t>(b, size_of(w.type)), pump_);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(
+        sdo.download(w.object, std::span<const std::uint8_t>(b, size_of(w.type)), pump_));
   }
   if (c.kind == NodeKind::kCia402Drive && c.drive.mode != Mode::kNone) {
-    s = set_mode(id, c.drive.mode);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(set_mode(id, c.drive.mode));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 // Real drives ship with default PDO mappings enabled (often four TPDOs each); left alone they
@@ -430,13 +419,12 @@ Status Master::disable_unused_pdos(NodeRt& n) {
         return r.status();
       }
       if (*r & cob::kInvalidBit) continue;
-      Status s = sdo.write<std::uint32_t>(cob, *r | cob::kInvalidBit, pump_);
-      if (!s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(sdo.write<std::uint32_t>(cob, *r | cob::kInvalidBit, pump_));
       n.disabled.push_back(p.comm_index());
       ++stats_.pdos_disabled;
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 const std::map<std::uint32_t, std::int64_t>* Master::applied(NodeId id) const {
@@ -451,7 +439,7 @@ std::vector<std::uint16_t> Master::disabled_pdos(NodeId id) const {
 
 Status Master::write_dcf(NodeId id, const std::string& path) const {
   if (node_index_[id] < 0) {
-    return Status::Error(ErrorCode::kNotFound, "node %u: not in the configuration", unsigned{id});
+    return Status::error(ErrorCode::kNotFound, "node %u: not in the configuration", unsigned{id});
   }
   const NodeRt& n = *nodes_[static_cast<std::size_t>(node_index_[id])];
   eds::Eds description;
@@ -516,10 +504,9 @@ Status Master::write_dcf(NodeId id, const std::string& path) const {
 
 Status Master::write_dcfs(const std::string& dir) const {
   for (const auto& n : nodes_) {
-    Status s = write_dcf(n->config.id, dir + "/" + n->config.name + ".dcf");
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(write_dcf(n->config.id, dir + "/" + n->config.name + ".dcf"));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 void Master::restart_link(void* self) {
@@ -544,17 +531,16 @@ Status Master::enable_link_restart() {
   auto link = can::CanLink::open(config_.interface);
   if (!link.ok()) return link.status();
   can::LinkInfo info;
-  Status s = (*link)->query(info);
-  if (!s.ok()) return s;
+  CDPR_RETURN_IF_ERROR((*link)->query(info));
   link_ = std::move(*link);
   bus_sup_.set_restart_hook(&Master::restart_link, this);
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Master::set_mode(NodeId id, Mode mode) {
   NodeRt* n = node(id);
   if (n == nullptr || n->drive < 0) {
-    return Status::Error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
+    return Status::error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
                          unsigned{id});
   }
   SdoClient& sdo = *n->sdo;
@@ -562,7 +548,6 @@ Status Master::set_mode(NodeId id, Mode mode) {
   // Hold the position while the drive switches: whichever mode it is in meanwhile, the target
   // follows the actual position and no command of the old mode is carried over.
   drive.set_mode(Mode::kNone);
-  Status s;
   if (mode == Mode::kCyclicSyncPosition) {
     // 0x60C2 interpolation time period = value * 10^index s, equal to the SYNC period.
     const double ms = to_ms(config_.sync_period);
@@ -573,18 +558,18 @@ Status Master::set_mode(NodeId id, Mode mode) {
       --exponent;
     }
     if (value > 255) {
-      return Status::Error(ErrorCode::kOutOfRange,
+      return Status::error(ErrorCode::kOutOfRange,
                            "node %u: SYNC period %.4f ms does not fit 0x60C2 (u8 value)",
                            unsigned{id}, ms);
     }
-    s = sdo.write<std::uint8_t>(cia402::obj::kInterpolationPeriodValue,
-                                static_cast<std::uint8_t>(std::lround(value)), pump_);
-    if (!s.ok()) return s;
-    s = sdo.write<std::int8_t>(cia402::obj::kInterpolationPeriodIndex, exponent, pump_);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(sdo.write<std::uint8_t>(cia402::obj::kInterpolationPeriodValue,
+                                                 static_cast<std::uint8_t>(std::lround(value)),
+                                                 pump_));
+    CDPR_RETURN_IF_ERROR(
+        sdo.write<std::int8_t>(cia402::obj::kInterpolationPeriodIndex, exponent, pump_));
   }
-  s = sdo.write<std::int8_t>(cia402::obj::kModesOfOperation, static_cast<std::int8_t>(mode), pump_);
-  if (!s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(sdo.write<std::int8_t>(cia402::obj::kModesOfOperation,
+                                              static_cast<std::int8_t>(mode), pump_));
   const Timestamp start = hooks_.now();
   const auto timeout = n->config.drive.mode_switch_timeout;
   std::int8_t shown = 0;
@@ -594,7 +579,7 @@ Status Master::set_mode(NodeId id, Mode mode) {
     shown = *r;
     if (shown == static_cast<std::int8_t>(mode)) break;
     if (hooks_.now() - start >= timeout) {
-      return Status::Error(ErrorCode::kTimeout,
+      return Status::error(ErrorCode::kTimeout,
                            "node %u: 0x6061 shows mode %d %.0f ms after writing 0x6060 = %d (%s)",
                            unsigned{id}, int{shown}, to_ms(timeout), static_cast<int>(mode),
                            to_string(mode).data());
@@ -603,22 +588,22 @@ Status Master::set_mode(NodeId id, Mode mode) {
     (void)wait_for([&] { return hooks_.now() >= until; }, std::chrono::seconds(1), "mode poll");
   }
   drive.set_mode(mode);
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Master::set_actual_position(NodeId id, double position, std::chrono::nanoseconds timeout) {
   NodeRt* n = node(id);
   if (n == nullptr || n->drive < 0) {
-    return Status::Error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
+    return Status::error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
                          unsigned{id});
   }
   Drive& drive = drives_[static_cast<std::size_t>(n->drive)];
   if (!running_) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "node %u: set actual position: the master is not running", unsigned{id});
   }
   if (!drive.enabled()) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "node %u: set actual position needs OPERATION_ENABLED (drive in %s)",
                          unsigned{id}, cia402::to_string(drive.state()).data());
   }
@@ -640,19 +625,19 @@ Status Master::set_actual_position(NodeId id, double position, std::chrono::nano
     const char* what = drive.homing_error() ? "reported a homing error"
                        : !drive.enabled()   ? "left OPERATION_ENABLED"
                                             : "did not report homing attained";
-    return Status::Error(s.ok() ? ErrorCode::kUnavailable : ErrorCode::kTimeout,
+    return Status::error(s.ok() ? ErrorCode::kUnavailable : ErrorCode::kTimeout,
                          "node %u: homing method %d to %d counts: %s after %.0f ms (statusword "
                          "0x%04X)",
                          unsigned{id}, int{method}, counts, what, to_ms(hooks_.now() - t0),
                          unsigned{drive.statusword()});
   }
   if (drive.actual_counts() != counts) {
-    return Status::Error(ErrorCode::kProtocolError,
+    return Status::error(ErrorCode::kProtocolError,
                          "node %u: position actual is %d counts after homing, expected %d",
                          unsigned{id}, drive.actual_counts(), counts);
   }
   if (previous != Mode::kNone && previous != Mode::kHoming) return set_mode(id, previous);
-  return Status::Ok();
+  return Status::success();
 }
 
 void Master::quick_stop_all() {
@@ -671,7 +656,7 @@ Status Master::enable_all(std::chrono::nanoseconds timeout) {
         err = d.supervisor().error();
         if (err.ok())
           err =
-              Status::Error(ErrorCode::kUnavailable, "node %u: drive in fault", unsigned{d.node()});
+              Status::error(ErrorCode::kUnavailable, "node %u: drive in fault", unsigned{d.node()});
         return true;
       }
       all = all && d.enabled();
@@ -683,7 +668,7 @@ Status Master::enable_all(std::chrono::nanoseconds timeout) {
   if (!s.ok()) {
     for (const Drive& d : drives_) {
       if (!d.enabled()) {
-        return Status::Error(
+        return Status::error(
             ErrorCode::kTimeout, "node %u: not OPERATION_ENABLED after %.0f ms (in %s)",
             unsigned{d.node()}, to_ms(timeout), cia402::to_string(d.state()).data());
       }

@@ -62,17 +62,17 @@ int ProcessImage::find(ObjectAddress obj) const {
 Result<PdoLayout> PdoLayout::compile(const PdoConfig& config, NodeId node, ProcessImage& image) {
   const char* dir = config.direction == PdoDirection::kRpdo ? "RPDO" : "TPDO";
   if (config.entries.size() > 8 || config.byte_size() > 8) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "node %u: %s%d maps %zu entries of %zu bytes (at most 8 bytes)",
                          unsigned{node}, dir, config.number, config.entries.size(),
                          config.byte_size());
   }
   if (config.number < 1 || config.number > 512) {
-    return Status::Error(ErrorCode::kInvalidArgument, "node %u: %s number %d not in 1..512",
+    return Status::error(ErrorCode::kInvalidArgument, "node %u: %s number %d not in 1..512",
                          unsigned{node}, dir, config.number);
   }
   if (config.cob_id == 0 && config.number > 4) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "node %u: %s%d needs an explicit cob_id (defaults exist for 1..4)",
                          unsigned{node}, dir, config.number);
   }
@@ -123,30 +123,24 @@ Status configure_pdo(SdoClient& sdo, Pump& pump, const PdoConfig& config) {
   const std::uint16_t comm = config.comm_index();
   const std::uint16_t map = config.mapping_index();
   const std::uint32_t cob_id = config.effective_cob_id(sdo.node());
-  Status s = sdo.write<std::uint32_t>({comm, 1}, cob_id | cob::kInvalidBit, pump);
-  if (!s.ok()) return s;
-  s = sdo.write<std::uint8_t>({map, 0}, 0, pump);
-  if (!s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(sdo.write<std::uint32_t>({comm, 1}, cob_id | cob::kInvalidBit, pump));
+  CDPR_RETURN_IF_ERROR(sdo.write<std::uint8_t>({map, 0}, 0, pump));
   for (std::size_t i = 0; i < config.entries.size(); ++i) {
-    s = sdo.write<std::uint32_t>({map, static_cast<std::uint8_t>(i + 1)},
-                                 config.entries[i].mapping_value(), pump);
-    if (!s.ok()) return s;
+    CDPR_RETURN_IF_ERROR(sdo.write<std::uint32_t>({map, static_cast<std::uint8_t>(i + 1)},
+                                                  config.entries[i].mapping_value(), pump));
   }
-  s = sdo.write<std::uint8_t>({map, 0}, static_cast<std::uint8_t>(config.entries.size()), pump);
-  if (!s.ok()) return s;
-  s = sdo.write<std::uint8_t>({comm, 2}, config.transmission_type, pump);
-  if (!s.ok()) return s;
+  CDPR_RETURN_IF_ERROR(
+      sdo.write<std::uint8_t>({map, 0}, static_cast<std::uint8_t>(config.entries.size()), pump));
+  CDPR_RETURN_IF_ERROR(sdo.write<std::uint8_t>({comm, 2}, config.transmission_type, pump));
   if (config.direction == PdoDirection::kTpdo) {
     if (config.inhibit_time_100us != 0) {
-      s = sdo.write<std::uint16_t>({comm, 3}, config.inhibit_time_100us, pump);
-      if (!s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(sdo.write<std::uint16_t>({comm, 3}, config.inhibit_time_100us, pump));
     }
     if (config.event_timer_ms != 0) {
-      s = sdo.write<std::uint16_t>({comm, 5}, config.event_timer_ms, pump);
-      if (!s.ok()) return s;
+      CDPR_RETURN_IF_ERROR(sdo.write<std::uint16_t>({comm, 5}, config.event_timer_ms, pump));
     }
   }
-  if (config.entries.empty()) return Status::Ok();
+  if (config.entries.empty()) return Status::success();
   return sdo.write<std::uint32_t>({comm, 1}, cob_id, pump);
 }
 

@@ -19,7 +19,7 @@ class SimNetwork {
 
   can::CanBus& master_bus() { return *master_ep_; }
   can::VirtualCanBus& bus() { return bus_; }
-  can::ManualClock& clock() { return clock_; }
+  cdpr::ManualClock& clock() { return clock_; }
   Timestamp now() const { return clock_.now(); }
 
   template <typename T, typename... Args>
@@ -44,7 +44,7 @@ class SimNetwork {
   std::chrono::nanoseconds step() const { return step_; }
 
  private:
-  can::ManualClock clock_;
+  cdpr::ManualClock clock_;
   can::VirtualCanBus bus_;
   std::unique_ptr<can::VirtualCanEndpoint> master_ep_;
   std::vector<std::unique_ptr<can::VirtualCanEndpoint>> endpoints_;

@@ -19,7 +19,7 @@
 #include <cstdint>
 #include <string>
 
-#include "cdpr/modbus/seqlock.hpp"
+#include "cdpr/core/seqlock.hpp"
 
 namespace cdpr::controller {
 
@@ -124,7 +124,7 @@ class CycleStats {
 };
 
 // The newest snapshot of a loop's statistics, readable from any thread without a lock.
-// The seqlock is cdpr::modbus::SeqLock (header-only; it belongs in a core library).
+// The seqlock is cdpr::SeqLock (header-only; it belongs in a core library).
 class CycleStatsBoard {
  public:
   // Single writer (the loop's thread). No allocation, no lock.
@@ -136,7 +136,7 @@ class CycleStatsBoard {
   std::uint64_t version() const noexcept { return board_.version(); }
 
  private:
-  modbus::SeqLock<CycleStatsSnapshot> board_;
+  cdpr::SeqLock<CycleStatsSnapshot> board_;
 };
 
 // One line for a log or `cdprctl status` (allocates; not for the RT thread):

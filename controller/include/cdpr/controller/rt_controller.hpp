@@ -33,7 +33,7 @@
 #include "cdpr/controller/slew.hpp"
 #include "cdpr/controller/spsc_ring.hpp"
 #include "cdpr/controller/trajectory.hpp"
-#include "cdpr/modbus/seqlock.hpp"
+#include "cdpr/core/seqlock.hpp"
 
 namespace cdpr::controller {
 
@@ -207,7 +207,7 @@ class RtController {
   bool settled_ = false;
 
   RtSnapshot snap_;
-  modbus::SeqLock<RtSnapshot> published_;
+  cdpr::SeqLock<RtSnapshot> published_;
   SpscRing<RtEvent, 256> events_;
   std::uint64_t overruns_ = 0;
 };

@@ -30,12 +30,6 @@
 
 namespace cdpr::can {
 
-// The bus's source of time: cdpr::Clock, SteadyClock, ManualClock (core/, cdpr/core/clock.hpp),
-// also reachable under their former names in cdpr::can.
-using Clock = cdpr::Clock;
-using SteadyClock = cdpr::SteadyClock;
-using ManualClock = cdpr::ManualClock;
-
 struct VirtualBusOptions {
   std::size_t queue_capacity = 1024;  // frames per endpoint receive queue
   bool bit_timing = false;            // accumulate bus busy time with the bit-time model
