@@ -20,9 +20,9 @@
 #include <thread>
 #include <vector>
 
+#include "cdpr/core/seqlock.hpp"
 #include "cdpr/modbus/modbus_link.hpp"
 #include "cdpr/modbus/register_map.hpp"
-#include "cdpr/core/seqlock.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr::modbus {
