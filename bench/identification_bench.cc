@@ -176,7 +176,7 @@ RobotRun run_robot(const std::string& name, const cdpr::scenario::Scenario& s,
   r.ours_anchor_3d = anchor_rms_3d(ours.estimate, s.truth);
   r.ours_chi2 = ours.chi2;
   r.ours_dof = ours.dof;
-  r.ours_brief = ours.BriefReport();
+  r.ours_brief = ours.brief_report();
   for (const std::string& w : ours.warnings)
     std::printf("[%s]   warning: %s\n", name.c_str(), w.c_str());
   const cdpr::RealizedAccuracy acc_ours =
@@ -195,7 +195,7 @@ RobotRun run_robot(const std::string& name, const cdpr::scenario::Scenario& s,
     r.paper_ms = 1e3 * paper.time_s;
     r.paper_iterations = paper.iterations;
     r.paper_anchor_rms = anchor_rms_error(paper.estimate, s.truth);
-    r.paper_brief = paper.Summary();
+    r.paper_brief = paper.summary();
     const cdpr::RealizedAccuracy acc_paper =
         must(cdpr::measure_position_accuracy(s.truth, paper.estimate, box), "accuracy paper");
     r.paper_pos_rms = acc_paper.position_rms_m;
@@ -204,7 +204,7 @@ RobotRun run_robot(const std::string& name, const cdpr::scenario::Scenario& s,
     const cdpr::PaperMethodReport paper_nom =
         must(cdpr::paper_method(paper_start(s, false), sim.set, cdpr::PaperMethodOptions{}),
              "paper method (rest nominal)");
-    r.paper_nom_brief = paper_nom.Summary();
+    r.paper_nom_brief = paper_nom.summary();
     r.paper_nom_ms = 1e3 * paper_nom.time_s;
     r.paper_nom_iterations = paper_nom.iterations;
     r.paper_nom_anchor_rms = anchor_rms_error(paper_nom.estimate, s.truth);

@@ -2,6 +2,11 @@
 #
 # cdpr_add_gtest(NAME <target> SOURCES <files...> LIBS <targets...> [LABELS <labels...>])
 #   Builds one GoogleTest executable and registers its cases with CTest (label "unit" by default).
+#   Test targets are named <folder>_<stem>_test: <folder> is the directory that holds the test
+#   (for tests/<dir>: <dir>), <stem> the source's name without _test.cc (or what a multi-file test
+#   covers), and the folder is not repeated when the stem starts with it: core_status_test,
+#   model_kinematics_test, modbus_register_map_test, fit_cdpr_fit_test, recording_test,
+#   sim_master_vcan_test.
 #
 # cdpr_add_vcan_test(NAME <test> COMMAND <cmd...> [LABELS ...] [TIMEOUT s])
 #   Registers a test that needs a kernel CAN bus. It runs through tests/vcan/vcan-run, which uses

@@ -16,7 +16,7 @@ TEST(Status, DefaultIsOkAndEmpty) {
 }
 
 TEST(Status, ErrorFormatsCodeAndMessage) {
-  const Status s = Status::Error(ErrorCode::kTimeout, "node %d: no answer in %d ms", 3, 100);
+  const Status s = Status::error(ErrorCode::kTimeout, "node %d: no answer in %d ms", 3, 100);
   EXPECT_FALSE(s.ok());
   EXPECT_EQ(s.code(), ErrorCode::kTimeout);
   EXPECT_EQ(s.to_string(), "timeout: node 3: no answer in 100 ms");
@@ -59,7 +59,7 @@ TEST(Result, CarriesValueOrStatus) {
 }
 
 TEST(Result, OkStatusWithoutValueBecomesInternalError) {
-  const Result<int> r{Status::Ok()};
+  const Result<int> r{Status::success()};
   ASSERT_FALSE(r.ok());
   EXPECT_EQ(r.status().code(), ErrorCode::kInternal);
 }
@@ -67,19 +67,19 @@ TEST(Result, OkStatusWithoutValueBecomesInternalError) {
 // Helpers for the propagation macros: each step records that it ran.
 Status step(std::vector<int>& ran, int id, bool ok) {
   ran.push_back(id);
-  return ok ? Status::Ok() : Status::Error(ErrorCode::kTimeout, "step %d failed", id);
+  return ok ? Status::success() : Status::error(ErrorCode::kTimeout, "step %d failed", id);
 }
 
 Result<int> value(std::vector<int>& ran, int id, bool ok) {
   ran.push_back(id);
-  if (!ok) return Status::Error(ErrorCode::kNotFound, "value %d missing", id);
+  if (!ok) return Status::error(ErrorCode::kNotFound, "value %d missing", id);
   return 10 * id;
 }
 
 Status two_steps(std::vector<int>& ran, bool first_ok) {
   CDPR_RETURN_IF_ERROR(step(ran, 1, first_ok));
   CDPR_RETURN_IF_ERROR(step(ran, 2, true));
-  return Status::Ok();
+  return Status::success();
 }
 
 TEST(StatusMacros, ReturnIfErrorStopsAtTheFirstError) {
@@ -115,7 +115,7 @@ TEST(StatusMacros, AssignOrReturnDeclaresOrAssignsAndPassesTheStatusOn) {
 
 Status move_only(std::unique_ptr<int>& out) {
   CDPR_ASSIGN_OR_RETURN(out, Result<std::unique_ptr<int>>(std::make_unique<int>(5)));
-  return Status::Ok();
+  return Status::success();
 }
 
 TEST(StatusMacros, AssignOrReturnMovesTheValue) {

@@ -229,7 +229,7 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
 }
 
 Status require_identifiable(const IdentifiabilityReport& report) {
-  if (report.identifiable()) return Status::Ok();
+  if (report.identifiable()) return Status::success();
   std::string msg = "unidentifiable parameter choice (rank " + std::to_string(report.rank) +
                     " of " + std::to_string(report.num_parameters) + "): ";
   int null_count = 0;
@@ -249,7 +249,7 @@ Status require_identifiable(const IdentifiabilityReport& report) {
   return Status(ErrorCode::kFailedPrecondition, msg);
 }
 
-std::string IdentifiabilityReport::Summary() const {
+std::string IdentifiabilityReport::summary() const {
   std::ostringstream os;
   char buf[256];
   std::snprintf(buf, sizeof(buf),

@@ -353,11 +353,11 @@ void add_geometry_block(Built& B, double* ptr, int size, const std::vector<bool>
 
 Status check_mask(const AnchorMask& mask, int m, const char* what) {
   if (mask.size() != 0 && mask.cols() != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "identification options: %s mask has %d columns, the robot has %d cables",
                          what, static_cast<int>(mask.cols()), m);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 // Builds the problem with values from `model` and pose guesses `poses`.
@@ -389,7 +389,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
   const bool fix_plane =
       opt.gauge == Gauge::kLaserPlane || opt.gauge == Gauge::kHomePoseAndLaserPlane;
   if (fix_home && (opt.home_pose_index < 0 || opt.home_pose_index >= n)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "identification: home_pose_index %d is not one of the %d poses",
                          opt.home_pose_index, n);
   }
@@ -714,7 +714,7 @@ Result<Information> information(Built& B, bool apply_loss, bool keep = false) {
         "identification: the model cannot be evaluated (a cable is degenerate at a pose)");
   }
   if (J.num_cols != col) {
-    return Status::Error(ErrorCode::kInternal,
+    return Status::error(ErrorCode::kInternal,
                          "identification: Jacobian has %d columns, expected %d", J.num_cols, col);
   }
   int row = 0;
@@ -907,7 +907,7 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   for (bool f : B.pose_free) free_pose_params += f ? 6 : 0;
   const int num_params = P + free_pose_params;
   if (B.num_residuals <= num_params) {
-    return Status::Error(
+    return Status::error(
         ErrorCode::kFailedPrecondition,
         "identification: too few poses: %d poses give %d residuals for %d unknowns "
         "(%d parameters + %d pose coordinates); measure more poses",
@@ -964,7 +964,7 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   rep.num_parameters = num_params;
   rep.dof = B.num_residuals - num_params;
   if (summary.termination_type == ceres::FAILURE) {
-    return Status::Error(ErrorCode::kNumericalFailure, "identification: Ceres failed: %s",
+    return Status::error(ErrorCode::kNumericalFailure, "identification: Ceres failed: %s",
                          summary.message.c_str());
   }
   rep.estimate = extract(B, initial);
@@ -1151,7 +1151,7 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   return rep;
 }
 
-std::string IdentificationReport::BriefReport() const {
+std::string IdentificationReport::brief_report() const {
   char buf[320];
   std::snprintf(buf, sizeof(buf),
                 "Identification: %s, %d iterations, cost %.6g -> %.6g, chi2 %.1f / dof %d, "
@@ -1161,7 +1161,7 @@ std::string IdentificationReport::BriefReport() const {
   return buf;
 }
 
-std::string IdentificationReport::FullReport() const {
+std::string IdentificationReport::full_report() const {
   std::ostringstream os;
   char buf[320];
   os << "cdpr identification report\n";

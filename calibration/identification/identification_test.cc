@@ -63,8 +63,8 @@ TEST(Identification, NoiseFreeDataRecoversTheTruth) {
   IdentificationOptions opt;
   auto rep = identify(d.s.nominal, d.sim.set, opt);
   ASSERT_TRUE(rep.ok()) << rep.status().to_string();
-  EXPECT_TRUE(rep->converged) << rep->FullReport();
-  EXPECT_LT(max_anchor_error(rep->estimate, d.s.truth), 1e-6) << rep->FullReport();
+  EXPECT_TRUE(rep->converged) << rep->full_report();
+  EXPECT_LT(max_anchor_error(rep->estimate, d.s.truth), 1e-6) << rep->full_report();
   EXPECT_LT((rep->estimate.readings.length_offsets - d.s.truth.readings.length_offsets)
                 .cwiseAbs()
                 .maxCoeff(),
@@ -100,11 +100,11 @@ TEST(Identification, ErrorIsConsistentWithTheReportedStd) {
   }
   ASSERT_EQ(count, 24);
   const double rms_z = std::sqrt(sum / count);
-  EXPECT_GT(rms_z, 0.4) << rep->FullReport();
-  EXPECT_LT(rms_z, 1.8) << rep->FullReport();
+  EXPECT_GT(rms_z, 0.4) << rep->full_report();
+  EXPECT_LT(rms_z, 1.8) << rep->full_report();
   // chi-square near its dof.
-  EXPECT_NEAR(rep->chi2 / rep->dof, 1.0, 0.35) << rep->FullReport();
-  EXPECT_FALSE(rep->FullReport().empty());
+  EXPECT_NEAR(rep->chi2 / rep->dof, 1.0, 0.35) << rep->full_report();
+  EXPECT_FALSE(rep->full_report().empty());
 }
 
 // Force noise enters the equilibrium residual through the geometry (cov = sigma_F^2 A^T A). With
@@ -208,7 +208,7 @@ TEST(Identifiability, NamesAnchorAlongCableAgainstOffset) {
   io.weak_tolerance = 1e-2;
   auto rep = analyze_identifiability(s.nominal, sim->set, opt, io);
   ASSERT_TRUE(rep.ok()) << rep.status().to_string();
-  ASSERT_FALSE(rep->directions.empty()) << rep->Summary();
+  ASSERT_FALSE(rep->directions.empty()) << rep->summary();
   bool named = false;
   for (const ParameterDirection& d : rep->directions) {
     for (int i = 1; i <= 8; ++i) {
@@ -219,7 +219,7 @@ TEST(Identifiability, NamesAnchorAlongCableAgainstOffset) {
       }
     }
   }
-  EXPECT_TRUE(named) << rep->Summary();
+  EXPECT_TRUE(named) << rep->summary();
 }
 
 }  // namespace

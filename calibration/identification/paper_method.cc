@@ -129,7 +129,7 @@ Result<PaperMethodReport> paper_method(const CalibratedModel& initial, const Mea
   const int m = initial.robot.num_cables();
   const AnchorMask mask = options.parameters.size() == 0 ? paper_anchor_mask() : options.parameters;
   if (mask.cols() != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "paper method: the parameter mask has %d columns, the robot %d cables",
                          static_cast<int>(mask.cols()), m);
   }
@@ -148,7 +148,7 @@ Result<PaperMethodReport> paper_method(const CalibratedModel& initial, const Mea
   const int K = static_cast<int>(coords.size());
   const int per = m + (options.use_laser && !initial.robot.lasers.empty() ? 1 : 0);
   if (per * set.num_poses() < K) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "paper method: too few poses: %d errors for %d parameters",
                          per * set.num_poses(), K);
   }
@@ -210,7 +210,7 @@ Result<PaperMethodReport> paper_method(const CalibratedModel& initial, const Mea
   return rep;
 }
 
-std::string PaperMethodReport::Summary() const {
+std::string PaperMethodReport::summary() const {
   char buf[256];
   std::snprintf(buf, sizeof(buf),
                 "Paper method: %s (%s), %d iterations, %ld FK solves, ||Error|| %.4g -> %.4g m, "

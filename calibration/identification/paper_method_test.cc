@@ -27,11 +27,11 @@ TEST(PaperMethod, ConvergesOnNoiseFreeData) {
   ASSERT_TRUE(sim.ok()) << sim.status().to_string();
   auto rep = paper_method(start, sim->set);
   ASSERT_TRUE(rep.ok()) << rep.status().to_string();
-  EXPECT_TRUE(rep->converged) << rep->Summary();
-  EXPECT_LT(rep->final_error_norm, 1e-6 * rep->initial_error_norm + 1e-8) << rep->Summary();
+  EXPECT_TRUE(rep->converged) << rep->summary();
+  EXPECT_LT(rep->final_error_norm, 1e-6 * rep->initial_error_norm + 1e-8) << rep->summary();
   EXPECT_LT((rep->estimate.robot.frame_anchors - s.truth.robot.frame_anchors).cwiseAbs().maxCoeff(),
             1e-6)
-      << rep->Summary();
+      << rep->summary();
   EXPECT_GT(rep->fk_solves, 25 * 16);
 }
 

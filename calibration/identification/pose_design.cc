@@ -137,7 +137,7 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
   }
   const int C = static_cast<int>(cands.size()) - 1;
   if (C < options.num_poses - 1) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "pose design: only %d feasible candidates for %d poses", C,
                          options.num_poses - 1);
   }

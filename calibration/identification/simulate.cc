@@ -64,7 +64,7 @@ Result<Eigen::VectorXd> unstretched_lengths(const RobotModel& model, const Pose&
                                             const Eigen::VectorXd& tensions) {
   KinematicsData data(model);
   if (!inverse_kinematics(model, pose, data)) {
-    return Status::Error(ErrorCode::kNumericalFailure, "cable %d is degenerate at the pose",
+    return Status::error(ErrorCode::kNumericalFailure, "cable %d is degenerate at the pose",
                          data.invalid_cable + 1);
   }
   Eigen::VectorXd u(model.num_cables());
@@ -145,13 +145,13 @@ Result<Eigen::VectorXd> homing_offsets(const RobotModel& truth, const RobotModel
 Result<CalibratedModel> homed_truth(const RobotModel& truth, const RobotModel& nominal,
                                     double reference_tension) {
   if (truth.num_cables() != nominal.num_cables()) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "homing: the true robot has %d cables, the nominal one %d",
                          truth.num_cables(), nominal.num_cables());
   }
   const double f_ref =
       std::isnan(reference_tension) ? default_reference_tension(nominal) : reference_tension;
-  CalibratedModel out = CalibratedModel::FromRobot(truth);
+  CalibratedModel out = CalibratedModel::from_robot(truth);
   auto off = homing_offsets(truth, nominal, f_ref);
   if (!off) return Status(off.status().code(), "homing: " + std::string(off.status().message()));
   out.readings.length_offsets = *off;

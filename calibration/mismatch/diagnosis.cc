@@ -623,13 +623,13 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     for (int j = 0; j < s.num_poses(); ++j) {
       const PoseMeasurement& p = s.poses[static_cast<std::size_t>(j)];
       if (p.cable_lengths.size() != m) {
-        return Status::Error(ErrorCode::kInvalidArgument,
+        return Status::error(ErrorCode::kInvalidArgument,
                              "diagnose: the %s has %d cable lengths per pose (pose %d), the model "
                              "has %d cables",
                              what, static_cast<int>(p.cable_lengths.size()), j, m);
       }
       if (p.laser_distances.size() != 0 && p.laser_distances.size() != nl) {
-        return Status::Error(ErrorCode::kInvalidArgument,
+        return Status::error(ErrorCode::kInvalidArgument,
                              "diagnose: the %s has %d laser distances per pose (pose %d), the "
                              "model has %d lasers",
                              what, static_cast<int>(p.laser_distances.size()), j, nl);

@@ -236,7 +236,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   const int np = set.num_poses();
   if ((residuals != nullptr && static_cast<int>(residuals->size()) != np) ||
       static_cast<int>(poses.size()) != np) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "mismatch: %d residual sets and %d poses for a measurement set of %d "
                          "poses",
                          residuals != nullptr ? static_cast<int>(residuals->size()) : np,
@@ -304,12 +304,12 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
         si.push_back(kNaN);
       }
     } else if (jac_rows != have) {
-      return Status::Error(ErrorCode::kInternal,
+      return Status::error(ErrorCode::kInternal,
                            "mismatch: pose %d has %d Jacobian rows, the residual layout %d", j,
                            jac_rows, have);
     }
     if (ext->jacobian_geometry[uj].rows() != jac_rows) {
-      return Status::Error(ErrorCode::kInternal,
+      return Status::error(ErrorCode::kInternal,
                            "mismatch: pose %d: the extended Jacobian has a different row count", j);
     }
   }
@@ -347,7 +347,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
         break;
     }
     if (!std::isfinite(r(k))) {
-      return Status::Error(
+      return Status::error(
           ErrorCode::kInternal,
           "mismatch: pose %d: a residual the Jacobian has is missing in the report", row.pose);
     }
@@ -363,7 +363,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
     const auto uj = static_cast<std::size_t>(j);
     const PoseMeasurement& pm = set.poses[uj];
     if (!inverse_kinematics(robot, poses[uj], kin)) {
-      return Status::Error(ErrorCode::kNumericalFailure,
+      return Status::error(ErrorCode::kNumericalFailure,
                            "mismatch: pose %d: cable %d is degenerate at the estimated pose", j,
                            kin.invalid_cable + 1);
     }
@@ -652,7 +652,7 @@ const CandidateScreen* MismatchSummary::find(const std::string& id) const {
   return nullptr;
 }
 
-std::string MismatchSummary::Text() const {
+std::string MismatchSummary::text() const {
   std::string s;
   for (const auto& f : findings) s += "- " + f + "\n";
   s += format("\n%-34s %5s %10s %10s %9s %8s %10s\n", "candidate", "k", "T", "p(F)", "p(Holm)",
@@ -839,7 +839,7 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
   out.jacobian_rank = rankJ;
   out.dof = n - rankJ;
   if (n == 0 || out.dof <= 0) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "mismatch: %d residuals and %d fitted quantities leave no degrees of "
                          "freedom",
                          n, rankJ);

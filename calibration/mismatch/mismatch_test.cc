@@ -79,7 +79,7 @@ TEST(Mismatch, NullDataGivesNoSignificantCandidateAcrossSeeds) {
     for (const auto& c : s->candidates) any = any || c.significant;
     if (any) {
       ++false_positive_seeds;
-      std::printf("false positive, seed %d:\n%s\n", seed, s->Text().c_str());
+      std::printf("false positive, seed %d:\n%s\n", seed, s->text().c_str());
     }
     const MisfitGroup* len = channel(*s, "cable lengths");
     ASSERT_NE(len, nullptr);
@@ -108,7 +108,7 @@ TEST(Mismatch, ConcealedHookeElasticityIsLocatedAndNamed) {
   conceal_hooke(d, sim, kEa);
   auto s = identify_and_locate(d, sim.set);
   ASSERT_TRUE(s.ok()) << s.status().to_string();
-  SCOPED_TRACE(s->Text());
+  SCOPED_TRACE(s->text());
   EXPECT_LT(s->p_value, 0.01);
   const MisfitGroup* len = channel(*s, "cable lengths");
   ASSERT_NE(len, nullptr);
@@ -147,7 +147,7 @@ TEST(Mismatch, ConcealedDrumScaleErrorIsNamed) {
   }
   auto s = identify_and_locate(d, sim.set);
   ASSERT_TRUE(s.ok()) << s.status().to_string();
-  SCOPED_TRACE(s->Text());
+  SCOPED_TRACE(s->text());
   const MisfitGroup* len = channel(*s, "cable lengths");
   ASSERT_NE(len, nullptr);
   EXPECT_TRUE(len->flagged);
@@ -162,7 +162,7 @@ TEST(Mismatch, ElasticityAndComplianceAreReportedAsConfounded) {
   const SimulatedMeasurements sim = simulate(d, 5);
   auto s = identify_and_locate(d, sim.set);
   ASSERT_TRUE(s.ok()) << s.status().to_string();
-  SCOPED_TRACE(s->Text());
+  SCOPED_TRACE(s->text());
   // On MINI the routing length (0.5 m) dominates the loaded length, so F*L and F differ little
   // once the identification (offsets, anchors, poses) is projected out.
   ASSERT_TRUE(confounded(*s, "hooke_shared", "compliance_shared"));

@@ -25,7 +25,7 @@ struct Fixture {
   Diagnosis d;
   Fixture() {
     const int m = robot.num_cables();
-    d.before.estimate = CalibratedModel::FromRobot(robot);
+    d.before.estimate = CalibratedModel::from_robot(robot);
     for (int j = 0; j < 2; ++j) {
       Pose p = robot.home;
       p.position.x() = 0.05 * j;

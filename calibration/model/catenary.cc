@@ -60,13 +60,13 @@ Result<CatenarySolution> solve_elastic_catenary(double span, double height,
     return Status(ErrorCode::kInvalidArgument, "elastic catenary: non-finite input");
   }
   if (!(span > 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "elastic catenary: horizontal span %g m must be > 0 (a vertical cable "
                          "has no catenary; use the straight elastic cable)",
                          span);
   }
   if (!(l0 > 0.0) || w < 0.0 || !(ea > 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "elastic catenary: need L0 > 0, w >= 0, EA > 0 (L0 %g m, w %g N/m, EA "
                          "%g N)",
                          l0, w, ea);
@@ -74,7 +74,7 @@ Result<CatenarySolution> solve_elastic_catenary(double span, double height,
   const double chord = std::hypot(span, height);
   if (w == 0.0) {
     if (!(chord > l0)) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "elastic catenary: weightless cable is slack (chord %.6g m <= L0 "
                            "%.6g m)",
                            chord, l0);
@@ -127,7 +127,7 @@ Result<CatenarySolution> solve_elastic_catenary(double span, double height,
       break;
     }
   }
-  return Status::Error(ErrorCode::kNumericalFailure,
+  return Status::error(ErrorCode::kNumericalFailure,
                        "elastic catenary: no solution for span %.6g m, height %.6g m, L0 %.6g m "
                        "(end point error %.3g m)",
                        span, height, l0, f.norm());

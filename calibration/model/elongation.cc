@@ -111,7 +111,7 @@ Result<double> loaded_length_from_unstretched(const CableModel& cable, double un
       return unstretched_length;
     case ElongationKind::kHooke:
       if (!(cable.ea + tension > 0.0)) {
-        return Status::Error(ErrorCode::kNumericalFailure,
+        return Status::error(ErrorCode::kNumericalFailure,
                              "Hooke elongation: tension %.6g N <= -EA (EA %.6g N)", tension,
                              cable.ea);
       }
@@ -125,7 +125,7 @@ Result<double> loaded_length_from_unstretched(const CableModel& cable, double un
     const ElongationDerivatives d = cable_elongation_derivatives(cable, length, tension);
     const double slope = 1.0 - d.d_length;
     if (!(slope > 0.0)) {
-      return Status::Error(ErrorCode::kNumericalFailure,
+      return Status::error(ErrorCode::kNumericalFailure,
                            "polynomial elongation: d(L - dL)/dL = %.3g <= 0 at L = %.6g m, "
                            "F = %.6g N (outside the fitted range?)",
                            slope, length, tension);
@@ -137,7 +137,7 @@ Result<double> loaded_length_from_unstretched(const CableModel& cable, double un
       return length;
     }
   }
-  return Status::Error(ErrorCode::kNumericalFailure,
+  return Status::error(ErrorCode::kNumericalFailure,
                        "polynomial elongation: no loaded length found for unstretched %.6g m, "
                        "F = %.6g N in 50 Newton steps",
                        unstretched_length, tension);
@@ -145,30 +145,30 @@ Result<double> loaded_length_from_unstretched(const CableModel& cable, double un
 
 Status validate_polynomial_surface(const PolynomialSurface& surface) {
   if (surface.order < 0 || surface.order > kMaxPolynomialOrder) {
-    return Status::Error(ErrorCode::kOutOfRange, "polynomial order %d outside [0, %d]",
+    return Status::error(ErrorCode::kOutOfRange, "polynomial order %d outside [0, %d]",
                          surface.order, kMaxPolynomialOrder);
   }
   const int need = polynomial_surface_size(surface.order);
   if (static_cast<int>(surface.coefficients.size()) != need) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "polynomial of order %d needs %d coefficients, got %zu", surface.order,
                          need, surface.coefficients.size());
   }
   for (std::size_t c = 0; c < surface.coefficients.size(); ++c) {
     if (!std::isfinite(surface.coefficients[c])) {
-      return Status::Error(ErrorCode::kInvalidArgument, "polynomial coefficient %zu is not finite",
+      return Status::error(ErrorCode::kInvalidArgument, "polynomial coefficient %zu is not finite",
                            c);
     }
   }
   if (!(surface.length_scale > 0.0) || !std::isfinite(surface.length_scale) ||
       !(surface.tension_scale > 0.0) || !std::isfinite(surface.tension_scale) ||
       !std::isfinite(surface.length_center) || !std::isfinite(surface.tension_center)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "polynomial scaling must be finite with positive scales (length_scale "
                          "%.6g, tension_scale %.6g)",
                          surface.length_scale, surface.tension_scale);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Result<PolynomialFitSummary> fit_polynomial_surface(std::span<const ElongationSample> samples,
@@ -176,7 +176,7 @@ Result<PolynomialFitSummary> fit_polynomial_surface(std::span<const ElongationSa
   using Selection = PolynomialFitOptions::Selection;
   if (options.min_order < 0 || options.max_order > kMaxPolynomialOrder ||
       options.min_order > options.max_order) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "polynomial fit: orders %d..%d must satisfy 0 <= min <= max <= %d",
                          options.min_order, options.max_order, kMaxPolynomialOrder);
   }
@@ -185,14 +185,14 @@ Result<PolynomialFitSummary> fit_polynomial_surface(std::span<const ElongationSa
   }
   const int n = static_cast<int>(samples.size());
   if (options.folds < 2 || options.folds > n) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "polynomial fit: %d folds for %d samples (need 2 <= folds <= samples)",
                          options.folds, n);
   }
   for (int k = 0; k < n; ++k) {
     const ElongationSample& s = samples[static_cast<std::size_t>(k)];
     if (!std::isfinite(s.length) || !std::isfinite(s.tension) || !std::isfinite(s.elongation)) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "polynomial fit: sample %d is not finite (L %g, F %g, dL %g)", k,
                            s.length, s.tension, s.elongation);
     }
@@ -201,7 +201,7 @@ Result<PolynomialFitSummary> fit_polynomial_surface(std::span<const ElongationSa
   const int smallest_training = n - (n + options.folds - 1) / options.folds;
   const int min_size = polynomial_surface_size(options.min_order);
   if (smallest_training < min_size) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "polynomial fit: %d samples in %d folds leave %d per training set; order "
                          "%d needs at least %d",
                          n, options.folds, smallest_training, options.min_order, min_size);
@@ -215,13 +215,13 @@ Result<PolynomialFitSummary> fit_polynomial_surface(std::span<const ElongationSa
   const double l_span = lmax->length - lmin->length;
   const double f_span = fmax->tension - fmin->tension;
   if (options.max_order > 0 && !(l_span > 1e-12 * std::max(1.0, std::abs(lmax->length)))) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "polynomial fit: every sample has the same length (%.6g m); a surface "
                          "dL(L, F) needs at least two lengths",
                          lmax->length);
   }
   if (options.max_order > 0 && !(f_span > 1e-12 * std::max(1.0, std::abs(fmax->tension)))) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "polynomial fit: every sample has the same tension (%.6g N); a surface "
                          "dL(L, F) needs at least two tensions",
                          fmax->tension);
@@ -312,7 +312,7 @@ Result<PolynomialFitSummary> fit_polynomial_surface(std::span<const ElongationSa
     if (summary.cv_rmse[k] < summary.cv_rmse[best]) best = k;
   }
   if (!std::isfinite(summary.cv_rmse[best])) {
-    return Status::Error(ErrorCode::kNumericalFailure,
+    return Status::error(ErrorCode::kNumericalFailure,
                          "polynomial fit: no order in %d..%d is identifiable from the %d samples "
                          "(too few distinct lengths or tensions)",
                          options.min_order, options.max_order, n);
@@ -332,7 +332,7 @@ Result<PolynomialFitSummary> fit_polynomial_surface(std::span<const ElongationSa
   const LstsqResult fit =
       solve_least_squares(design.leftCols(cols), target, options.rank_tolerance);
   if (!fit.identifiable) {
-    return Status::Error(ErrorCode::kNumericalFailure,
+    return Status::error(ErrorCode::kNumericalFailure,
                          "polynomial fit: order %d is not identifiable from all samples",
                          summary.order);
   }

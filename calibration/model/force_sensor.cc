@@ -9,11 +9,11 @@ Result<ForceSensorFit> fit_force_sensor(std::span<const ForceCalibrationSample> 
                                         double gravity) {
   const int n = static_cast<int>(samples.size());
   if (!(gravity > 0.0) || !std::isfinite(gravity)) {
-    return Status::Error(ErrorCode::kInvalidArgument, "force sensor fit: gravity %g must be > 0",
+    return Status::error(ErrorCode::kInvalidArgument, "force sensor fit: gravity %g must be > 0",
                          gravity);
   }
   if (n < 3) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "force sensor fit: %d samples; gain, offset and their standard errors "
                          "need at least 3 (with 2 or more distinct masses)",
                          n);
@@ -23,12 +23,12 @@ Result<ForceSensorFit> fit_force_sensor(std::span<const ForceCalibrationSample> 
   for (int k = 0; k < n; ++k) {
     const ForceCalibrationSample& s = samples[static_cast<std::size_t>(k)];
     if (!std::isfinite(s.mass) || !std::isfinite(s.raw)) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "force sensor fit: sample %d is not finite (mass %g kg, raw %g)", k,
                            s.mass, s.raw);
     }
     if (s.mass < 0.0) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "force sensor fit: sample %d has a negative mass (%g kg)", k, s.mass);
     }
     x_mean += s.mass * gravity;
@@ -47,7 +47,7 @@ Result<ForceSensorFit> fit_force_sensor(std::span<const ForceCalibrationSample> 
   }
   // Spread below rounding of the tensions themselves: a single mass.
   if (!(sxx > n * 1e-24 * std::max(1.0, x_max * x_max))) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "force sensor fit: all %d samples use the same mass (%g kg); the gain "
                          "needs at least two different masses",
                          n, samples[0].mass);
@@ -67,7 +67,7 @@ Result<ForceSensorFit> fit_force_sensor(std::span<const ForceCalibrationSample> 
   fit.gain_stderr = std::sqrt(sigma2 / sxx);
   fit.offset_stderr = std::sqrt(sigma2 * (1.0 / n + x_mean * x_mean / sxx));
   if (!(std::abs(fit.sensor.gain) > 3.0 * fit.gain_stderr)) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "force sensor fit: the readings do not depend on the load (gain %.4g "
                          "+- %.2g raw/N): sensor disconnected or the masses not hanging on it?",
                          fit.sensor.gain, fit.gain_stderr);

@@ -52,25 +52,25 @@ Status check_model_and_data(const RobotModel& model, const ForwardKinematicsOpti
                             const ForwardKinematicsData& data, Eigen::Index num_lengths) {
   const int m = model.num_cables();
   if (m < 6) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "forward kinematics needs at least 6 cables for a 6-DOF pose, model "
                          "has %d",
                          m);
   }
   if (model.platform_anchors.cols() != m || static_cast<int>(model.pulleys.size()) != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "forward kinematics: model has %d frame anchors, %d platform anchors, "
                          "%zu pulleys",
                          m, static_cast<int>(model.platform_anchors.cols()), model.pulleys.size());
   }
   if (num_lengths != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "forward kinematics: %d lengths given for %d cables",
                          static_cast<int>(num_lengths), m);
   }
   if (data.residuals.size() != m || data.current.lengths.size() != m ||
       data.trial.lengths.size() != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "forward kinematics: workspace built for %d cables, model has %d",
                          static_cast<int>(data.residuals.size()), m);
   }
@@ -81,7 +81,7 @@ Status check_model_and_data(const RobotModel& model, const ForwardKinematicsOpti
                   "forward kinematics: options need max_iterations >= 0, initial_lambda > 0 "
                   "and non-negative tolerances");
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 double characteristic_length(const RobotModel& model) {
@@ -134,31 +134,31 @@ ForwardKinematicsSummary solve(const RobotModel& model, const ForwardKinematicsO
       case ForwardKinematicsTermination::kConverged:
         if (s.max_abs_residual > options.max_residual) {
           s.termination = ForwardKinematicsTermination::kInconsistentLengths;
-          s.status = Status::Error(
+          s.status = Status::error(
               ErrorCode::kNumericalFailure,
               "forward kinematics converged to a pose where cable %d misses its length by "
               "%.3g m (> max_residual %.3g m): lengths inconsistent with the model, or a local "
               "minimum",
               s.worst_cable, s.max_abs_residual, options.max_residual);
         } else {
-          s.status = Status::Ok();
+          s.status = Status::success();
         }
         break;
       case ForwardKinematicsTermination::kMaxIterations:
         s.status =
-            Status::Error(ErrorCode::kNumericalFailure,
+            Status::error(ErrorCode::kNumericalFailure,
                           "forward kinematics did not converge in max_iterations %d (%d "
                           "orientation restarts; max |residual| %.3g m at cable %d)",
                           options.max_iterations, s.restarts, s.max_abs_residual, s.worst_cable);
         break;
       case ForwardKinematicsTermination::kDegenerateGeometry:
-        s.status = Status::Error(ErrorCode::kFailedPrecondition,
+        s.status = Status::error(ErrorCode::kFailedPrecondition,
                                  "forward kinematics: cable %d is degenerate at the initial pose "
                                  "(platform anchor on the frame anchor or inside its pulley)",
                                  cur->invalid_cable);
         break;
       case ForwardKinematicsTermination::kNumericalFailure:
-        s.status = Status::Error(ErrorCode::kNumericalFailure,
+        s.status = Status::error(ErrorCode::kNumericalFailure,
                                  "forward kinematics: singular or non-finite normal equations "
                                  "after %d iterations (max |residual| %.3g m)",
                                  s.iterations, s.max_abs_residual);
@@ -337,7 +337,7 @@ ForwardKinematicsSummary forward_kinematics_elastic(
   }
   const int m = model.num_cables();
   if (tensions.size() != m || static_cast<int>(model.cables.size()) != m) {
-    return invalid(Status::Error(ErrorCode::kInvalidArgument,
+    return invalid(Status::error(ErrorCode::kInvalidArgument,
                                  "forward kinematics: %d tensions and %zu cable models for %d "
                                  "cables",
                                  static_cast<int>(tensions.size()), model.cables.size(), m));
@@ -352,7 +352,7 @@ ForwardKinematicsSummary forward_kinematics_elastic(
         cable, unstretched_lengths(i) + cable.routing_length, tensions(i));
     if (!loaded.ok()) {
       const std::string_view why = loaded.status().message();
-      return invalid(Status::Error(loaded.status().code(), "forward kinematics, cable %d: %.*s", i,
+      return invalid(Status::error(loaded.status().code(), "forward kinematics, cable %d: %.*s", i,
                                    static_cast<int>(why.size()), why.data()));
     }
     data.target_lengths(i) = *loaded - cable.routing_length;

@@ -307,7 +307,7 @@ ElastostaticSummary solve_elastostatics(const RobotModel& model,
   const int m = model.num_cables();
   if (length_commands.size() != m || data.tensions.size() != m ||
       static_cast<int>(model.cables.size()) != m) {
-    summary.status = Status::Error(ErrorCode::kInvalidArgument,
+    summary.status = Status::error(ErrorCode::kInvalidArgument,
                                    "elastostatics: %d length commands and data for %d cables, "
                                    "the model has %d cables",
                                    static_cast<int>(length_commands.size()),
@@ -326,7 +326,7 @@ ElastostaticSummary solve_elastostatics(const RobotModel& model,
   }
   for (int i = 0; i < m; ++i) {
     if (model.cables[static_cast<std::size_t>(i)].elongation == ElongationKind::kRigid) {
-      summary.status = Status::Error(ErrorCode::kInvalidArgument,
+      summary.status = Status::error(ErrorCode::kInvalidArgument,
                                      "cables[%d].elongation: a rigid cable has no elasto-static "
                                      "equilibrium (use hooke or polynomial)",
                                      i);
@@ -361,12 +361,12 @@ ElastostaticSummary solve_elastostatics(const RobotModel& model,
   summary.pose = Pose{r, rpy_from_rotation(R)};
   if (core.termination == ElastostaticTermination::kDegenerateGeometry) {
     summary.status =
-        Status::Error(ErrorCode::kInvalidArgument,
+        Status::error(ErrorCode::kInvalidArgument,
                       "elastostatics: cable %d is degenerate at the start pose", core.bad_cable);
     return summary;
   }
   if (core.termination == ElastostaticTermination::kNumericalFailure) {
-    summary.status = Status::Error(ErrorCode::kNumericalFailure,
+    summary.status = Status::error(ErrorCode::kNumericalFailure,
                                    "elastostatics: the tension law of cable %d failed (polynomial "
                                    "surface not increasing in the tension?) or values are not "
                                    "finite",
@@ -375,7 +375,7 @@ ElastostaticSummary solve_elastostatics(const RobotModel& model,
   }
   for (int i = 0; i < m; ++i) summary.taut_cables += data.tensions(i) > 0.0 ? 1 : 0;
   if (core.termination != ElastostaticTermination::kConverged) {
-    summary.status = Status::Error(
+    summary.status = Status::error(
         ErrorCode::kNumericalFailure,
         "elastostatics: no equilibrium found in %d iterations (largest wrench residual %.3g N, "
         "%d of %d cables taut): the commands may not hold the platform",
@@ -440,7 +440,7 @@ ElastostaticSummary solve_elastostatics(const RobotModel& model,
            data.tensions, data.stiffnesses, w, &K_analytic, nullptr);
   data.wrench = w;
   data.stiffness = K;
-  summary.status = Status::Ok();
+  summary.status = Status::success();
   return summary;
 }
 

@@ -82,7 +82,7 @@ ForceDistributionResult closed_form(
         !(ldlt.vectorD().minCoeff() > options.rank_tolerance * dmax)) {
       out.outcome = out.iterations == 1 ? ForceDistributionOutcome::kDegenerate
                                         : ForceDistributionOutcome::kNotFound;
-      out.status = Status::Error(
+      out.status = Status::error(
           out.iterations == 1 ? ErrorCode::kNumericalFailure : ErrorCode::kOutOfRange,
           out.iterations == 1
               ? "force distribution: the structure matrix has rank < 6 at this pose"
@@ -98,7 +98,7 @@ ForceDistributionResult closed_form(
         worst_violation(out.tensions, f_min, f_max, fixed, options.feasibility_tolerance, nullptr);
     if (worst < 0) {
       out.outcome = ForceDistributionOutcome::kFeasible;
-      out.status = Status::Ok();
+      out.status = Status::success();
       return out;
     }
     // Fix the worst offender at the limit it violates and recompute the others.
@@ -203,7 +203,7 @@ ForceDistributionResult quadratic_program(
   for (int k = 0; k < 6; ++k) rank += std::abs(qr.matrixQR()(k, k)) > options.rank_tolerance * r00;
   if (rank < 6 || !(r00 > 0.0)) {
     out.outcome = ForceDistributionOutcome::kDegenerate;
-    out.status = Status::Error(ErrorCode::kNumericalFailure,
+    out.status = Status::error(ErrorCode::kNumericalFailure,
                                "force distribution: the structure matrix has rank %d < 6 at this "
                                "pose",
                                rank);
@@ -227,8 +227,8 @@ ForceDistributionResult quadratic_program(
     out.iterations = 1;
     out.outcome =
         worst < 0 ? ForceDistributionOutcome::kFeasible : ForceDistributionOutcome::kInfeasible;
-    out.status = worst < 0 ? Status::Ok()
-                           : Status::Error(ErrorCode::kOutOfRange,
+    out.status = worst < 0 ? Status::success()
+                           : Status::error(ErrorCode::kOutOfRange,
                                            "force distribution: the only balancing tensions put "
                                            "cable %d outside its limits",
                                            worst);
@@ -251,10 +251,10 @@ ForceDistributionResult quadratic_program(
       worst_violation(out.tensions, f_min, f_max, nullptr, options.feasibility_tolerance, nullptr);
   if (ok && worst < 0) {
     out.outcome = ForceDistributionOutcome::kFeasible;
-    out.status = Status::Ok();
+    out.status = Status::success();
   } else if (!ok && out.iterations >= options.max_iterations) {
     out.outcome = ForceDistributionOutcome::kNotFound;
-    out.status = Status::Error(ErrorCode::kNumericalFailure,
+    out.status = Status::error(ErrorCode::kNumericalFailure,
                                "force distribution (QP): no solution in %d active-set steps",
                                out.iterations);
   } else {
@@ -299,7 +299,7 @@ ForceDistributionResult distribute_forces(
   const int m = static_cast<int>(structure_matrix.cols());
   if (m < 1 || m > kMaxCables || f_min.size() != m || f_max.size() != m) {
     out.status =
-        Status::Error(ErrorCode::kInvalidArgument,
+        Status::error(ErrorCode::kInvalidArgument,
                       "force distribution: %d cables (at most %d) with %d and %d limits", m,
                       kMaxCables, static_cast<int>(f_min.size()), static_cast<int>(f_max.size()));
     return out;
@@ -334,7 +334,7 @@ ForceDistributionResult distribute_forces(const RobotModel& model, const Pose& p
   if (m > kMaxCables || static_cast<int>(model.cables.size()) != m ||
       data.kinematics.lengths.size() != m) {
     ForceDistributionResult out;
-    out.status = Status::Error(ErrorCode::kInvalidArgument,
+    out.status = Status::error(ErrorCode::kInvalidArgument,
                                "force distribution: model with %d cables (at most %d) or scratch "
                                "data of another size",
                                m, kMaxCables);
@@ -343,7 +343,7 @@ ForceDistributionResult distribute_forces(const RobotModel& model, const Pose& p
   if (!inverse_kinematics(model, pose, data.kinematics)) {
     ForceDistributionResult out;
     out.outcome = ForceDistributionOutcome::kDegenerate;
-    out.status = Status::Error(ErrorCode::kInvalidArgument,
+    out.status = Status::error(ErrorCode::kInvalidArgument,
                                "force distribution: cable %d is degenerate at this pose",
                                data.kinematics.invalid_cable);
     return out;

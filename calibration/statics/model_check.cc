@@ -22,38 +22,38 @@ bool finite(const Eigen::MatrixBase<Derived>& m) {
 }
 
 Status not_finite(const char* prefix, const char* field) {
-  return Status::Error(ErrorCode::kInvalidArgument, "%s%s: expected finite numbers, got NaN or inf",
+  return Status::error(ErrorCode::kInvalidArgument, "%s%s: expected finite numbers, got NaN or inf",
                        prefix, field);
 }
 
 Status check_positive(const char* prefix, const char* field, double v, const char* unit) {
   if (!finite(v)) return not_finite(prefix, field);
   if (!(v > 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "%s%s: expected a positive number (%s), got %g", prefix, field, unit, v);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status check_non_negative(const char* prefix, const char* field, double v, const char* unit) {
   if (!finite(v)) return not_finite(prefix, field);
   if (!(v >= 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "%s%s: expected a non-negative number (%s), got %g", prefix, field, unit,
                          v);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status check_unit(const char* prefix, const char* field, const Eigen::Vector3d& v, double tol) {
   if (!finite(v)) return not_finite(prefix, field);
   const double n = v.norm();
   if (std::abs(n - 1.0) > tol) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "%s%s: expected a unit vector, got [%g, %g, %g] of length %g", prefix,
                          field, v.x(), v.y(), v.z(), n);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status check_cable(const RobotModel& model, int i, const ModelCheckOptions& options) {
@@ -69,7 +69,7 @@ Status check_cable(const RobotModel& model, int i, const ModelCheckOptions& opti
   const Eigen::Matrix3d gram = pulley.frame.transpose() * pulley.frame;
   const double orthonormality = (gram - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
   if (orthonormality > options.unit_tolerance || pulley.frame.determinant() < 0.0) {
-    return Status::Error(
+    return Status::error(
         ErrorCode::kInvalidArgument,
         "%spulley: the pulley frame (columns reference, axis x reference, axis) is "
         "not a right-handed orthonormal frame (|R^T R - I| = %g, det = %g)",
@@ -84,7 +84,7 @@ Status check_cable(const RobotModel& model, int i, const ModelCheckOptions& opti
   CDPR_RETURN_IF_ERROR(check_positive(p, "winch.counts_per_rev", w.counts_per_rev, "counts"));
   if (!finite(w.length_offset)) return not_finite(p, "winch.length_offset");
   if (w.direction != 1 && w.direction != -1) {
-    return Status::Error(ErrorCode::kInvalidArgument, "%swinch.direction: expected 1 or -1, got %d",
+    return Status::error(ErrorCode::kInvalidArgument, "%swinch.direction: expected 1 or -1, got %d",
                          p, w.direction);
   }
 
@@ -95,19 +95,19 @@ Status check_cable(const RobotModel& model, int i, const ModelCheckOptions& opti
   CDPR_RETURN_IF_ERROR(check_non_negative(p, "f_min", c.f_min, "N"));
   CDPR_RETURN_IF_ERROR(check_positive(p, "f_max", c.f_max, "N"));
   if (c.f_min > c.f_max) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "%sf_min: the minimum tension %g N is above the maximum f_max = %g N", p,
                          c.f_min, c.f_max);
   }
   if (c.elongation == ElongationKind::kPolynomial) {
     const int n = c.polynomial.order;
     if (n < 0) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "%selongation.order: expected a non-negative order, got %d", p, n);
     }
     const std::size_t expected = static_cast<std::size_t>((n + 1) * (n + 2) / 2);
     if (c.polynomial.coefficients.size() != expected) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "%selongation.coefficients: order %d needs %zu coefficients, got %zu", p,
                            n, expected, c.polynomial.coefficients.size());
     }
@@ -125,17 +125,17 @@ Status check_cable(const RobotModel& model, int i, const ModelCheckOptions& opti
   const ForceSensorModel& s = model.force_sensors[k];
   if (!finite(s.gain)) return not_finite(p, "force_sensor.gain");
   if (s.gain == 0.0) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "%sforce_sensor.gain: expected a non-zero number, got 0", p);
   }
   if (!finite(s.offset)) return not_finite(p, "force_sensor.offset");
-  return Status::Ok();
+  return Status::success();
 }
 
 Status check_sizes(const RobotModel& model) {
   const std::size_t m = static_cast<std::size_t>(model.num_cables());
   auto mismatch = [&](const char* field, std::size_t n) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "%s: expected one entry per cable (%zu, the number of frame anchors), got "
                          "%zu",
                          field, m, n);
@@ -147,7 +147,7 @@ Status check_sizes(const RobotModel& model) {
   if (model.winches.size() != m) return mismatch("winches", model.winches.size());
   if (model.cables.size() != m) return mismatch("cables", model.cables.size());
   if (model.force_sensors.size() != m) return mismatch("force_sensors", model.force_sensors.size());
-  return Status::Ok();
+  return Status::success();
 }
 
 Status check_platform(const PlatformModel& p) {
@@ -161,12 +161,12 @@ Status check_platform(const PlatformModel& p) {
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(p.inertia, Eigen::EigenvaluesOnly);
   if (!(eig.eigenvalues()(0) > 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "platform.inertia: expected a positive definite matrix (kg m^2), smallest "
                          "eigenvalue %g",
                          eig.eigenvalues()(0));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status check_laser(const LaserModel& l, int j, double tol) {
@@ -175,18 +175,18 @@ Status check_laser(const LaserModel& l, int j, double tol) {
   if (!finite(l.origin)) return not_finite(p, "origin");
   if (!finite(l.plane_point)) return not_finite(p, "plane_point");
   if (!finite(l.direction) || l.direction.norm() == 0.0) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "%sdirection: expected a unit vector, got a zero or non-finite vector", p);
   }
   CDPR_RETURN_IF_ERROR(check_unit(p, "direction", l.direction, tol));
   CDPR_RETURN_IF_ERROR(check_unit(p, "plane_normal", l.plane_normal, tol));
   CDPR_RETURN_IF_ERROR(check_non_negative(p, "range", l.range_min, "m"));
   if (!finite(l.range_max) || !(l.range_max > l.range_min)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "%srange: expected [min, max] with 0 <= min < max (m), got [%g, %g]", p,
                          l.range_min, l.range_max);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace
@@ -223,7 +223,7 @@ StructureConditioning structure_conditioning(const RobotModel& model, const Pose
 Status check_model(const RobotModel& model, const ModelCheckOptions& options) {
   const int m = model.num_cables();
   if (m < options.min_cables) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "cables: a spatial robot needs at least %d cables, got %d",
                          options.min_cables, m);
   }
@@ -231,7 +231,7 @@ Status check_model(const RobotModel& model, const ModelCheckOptions& options) {
   for (int i = 0; i < m; ++i) CDPR_RETURN_IF_ERROR(check_cable(model, i, options));
   CDPR_RETURN_IF_ERROR(check_platform(model.platform));
   if (!finite(model.gravity) || model.gravity < 0.0) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "gravity: expected a non-negative number (m/s^2), got %g", model.gravity);
   }
   for (std::size_t j = 0; j < model.lasers.size(); ++j) {
@@ -245,24 +245,24 @@ Status check_model(const RobotModel& model, const ModelCheckOptions& options) {
   const StructureConditioning sc =
       structure_conditioning(model, model.home, options.rank_tolerance);
   if (!sc.valid) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "cables[%d].frame_anchor: at the home pose the platform anchor lies on "
                          "the frame anchor or inside its pulley (degenerate cable)",
                          sc.invalid_cable);
   }
   if (sc.rank < 6) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "cables: the structure matrix at the home pose has rank %d < 6 (the "
                          "anchors cannot hold the platform in all six directions)",
                          sc.rank);
   }
   if (sc.condition_number > options.max_condition_number) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "cables: the structure matrix at the home pose is badly conditioned "
                          "(condition number %.3g > %.3g)",
                          sc.condition_number, options.max_condition_number);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace cdpr

@@ -52,8 +52,8 @@ inline Scenario mini_scenario() {
   // The true floor is slightly tilted and lower than believed.
   truth.lasers[0].plane_point = Eigen::Vector3d(0.0, 0.0, -0.4023);
   truth.lasers[0].plane_normal = Eigen::Vector3d(0.002, -0.001, 1.0).normalized();
-  s.nominal = CalibratedModel::FromRobot(nominal);
-  s.truth = CalibratedModel::FromRobot(truth);
+  s.nominal = CalibratedModel::from_robot(nominal);
+  s.truth = CalibratedModel::from_robot(truth);
   auto off = homing_offsets(truth, nominal, default_reference_tension(nominal));
   if (off) s.truth.readings.length_offsets = *off;
   s.box = testing::mini_workspace();
@@ -90,9 +90,9 @@ inline Scenario mini_config_scenario() {
     truth.pulleys[static_cast<std::size_t>(i)].frame =
         testing::vertical_swivel_frame(truth.frame_anchors.col(i), /*cable_goes_up=*/i < 4);
   }
-  s.nominal = CalibratedModel::FromRobot(nominal);
+  s.nominal = CalibratedModel::from_robot(nominal);
   auto homed = homed_truth(truth, nominal);
-  s.truth = homed ? *homed : CalibratedModel::FromRobot(truth);
+  s.truth = homed ? *homed : CalibratedModel::from_robot(truth);
   s.box = testing::mini_workspace();
   return s;
 }
@@ -109,8 +109,8 @@ inline Scenario large_scenario(double perturbation = 0.03, unsigned seed = 7) {
     for (int q = 0; q < 3; ++q) truth.frame_anchors(q, i) += u(rng);
   }
   truth.lasers[0].plane_point = Eigen::Vector3d(0.0, 0.0, -2.01);
-  s.nominal = CalibratedModel::FromRobot(nominal);
-  s.truth = CalibratedModel::FromRobot(truth);
+  s.nominal = CalibratedModel::from_robot(nominal);
+  s.truth = CalibratedModel::from_robot(truth);
   auto off = homing_offsets(truth, nominal, default_reference_tension(nominal));
   if (off) s.truth.readings.length_offsets = *off;
   s.box = testing::large_workspace();

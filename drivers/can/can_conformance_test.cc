@@ -249,7 +249,7 @@ BusPair virtual_pair(bool manual) {
   VirtualCanBus* bus = owner->bus.get();
   p.inject_error = [bus](std::uint32_t cls, const std::array<std::uint8_t, 8>& data) {
     bus->inject_error(cls, data);
-    return Status::Ok();
+    return Status::success();
   };
   p.waits = !manual;
   p.keep = owner;

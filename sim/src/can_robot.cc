@@ -23,17 +23,17 @@ class CanRobot::Port final : public can::CanBus {
   Status send(const can::Frame& f) override {
     if (robot_.bus_off_) {
       ++robot_.stats_.frames_dropped_bus_off;
-      return Status::Ok();
+      return Status::success();
     }
     ++stats_.frames_sent;
     return robot_.bus_.send(f);
   }
   Status receive(can::Frame& f, nanoseconds) override {
-    if (rx_.empty()) return Status::Error(ErrorCode::kTimeout, "%s: no frame", name_.c_str());
+    if (rx_.empty()) return Status::error(ErrorCode::kTimeout, "%s: no frame", name_.c_str());
     f = rx_.front();
     rx_.pop_front();
     ++stats_.frames_received;
-    return Status::Ok();
+    return Status::success();
   }
   const std::string& name() const override { return name_; }
   can::BusStats stats() const override { return stats_; }
@@ -89,7 +89,7 @@ Result<std::unique_ptr<CanRobot>> CanRobot::create(can::CanBus& bus,
                                                    Physics& physics, CanRobotOptions options) {
   const int m = physics.truth().num_cables();
   if (!options.initial_counts.empty() && static_cast<int>(options.initial_counts.size()) != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "CAN robot: %zu initial counts for a robot with %d cables",
                          options.initial_counts.size(), m);
   }
@@ -101,7 +101,7 @@ Result<std::unique_ptr<CanRobot>> CanRobot::create(can::CanBus& bus,
     if (n.kind == co::NodeKind::kCia402Drive) {
       const auto cable = r->drives_.size();
       if (static_cast<int>(cable) >= m) {
-        return Status::Error(ErrorCode::kInvalidArgument,
+        return Status::error(ErrorCode::kInvalidArgument,
                              "CAN robot: node %u (%s): more cia402 drives than the robot's %d "
                              "cables",
                              unsigned{n.id}, n.name.c_str(), m);
@@ -153,12 +153,12 @@ Result<std::unique_ptr<CanRobot>> CanRobot::create(can::CanBus& bus,
     r->nodes_.push_back(std::move(node));
   }
   if (static_cast<int>(r->drives_.size()) != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "CAN robot: the network has %zu cia402 drives, the robot %d cables",
                          r->drives_.size(), m);
   }
   if (!r->force_channels_.empty() && static_cast<int>(r->force_channels_.size()) != m) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "CAN robot: the force-sensor nodes map %zu channels, the robot has %d "
                          "cables (one channel per cable, or none)",
                          r->force_channels_.size(), m);
@@ -171,7 +171,7 @@ Result<std::unique_ptr<CanRobot>> CanRobot::create(can::CanBus& bus,
                              f.kind == FaultKind::kDriveSilent || f.kind == FaultKind::kSdoAbort ||
                              f.kind == FaultKind::kCableOverload;
     if (needs_cable && (f.cable < 0 || f.cable >= m)) {
-      return Status::Error(ErrorCode::kInvalidArgument, "%s:%d: faults: %s: cable %d is not 1..%d",
+      return Status::error(ErrorCode::kInvalidArgument, "%s:%d: faults: %s: cable %d is not 1..%d",
                            sc.file.c_str(), f.line, std::string(to_string(f.kind)).c_str(),
                            f.cable + 1, m);
     }

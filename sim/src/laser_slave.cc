@@ -23,7 +23,7 @@ namespace cdpr::sim {
 namespace {
 
 Status os_error(const char* what, int err) {
-  return Status::Error(ErrorCode::kIoError, "laser slave: %s: %s (errno %d)", what,
+  return Status::error(ErrorCode::kIoError, "laser slave: %s: %s (errno %d)", what,
                        std::strerror(err), err);
 }
 
@@ -99,7 +99,7 @@ Result<std::unique_ptr<LaserSlave>> LaserSlave::start(const LaserSlaveConfig& co
   if (!valid.ok()) return modbus::with_context("laser slave: register map: ", valid);
   if (config.transport == LaserSlaveConfig::Transport::kRtuPty &&
       (config.slave_id < 1 || config.slave_id > 247)) {
-    return Status::Error(ErrorCode::kInvalidArgument, "laser slave: RTU slave id %d not in 1..247",
+    return Status::error(ErrorCode::kInvalidArgument, "laser slave: RTU slave id %d not in 1..247",
                          config.slave_id);
   }
   std::unique_ptr<LaserSlave> s(new LaserSlave(config));
@@ -149,7 +149,7 @@ Status LaserSlave::open_transport() {
       struct stat st {};
       if (lstat(config_.pty_link.c_str(), &st) == 0) {
         if (!S_ISLNK(st.st_mode)) {
-          return Status::Error(ErrorCode::kInvalidArgument,
+          return Status::error(ErrorCode::kInvalidArgument,
                                "laser slave: %s exists and is not a symlink (not replaced)",
                                config_.pty_link.c_str());
         }
@@ -169,7 +169,7 @@ Status LaserSlave::open_transport() {
     listen_fd_ = modbus_tcp_listen(ctx_, 4);
     if (listen_fd_ < 0) {
       const int err = errno;
-      return Status::Error(ErrorCode::kIoError, "laser slave: listen on %s:%d: %s",
+      return Status::error(ErrorCode::kIoError, "laser slave: listen on %s:%d: %s",
                            config_.host.c_str(), config_.port, modbus_strerror(err));
     }
     sockaddr_in addr{};
@@ -181,7 +181,7 @@ Status LaserSlave::open_transport() {
   }
   modbus_set_indication_timeout(ctx_, 0, 200000);
   modbus_set_byte_timeout(ctx_, 0, 50000);
-  return Status::Ok();
+  return Status::success();
 }
 
 void LaserSlave::stop() {

@@ -113,13 +113,13 @@ Result<Physics> Physics::create(RobotModel truth, const Scenario& scenario, std:
   CDPR_RETURN_IF_ERROR(check_against(scenario, m));
   for (int i = 0; i < m; ++i) {
     if (truth.cables[static_cast<std::size_t>(i)].elongation == ElongationKind::kRigid) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "sim physics: cable %d of the true robot is rigid (resolve_truth gives "
                            "it a stiff Hooke law)",
                            i + 1);
     }
     if (truth.force_sensors[static_cast<std::size_t>(i)].gain == 0.0) {
-      return Status::Error(ErrorCode::kInvalidArgument, "sim physics: force sensor %d has gain 0",
+      return Status::error(ErrorCode::kInvalidArgument, "sim physics: force sensor %d has gain 0",
                            i + 1);
     }
   }
@@ -327,12 +327,12 @@ bool Physics::solve_sag(const Eigen::VectorXd& l, Eigen::Vector3d& r, Eigen::Mat
 Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double time_s) {
   const int m = truth_.num_cables();
   if (counts.size() != m || !counts.allFinite()) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "sim physics: %d finite counts expected (one per cable), got %d", m,
                          static_cast<int>(counts.size()));
   }
   if (!std::isfinite(time_s) || (state_.steps > 0 && time_s < state_.time_s)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "sim physics: time %.9g s goes backwards (last step at %.9g s)", time_s,
                          state_.time_s);
   }
@@ -385,7 +385,7 @@ Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double tim
     if (!ok && !scenario_.effects.sag) {
       state_.converged = false;
       Status st = s.status;
-      return Status::Error(ErrorCode::kNumericalFailure, "sim physics at t = %.6g s: %.*s", time_s,
+      return Status::error(ErrorCode::kNumericalFailure, "sim physics at t = %.6g s: %.*s", time_s,
                            static_cast<int>(st.message().size()), st.message().data());
     }
   }
@@ -397,7 +397,7 @@ Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double tim
     iters += sag_iters;
     if (!ok) {
       state_.converged = false;
-      return Status::Error(ErrorCode::kNumericalFailure,
+      return Status::error(ErrorCode::kNumericalFailure,
                            "sim physics at t = %.6g s: no equilibrium with sagging cables", time_s);
     }
     tensions = sag_tensions_;
@@ -434,7 +434,7 @@ Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double tim
       state_.overloaded[static_cast<std::size_t>(f.cable)] = true;
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 LaserChannel Physics::laser_at(int laser, const Eigen::Vector3d& position,
@@ -476,7 +476,7 @@ Result<Eigen::VectorXd> nominal_counts(const RobotModel& nominal, const Pose& po
   if (!f.ok()) return f.status();
   CableCommandData data(nominal);
   if (!inverse_kinematics_compensated(nominal, pose, *f, data)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "nominal inverse kinematics: cable %d is degenerate at the pose",
                          data.kinematics.invalid_cable + 1);
   }
@@ -488,7 +488,7 @@ Result<std::vector<LockstepSample>> run_lockstep(Physics& physics, const RobotMo
                                                  const LockstepOptions& options) {
   const int m = nominal.num_cables();
   if (m != physics.truth().num_cables()) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "lock-step: the nominal robot has %d cables, the true one %d", m,
                          physics.truth().num_cables());
   }
@@ -505,7 +505,7 @@ Result<std::vector<LockstepSample>> run_lockstep(Physics& physics, const RobotMo
     Result<Eigen::VectorXd> target = nominal_counts(nominal, poses[j], options.reference_tension);
     if (!target.ok()) {
       Status s = target.status();
-      return Status::Error(s.code(), "lock-step pose %d: %.*s", static_cast<int>(j),
+      return Status::error(s.code(), "lock-step pose %d: %.*s", static_cast<int>(j),
                            static_cast<int>(s.message().size()), s.message().data());
     }
     const Eigen::VectorXd goal = target->array().round().matrix();  // drives take integers
@@ -516,7 +516,7 @@ Result<std::vector<LockstepSample>> run_lockstep(Physics& physics, const RobotMo
       const Eigen::VectorXd c = previous + a * (goal - previous);
       const Status st = physics.step(c, t0 + a * options.dwell_s);
       if (!st.ok()) {
-        return Status::Error(st.code(), "lock-step pose %d: %.*s", static_cast<int>(j),
+        return Status::error(st.code(), "lock-step pose %d: %.*s", static_cast<int>(j),
                              static_cast<int>(st.message().size()), st.message().data());
       }
     }

@@ -34,18 +34,18 @@ Result<PerCable> per_cable(const YamlField& f, Sign sign, const char* unit) {
 Status optional_per_cable(const YamlField& map, const char* key, Sign sign, const char* unit,
                           PerCable& out) {
   const YamlField f = map[key];
-  if (!f.present()) return Status::Ok();
+  if (!f.present()) return Status::success();
   CDPR_ASSIGN_OR_RETURN(out, per_cable(f, sign, unit));
-  return Status::Ok();
+  return Status::success();
 }
 
 Status optional_vector(const YamlField& map, const char* key, const char* unit,
                        Eigen::Vector3d& out) {
   const YamlField f = map[key];
-  if (!f.present()) return Status::Ok();
+  if (!f.present()) return Status::success();
   CDPR_ASSIGN_OR_RETURN(const auto v, f.vector3(unit));
   out = Eigen::Vector3d(v[0], v[1], v[2]);
-  return Status::Ok();
+  return Status::success();
 }
 
 std::string resolve_path(std::string_view base_dir, const std::string& p) {
@@ -67,7 +67,7 @@ Status parse_truth(const YamlField& n, std::string_view base_dir, TruthSource& t
     CDPR_RETURN_IF_ERROR(
         q.optional("seed", t.perturb_seed, 0, std::numeric_limits<std::int64_t>::max()));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status parse_noise(const YamlField& n, SensorNoiseLevels& s) {
@@ -76,7 +76,7 @@ Status parse_noise(const YamlField& n, SensorNoiseLevels& s) {
       n.optional("encoder_counts", s.encoder_counts, Sign::kNonNegative, "counts"));
   CDPR_RETURN_IF_ERROR(n.optional("force_raw", s.force_raw, Sign::kNonNegative, "raw units"));
   CDPR_RETURN_IF_ERROR(n.optional("laser", s.laser, Sign::kNonNegative, "m"));
-  return Status::Ok();
+  return Status::success();
 }
 
 Status parse_polynomial(const YamlField& n, PolynomialSurface& p) {
@@ -100,7 +100,7 @@ Status parse_polynomial(const YamlField& n, PolynomialSurface& p) {
   CDPR_RETURN_IF_ERROR(n.optional("tension_scale", p.tension_scale, Sign::kPositive, "N"));
   const Status v = validate_polynomial_surface(p);
   if (!v.ok()) return n.error(v.message());
-  return Status::Ok();
+  return Status::success();
 }
 
 Status parse_effects(const YamlField& n, HiddenEffects& e) {
@@ -173,7 +173,7 @@ Status parse_effects(const YamlField& n, HiddenEffects& e) {
     CDPR_RETURN_IF_ERROR(t.optional("max_delta", th.max_delta_k, Sign::kNonNegative, "K"));
     e.thermal = th;
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 struct FaultName {
@@ -244,7 +244,7 @@ Status parse_fault(const YamlField& n, Fault& out) {
   } else if (n["limit"].present()) {
     return n["limit"].error("only used by cable_overload faults");
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status parse_laser_serving(const YamlField& n, std::string_view base_dir, LaserServing& l) {
@@ -257,7 +257,7 @@ Status parse_laser_serving(const YamlField& n, std::string_view base_dir, LaserS
   int parity = l.parity == 'N' ? 0 : (l.parity == 'O' ? 2 : 1);
   CDPR_RETURN_IF_ERROR(n.optional_choice("parity", parity, {"none", "even", "odd"}));
   l.parity = parity == 0 ? 'N' : (parity == 2 ? 'O' : 'E');
-  return Status::Ok();
+  return Status::success();
 }
 
 Result<Scenario> parse_document(const YamlDocument& doc, std::string_view base_dir) {
@@ -265,7 +265,7 @@ Result<Scenario> parse_document(const YamlDocument& doc, std::string_view base_d
   s.file = doc.file();
   const YamlField root = doc.root();
   if (!root.present()) {
-    return Status::Error(ErrorCode::kInvalidArgument, "%s: empty scenario", s.file.c_str());
+    return Status::error(ErrorCode::kInvalidArgument, "%s: empty scenario", s.file.c_str());
   }
   CDPR_RETURN_IF_ERROR(root.check_keys({"name", "truth", "noise", "effects", "faults", "laser"}));
   CDPR_RETURN_IF_ERROR(root.optional("name", s.name));
@@ -336,7 +336,7 @@ Status check_against(const Scenario& s, int m) {
                {&e.force_offset_error, "effects.force_sensor.offset_error"}};
   for (const auto& l : lists) {
     if (!l.p->fits(m)) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "%s:%d: %s: %d values for a robot with %d cables (give 1 or %d)",
                            s.file.c_str(), l.p->line, l.field, static_cast<int>(l.p->values.size()),
                            m, m);
@@ -345,12 +345,12 @@ Status check_against(const Scenario& s, int m) {
   for (std::size_t k = 0; k < s.faults.size(); ++k) {
     const Fault& f = s.faults[k];
     if (f.cable >= m) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "%s:%d: faults[%d].cable: cable %d does not exist (the robot has %d)",
                            s.file.c_str(), f.line, static_cast<int>(k), f.cable + 1, m);
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Result<RobotModel> resolve_truth(const Scenario& s, const RobotModel& nominal) {
@@ -359,12 +359,12 @@ Result<RobotModel> resolve_truth(const Scenario& s, const RobotModel& nominal) {
     Result<RobotModel> t = config::load_robot_config(s.truth.config_path);
     if (!t.ok()) {
       Status st = t.status();
-      return Status::Error(st.code(), "%s: truth.config: %.*s", s.file.c_str(),
+      return Status::error(st.code(), "%s: truth.config: %.*s", s.file.c_str(),
                            static_cast<int>(st.message().size()), st.message().data());
     }
     truth = std::move(*t);
     if (truth.num_cables() != nominal.num_cables()) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "%s: truth.config: the true robot has %d cables, the nominal %d",
                            s.file.c_str(), truth.num_cables(), nominal.num_cables());
     }
@@ -403,13 +403,13 @@ Result<RobotModel> resolve_truth(const Scenario& s, const RobotModel& nominal) {
       c.ea = e.stiff_ea;
     }
     if (e.sag && c.elongation != ElongationKind::kHooke) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "%s: effects.sag: cable %d of the true robot is not a Hooke cable (sag "
                            "is modelled for Hooke cables only)",
                            s.file.c_str(), i + 1);
     }
     if (e.sag && !(c.mass_per_length > 0.0)) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "%s: effects.sag: cable %d has no mass_per_length in the true robot "
                            "description (nothing to sag)",
                            s.file.c_str(), i + 1);

@@ -9,7 +9,7 @@
 // the recording's hash in the reports) is set to a fixed date in the file after `simulate`.
 //
 // After an intended change of a report, regenerate the copies and review their diff:
-//   CDPR_UPDATE_GOLDEN=1 build/ci/tests/fit/cdpr_fit_golden_test
+//   CDPR_UPDATE_GOLDEN=1 build/ci/tests/fit/fit_cdpr_fit_golden_test
 #include <gtest/gtest.h>
 
 #include <cstdlib>

@@ -90,7 +90,7 @@ TEST(MiniConfigScenario, HomedEncodersSettleTheElasticPlatformAtHome) {
   auto homed = cdpr::simulate_measurements(s.truth, home, cdpr::SensorNoise{}, 1, so);
   ASSERT_TRUE(homed.ok()) << homed.status().to_string();
   EXPECT_LT((homed->true_poses[0].vector() - s.nominal.robot.home.vector()).norm(), 1e-8);
-  auto unhomed = cdpr::simulate_measurements(cdpr::CalibratedModel::FromRobot(s.truth.robot), home,
+  auto unhomed = cdpr::simulate_measurements(cdpr::CalibratedModel::from_robot(s.truth.robot), home,
                                              cdpr::SensorNoise{}, 1, so);
   ASSERT_TRUE(unhomed.ok());
   EXPECT_GT(unhomed->true_poses[0].position.norm(), 1e-3);

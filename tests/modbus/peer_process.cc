@@ -52,7 +52,7 @@ Result<ChildProcess> ChildProcess::spawn(const std::vector<std::string>& argv,
   args.push_back(nullptr);
   const int log_fd = open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (log_fd < 0) {
-    return Status::Error(ErrorCode::kIoError, "spawn: cannot open %s", log_path.c_str());
+    return Status::error(ErrorCode::kIoError, "spawn: cannot open %s", log_path.c_str());
   }
   const pid_t parent = getpid();
   const pid_t pid = fork();
@@ -146,10 +146,10 @@ Status PtyPair::start() {
   if (!p.ok()) return p.status();
   socat_ = std::move(*p);
   if (!wait_for_file(a_, 5.0) || !wait_for_file(b_, 5.0)) {
-    return Status::Error(ErrorCode::kTimeout, "socat made no pty pair in 5 s: %s",
+    return Status::error(ErrorCode::kTimeout, "socat made no pty pair in 5 s: %s",
                          read_text(log_).c_str());
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 LaserSlave::LaserSlave(const TempDir& dir, std::string name)
@@ -190,12 +190,12 @@ Status LaserSlave::start(const std::vector<std::string>& where, const SlaveOptio
   proc_ = std::move(*p);
   const auto t0 = Clock::now();
   while (since(t0) < 15.0) {
-    if (wait_for_file(ready_, 0.05)) return Status::Ok();
+    if (wait_for_file(ready_, 0.05)) return Status::success();
     if (!proc_.running()) {
-      return Status::Error(ErrorCode::kUnavailable, "laser slave exited: %s", log().c_str());
+      return Status::error(ErrorCode::kUnavailable, "laser slave exited: %s", log().c_str());
     }
   }
-  return Status::Error(ErrorCode::kTimeout, "laser slave not ready in 15 s: %s", log().c_str());
+  return Status::error(ErrorCode::kTimeout, "laser slave not ready in 15 s: %s", log().c_str());
 }
 
 }  // namespace cdpr::modbus::testing

@@ -24,7 +24,7 @@ const std::vector<std::string>& estimate_names() {
 
 Status apply_estimate(const std::vector<std::string>& names, int num_cables,
                       IdentificationOptions* o) {
-  if (names.empty()) return Status::Ok();  // the defaults of IdentificationOptions
+  if (names.empty()) return Status::success();  // the defaults of IdentificationOptions
   o->estimate_frame_anchors = false;
   o->estimate_platform_anchors = false;
   o->estimate_length_offsets = false;
@@ -40,7 +40,7 @@ Status apply_estimate(const std::vector<std::string>& names, int num_cables,
       o->estimate_frame_anchors = true;
     } else if (n == "paper-anchors") {
       if (num_cables != 8) {
-        return Status::Error(ErrorCode::kInvalidArgument,
+        return Status::error(ErrorCode::kInvalidArgument,
                              "--estimate paper-anchors is the paper's 16-coordinate subset of an "
                              "8-cable robot; this config has %d cables",
                              num_cables);
@@ -70,11 +70,11 @@ Status apply_estimate(const std::vector<std::string>& names, int num_cables,
     } else {
       std::string all;
       for (const std::string& k : estimate_names()) all += (all.empty() ? "" : ", ") + k;
-      return Status::Error(ErrorCode::kInvalidArgument, "--estimate: unknown item '%s' (one of %s)",
+      return Status::error(ErrorCode::kInvalidArgument, "--estimate: unknown item '%s' (one of %s)",
                            n.c_str(), all.c_str());
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 std::vector<std::string> estimated_items(const IdentificationOptions& o) {
@@ -119,7 +119,7 @@ Result<std::optional<RobotModel>> load_truth(const CalibrateArgs& args, const Ro
   auto t = load_config(args.truth);
   if (!t.ok()) return t.status();
   if (t->num_cables() != nominal.num_cables()) {
-    return Status::Error(ErrorCode::kInvalidArgument, "--truth %s has %d cables, %s has %d",
+    return Status::error(ErrorCode::kInvalidArgument, "--truth %s has %d cables, %s has %d",
                          args.truth.c_str(), t->num_cables(), args.config.c_str(),
                          nominal.num_cables());
   }
@@ -166,26 +166,26 @@ Result<Output> calibrate_paper(const CalibrateArgs& args, const RobotModel& nomi
     if (e == "anchors") {
       options.parameters = AnchorMask::Constant(3, nominal.num_cables(), true);
     } else if (e != "paper-anchors") {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "--method paper estimates frame anchors only (--estimate anchors or "
                            "paper-anchors), not '%s'",
                            e.c_str());
     }
   }
   if (options.parameters.size() == 0 && nominal.num_cables() != 8) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "--method paper: the paper's parameter set is for 8 cables; this config "
                          "has %d (use --estimate anchors)",
                          nominal.num_cables());
   }
   if (args.home_pose < 0 || args.home_pose >= set.num_poses()) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "--home-pose %d: the recording has rows 0..%d", args.home_pose,
                          set.num_poses() - 1);
   }
   auto truth = load_truth(args, nominal);
   if (!truth.ok()) return truth.status();
-  const CalibratedModel initial = CalibratedModel::FromRobot(nominal);
+  const CalibratedModel initial = CalibratedModel::from_robot(nominal);
   auto result = paper_method(initial, set, options);
   if (!result.ok()) {
     return with_context(result.status(), "calibrating " + args.config + " from " + args.recording);
@@ -214,7 +214,7 @@ Result<Output> calibrate_paper(const CalibrateArgs& args, const RobotModel& nomi
 
 Result<Output> calibrate(const CalibrateArgs& args) {
   if (args.method != "ours" && args.method != "paper") {
-    return Status::Error(ErrorCode::kInvalidArgument, "--method %s: expected ours or paper",
+    return Status::error(ErrorCode::kInvalidArgument, "--method %s: expected ours or paper",
                          args.method.c_str());
   }
   auto nominal = load_config(args.config);
@@ -253,7 +253,7 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   } else if (args.gauge == "none") {
     options.gauge = Gauge::kNone;
   } else {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "--gauge %s: expected home, laser-plane, both or none",
                          args.gauge.c_str());
   }
@@ -264,11 +264,11 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   } else if (args.loss == "cauchy") {
     options.loss = RobustLoss::kCauchy;
   } else {
-    return Status::Error(ErrorCode::kInvalidArgument, "--loss %s: expected none, huber or cauchy",
+    return Status::error(ErrorCode::kInvalidArgument, "--loss %s: expected none, huber or cauchy",
                          args.loss.c_str());
   }
   if (args.home_pose < 0 || args.home_pose >= set->num_poses()) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "--home-pose %d: the recording has rows 0..%d", args.home_pose,
                          set->num_poses() - 1);
   }
@@ -285,7 +285,7 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   auto truth = load_truth(args, *nominal);
   if (!truth.ok()) return truth.status();
 
-  const CalibratedModel initial = CalibratedModel::FromRobot(*nominal);
+  const CalibratedModel initial = CalibratedModel::from_robot(*nominal);
   // Identifiability of the choice at the commanded poses (named directions for the report).
   auto ident = analyze_identifiability(initial, *set, options);
   auto result = identify(initial, *set, options);

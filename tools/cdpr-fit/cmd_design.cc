@@ -40,7 +40,7 @@ Result<Output> design_poses(const DesignArgs& args) {
   options.max_angle = args.max_angle;
   options.noise = args.noise;
   CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, model->num_cables(), &options.identification));
-  const CalibratedModel cm = CalibratedModel::FromRobot(*model);
+  const CalibratedModel cm = CalibratedModel::from_robot(*model);
   auto design = cdpr::design_poses(cm, options);
   if (!design.ok()) return with_context(design.status(), "designing poses for " + args.config);
 
@@ -118,7 +118,7 @@ Result<Output> predict_accuracy(const PredictArgs& args) {
   options.box.half_extent = Eigen::Vector3d::Constant(args.half_extent);
   options.box.points_per_axis = args.points_per_axis;
   auto p =
-      cdpr::predict_accuracy(CalibratedModel::FromRobot(*model), list->poses, args.noise, options);
+      cdpr::predict_accuracy(CalibratedModel::from_robot(*model), list->poses, args.noise, options);
   if (!p.ok()) {
     return with_context(p.status(), "predicting the accuracy of " + args.poses);
   }

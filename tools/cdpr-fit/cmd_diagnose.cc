@@ -57,7 +57,7 @@ Status check_plausible_units(const recording::Recording& rec, const RobotModel& 
   if (largest > kImplausibleMetres || ratio > kImplausibleRatio ||
       ratio < 1.0 / kImplausibleRatio) {
     // Short enough for Status (240 characters) after a long path.
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "%s: length_1..length_%d: %s (mean %.4g vs %.4g m of the nominal inverse "
                          "kinematics at the commanded poses; largest %.4g in length_%d)",
                          file.c_str(), rec.num_cables, unit_guess(ratio).c_str(),
@@ -68,13 +68,13 @@ Status check_plausible_units(const recording::Recording& rec, const RobotModel& 
     for (std::size_t j = 0; j < rec.poses.size(); ++j) {
       const Eigen::VectorXd& l = rec.poses[j].lasers;
       if (k < l.size() && std::isfinite(l(k)) && std::abs(l(k)) > kImplausibleMetres) {
-        return Status::Error(ErrorCode::kInvalidArgument,
+        return Status::error(ErrorCode::kInvalidArgument,
                              "%s: laser_%d: reading %.6g in data row %zu looks like mm, expected m",
                              file.c_str(), k + 1, l(k), j + 1);
       }
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 struct Loaded {
@@ -131,11 +131,11 @@ int exit_status_of(Diagnosis::Verdict v) {
 
 Result<Output> diagnose(const DiagnoseArgs& args) {
   if (args.bootstrap < 1) {
-    return Status::Error(ErrorCode::kInvalidArgument, "--bootstrap %d: must be at least 1",
+    return Status::error(ErrorCode::kInvalidArgument, "--bootstrap %d: must be at least 1",
                          args.bootstrap);
   }
   if (args.folds < 2) {
-    return Status::Error(ErrorCode::kInvalidArgument, "--folds %d: must be at least 2", args.folds);
+    return Status::error(ErrorCode::kInvalidArgument, "--folds %d: must be at least 2", args.folds);
   }
   auto nominal = load_config(args.config);
   if (!nominal.ok()) return nominal.status();
@@ -156,7 +156,7 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
   options.bootstrap_samples = args.bootstrap;
   options.cv_folds = args.folds;
 
-  const CalibratedModel initial = CalibratedModel::FromRobot(*nominal);
+  const CalibratedModel initial = CalibratedModel::from_robot(*nominal);
   auto result = cdpr::diagnose(initial, primary->set, validation ? &validation->set : nullptr,
                                identification, options);
   if (!result.ok()) {

@@ -18,14 +18,14 @@ Result<Output> simulate(const SimulateArgs& args) {
     auto n = load_config(args.nominal);
     if (!n.ok()) return n.status();
     if (n->num_cables() != truth->num_cables()) {
-      return Status::Error(
+      return Status::error(
           ErrorCode::kInvalidArgument, "--nominal %s has %d cables but --config %s has %d",
           args.nominal.c_str(), n->num_cables(), args.config.c_str(), truth->num_cables());
     }
-    nominal = CalibratedModel::FromRobot(*n);
+    nominal = CalibratedModel::from_robot(*n);
   }
   if (truth->lasers.empty()) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "%s has no laser; a recording needs at least one laser column",
                          args.config.c_str());
   }
@@ -40,7 +40,7 @@ Result<Output> simulate(const SimulateArgs& args) {
     PoseDesignOptions design;
     design.num_poses = args.design;
     design.noise = args.noise;
-    const CalibratedModel planner = nominal ? *nominal : CalibratedModel::FromRobot(*truth);
+    const CalibratedModel planner = nominal ? *nominal : CalibratedModel::from_robot(*truth);
     fit_design_box_to_robot(planner.robot, design);
     auto d = cdpr::design_poses(planner, design);
     if (!d.ok()) return with_context(d.status(), "--design " + std::to_string(args.design));
@@ -59,7 +59,7 @@ Result<Output> simulate(const SimulateArgs& args) {
   options.reference_tension = args.reference_tension;
   for (const int j : args.reference_poses) {
     if (j < 0 || j >= static_cast<int>(list->poses.size())) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "--reference-poses: pose %d is not in %s (it has %zu poses)", j,
                            poses_source.c_str(), list->poses.size());
     }
@@ -75,7 +75,7 @@ Result<Output> simulate(const SimulateArgs& args) {
   const CalibratedModel& truth_model = *homed;
   auto sim = simulate_measurements(truth_model, list->poses, args.noise, args.seed, options);
   if (!sim.ok()) {
-    return Status::Error(sim.status().code(), "simulating %s at the poses of %s: %.*s",
+    return Status::error(sim.status().code(), "simulating %s at the poses of %s: %.*s",
                          args.config.c_str(), poses_source.c_str(),
                          static_cast<int>(sim.status().message().size()),
                          sim.status().message().data());

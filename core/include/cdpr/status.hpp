@@ -84,8 +84,8 @@ class Status {
   constexpr Status() = default;
   Status(ErrorCode code, std::string_view message) : code_(code) { set(message); }
 
-  // printf-style constructor for messages with values: Status::Error(kTimeout, "node %d ...", id)
-  [[gnu::format(printf, 2, 3)]] static Status Error(ErrorCode code, const char* fmt, ...) {
+  // printf-style constructor for messages with values: Status::error(kTimeout, "node %d ...", id)
+  [[gnu::format(printf, 2, 3)]] static Status error(ErrorCode code, const char* fmt, ...) {
     Status s;
     s.code_ = code;
     va_list args;
@@ -94,7 +94,7 @@ class Status {
     va_end(args);
     return s;
   }
-  static constexpr Status Ok() { return {}; }
+  static constexpr Status success() { return {}; }
 
   bool ok() const { return code_ == ErrorCode::kOk; }
   explicit operator bool() const { return ok(); }

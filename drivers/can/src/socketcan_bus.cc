@@ -87,19 +87,19 @@ Result<std::unique_ptr<SocketCanBus>> SocketCanBus::open(const std::string& ifna
                                                          const SocketCanOptions& options) {
   const char* n = ifname.c_str();
   if (ifname.empty() || ifname.size() >= IFNAMSIZ) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "'%s': not a valid interface name (1..%d characters)", n, IFNAMSIZ - 1);
   }
   const int fd = ::socket(PF_CAN, SOCK_RAW | SOCK_NONBLOCK | SOCK_CLOEXEC, CAN_RAW);
   if (fd < 0) {
     const int err = errno;
     if (err == EAFNOSUPPORT || err == EPROTONOSUPPORT || err == ESOCKTNOSUPPORT) {
-      return Status::Error(ErrorCode::kUnavailable,
+      return Status::error(ErrorCode::kUnavailable,
                            "%s: this kernel has no SocketCAN support (socket(AF_CAN, CAN_RAW): "
                            "%s); load can/can-raw or use tests/vcan/vcan-run",
                            n, errtext(err));
     }
-    return Status::Error(ErrorCode::kIoError, "%s: socket(AF_CAN, CAN_RAW): %s", n, errtext(err));
+    return Status::error(ErrorCode::kIoError, "%s: socket(AF_CAN, CAN_RAW): %s", n, errtext(err));
   }
   FdCloser closer(fd);
 
@@ -109,32 +109,32 @@ Result<std::unique_ptr<SocketCanBus>> SocketCanBus::open(const std::string& ifna
   if (::ioctl(fd, SIOCGIFINDEX, &ifr) < 0) {
     const int err = errno;
     if (err == ENODEV) {
-      return Status::Error(ErrorCode::kNotFound, "%s: no such CAN interface", n);
+      return Status::error(ErrorCode::kNotFound, "%s: no such CAN interface", n);
     }
-    return Status::Error(ErrorCode::kIoError, "%s: SIOCGIFINDEX: %s", n, errtext(err));
+    return Status::error(ErrorCode::kIoError, "%s: SIOCGIFINDEX: %s", n, errtext(err));
   }
   const int ifindex = ifr.ifr_ifindex;
 
   ifr = make_ifreq(ifname);
   if (::ioctl(fd, SIOCGIFHWADDR, &ifr) == 0 && ifr.ifr_hwaddr.sa_family != ARPHRD_CAN) {
-    return Status::Error(ErrorCode::kInvalidArgument, "%s is not a CAN interface (link type %u)", n,
+    return Status::error(ErrorCode::kInvalidArgument, "%s is not a CAN interface (link type %u)", n,
                          static_cast<unsigned>(ifr.ifr_hwaddr.sa_family));
   }
 
   ifr = make_ifreq(ifname);
   if (::ioctl(fd, SIOCGIFFLAGS, &ifr) < 0) {
-    return Status::Error(ErrorCode::kIoError, "%s: SIOCGIFFLAGS: %s", n, errtext(errno));
+    return Status::error(ErrorCode::kIoError, "%s: SIOCGIFFLAGS: %s", n, errtext(errno));
   }
   if ((static_cast<unsigned>(ifr.ifr_flags) & IFF_UP) == 0) {
-    return Status::Error(ErrorCode::kUnavailable, "%s is down (ip link set %s up)", n, n);
+    return Status::error(ErrorCode::kUnavailable, "%s is down (ip link set %s up)", n, n);
   }
 
   auto set_opt = [&](int level, int opt, const void* value, socklen_t len,
                      const char* what) -> Status {
     if (::setsockopt(fd, level, opt, value, len) < 0) {
-      return Status::Error(ErrorCode::kIoError, "%s: setsockopt(%s): %s", n, what, errtext(errno));
+      return Status::error(ErrorCode::kIoError, "%s: setsockopt(%s): %s", n, what, errtext(errno));
     }
-    return Status::Ok();
+    return Status::success();
   };
 
   const can_err_mask_t err_mask = options.error_mask & CAN_ERR_MASK;
@@ -166,10 +166,10 @@ Result<std::unique_ptr<SocketCanBus>> SocketCanBus::open(const std::string& ifna
   if (::bind(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof(addr)) < 0) {
     const int err = errno;
     if (err == ENETDOWN) {
-      return Status::Error(ErrorCode::kUnavailable, "%s is down", n);
+      return Status::error(ErrorCode::kUnavailable, "%s is down", n);
     }
-    if (err == ENODEV) return Status::Error(ErrorCode::kNotFound, "%s: no such CAN interface", n);
-    return Status::Error(ErrorCode::kIoError, "%s: bind: %s", n, errtext(err));
+    if (err == ENODEV) return Status::error(ErrorCode::kNotFound, "%s: no such CAN interface", n);
+    return Status::error(ErrorCode::kIoError, "%s: bind: %s", n, errtext(err));
   }
   return std::unique_ptr<SocketCanBus>(new SocketCanBus(closer.release(), ifname, granted));
 }
@@ -201,23 +201,23 @@ Status SocketCanBus::send(const Frame& frame) {
   const ssize_t w = ::write(fd_, &cf, sizeof(cf));
   if (w == static_cast<ssize_t>(sizeof(cf))) {
     sent_.fetch_add(1, std::memory_order_relaxed);
-    return Status::Ok();
+    return Status::success();
   }
   if (w >= 0) {
-    return Status::Error(ErrorCode::kIoError, "%s: short write (%zd bytes)", name_.c_str(), w);
+    return Status::error(ErrorCode::kIoError, "%s: short write (%zd bytes)", name_.c_str(), w);
   }
   const int err = errno;
   switch (err) {
     case EAGAIN:
     case ENOBUFS:
-      return Status::Error(ErrorCode::kUnavailable, "%s: transmit queue full", name_.c_str());
+      return Status::error(ErrorCode::kUnavailable, "%s: transmit queue full", name_.c_str());
     case ENETDOWN:
-      return Status::Error(ErrorCode::kUnavailable, "%s is down", name_.c_str());
+      return Status::error(ErrorCode::kUnavailable, "%s is down", name_.c_str());
     case EINVAL:
-      return Status::Error(ErrorCode::kInvalidArgument, "%s: kernel refused the frame: %s",
+      return Status::error(ErrorCode::kInvalidArgument, "%s: kernel refused the frame: %s",
                            name_.c_str(), errtext(err));
     default:
-      return Status::Error(ErrorCode::kIoError, "%s: write: %s", name_.c_str(), errtext(err));
+      return Status::error(ErrorCode::kIoError, "%s: write: %s", name_.c_str(), errtext(err));
   }
 }
 
@@ -250,12 +250,12 @@ Status SocketCanBus::read_one(Frame& frame) {
     const int err = errno;
     if (err == EAGAIN || err == EINTR) return Status(ErrorCode::kTimeout, "");
     if (err == ENETDOWN) {
-      return Status::Error(ErrorCode::kUnavailable, "%s is down", name_.c_str());
+      return Status::error(ErrorCode::kUnavailable, "%s is down", name_.c_str());
     }
-    return Status::Error(ErrorCode::kIoError, "%s: recvmsg: %s", name_.c_str(), errtext(err));
+    return Status::error(ErrorCode::kIoError, "%s: recvmsg: %s", name_.c_str(), errtext(err));
   }
   if (r != static_cast<ssize_t>(sizeof(cf))) {
-    return Status::Error(ErrorCode::kProtocolError, "%s: unexpected %zd-byte CAN frame (CAN FD?)",
+    return Status::error(ErrorCode::kProtocolError, "%s: unexpected %zd-byte CAN frame (CAN FD?)",
                          name_.c_str(), r);
   }
   std::int64_t stamp = 0;
@@ -289,7 +289,7 @@ Status SocketCanBus::read_one(Frame& frame) {
     if (!frame.rtr) std::memcpy(frame.data.data(), cf.data, frame.dlc);
   }
   received_.fetch_add(1, std::memory_order_relaxed);
-  return Status::Ok();
+  return Status::success();
 }
 
 Status SocketCanBus::receive(Frame& frame, std::chrono::nanoseconds timeout) {
@@ -303,7 +303,7 @@ Status SocketCanBus::receive(Frame& frame, std::chrono::nanoseconds timeout) {
     clock_gettime(CLOCK_MONOTONIC, &now);
     const std::int64_t left = deadline - to_ns(now);
     if (left <= 0) {
-      return Status::Error(ErrorCode::kTimeout, "%s: no CAN frame within %lld us", name_.c_str(),
+      return Status::error(ErrorCode::kTimeout, "%s: no CAN frame within %lld us", name_.c_str(),
                            static_cast<long long>(timeout.count() / 1000));
     }
     pollfd p{fd_, POLLIN, 0};
@@ -311,10 +311,10 @@ Status SocketCanBus::receive(Frame& frame, std::chrono::nanoseconds timeout) {
                         static_cast<long>(left % 1'000'000'000LL)};
     const int pr = ::ppoll(&p, 1, &wait, nullptr);
     if (pr < 0 && errno != EINTR) {
-      return Status::Error(ErrorCode::kIoError, "%s: poll: %s", name_.c_str(), errtext(errno));
+      return Status::error(ErrorCode::kIoError, "%s: poll: %s", name_.c_str(), errtext(errno));
     }
     if (pr > 0 && (p.revents & (POLLERR | POLLNVAL)) != 0 && (p.revents & POLLIN) == 0) {
-      return Status::Error(ErrorCode::kIoError, "%s: socket error while waiting", name_.c_str());
+      return Status::error(ErrorCode::kIoError, "%s: socket error while waiting", name_.c_str());
     }
   }
 }

@@ -137,7 +137,7 @@ Status VirtualCanEndpoint::send(const Frame& frame) {
   std::lock_guard lock(state_->mutex);
   state_->deliver(f, queue_.get());
   ++queue_->stats.frames_sent;
-  return Status::Ok();
+  return Status::success();
 }
 
 Status VirtualCanEndpoint::receive(Frame& frame, std::chrono::nanoseconds timeout) {
@@ -146,14 +146,14 @@ Status VirtualCanEndpoint::receive(Frame& frame, std::chrono::nanoseconds timeou
   if (q.size == 0) {
     if (timeout.count() <= 0 || !state_->clock.real_time() ||
         !q.ready.wait_for(lock, timeout, [&q] { return q.size > 0; })) {
-      return Status::Error(ErrorCode::kTimeout, "%s: no CAN frame within %lld us", name_.c_str(),
+      return Status::error(ErrorCode::kTimeout, "%s: no CAN frame within %lld us", name_.c_str(),
                            static_cast<long long>(timeout.count() / 1000));
     }
   }
   frame = q.pop();
   ++q.stats.frames_received;
   if (frame.error) ++q.stats.error_frames;
-  return Status::Ok();
+  return Status::success();
 }
 
 BusStats VirtualCanEndpoint::stats() const {

@@ -140,7 +140,7 @@ std::uint16_t Supervisor::step(std::uint16_t statusword, Timestamp now) {
   if (s != state_ || !started_) {
     if ((s == State::kFault || s == State::kFaultReactionActive) && !in_fault()) {
       became_faulted_ = true;
-      error_ = Status::Error(ErrorCode::kUnavailable, "node %u: drive in %s (statusword 0x%04X)",
+      error_ = Status::error(ErrorCode::kUnavailable, "node %u: drive in %s (statusword 0x%04X)",
                              unsigned{node_}, to_string(s).data(), unsigned{statusword});
     }
     state_ = s;
@@ -161,7 +161,7 @@ std::uint16_t Supervisor::step(std::uint16_t statusword, Timestamp now) {
     became_stuck_ = true;
     const std::string_view cmd =
         s == State::kFault ? std::string_view("fault reset") : command_name(last_command_);
-    error_ = Status::Error(ErrorCode::kTimeout, "node %u: stuck in %s for %.0f ms after %.*s",
+    error_ = Status::error(ErrorCode::kTimeout, "node %u: stuck in %s for %.0f ms after %.*s",
                            unsigned{node_}, to_string(s).data(), to_ms(now - since_),
                            static_cast<int>(cmd.size()), cmd.data());
   }

@@ -52,10 +52,10 @@ using config::YamlField;
 
 // A duration in milliseconds within 0..max_ms.
 Status millis(const YamlField& f, double max_ms, nanoseconds& out) {
-  if (!f.present()) return Status::Ok();
+  if (!f.present()) return Status::success();
   CDPR_ASSIGN_OR_RETURN(const double v, f.number_in(0.0, max_ms, "ms"));
   out = from_ms(v);
-  return Status::Ok();
+  return Status::success();
 }
 
 // "0x6041:00" (index:sub in hexadecimal).
@@ -75,7 +75,7 @@ Status address(const YamlField& f, const std::string& s, ObjectAddress& out) {
     return f.error("object '" + s + "' is not INDEX:SUB in hexadecimal");
   }
   out = ObjectAddress{static_cast<std::uint16_t>(idx), static_cast<std::uint8_t>(sub)};
-  return Status::Ok();
+  return Status::success();
 }
 
 // "0x6041:00 u16" (index:sub type).
@@ -89,7 +89,7 @@ Status mapping(const YamlField& f, PdoEntry& out) {
     return f.error("type '" + type + "' is not one of i8 u8 i16 u16 i32 u32");
   }
   if (!rest.empty()) return f.error("unexpected '" + rest + "' after the type");
-  return Status::Ok();
+  return Status::success();
 }
 
 Status parse_master(const YamlField& m, MasterConfig& c) {
@@ -123,7 +123,7 @@ Status parse_master(const YamlField& m, MasterConfig& c) {
   }
   CDPR_RETURN_IF_ERROR(m.optional("reset_communication", c.reset_communication));
   CDPR_RETURN_IF_ERROR(m.optional("quick_stop_on_fault", c.quick_stop_on_fault));
-  return Status::Ok();
+  return Status::success();
 }
 
 Status parse_pdo_list(const YamlField& list, PdoDirection dir, std::vector<PdoConfig>& out) {
@@ -158,7 +158,7 @@ Status parse_pdo_list(const YamlField& list, PdoDirection dir, std::vector<PdoCo
     }
     out.push_back(std::move(c));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 // A node's fields: in the node's entry first, then in its profile.
@@ -194,7 +194,7 @@ Status parse_sdo_writes(const YamlField& list, std::vector<SdoWrite>& out) {
     CDPR_ASSIGN_OR_RETURN(w.value, value.integer(lo, hi));
     out.push_back(w);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status parse_node(const NodeFields& f, NodeConfig& c) {
@@ -250,11 +250,11 @@ Status parse_node(const NodeFields& f, NodeConfig& c) {
   CDPR_RETURN_IF_ERROR(millis(f["mode_switch_timeout_ms"], 60000, d.mode_switch_timeout));
   const auto integer = [&](const char* key, auto& out, std::int64_t lo, std::int64_t hi) {
     const YamlField v = f[key];
-    if (!v.present()) return Status::Ok();
+    if (!v.present()) return Status::success();
     Result<std::int64_t> r = v.integer(lo, hi);
     if (!r.ok()) return r.status();
     out = static_cast<std::remove_reference_t<decltype(out)>>(*r);
-    return Status::Ok();
+    return Status::success();
   };
   CDPR_RETURN_IF_ERROR(
       integer("abort_connection_option", d.abort_connection_option, -32768, 32767));
@@ -269,7 +269,7 @@ Status parse_node(const NodeFields& f, NodeConfig& c) {
   if (const YamlField offset = f["offset"]; offset.present()) {
     CDPR_ASSIGN_OR_RETURN(c.force.offset, offset.numbers(Sign::kAny, "", /*scalar_allowed=*/true));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status parse_document(const YamlField& root, MasterConfig& c) {
@@ -306,7 +306,7 @@ Status parse_document(const YamlField& root, MasterConfig& c) {
     CDPR_RETURN_IF_ERROR(parse_node(f, nc));
     c.nodes.push_back(std::move(nc));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 std::size_t mapped_count(const std::vector<PdoConfig>& pdos) {
@@ -331,29 +331,29 @@ Status validate(const MasterConfig& c) {
   std::set<std::uint32_t> cob_ids{cob::kNmt, cob::kSync, c.heartbeat_cob_id()};
   for (const auto& n : c.nodes) {
     if (!valid_node_id(n.id)) {
-      return Status::Error(ErrorCode::kInvalidArgument, "node %u (%s): id not in 1..127",
+      return Status::error(ErrorCode::kInvalidArgument, "node %u (%s): id not in 1..127",
                            unsigned{n.id}, n.name.c_str());
     }
     if (n.id == c.master_id) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "node %u (%s): id is the master's own node id", unsigned{n.id},
                            n.name.c_str());
     }
     if (!ids.insert(n.id).second) {
-      return Status::Error(ErrorCode::kInvalidArgument, "node %u (%s): id used twice",
+      return Status::error(ErrorCode::kInvalidArgument, "node %u (%s): id used twice",
                            unsigned{n.id}, n.name.c_str());
     }
     for (const auto* list : {&n.rpdos, &n.tpdos}) {
       for (const auto& p : *list) {
         const char* dir = p.direction == PdoDirection::kRpdo ? "RPDO" : "TPDO";
         if (p.cob_id == 0 && p.number > 4) {
-          return Status::Error(ErrorCode::kInvalidArgument,
+          return Status::error(ErrorCode::kInvalidArgument,
                                "node %u (%s): %s%d needs a cob_id (defaults exist for 1..4)",
                                unsigned{n.id}, n.name.c_str(), dir, p.number);
         }
         if (p.entries.empty()) continue;
         if (!cob_ids.insert(p.effective_cob_id(n.id)).second) {
-          return Status::Error(ErrorCode::kInvalidArgument,
+          return Status::error(ErrorCode::kInvalidArgument,
                                "node %u (%s): %s%d COB-ID 0x%03X is used twice", unsigned{n.id},
                                n.name.c_str(), dir, p.number, unsigned{p.effective_cob_id(n.id)});
         }
@@ -361,14 +361,14 @@ Status validate(const MasterConfig& c) {
     }
     if (n.heartbeat_timeout.count() > 0 && n.heartbeat_period.count() > 0 &&
         n.heartbeat_timeout <= n.heartbeat_period) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "node %u (%s): heartbeat timeout %.0f ms must exceed its period %.0f ms",
                            unsigned{n.id}, n.name.c_str(), to_ms(n.heartbeat_timeout),
                            to_ms(n.heartbeat_period));
     }
     if (n.master_heartbeat_timeout.count() > 0 &&
         n.master_heartbeat_timeout <= c.master_heartbeat_period) {
-      return Status::Error(
+      return Status::error(
           ErrorCode::kInvalidArgument,
           "node %u (%s): master heartbeat timeout %.0f ms must exceed the master's "
           "heartbeat period %.0f ms",
@@ -384,7 +384,7 @@ Status validate(const MasterConfig& c) {
       for (const auto& [obj, where] : need) {
         const auto& list = std::string_view(where) == "TPDO" ? n.tpdos : n.rpdos;
         if (!maps(list, obj)) {
-          return Status::Error(ErrorCode::kInvalidArgument,
+          return Status::error(ErrorCode::kInvalidArgument,
                                "node %u (%s): a cia402 drive needs 0x%04X:%02X in its %ss",
                                unsigned{n.id}, n.name.c_str(), unsigned{obj.index},
                                unsigned{obj.sub}, where);
@@ -394,13 +394,13 @@ Status validate(const MasterConfig& c) {
     if (n.kind == NodeKind::kForceSensor) {
       const std::size_t ch = mapped_count(n.tpdos);
       if (ch == 0) {
-        return Status::Error(ErrorCode::kInvalidArgument,
+        return Status::error(ErrorCode::kInvalidArgument,
                              "node %u (%s): a force sensor needs its channels in TPDOs",
                              unsigned{n.id}, n.name.c_str());
       }
       for (const auto* v : {&n.force.gain, &n.force.offset}) {
         if (v->size() != 1 && v->size() != ch) {
-          return Status::Error(ErrorCode::kInvalidArgument,
+          return Status::error(ErrorCode::kInvalidArgument,
                                "node %u (%s): %s has %zu values for %zu channels", unsigned{n.id},
                                n.name.c_str(), v == &n.force.gain ? "gain" : "offset", v->size(),
                                ch);
@@ -408,13 +408,13 @@ Status validate(const MasterConfig& c) {
       }
       for (double g : n.force.gain) {
         if (g == 0) {
-          return Status::Error(ErrorCode::kInvalidArgument, "node %u (%s): a gain is 0",
+          return Status::error(ErrorCode::kInvalidArgument, "node %u (%s): a gain is 0",
                                unsigned{n.id}, n.name.c_str());
         }
       }
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Result<MasterConfig> parse_config(std::string_view yaml, std::string_view source) {
@@ -432,7 +432,7 @@ Result<MasterConfig> parse_config(std::string_view yaml, std::string_view source
   }
   const Status s = validate(c);
   if (!s.ok()) {
-    return Status::Error(s.code(), "%.*s: %.*s", static_cast<int>(source.size()), source.data(),
+    return Status::error(s.code(), "%.*s: %.*s", static_cast<int>(source.size()), source.data(),
                          static_cast<int>(s.message().size()), s.message().data());
   }
   return c;
@@ -441,7 +441,7 @@ Result<MasterConfig> parse_config(std::string_view yaml, std::string_view source
 Result<MasterConfig> load_config(const std::string& path) {
   std::ifstream in(path);
   if (!in) {
-    return Status::Error(ErrorCode::kNotFound, "%s: cannot open the CANopen configuration",
+    return Status::error(ErrorCode::kNotFound, "%s: cannot open the CANopen configuration",
                          path.c_str());
   }
   std::stringstream ss;

@@ -22,7 +22,7 @@ Result<Drive> Drive::bind(const NodeConfig& config, ProcessImage& image) {
   for (const auto& n : needs) {
     const int s = image.find(n.obj);
     if (s < 0) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "node %u: drive PDOs do not map 0x%04X:%02X", unsigned{config.id},
                            unsigned{n.obj.index}, unsigned{n.obj.sub});
     }
@@ -144,7 +144,7 @@ Result<ForceSensor> ForceSensor::bind(const NodeConfig& config, const ProcessIma
     for (const auto& e : p.entries) {
       const int s = image.find(e.object);
       if (s < 0) {
-        return Status::Error(ErrorCode::kInternal, "node %u: channel 0x%04X:%02X not in image",
+        return Status::error(ErrorCode::kInternal, "node %u: channel 0x%04X:%02X not in image",
                              unsigned{config.id}, unsigned{e.object.index}, unsigned{e.object.sub});
       }
       f.slots_.push_back(static_cast<std::uint16_t>(s));
@@ -153,7 +153,7 @@ Result<ForceSensor> ForceSensor::bind(const NodeConfig& config, const ProcessIma
   f.gain_ = config.force.gain;
   f.offset_ = config.force.offset;
   if (f.gain_.size() != f.slots_.size() || f.offset_.size() != f.slots_.size()) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "node %u: %zu channels but %zu gains and %zu offsets", unsigned{config.id},
                          f.slots_.size(), f.gain_.size(), f.offset_.size());
   }

@@ -221,23 +221,23 @@ Status Master::wait_for(const std::function<bool()>& done, std::chrono::nanoseco
   const Timestamp start = hooks_.now();
   while (!done()) {
     if (hooks_.now() - start >= timeout) {
-      return Status::Error(ErrorCode::kTimeout, "%s: not done after %.0f ms", what, to_ms(timeout));
+      return Status::error(ErrorCode::kTimeout, "%s: not done after %.0f ms", what, to_ms(timeout));
     }
     pump_step();
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Master::nmt(NmtCommand cmd, NodeId node_id) {
   const Timestamp now = hooks_.now();
   Status s = bus_.send(nmt_frame(cmd, node_id));
   if (!s.ok()) {
-    return Status::Error(ErrorCode::kIoError, "NMT %s to node %u: %.*s", to_string(cmd).data(),
+    return Status::error(ErrorCode::kIoError, "NMT %s to node %u: %.*s", to_string(cmd).data(),
                          unsigned{node_id}, static_cast<int>(s.message().size()),
                          s.message().data());
   }
   (void)now;
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Master::boot() {
@@ -268,7 +268,7 @@ Status Master::boot() {
     };
     s = wait_for([&] { return missing(booted).empty(); }, config_.boot_timeout, "boot-up");
     if (!s.ok()) {
-      return Status::Error(ErrorCode::kTimeout,
+      return Status::error(ErrorCode::kTimeout,
                            "node %s: no boot-up within %.0f ms after NMT reset communication",
                            missing(booted).c_str(), to_ms(config_.boot_timeout));
     }
@@ -288,7 +288,7 @@ Status Master::boot() {
   Status s =
       wait_for([&] { return missing(operational).empty(); }, config_.boot_timeout, "NMT start");
   if (!s.ok()) {
-    return Status::Error(ErrorCode::kTimeout,
+    return Status::error(ErrorCode::kTimeout,
                          "node %s: not OPERATIONAL within %.0f ms after NMT start",
                          missing(operational).c_str(), to_ms(config_.boot_timeout));
   }
@@ -302,13 +302,13 @@ Status Master::boot() {
   sync_.start(now);
   next_cycle_ = now;
   running_ = true;
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Master::configure_node(NodeId id) {
   NodeRt* n = node(id);
   if (n == nullptr) {
-    return Status::Error(ErrorCode::kNotFound, "node %u: not in the configuration", unsigned{id});
+    return Status::error(ErrorCode::kNotFound, "node %u: not in the configuration", unsigned{id});
   }
   const NodeConfig& c = n->config;
   SdoClient& sdo = *n->sdo;
@@ -366,13 +366,13 @@ Status Master::configure_node(NodeId id) {
     s = set_mode(id, c.drive.mode);
     if (!s.ok()) return s;
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Master::set_mode(NodeId id, Mode mode) {
   NodeRt* n = node(id);
   if (n == nullptr || n->drive < 0) {
-    return Status::Error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
+    return Status::error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
                          unsigned{id});
   }
   SdoClient& sdo = *n->sdo;
@@ -391,7 +391,7 @@ Status Master::set_mode(NodeId id, Mode mode) {
       --exponent;
     }
     if (value > 255) {
-      return Status::Error(ErrorCode::kOutOfRange,
+      return Status::error(ErrorCode::kOutOfRange,
                            "node %u: SYNC period %.4f ms does not fit 0x60C2 (u8 value)",
                            unsigned{id}, ms);
     }
@@ -412,7 +412,7 @@ Status Master::set_mode(NodeId id, Mode mode) {
     shown = *r;
     if (shown == static_cast<std::int8_t>(mode)) break;
     if (hooks_.now() - start >= timeout) {
-      return Status::Error(ErrorCode::kTimeout,
+      return Status::error(ErrorCode::kTimeout,
                            "node %u: 0x6061 shows mode %d %.0f ms after writing 0x6060 = %d (%s)",
                            unsigned{id}, int{shown}, to_ms(timeout), static_cast<int>(mode),
                            to_string(mode).data());
@@ -421,22 +421,22 @@ Status Master::set_mode(NodeId id, Mode mode) {
     (void)wait_for([&] { return hooks_.now() >= until; }, std::chrono::seconds(1), "mode poll");
   }
   drive.set_mode(mode);
-  return Status::Ok();
+  return Status::success();
 }
 
 Status Master::set_actual_position(NodeId id, double position, std::chrono::nanoseconds timeout) {
   NodeRt* n = node(id);
   if (n == nullptr || n->drive < 0) {
-    return Status::Error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
+    return Status::error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
                          unsigned{id});
   }
   Drive& drive = drives_[static_cast<std::size_t>(n->drive)];
   if (!running_) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "node %u: set actual position: the master is not running", unsigned{id});
   }
   if (!drive.enabled()) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "node %u: set actual position needs OPERATION_ENABLED (drive in %s)",
                          unsigned{id}, cia402::to_string(drive.state()).data());
   }
@@ -458,19 +458,19 @@ Status Master::set_actual_position(NodeId id, double position, std::chrono::nano
     const char* what = drive.homing_error() ? "reported a homing error"
                        : !drive.enabled()   ? "left OPERATION_ENABLED"
                                             : "did not report homing attained";
-    return Status::Error(s.ok() ? ErrorCode::kUnavailable : ErrorCode::kTimeout,
+    return Status::error(s.ok() ? ErrorCode::kUnavailable : ErrorCode::kTimeout,
                          "node %u: homing method %d to %d counts: %s after %.0f ms (statusword "
                          "0x%04X)",
                          unsigned{id}, int{method}, counts, what, to_ms(hooks_.now() - t0),
                          unsigned{drive.statusword()});
   }
   if (drive.actual_counts() != counts) {
-    return Status::Error(ErrorCode::kProtocolError,
+    return Status::error(ErrorCode::kProtocolError,
                          "node %u: position actual is %d counts after homing, expected %d",
                          unsigned{id}, drive.actual_counts(), counts);
   }
   if (previous != Mode::kNone && previous != Mode::kHoming) return set_mode(id, previous);
-  return Status::Ok();
+  return Status::success();
 }
 
 void Master::quick_stop_all() {
@@ -489,7 +489,7 @@ Status Master::enable_all(std::chrono::nanoseconds timeout) {
         err = d.supervisor().error();
         if (err.ok())
           err =
-              Status::Error(ErrorCode::kUnavailable, "node %u: drive in fault", unsigned{d.node()});
+              Status::error(ErrorCode::kUnavailable, "node %u: drive in fault", unsigned{d.node()});
         return true;
       }
       all = all && d.enabled();
@@ -501,7 +501,7 @@ Status Master::enable_all(std::chrono::nanoseconds timeout) {
   if (!s.ok()) {
     for (const Drive& d : drives_) {
       if (!d.enabled()) {
-        return Status::Error(
+        return Status::error(
             ErrorCode::kTimeout, "node %u: not OPERATION_ENABLED after %.0f ms (in %s)",
             unsigned{d.node()}, to_ms(timeout), cia402::to_string(d.state()).data());
       }

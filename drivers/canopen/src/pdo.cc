@@ -62,17 +62,17 @@ int ProcessImage::find(ObjectAddress obj) const {
 Result<PdoLayout> PdoLayout::compile(const PdoConfig& config, NodeId node, ProcessImage& image) {
   const char* dir = config.direction == PdoDirection::kRpdo ? "RPDO" : "TPDO";
   if (config.entries.size() > 8 || config.byte_size() > 8) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "node %u: %s%d maps %zu entries of %zu bytes (at most 8 bytes)",
                          unsigned{node}, dir, config.number, config.entries.size(),
                          config.byte_size());
   }
   if (config.number < 1 || config.number > 512) {
-    return Status::Error(ErrorCode::kInvalidArgument, "node %u: %s number %d not in 1..512",
+    return Status::error(ErrorCode::kInvalidArgument, "node %u: %s number %d not in 1..512",
                          unsigned{node}, dir, config.number);
   }
   if (config.cob_id == 0 && config.number > 4) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "node %u: %s%d needs an explicit cob_id (defaults exist for 1..4)",
                          unsigned{node}, dir, config.number);
   }
@@ -146,7 +146,7 @@ Status configure_pdo(SdoClient& sdo, Pump& pump, const PdoConfig& config) {
       if (!s.ok()) return s;
     }
   }
-  if (config.entries.empty()) return Status::Ok();
+  if (config.entries.empty()) return Status::success();
   return sdo.write<std::uint32_t>({comm, 1}, cob_id, pump);
 }
 

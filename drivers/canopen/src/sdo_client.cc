@@ -47,7 +47,7 @@ SdoClient::SdoClient(can::CanBus& bus, NodeId node, SdoTiming timing)
 
 Status SdoClient::start_upload(ObjectAddress a, Timestamp now) {
   if (busy()) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "node %u: SDO upload 0x%04X:%02X while another transfer runs",
                          unsigned{node_}, unsigned{a.index}, unsigned{a.sub});
   }
@@ -60,12 +60,12 @@ Status SdoClient::start_upload(ObjectAddress a, Timestamp now) {
 Status SdoClient::start_download(ObjectAddress a, std::span<const std::uint8_t> data,
                                  Timestamp now) {
   if (busy()) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "node %u: SDO download 0x%04X:%02X while another transfer runs",
                          unsigned{node_}, unsigned{a.index}, unsigned{a.sub});
   }
   if (data.empty()) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "node %u: SDO download 0x%04X:%02X of 0 bytes", unsigned{node_},
                          unsigned{a.index}, unsigned{a.sub});
   }
@@ -82,11 +82,11 @@ Status SdoClient::begin(Timestamp now) {
   attempt_ = 1;
   transfer_stale_ = 0;
   state_ = State::kBusy;
-  result_ = Status::Ok();
+  result_ = Status::success();
   if (now < quiet_until_) {
     phase_ = Phase::kQuiet;
     deadline_ = quiet_until_;
-    return Status::Ok();
+    return Status::success();
   }
   deadline_ = now + timing_.timeout;
   return send_request();
@@ -119,12 +119,12 @@ Status SdoClient::send_request() {
   }
   Status s = bus_.send(f);
   if (!s.ok()) {
-    fail(Status::Error(ErrorCode::kIoError, "node %u: SDO %s 0x%04X:%02X: cannot send: %.*s",
+    fail(Status::error(ErrorCode::kIoError, "node %u: SDO %s 0x%04X:%02X: cannot send: %.*s",
                        unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub},
                        static_cast<int>(s.message().size()), s.message().data()));
     return result_;
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status SdoClient::send_segment() {
@@ -169,7 +169,7 @@ void SdoClient::fail(Status s) {
 
 void SdoClient::finish() {
   state_ = State::kDone;
-  result_ = Status::Ok();
+  result_ = Status::success();
 }
 
 void SdoClient::cancel() {
@@ -181,7 +181,7 @@ void SdoClient::cancel(Timestamp now) {
   last_now_ = now;
   // Nothing was sent yet while the initiate is held back: no abort needed.
   if (phase_ != Phase::kQuiet) send_abort(abort_code::kGeneral, now);
-  fail(Status::Error(ErrorCode::kAborted, "node %u: SDO %s 0x%04X:%02X cancelled by the master",
+  fail(Status::error(ErrorCode::kAborted, "node %u: SDO %s 0x%04X:%02X cancelled by the master",
                      unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub}));
 }
 
@@ -203,13 +203,13 @@ void SdoClient::retry_or_fail(Timestamp now, const char* why) {
   }
   if (why == nullptr) {
     if (transfer_stale_ == 0) {
-      fail(Status::Error(
+      fail(Status::error(
           ErrorCode::kTimeout,
           "node %u: SDO %s 0x%04X:%02X timed out: no answer in %.0f ms (%d attempt%s)",
           unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub},
           to_ms(timing_.timeout), attempt_, attempt_ == 1 ? "" : "s"));
     } else {
-      fail(Status::Error(ErrorCode::kTimeout,
+      fail(Status::error(ErrorCode::kTimeout,
                          "node %u: SDO %s 0x%04X:%02X timed out: no answer in %.0f ms (%d "
                          "attempt%s; %u stale answer%s discarded, last command byte 0x%02X for "
                          "0x%04X:%02X)",
@@ -220,7 +220,7 @@ void SdoClient::retry_or_fail(Timestamp now, const char* why) {
                          unsigned{last_stale_mux_.sub}));
     }
   } else {
-    fail(Status::Error(ErrorCode::kProtocolError, "node %u: SDO %s 0x%04X:%02X: %s (%d attempt%s)",
+    fail(Status::error(ErrorCode::kProtocolError, "node %u: SDO %s 0x%04X:%02X: %s (%d attempt%s)",
                        unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub}, why,
                        attempt_, attempt_ == 1 ? "" : "s"));
   }
@@ -246,7 +246,7 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
   if (!busy() || phase_ == Phase::kQuiet) return discard(f);
   if (f.dlc < 8) {
     send_abort(abort_code::kCommandSpecifier, now);
-    fail(Status::Error(
+    fail(Status::error(
         ErrorCode::kProtocolError, "node %u: SDO %s 0x%04X:%02X: answer with dlc %u (must be 8)",
         unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub}, unsigned{f.dlc}));
     return true;
@@ -264,7 +264,7 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
     if (phase_ == Phase::kInitiate && (!(mux == addr_) || echo)) return discard(f);
     abort_sent_ = 0;
     const std::string_view text = sdo_abort_text(code);
-    fail(Status::Error(ErrorCode::kAborted, "node %u: SDO %s 0x%04X:%02X aborted: 0x%08X %.*s",
+    fail(Status::error(ErrorCode::kAborted, "node %u: SDO %s 0x%04X:%02X aborted: 0x%08X %.*s",
                        unsigned{node_}, op_name(), unsigned{addr_.index}, unsigned{addr_.sub},
                        unsigned{code}, static_cast<int>(text.size()), text.data()));
     return true;
@@ -289,7 +289,7 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
   deadline_ = now + timing_.timeout;
   auto protocol_error = [&](const char* what) {
     send_abort(abort_code::kCommandSpecifier, now);
-    fail(Status::Error(ErrorCode::kProtocolError,
+    fail(Status::error(ErrorCode::kProtocolError,
                        "node %u: SDO %s 0x%04X:%02X: %s (command byte 0x%02X)", unsigned{node_},
                        op_name(), unsigned{addr_.index}, unsigned{addr_.sub}, what, unsigned{cmd}));
   };
@@ -326,7 +326,7 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
                 f.data.begin() + 1 + static_cast<std::ptrdiff_t>(n));
     if (cmd & 0x01) {
       if (expected_size_ != 0 && buf_.size() != expected_size_) {
-        fail(Status::Error(ErrorCode::kProtocolError,
+        fail(Status::error(ErrorCode::kProtocolError,
                            "node %u: SDO upload 0x%04X:%02X: got %zu bytes, server announced %zu",
                            unsigned{node_}, unsigned{addr_.index}, unsigned{addr_.sub}, buf_.size(),
                            expected_size_));
@@ -337,7 +337,7 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
     }
     if (expected_size_ != 0 && buf_.size() > expected_size_) {
       send_abort(abort_code::kGeneral, now);
-      fail(Status::Error(ErrorCode::kProtocolError,
+      fail(Status::error(ErrorCode::kProtocolError,
                          "node %u: SDO upload 0x%04X:%02X: %zu bytes and no last segment, "
                          "server announced %zu",
                          unsigned{node_}, unsigned{addr_.index}, unsigned{addr_.sub}, buf_.size(),

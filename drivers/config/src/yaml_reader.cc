@@ -102,14 +102,14 @@ Result<YamlDocument> YamlDocument::load(const std::string& path, std::string_vie
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     const int err = errno;
-    return Status::Error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
+    return Status::error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
                          "cannot open %.*s %s: %s", static_cast<int>(what.size()), what.data(),
                          path.c_str(), std::strerror(err));
   }
   std::ostringstream text;
   text << in.rdbuf();
   if (in.bad()) {
-    return Status::Error(ErrorCode::kIoError, "cannot read %.*s %s", static_cast<int>(what.size()),
+    return Status::error(ErrorCode::kIoError, "cannot read %.*s %s", static_cast<int>(what.size()),
                          what.data(), path.c_str());
   }
   return parse(text.str(), path);
@@ -188,12 +188,12 @@ Status YamlField::error_at(std::string_view path, std::string_view reason) const
 // ---------------------------------------------------------------------------------------------
 
 Status YamlField::expect_map(std::string_view what) const {
-  if (is_map()) return Status::Ok();
+  if (is_map()) return Status::success();
   return error("expected " + std::string(what) + ", got " + describe());
 }
 
 Status YamlField::expect_list(std::string_view what) const {
-  if (is_list()) return Status::Ok();
+  if (is_list()) return Status::success();
   return error("expected " + std::string(what) + ", got " + describe());
 }
 
@@ -209,7 +209,7 @@ Status YamlField::check_keys(std::initializer_list<std::string_view> known) cons
     if (!ok) return k.error("unknown field (known fields: " + join_names(known) + ")");
     if (!seen.insert(key).second) return k.error("field given twice");
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 YamlField YamlField::operator[](std::string_view key) const {
@@ -367,39 +367,39 @@ Result<std::vector<double>> YamlField::numbers(Sign sign, std::string_view unit,
 Status YamlField::optional(std::string_view key, double& out, Sign sign,
                            std::string_view unit) const {
   const YamlField f = (*this)[key];
-  if (!f.present()) return Status::Ok();
+  if (!f.present()) return Status::success();
   Result<double> v = f.number(sign, unit);
   if (!v.ok()) return v.status();
   out = *v;
-  return Status::Ok();
+  return Status::success();
 }
 
 Status YamlField::optional(std::string_view key, bool& out) const {
   const YamlField f = (*this)[key];
-  if (!f.present()) return Status::Ok();
+  if (!f.present()) return Status::success();
   Result<bool> v = f.boolean();
   if (!v.ok()) return v.status();
   out = *v;
-  return Status::Ok();
+  return Status::success();
 }
 
 Status YamlField::optional(std::string_view key, std::string& out) const {
   const YamlField f = (*this)[key];
-  if (!f.present()) return Status::Ok();
+  if (!f.present()) return Status::success();
   Result<std::string> v = f.text();
   if (!v.ok()) return v.status();
   out = std::move(*v);
-  return Status::Ok();
+  return Status::success();
 }
 
 Status YamlField::optional_choice(std::string_view key, int& index,
                                   std::initializer_list<std::string_view> choices) const {
   const YamlField f = (*this)[key];
-  if (!f.present()) return Status::Ok();
+  if (!f.present()) return Status::success();
   Result<int> v = f.choice(choices);
   if (!v.ok()) return v.status();
   index = *v;
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace cdpr::config

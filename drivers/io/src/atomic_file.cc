@@ -14,7 +14,7 @@ namespace cdpr::io {
 namespace {
 
 Status os_error(int err, const char* what, const std::string& path) {
-  return Status::Error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
+  return Status::error(err == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
                        "cannot %s %s: %s", what, path.c_str(), std::strerror(err));
 }
 
@@ -45,7 +45,7 @@ Status write_all(int fd, std::string_view contents, const std::string& temp) {
     p += n;
     left -= static_cast<std::size_t>(n);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status fsync_directory(const std::string& dir) {
@@ -56,7 +56,7 @@ Status fsync_directory(const std::string& dir) {
   ::close(fd);
   // Some file systems cannot sync a directory (EINVAL); the rename itself is still atomic.
   if (rc != 0 && err != EINVAL) return os_error(err, "flush the directory", dir);
-  return Status::Ok();
+  return Status::success();
 }
 
 // Writes and flushes a new temporary beside `path`; returns its name.
@@ -100,7 +100,7 @@ Status AtomicFileSet::stage(const std::string& path, std::string_view contents) 
     return temp.status();
   }
   files_.push_back({path, std::move(*temp)});
-  return Status::Ok();
+  return Status::success();
 }
 
 Status AtomicFileSet::commit() {
@@ -119,7 +119,7 @@ Status AtomicFileSet::commit() {
   }
   files_.clear();
   for (const std::string& dir : directories) CDPR_RETURN_IF_ERROR(fsync_directory(dir));
-  return Status::Ok();
+  return Status::success();
 }
 
 void AtomicFileSet::abandon() {

@@ -35,11 +35,11 @@ Status LaserConfig::validate() const {
   if (Status s = link.validate(); !s.ok()) return with_context("laser '" + name + "': ", s);
   if (Status s = map.validate(); !s.ok()) return with_context("laser '" + name + "': ", s);
   if (!(poll_rate_hz >= 0.1 && poll_rate_hz <= 1000.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "laser '%s': poll_rate %g Hz is outside 0.1..1000", name.c_str(),
                          poll_rate_hz);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 LaserSensor::LaserSensor(LaserConfig config)
@@ -51,13 +51,13 @@ LaserSensor::~LaserSensor() {
 
 Status LaserSensor::start() {
   CDPR_RETURN_IF_ERROR(config_.validate());
-  if (thread_.joinable()) return Status::Ok();
+  if (thread_.joinable()) return Status::success();
   {
     std::lock_guard<std::mutex> lk(stop_mutex_);
     stop_requested_ = false;
   }
   thread_ = std::thread([this] { poll_loop(); });
-  return Status::Ok();
+  return Status::success();
 }
 
 void LaserSensor::stop() {
@@ -121,7 +121,7 @@ LaserReading LaserSensor::take_reading() {
   if (Status s = config_.map.validate(); !s.ok()) return fail(s);
   if (!link_.connected()) {
     if (t0 < next_connect_ns_) {
-      Status s = Status::Error(
+      Status s = Status::error(
           ErrorCode::kUnavailable, "%s: not connected, next attempt in %.0f ms",
           link_.describe().c_str(), static_cast<double>(next_connect_ns_ - t0) * 1e-6);
       if (!last_connect_error_.ok()) {
@@ -138,7 +138,7 @@ LaserReading LaserSensor::take_reading() {
       return fail(c);
     }
     if (sequence_ > 1) ++reconnects_;
-    last_connect_error_ = Status::Ok();
+    last_connect_error_ = Status::success();
   }
 
   if (map.trigger) {
@@ -176,7 +176,7 @@ LaserReading LaserSensor::take_reading() {
 
 Result<Measurement> LaserSensor::measure(int n, const MeasureOptions& options) {
   if (n < 1 || n > 100000) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "laser '%s': measure(%d): n must be 1..100000", config_.name.c_str(), n);
   }
   CDPR_RETURN_IF_ERROR(config_.validate());
@@ -206,7 +206,7 @@ Result<Measurement> LaserSensor::measure(int n, const MeasureOptions& options) {
   m.used = rm.used;
   m.rejected = rm.rejected;
   if (m.used < min_valid) {
-    Status s = Status::Error(ErrorCode::kUnavailable,
+    Status s = Status::error(ErrorCode::kUnavailable,
                              "laser '%s': measure(%d): %d readings usable, %d needed (%d failed, "
                              "%d outliers); last problem: ",
                              config_.name.c_str(), n, m.used, min_valid, m.failed, m.rejected);

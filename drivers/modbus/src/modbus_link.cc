@@ -59,34 +59,34 @@ Status LinkConfig::validate() const {
       return Status(ErrorCode::kInvalidArgument, "modbus RTU: device is empty");
     }
     if (rtu->baud <= 0 || rtu->baud > 4000000) {
-      return Status::Error(ErrorCode::kInvalidArgument, "modbus RTU %s: baud %d is not valid",
+      return Status::error(ErrorCode::kInvalidArgument, "modbus RTU %s: baud %d is not valid",
                            rtu->device.c_str(), rtu->baud);
     }
     if (rtu->parity != 'N' && rtu->parity != 'E' && rtu->parity != 'O') {
-      return Status::Error(ErrorCode::kInvalidArgument, "modbus RTU %s: parity must be N, E or O",
+      return Status::error(ErrorCode::kInvalidArgument, "modbus RTU %s: parity must be N, E or O",
                            rtu->device.c_str());
     }
     if (rtu->data_bits < 5 || rtu->data_bits > 8) {
-      return Status::Error(ErrorCode::kInvalidArgument, "modbus RTU %s: data bits %d not 5..8",
+      return Status::error(ErrorCode::kInvalidArgument, "modbus RTU %s: data bits %d not 5..8",
                            rtu->device.c_str(), rtu->data_bits);
     }
     if (rtu->stop_bits != 1 && rtu->stop_bits != 2) {
-      return Status::Error(ErrorCode::kInvalidArgument, "modbus RTU %s: stop bits %d not 1 or 2",
+      return Status::error(ErrorCode::kInvalidArgument, "modbus RTU %s: stop bits %d not 1 or 2",
                            rtu->device.c_str(), rtu->stop_bits);
     }
     if (slave_id < 1 || slave_id > 247) {
-      return Status::Error(ErrorCode::kInvalidArgument, "modbus RTU %s: slave id %d is not 1..247",
+      return Status::error(ErrorCode::kInvalidArgument, "modbus RTU %s: slave id %d is not 1..247",
                            rtu->device.c_str(), slave_id);
     }
   } else {
     const auto& tcp = std::get<TcpSettings>(transport);
     if (tcp.host.empty()) return Status(ErrorCode::kInvalidArgument, "modbus TCP: host is empty");
     if (tcp.port < 1 || tcp.port > 65535) {
-      return Status::Error(ErrorCode::kInvalidArgument, "modbus TCP %s: port %d not 1..65535",
+      return Status::error(ErrorCode::kInvalidArgument, "modbus TCP %s: port %d not 1..65535",
                            tcp.host.c_str(), tcp.port);
     }
     if (slave_id < 0 || slave_id > 255) {
-      return Status::Error(ErrorCode::kInvalidArgument, "modbus TCP %s: unit id %d not 0..255",
+      return Status::error(ErrorCode::kInvalidArgument, "modbus TCP %s: unit id %d not 0..255",
                            tcp.host.c_str(), slave_id);
     }
   }
@@ -102,7 +102,7 @@ Status LinkConfig::validate() const {
   if (!(reconnect_delay_s >= 0.0 && reconnect_delay_s <= 60.0)) {
     return Status(ErrorCode::kInvalidArgument, "modbus: reconnect_delay must be 0..60 s");
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 ModbusLink::ModbusLink(LinkConfig config) : config_(std::move(config)) {
@@ -145,7 +145,7 @@ Status ModbusLink::connect() {
   }
   if (ctx_ == nullptr) {
     const int err = errno;
-    return Status::Error(ErrorCode::kInvalidArgument, "%s: cannot create the context: %s",
+    return Status::error(ErrorCode::kInvalidArgument, "%s: cannot create the context: %s",
                          description_.c_str(), modbus_strerror(err));
   }
   std::uint32_t sec = 0;
@@ -158,7 +158,7 @@ Status ModbusLink::connect() {
   if (modbus_set_slave(ctx_, config_.slave_id) != 0) {
     const int err = errno;
     close();
-    return Status::Error(ErrorCode::kInvalidArgument, "%s: slave id rejected: %s",
+    return Status::error(ErrorCode::kInvalidArgument, "%s: slave id rejected: %s",
                          description_.c_str(), modbus_strerror(err));
   }
   if (modbus_connect(ctx_) != 0) {
@@ -168,7 +168,7 @@ Status ModbusLink::connect() {
                            : (err == ETIMEDOUT || err == EINPROGRESS) ? ErrorCode::kTimeout
                            : err == ECONNREFUSED                      ? ErrorCode::kUnavailable
                                                                       : ErrorCode::kIoError;
-    return Status::Error(code, "%s: cannot connect: %s (errno %d)", description_.c_str(),
+    return Status::error(code, "%s: cannot connect: %s (errno %d)", description_.c_str(),
                          modbus_strerror(err), err);
   }
   connected_ = true;
@@ -186,37 +186,37 @@ Status ModbusLink::connect() {
     }
   }
   modbus_flush(ctx_);
-  return Status::Ok();
+  return Status::success();
 }
 
 Status ModbusLink::failure(int err, const char* what, int tries) {
   const char* d = description_.c_str();
   if (err == ETIMEDOUT) {
     ++counters_.timeouts;
-    return Status::Error(ErrorCode::kTimeout,
+    return Status::error(ErrorCode::kTimeout,
                          "%s: %s: no answer from slave %d within %.0f ms (%d tries): wrong slave "
                          "id, wiring, baud rate or parity?",
                          d, what, config_.slave_id, config_.response_timeout_s * 1e3, tries);
   }
   if (err == EMBBADCRC) {
     ++counters_.crc_errors;
-    return Status::Error(ErrorCode::kProtocolError, "%s: %s: CRC error in the answer (%d tries)", d,
+    return Status::error(ErrorCode::kProtocolError, "%s: %s: CRC error in the answer (%d tries)", d,
                          what, tries);
   }
   if (is_exception(err)) {
     ++counters_.exceptions;
     const int code = err - MODBUS_ENOBASE;
     const std::string_view text = exception_text(code);
-    return Status::Error(ErrorCode::kAborted, "%s: %s: Modbus exception %d (%.*s)", d, what, code,
+    return Status::error(ErrorCode::kAborted, "%s: %s: Modbus exception %d (%.*s)", d, what, code,
                          static_cast<int>(text.size()), text.data());
   }
   ++counters_.other_errors;
   if (err == EMBBADSLAVE || err == EMBBADDATA || err == EMBBADEXC || err == EMBUNKEXC ||
       err == EMBMDATA) {
-    return Status::Error(ErrorCode::kProtocolError, "%s: %s: %s (%d tries)", d, what,
+    return Status::error(ErrorCode::kProtocolError, "%s: %s: %s (%d tries)", d, what,
                          modbus_strerror(err), tries);
   }
-  return Status::Error(ErrorCode::kIoError, "%s: %s: %s (errno %d)", d, what, modbus_strerror(err),
+  return Status::error(ErrorCode::kIoError, "%s: %s: %s (errno %d)", d, what, modbus_strerror(err),
                        err);
 }
 
@@ -228,11 +228,11 @@ Status ModbusLink::read_registers(RegisterTable table, std::uint16_t pdu_address
                 table == RegisterTable::kInput ? "input" : "holding", count == 1 ? "" : "s",
                 pdu_address);
   if (count < 1 || count > MODBUS_MAX_READ_REGISTERS || pdu_address + count > 65536) {
-    return Status::Error(ErrorCode::kInvalidArgument, "%s: %s: count must be 1..125 within 65535",
+    return Status::error(ErrorCode::kInvalidArgument, "%s: %s: count must be 1..125 within 65535",
                          description_.c_str(), what.data());
   }
   if (!connected_) {
-    return Status::Error(ErrorCode::kUnavailable, "%s: %s: not connected", description_.c_str(),
+    return Status::error(ErrorCode::kUnavailable, "%s: %s: not connected", description_.c_str(),
                          what.data());
   }
   int err = 0;
@@ -245,7 +245,7 @@ Status ModbusLink::read_registers(RegisterTable table, std::uint16_t pdu_address
                       : modbus_read_registers(ctx_, pdu_address, count, out.data());
     if (n == count) {
       ++counters_.requests;
-      return Status::Ok();
+      return Status::success();
     }
     err = n < 0 ? errno : EMBBADDATA;
     if (is_exception(err)) break;  // the slave answered; asking again changes nothing
@@ -266,7 +266,7 @@ Status ModbusLink::write_register(std::uint16_t pdu_address, std::uint16_t value
   std::snprintf(what.data(), what.size(), "write holding register at PDU address %u = %u",
                 pdu_address, value);
   if (!connected_) {
-    return Status::Error(ErrorCode::kUnavailable, "%s: %s: not connected", description_.c_str(),
+    return Status::error(ErrorCode::kUnavailable, "%s: %s: not connected", description_.c_str(),
                          what.data());
   }
   int err = 0;
@@ -276,7 +276,7 @@ Status ModbusLink::write_register(std::uint16_t pdu_address, std::uint16_t value
     if (attempt > 0) ++counters_.retries;
     if (modbus_write_register(ctx_, pdu_address, value) == 1) {
       ++counters_.requests;
-      return Status::Ok();
+      return Status::success();
     }
     err = errno;
     if (is_exception(err)) break;

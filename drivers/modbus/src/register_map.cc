@@ -158,72 +158,72 @@ double RegisterMap::resolution_m() const {
 Status RegisterMap::validate() const {
   const char* n = name.c_str();
   if (address_base != 0 && address_base != 1) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "register map '%s': address_base is %d, must be 0 or 1", n, address_base);
   }
   if (address < address_base) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "register map '%s': value.register %u is below address_base %d", n,
                          address, address_base);
   }
   if (!std::isfinite(scale) || scale == 0.0) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "register map '%s': value.scale must be finite and non-zero", n);
   }
   if (!std::isfinite(offset)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "register map '%s': value.offset must be finite", n);
   }
   if (!std::isfinite(min_m) || !std::isfinite(max_m) || !(min_m < max_m)) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "register map '%s': range needs finite min < max (got %g, %g)", n, min_m,
                          max_m);
   }
   const int start = block_start();
   const int count = block_count();
   if (start < address_base) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "register map '%s': read.start %d is below address_base %d", n, start,
                          address_base);
   }
   if (count < 1 || count > 125) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "register map '%s': read.count %d must be 1..125 (Modbus limit)", n,
                          count);
   }
   if (start - address_base + count > 65536) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "register map '%s': read block runs past register 65535", n);
   }
   if (address < start || address + register_count(type) > start + count) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "register map '%s': value.register %u (%d registers) is not inside the "
                          "read block %d..%d",
                          n, address, register_count(type), start, start + count - 1);
   }
   if (quality) {
     if (quality->address < address_base) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "register map '%s': quality.register %u is below address_base %d", n,
                            quality->address, address_base);
     }
     if (quality->ok_values.empty()) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "register map '%s': quality.ok must list at least one value", n);
     }
   }
   if (trigger) {
     if (trigger->address < address_base) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "register map '%s': trigger.register %u is below address_base %d", n,
                            trigger->address, address_base);
     }
     if (!std::isfinite(trigger->settle_s) || trigger->settle_s < 0.0 || trigger->settle_s > 1.0) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "register map '%s': trigger.settle must be 0..1 s", n);
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Interpretation interpret(const RegisterMap& map, std::span<const std::uint16_t> block,
@@ -233,7 +233,7 @@ Interpretation interpret(const RegisterMap& map, std::span<const std::uint16_t> 
   const int offset = map.address - map.block_start();
   if (offset < 0 || block.size() < static_cast<std::size_t>(offset + register_count(map.type))) {
     out.status = ReadingStatus::kCommError;
-    out.detail = Status::Error(ErrorCode::kInternal,
+    out.detail = Status::error(ErrorCode::kInternal,
                                "laser '%s': answer has %zu registers, value needs %d at offset %d",
                                n, block.size(), register_count(map.type), offset);
     return out;
@@ -259,7 +259,7 @@ Interpretation interpret(const RegisterMap& map, std::span<const std::uint16_t> 
         const bool nt = contains16(map.quality->no_target_values, q);
         out.status = nt ? ReadingStatus::kNoTarget : ReadingStatus::kSensorError;
         out.detail =
-            Status::Error(nt ? ErrorCode::kUnavailable : ErrorCode::kProtocolError,
+            Status::error(nt ? ErrorCode::kUnavailable : ErrorCode::kProtocolError,
                           "laser '%s' quality register %u = 0x%04X (masked 0x%04X): %s", n,
                           map.quality->address, *quality, q, nt ? "no target" : "sensor error");
         return out;
@@ -268,14 +268,14 @@ Interpretation interpret(const RegisterMap& map, std::span<const std::uint16_t> 
   }
   if (contains(map.error_raw, out.raw)) {
     out.status = ReadingStatus::kSensorError;
-    out.detail = Status::Error(ErrorCode::kProtocolError,
+    out.detail = Status::error(ErrorCode::kProtocolError,
                                "laser '%s' register %u: raw %s is the error value", n, map.address,
                                raw_text.data());
     return out;
   }
   if (contains(map.no_target_raw, out.raw)) {
     out.status = ReadingStatus::kNoTarget;
-    out.detail = Status::Error(ErrorCode::kUnavailable,
+    out.detail = Status::error(ErrorCode::kUnavailable,
                                "laser '%s' register %u: raw %s is the no-target value", n,
                                map.address, raw_text.data());
     return out;
@@ -283,14 +283,14 @@ Interpretation interpret(const RegisterMap& map, std::span<const std::uint16_t> 
   if (!std::isfinite(out.raw)) {
     out.status = ReadingStatus::kSensorError;
     out.detail =
-        Status::Error(ErrorCode::kProtocolError,
+        Status::error(ErrorCode::kProtocolError,
                       "laser '%s' register %u: value is not a finite number", n, map.address);
     return out;
   }
   out.distance_m = out.raw * map.scale + map.offset;
   if (out.distance_m < map.min_m || out.distance_m > map.max_m) {
     out.status = ReadingStatus::kOutOfRange;
-    out.detail = Status::Error(ErrorCode::kOutOfRange,
+    out.detail = Status::error(ErrorCode::kOutOfRange,
                                "laser '%s' register %u: %.6f m is outside the valid range "
                                "[%g, %g] m",
                                n, map.address, out.distance_m, map.min_m, map.max_m);

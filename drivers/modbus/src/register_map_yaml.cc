@@ -16,20 +16,20 @@ namespace {
 
 // An optional list of 16-bit register values.
 Status read_u16_list(const YamlField& f, std::vector<std::uint16_t>& out) {
-  if (!f.present()) return Status::Ok();
+  if (!f.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(f.expect_list("a list of integers, e.g. [0, 1]"));
   for (std::size_t i = 0; i < f.size(); ++i) {
     CDPR_ASSIGN_OR_RETURN(const std::int64_t v, f[i].integer(0, 0xFFFF));
     out.push_back(static_cast<std::uint16_t>(v));
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 // An optional list of raw values, e.g. [0xFFFF, -1.5].
 Status read_raw_list(const YamlField& f, std::vector<double>& out) {
-  if (!f.present()) return Status::Ok();
+  if (!f.present()) return Status::success();
   CDPR_ASSIGN_OR_RETURN(out, f.numbers(Sign::kAny, "raw values", /*scalar_allowed=*/false));
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace
@@ -130,7 +130,7 @@ Status parse_register_map_node(const YamlField& root, RegisterMap& m) {
 
   Status s = m.validate();
   if (!s.ok()) return with_context(root.file() + ": ", s);
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace detail

@@ -46,7 +46,7 @@ std::string Metadata::get(std::string_view k) const {
 
 Result<double> Metadata::number(std::string_view k) const {
   if (!has(k)) {
-    return Status::Error(ErrorCode::kNotFound, "metadata '%.*s' is absent",
+    return Status::error(ErrorCode::kNotFound, "metadata '%.*s' is absent",
                          static_cast<int>(k.size()), k.data());
   }
   const std::string v = get(k);
@@ -54,7 +54,7 @@ Result<double> Metadata::number(std::string_view k) const {
   const char* end = v.data() + v.size();
   const auto [ptr, ec] = std::from_chars(v.data(), end, d);
   if (ec != std::errc() || ptr != end || !std::isfinite(d)) {
-    return Status::Error(ErrorCode::kParseError, "metadata '%.*s': '%s' is not a number",
+    return Status::error(ErrorCode::kParseError, "metadata '%.*s': '%s' is not a number",
                          static_cast<int>(k.size()), k.data(), v.c_str());
   }
   return d;
@@ -145,13 +145,13 @@ int CsvTable::column(std::string_view column_name) const {
 Result<std::string> read_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) {
-    return Status::Error(errno == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
+    return Status::error(errno == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
                          "cannot open '%s': %s", path.c_str(), std::strerror(errno));
   }
   std::ostringstream ss;
   ss << in.rdbuf();
   if (in.bad()) {
-    return Status::Error(ErrorCode::kIoError, "cannot read '%s'", path.c_str());
+    return Status::error(ErrorCode::kIoError, "cannot read '%s'", path.c_str());
   }
   return ss.str();
 }
@@ -185,7 +185,7 @@ Result<CsvTable> parse_table(std::string_view text, std::string_view name) {
       const std::string_view v = trim(body.substr(colon + 1));
       for (std::size_t i = 0; i < t.metadata.entries().size(); ++i) {
         if (t.metadata.entries()[i].first == k) {
-          return Status::Error(ErrorCode::kParseError,
+          return Status::error(ErrorCode::kParseError,
                                "%s:%d: metadata key '%.*s' appears twice (first on line %d)", fname,
                                line_no, static_cast<int>(k.size()), k.data(), metadata_lines[i]);
         }
@@ -200,12 +200,12 @@ Result<CsvTable> parse_table(std::string_view text, std::string_view name) {
       const auto names = split_cells(line);
       for (std::size_t c = 0; c < names.size(); ++c) {
         if (names[c].empty()) {
-          return Status::Error(ErrorCode::kParseError, "%s:%d: column %zu: empty column name",
+          return Status::error(ErrorCode::kParseError, "%s:%d: column %zu: empty column name",
                                fname, line_no, c + 1);
         }
         for (std::size_t d = 0; d < c; ++d) {
           if (t.header[d] == names[c]) {
-            return Status::Error(ErrorCode::kParseError,
+            return Status::error(ErrorCode::kParseError,
                                  "%s:%d: column %zu (%.*s): duplicates column %zu", fname, line_no,
                                  c + 1, static_cast<int>(names[c].size()), names[c].data(), d + 1);
           }
@@ -219,13 +219,13 @@ Result<CsvTable> parse_table(std::string_view text, std::string_view name) {
     row.cells = split_cells(line);
     const std::size_t n = row.cells.size(), m = t.header.size();
     if (n < m) {
-      return Status::Error(ErrorCode::kParseError,
+      return Status::error(ErrorCode::kParseError,
                            "%s:%d: column %zu (%s): missing cell (row has %zu cells, header on "
                            "line %d has %zu columns)",
                            fname, line_no, n + 1, t.header[n].c_str(), n, t.header_line, m);
     }
     if (n > m) {
-      return Status::Error(ErrorCode::kParseError,
+      return Status::error(ErrorCode::kParseError,
                            "%s:%d: column %zu: extra cell '%s' (row has %zu cells, header on line "
                            "%d has %zu columns)",
                            fname, line_no, m + 1, shown(row.cells[m]).c_str(), n, t.header_line, m);
@@ -233,22 +233,22 @@ Result<CsvTable> parse_table(std::string_view text, std::string_view name) {
     t.rows.push_back(std::move(row));
   }
   if (t.header_line == 0) {
-    return Status::Error(ErrorCode::kParseError, "%s: no header row", fname);
+    return Status::error(ErrorCode::kParseError, "%s: no header row", fname);
   }
   if (!t.metadata.has(key::kUnits)) {
-    return Status::Error(ErrorCode::kParseError,
+    return Status::error(ErrorCode::kParseError,
                          "%s: no '# units: SI' line before the header (values must be SI: m, rad, "
                          "N, s, kg)",
                          fname);
   }
   if (t.metadata.get(key::kUnits) != kUnitsSI) {
-    return Status::Error(
+    return Status::error(
         ErrorCode::kParseError,
         "%s:%d: units '%s' are not supported; values must be SI (m, rad, N, s, kg)", fname,
         t.units_line, shown(t.metadata.get(key::kUnits)).c_str());
   }
   if (t.rows.empty()) {
-    return Status::Error(ErrorCode::kParseError, "%s:%d: no data rows after the header", fname,
+    return Status::error(ErrorCode::kParseError, "%s:%d: no data rows after the header", fname,
                          t.header_line);
   }
   return t;
@@ -260,7 +260,7 @@ Status cell_error(const CsvTable& t, const CsvRow& row, int col, const char* rea
   va_start(args, reason_fmt);
   std::vsnprintf(reason, sizeof reason, reason_fmt, args);
   va_end(args);
-  return Status::Error(ErrorCode::kParseError, "%s:%d: column %d (%s): %s", t.name.c_str(),
+  return Status::error(ErrorCode::kParseError, "%s:%d: column %d (%s): %s", t.name.c_str(),
                        row.line, col + 1, t.header[static_cast<std::size_t>(col)].c_str(), reason);
 }
 
@@ -269,7 +269,7 @@ Status parse_double(const CsvTable& t, const CsvRow& row, int col, bool allow_em
   if (cell.empty()) {
     if (allow_empty) {
       *out = std::numeric_limits<double>::quiet_NaN();
-      return Status::Ok();
+      return Status::success();
     }
     return cell_error(t, row, col, "empty cell, but this column is required");
   }
@@ -294,7 +294,7 @@ Status parse_double(const CsvTable& t, const CsvRow& row, int col, bool allow_em
     return cell_error(t, row, col, "'%s' is not a finite number", shown(cell).c_str());
   }
   *out = v;
-  return Status::Ok();
+  return Status::success();
 }
 
 Status parse_int(const CsvTable& t, const CsvRow& row, int col, std::int64_t* out) {
@@ -307,12 +307,12 @@ Status parse_int(const CsvTable& t, const CsvRow& row, int col, std::int64_t* ou
     return cell_error(t, row, col, "'%s' is not an integer", shown(cell).c_str());
   }
   *out = v;
-  return Status::Ok();
+  return Status::success();
 }
 
 Status format_metadata(const Metadata& metadata, std::string_view format, std::string* out) {
   if (metadata.has(key::kUnits) && metadata.get(key::kUnits) != kUnitsSI) {
-    return Status::Error(ErrorCode::kInvalidArgument, "metadata units '%s': only SI is written",
+    return Status::error(ErrorCode::kInvalidArgument, "metadata units '%s': only SI is written",
                          metadata.get(key::kUnits).c_str());
   }
   std::string fmt = metadata.has(key::kFormat) ? metadata.get(key::kFormat) : std::string(format);
@@ -321,21 +321,21 @@ Status format_metadata(const Metadata& metadata, std::string_view format, std::s
   for (const auto& [k, v] : metadata.entries()) {
     if (k == key::kFormat || k == key::kUnits) continue;
     if (!is_key(k)) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "metadata key '%s' must be letters, digits, '_', '-' or '.'", k.c_str());
     }
     if (v.find_first_of("\r\n") != std::string::npos) {
-      return Status::Error(ErrorCode::kInvalidArgument, "metadata '%s' holds a line break",
+      return Status::error(ErrorCode::kInvalidArgument, "metadata '%s' holds a line break",
                            k.c_str());
     }
     if (trim(v) != v) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "metadata '%s' starts or ends with blanks (not kept by readers)",
                            k.c_str());
     }
     *out += "# " + k + ": " + v + "\n";
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace detail

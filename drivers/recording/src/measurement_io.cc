@@ -8,14 +8,14 @@ namespace cdpr::recording {
 namespace {
 
 Status sigma_from(const Metadata& md, const char* k, double* sigma) {
-  if (!md.has(k)) return Status::Ok();
+  if (!md.has(k)) return Status::success();
   CDPR_ASSIGN_OR_RETURN(const double v, md.number(k));
   if (!(v > 0.0)) {
-    return Status::Error(ErrorCode::kInvalidArgument, "metadata '%s': %s is not a positive sigma",
+    return Status::error(ErrorCode::kInvalidArgument, "metadata '%s': %s is not a positive sigma",
                          k, md.get(k).c_str());
   }
   *sigma = v;
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace
@@ -37,7 +37,7 @@ Result<MeasurementSet> to_measurement_set(const Recording& rec, const SensorNois
   for (const RecordedPose& p : rec.poses) {
     if (p.lengths.size() != rec.num_cables || p.tensions.size() != rec.num_cables ||
         p.lasers.size() != rec.num_lasers) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "pose %lld: vector sizes do not match the recording's %d cables and %d "
                            "lasers",
                            static_cast<long long>(p.index), rec.num_cables, rec.num_lasers);
@@ -55,7 +55,7 @@ Result<MeasurementSet> to_measurement_set(const Recording& rec, const SensorNois
       if (filled == 6) {
         m.reference = p.reference;
       } else if (filled != 0) {
-        return Status::Error(ErrorCode::kInvalidArgument,
+        return Status::error(ErrorCode::kInvalidArgument,
                              "pose %lld: reference pose has %d of its 6 ref_ cells filled (all "
                              "or none)",
                              static_cast<long long>(p.index), filled);
@@ -96,7 +96,7 @@ Result<Recording> from_measurement_set(const MeasurementSet& set, Metadata metad
     if (p.cable_lengths.size() != rec.num_cables ||
         (p.tensions.size() != 0 && p.tensions.size() != rec.num_cables) ||
         p.laser_distances.size() != rec.num_lasers) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "measurement set: pose %zu has other vector sizes than pose 0", j);
     }
     RecordedPose r;

@@ -35,27 +35,27 @@ int indexed(std::string_view column, std::string_view prefix) {
 }
 
 Status check_format(const CsvTable& t, const char* expected) {
-  if (!t.metadata.has(key::kFormat)) return Status::Ok();
+  if (!t.metadata.has(key::kFormat)) return Status::success();
   const std::string f = t.metadata.get(key::kFormat);
   const std::string_view want(expected);
   const std::string_view family = want.substr(0, want.find(' '));
   if (f.compare(0, family.size(), family) != 0 ||
       (f.size() > family.size() && f[family.size()] != ' ')) {
-    return Status::Error(ErrorCode::kParseError, "%s: format '%s' is not '%s'", t.name.c_str(),
+    return Status::error(ErrorCode::kParseError, "%s: format '%s' is not '%s'", t.name.c_str(),
                          f.c_str(), expected);
   }
   if (f != want) {
-    return Status::Error(ErrorCode::kParseError,
+    return Status::error(ErrorCode::kParseError,
                          "%s: format '%s' is not supported (this build reads '%s')", t.name.c_str(),
                          f.c_str(), expected);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status header_error(const CsvTable& t, const char* fmt, const char* what) {
   char reason[160];
   std::snprintf(reason, sizeof reason, fmt, what);
-  return Status::Error(ErrorCode::kParseError, "%s:%d: %s", t.name.c_str(), t.header_line, reason);
+  return Status::error(ErrorCode::kParseError, "%s:%d: %s", t.name.c_str(), t.header_line, reason);
 }
 
 // Column layout of a recording, resolved from its header.
@@ -93,7 +93,7 @@ Status resolve_layout(const CsvTable& t, Layout* layout) {
       }
     }
     if (!known) {
-      return Status::Error(ErrorCode::kParseError, "%s:%d: column %zu (%s): unknown column",
+      return Status::error(ErrorCode::kParseError, "%s:%d: column %zu (%s): unknown column",
                            t.name.c_str(), t.header_line, c + 1, h.c_str());
     }
   }
@@ -113,14 +113,14 @@ Status resolve_layout(const CsvTable& t, Layout* layout) {
       }
       out->push_back(it->second);
     }
-    return Status::Ok();
+    return Status::success();
   };
   CDPR_RETURN_IF_ERROR(contiguous(lengths, "length_", &layout->lengths));
   CDPR_RETURN_IF_ERROR(contiguous(tensions, "tension_", &layout->tensions));
   CDPR_RETURN_IF_ERROR(contiguous(lasers, "laser_", &layout->lasers));
   if (layout->lengths.empty()) return header_error(t, "missing required column '%s'", "length_1");
   if (layout->tensions.size() != layout->lengths.size()) {
-    return Status::Error(ErrorCode::kParseError,
+    return Status::error(ErrorCode::kParseError,
                          "%s:%d: %zu length_ columns but %zu tension_ columns (one of each per "
                          "cable)",
                          t.name.c_str(), t.header_line, layout->lengths.size(),
@@ -138,25 +138,25 @@ Status resolve_layout(const CsvTable& t, Layout* layout) {
       }
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status check_size(const char* what, Eigen::Index got, int want, std::int64_t pose) {
   if (got != want) {
-    return Status::Error(ErrorCode::kInvalidArgument, "pose %lld: %ld %s values, expected %d",
+    return Status::error(ErrorCode::kInvalidArgument, "pose %lld: %ld %s values, expected %d",
                          static_cast<long long>(pose), static_cast<long>(got), what, want);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 Status append(std::string* out, double v, const char* what, std::int64_t pose) {
   if (std::isinf(v)) {
-    return Status::Error(ErrorCode::kInvalidArgument, "pose %lld: %s is infinite",
+    return Status::error(ErrorCode::kInvalidArgument, "pose %lld: %s is infinite",
                          static_cast<long long>(pose), what);
   }
   *out += ',';
   *out += format_number(v);
-  return Status::Ok();
+  return Status::success();
 }
 
 // "writing <path>: <message>"; a long path is shortened in its middle, the reason is kept.
@@ -212,7 +212,7 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
           return s;
         }
       }
-      return Status::Ok();
+      return Status::success();
     };
     CDPR_RETURN_IF_ERROR(fill(layout.lengths, &p.lengths));
     CDPR_RETURN_IF_ERROR(fill(layout.tensions, &p.tensions));
@@ -242,7 +242,7 @@ Result<Recording> read_recording(const std::string& path) {
 
 Result<std::string> format_recording(const Recording& rec) {
   if (rec.num_cables < 1 || rec.num_lasers < 1) {
-    return Status::Error(ErrorCode::kInvalidArgument,
+    return Status::error(ErrorCode::kInvalidArgument,
                          "a recording needs at least one cable and one laser (has %d and %d)",
                          rec.num_cables, rec.num_lasers);
   }
@@ -264,14 +264,14 @@ Result<std::string> format_recording(const Recording& rec) {
   for (std::size_t n = 0; n < rec.poses.size(); ++n) {
     const RecordedPose& p = rec.poses[n];
     if (n > 0 && p.index <= rec.poses[n - 1].index) {
-      return Status::Error(ErrorCode::kInvalidArgument, "pose index %lld does not increase",
+      return Status::error(ErrorCode::kInvalidArgument, "pose index %lld does not increase",
                            static_cast<long long>(p.index));
     }
     CDPR_RETURN_IF_ERROR(check_size("length", p.lengths.size(), rec.num_cables, p.index));
     CDPR_RETURN_IF_ERROR(check_size("tension", p.tensions.size(), rec.num_cables, p.index));
     CDPR_RETURN_IF_ERROR(check_size("laser", p.lasers.size(), rec.num_lasers, p.index));
     if (!std::isfinite(p.time_s) || !p.commanded.vector().allFinite()) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "pose %lld: time and commanded pose must be finite",
                            static_cast<long long>(p.index));
     }
@@ -314,18 +314,18 @@ Status check_against_model(const Recording& recording, const RobotModel& model) 
   const std::string robot =
       model.name.empty() ? std::string("the config") : "config '" + model.name + "'";
   if (recording.num_cables != m) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "cable count mismatch: the recording has %d cables (length_1..length_%d) "
                          "but %s has %d",
                          recording.num_cables, recording.num_cables, robot.c_str(), m);
   }
   if (recording.num_lasers != k) {
-    return Status::Error(ErrorCode::kFailedPrecondition,
+    return Status::error(ErrorCode::kFailedPrecondition,
                          "laser count mismatch: the recording has %d laser columns but %s has %d "
                          "lasers",
                          recording.num_lasers, robot.c_str(), k);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -344,14 +344,14 @@ Status resolve_fixed(const CsvTable& t, const std::array<const char*, N>& names,
       if (t.header[c] == names[a]) (*cols)[a] = static_cast<int>(c), known = true;
     }
     if (!known) {
-      return Status::Error(ErrorCode::kParseError, "%s:%d: column %zu (%s): unknown column",
+      return Status::error(ErrorCode::kParseError, "%s:%d: column %zu (%s): unknown column",
                            t.name.c_str(), t.header_line, c + 1, t.header[c].c_str());
     }
   }
   for (std::size_t a = 0; a < N; ++a) {
     if ((*cols)[a] < 0) return header_error(t, "missing required column '%s'", names[a]);
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 constexpr std::array<const char*, 3> kCableColumns = {"length_m", "tension_n", "elongation_m"};
@@ -510,7 +510,7 @@ Result<std::string> format_pose_list(const PoseList& list) {
   for (std::size_t j = 0; j < list.poses.size(); ++j) {
     const auto v = list.poses[j].vector();
     if (!v.allFinite()) {
-      return Status::Error(ErrorCode::kInvalidArgument, "pose %zu is not finite", j);
+      return Status::error(ErrorCode::kInvalidArgument, "pose %zu is not finite", j);
     }
     out += std::to_string(j);
     for (int a = 0; a < 6; ++a) out += ',' + format_number(v(a));

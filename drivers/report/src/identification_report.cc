@@ -224,9 +224,9 @@ std::string identification_text(const CalibrationReportInput& in) {
     << (nominal.lasers.size() == 1 ? "" : "s") << ")\n";
   h << "estimating:";
   for (const std::string& e : c.estimated) h << " " << e;
-  h << "\n\n" << in.identification->FullReport();
+  h << "\n\n" << in.identification->full_report();
   if (in.identifiability != nullptr) {
-    h << "\nIdentifiability:\n" << in.identifiability->Summary() << "\n";
+    h << "\nIdentifiability:\n" << in.identifiability->summary() << "\n";
   }
   h << anchor_table(nominal, in.after->robot);
   if (in.truth != nullptr) {
@@ -369,7 +369,7 @@ std::string paper_method_text(const PaperReportInput& in) {
   std::ostringstream h;
   h << c.title << " --method paper: " << c.config << " + " << c.recording << " ("
     << in.set->num_poses() << " poses)\n\n"
-    << in.paper->Summary() << "\n(the paper's method gives no standard deviations)\n"
+    << in.paper->summary() << "\n(the paper's method gives no standard deviations)\n"
     << anchor_table(nominal, in.paper->estimate.robot);
   if (in.truth != nullptr) {
     nlohmann::json unused;

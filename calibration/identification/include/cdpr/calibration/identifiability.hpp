@@ -57,7 +57,7 @@ struct IdentifiabilityReport {
   std::vector<ParameterDirection> directions;               // null first, then weak, weakest first
 
   bool identifiable() const { return rank == num_parameters; }
-  std::string Summary() const;
+  std::string summary() const;
 };
 
 // From precomputed information.

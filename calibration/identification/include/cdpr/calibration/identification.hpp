@@ -170,8 +170,8 @@ struct IdentificationReport {
   std::vector<std::string> warnings;
 
   bool trustworthy() const { return converged && warnings.empty(); }
-  std::string BriefReport() const;
-  std::string FullReport() const;
+  std::string brief_report() const;
+  std::string full_report() const;
 };
 
 // Identifies the parameters chosen in `options` from `set`, starting from `initial` (the nominal

@@ -51,7 +51,7 @@ struct ReadingModel {
   Eigen::VectorXd length_offsets;  // o_i, m
   Eigen::VectorXd length_scales;   // s_i, dimensionless (0 = the nominal winch model is right)
 
-  static ReadingModel Nominal(int num_cables) {
+  static ReadingModel nominal(int num_cables) {
     return ReadingModel{Eigen::VectorXd::Zero(num_cables), Eigen::VectorXd::Zero(num_cables)};
   }
 };
@@ -62,8 +62,8 @@ struct CalibratedModel {
   ReadingModel readings;
 
   // A model with nominal readings (zero offsets and scale errors).
-  static CalibratedModel FromRobot(const RobotModel& robot) {
-    return CalibratedModel{robot, ReadingModel::Nominal(robot.num_cables())};
+  static CalibratedModel from_robot(const RobotModel& robot) {
+    return CalibratedModel{robot, ReadingModel::nominal(robot.num_cables())};
   }
 };
 
@@ -109,30 +109,30 @@ inline Status validate(const MeasurementSet& set, const RobotModel& model) {
   for (int j = 0; j < set.num_poses(); ++j) {
     const PoseMeasurement& p = set.poses[static_cast<std::size_t>(j)];
     if (!p.commanded.vector().allFinite()) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "measurement set: pose %d: commanded pose is not finite", j);
     }
     if (p.cable_lengths.size() != m) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "measurement set: pose %d: %d cable lengths, the model has %d cables", j,
                            static_cast<int>(p.cable_lengths.size()), m);
     }
     if (p.tensions.size() != 0 && p.tensions.size() != m) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "measurement set: pose %d: %d tensions, the model has %d cables", j,
                            static_cast<int>(p.tensions.size()), m);
     }
     if (p.laser_distances.size() != 0 && p.laser_distances.size() != k) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "measurement set: pose %d: %d laser distances, the model has %d lasers",
                            j, static_cast<int>(p.laser_distances.size()), k);
     }
     if (p.reference && !p.reference->vector().allFinite()) {
-      return Status::Error(ErrorCode::kInvalidArgument,
+      return Status::error(ErrorCode::kInvalidArgument,
                            "measurement set: pose %d: reference pose is not finite", j);
     }
   }
-  return Status::Ok();
+  return Status::success();
 }
 
 }  // namespace cdpr

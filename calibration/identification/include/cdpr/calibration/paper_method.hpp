@@ -58,7 +58,7 @@ struct PaperMethodReport {
   bool converged = false;  // E_stop reached or the error stopped decreasing
   std::string termination;
   double time_s = 0.0;
-  std::string Summary() const;
+  std::string summary() const;
 };
 
 Result<PaperMethodReport> paper_method(const CalibratedModel& initial, const MeasurementSet& set,

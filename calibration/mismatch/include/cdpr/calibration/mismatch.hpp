@@ -133,7 +133,7 @@ struct MismatchSummary {
   // The top-ranked candidate if it is significant, else nullptr.
   const CandidateScreen* best() const;
   const CandidateScreen* find(const std::string& id) const;
-  std::string Text() const;  // the findings and the tables as text
+  std::string text() const;  // the findings and the tables as text
 };
 
 // The residual-space view of the screen, exposed for the bootstrap, cross-validation and pose

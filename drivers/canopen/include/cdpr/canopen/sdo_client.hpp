@@ -119,7 +119,7 @@ class SdoClient {
     Status s = run_upload(a, pump);
     if (!s.ok()) return s;
     if (buf_.size() != sizeof(T) && !(size_unknown_ && buf_.size() >= sizeof(T))) {
-      return Status::Error(ErrorCode::kProtocolError,
+      return Status::error(ErrorCode::kProtocolError,
                            "node %u: SDO upload 0x%04X:%02X returned %zu bytes, expected %zu",
                            unsigned{node_}, unsigned{a.index}, unsigned{a.sub}, buf_.size(),
                            sizeof(T));

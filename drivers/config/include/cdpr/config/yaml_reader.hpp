@@ -172,11 +172,11 @@ class YamlField {
   requires std::is_integral_v<Int> &&(!std::is_same_v<Int, bool>)Status
       optional(std::string_view key, Int& out, std::int64_t lo, std::int64_t hi) const {
     const YamlField f = (*this)[key];
-    if (!f.present()) return Status::Ok();
+    if (!f.present()) return Status::success();
     Result<std::int64_t> v = f.integer(lo, hi);
     if (!v.ok()) return v.status();
     out = static_cast<Int>(*v);
-    return Status::Ok();
+    return Status::success();
   }
   // The index into `choices`.
   Status optional_choice(std::string_view key, int& index,
