@@ -145,17 +145,9 @@ std::string p_text(double p) {
 }  // namespace
 
 std::string verdict_key(Diagnosis::Verdict v) {
-  switch (v) {
-    case Diagnosis::Verdict::kNoMismatch:
-      return "no_mismatch";
-    case Diagnosis::Verdict::kMismatchNamed:
-      return "mismatch_named";
-    case Diagnosis::Verdict::kMismatchUnexplained:
-      return "mismatch_unexplained";
-    case Diagnosis::Verdict::kInconclusive:
-      return "inconclusive";
-  }
-  return "unknown";
+  std::string key = to_string(v);  // "mismatch named" -> "mismatch_named"
+  for (char& c : key) c = c == ' ' ? '_' : c;
+  return key;
 }
 
 namespace {
