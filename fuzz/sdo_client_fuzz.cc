@@ -101,6 +101,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
                       "requests go to the server's COB-ID");
       CDPR_FUZZ_CHECK(sent.dlc == 8, "SDO requests have 8 bytes");
     }
+    CDPR_FUZZ_CHECK(client.data().size() <= co::SdoClient::kMaxUpload,
+                    "an upload never holds more than the client's limit");
     if (client.state() == co::SdoClient::State::kFailed) {
       CDPR_FUZZ_CHECK(!client.result().ok() && !client.result().message().empty(),
                       "a failed transfer names its reason");

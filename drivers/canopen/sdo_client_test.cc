@@ -268,6 +268,59 @@ TEST(SdoClientStateMachine, RejectsSecondTransferAndIgnoresOtherNodes) {
   EXPECT_EQ(get_u16(c.data().data()), 0x1234);
 }
 
+// Found by fuzz/sdo_client: a server that never sends the last segment of an upload without a
+// size made the client's buffer grow without limit.
+TEST(SdoClientStateMachine, UploadLargerThanTheLimitIsAbortedWhetherAnnouncedOrNot) {
+  cdpr::ManualClock clock;
+  can::VirtualCanBus bus(clock);
+  auto a = bus.endpoint("a");
+  auto b = bus.endpoint("b");
+  SdoClient c(*a, 5, SdoTiming{100ms, 0, 0ms});
+  auto answer = [&](std::array<std::uint8_t, 8> d) {
+    can::Frame f = make_frame(0x585, 8);
+    f.data = d;
+    return c.on_frame(f, clock.now());
+  };
+  auto last_sent = [&] {
+    can::Frame f, last;
+    while (b->receive(f, 0ns).ok()) last = f;
+    return last;
+  };
+  auto abort_code_of = [](const can::Frame& f) { return get_u32(&f.data[4]); };
+
+  // Without a size: segments keep coming, none is the last.
+  ASSERT_TRUE(c.start_upload({0x1008, 0}, clock.now()).ok());
+  ASSERT_TRUE(answer({0x40, 0x08, 0x10, 0x00, 0, 0, 0, 0}));  // segmented, size not indicated
+  std::size_t segments = 0;
+  bool toggle = false;
+  while (c.busy() && segments < 2 * SdoClient::kMaxUpload / 7) {
+    const std::uint8_t cmd = toggle ? 0x10 : 0x00;  // 7 bytes, not the last
+    can::Frame request;
+    ASSERT_TRUE(b->receive(request, 0ns).ok());  // the client's segment request (or its abort)
+    ASSERT_TRUE(answer({cmd, 1, 2, 3, 4, 5, 6, 7}));
+    toggle = !toggle;
+    ++segments;
+  }
+  EXPECT_EQ(c.state(), SdoClient::State::kFailed);
+  EXPECT_EQ(segments, SdoClient::kMaxUpload / 7 + 1);
+  EXPECT_NE(c.result().message().find("without a last segment"), std::string::npos)
+      << c.result().to_string();
+  can::Frame abort = last_sent();
+  EXPECT_EQ(abort.data[0], 0x80);
+  EXPECT_EQ(abort_code_of(abort), abort_code::kOutOfMemory);
+
+  // Announced too large: refused at the initiate answer.
+  ASSERT_TRUE(c.start_upload({0x1008, 0}, clock.now()).ok());
+  const auto big = static_cast<std::uint32_t>(SdoClient::kMaxUpload + 1);
+  ASSERT_TRUE(answer({0x41, 0x08, 0x10, 0x00, static_cast<std::uint8_t>(big & 0xFF),
+                      static_cast<std::uint8_t>((big >> 8) & 0xFF),
+                      static_cast<std::uint8_t>((big >> 16) & 0xFF), 0}));
+  EXPECT_EQ(c.state(), SdoClient::State::kFailed);
+  EXPECT_NE(c.result().message().find("server announced 65537 bytes"), std::string::npos)
+      << c.result().to_string();
+  EXPECT_EQ(abort_code_of(last_sent()), abort_code::kOutOfMemory);
+}
+
 TEST(SdoClientStateMachine, DiscardsAnswersThatCannotBelongToTheAttempt) {
   cdpr::ManualClock clock;
   can::VirtualCanBus bus(clock);

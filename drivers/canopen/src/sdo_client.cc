@@ -310,6 +310,15 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
       }
       expected_size_ = size_indicated ? get_u32(&f.data[4]) : 0;
       size_unknown_ = !size_indicated;
+      if (expected_size_ > kMaxUpload) {
+        send_abort(abort_code::kOutOfMemory, now);
+        fail(Status::error(ErrorCode::kProtocolError,
+                           "node %u: SDO upload 0x%04X:%02X: server announced %zu bytes, more than "
+                           "the %zu this client takes",
+                           unsigned{node_}, unsigned{addr_.index}, unsigned{addr_.sub},
+                           expected_size_, kMaxUpload));
+        return true;
+      }
       phase_ = Phase::kSegment;
       toggle_ = false;
       if (!send_segment().ok()) retry_or_fail(now, "could not send a segment request");
@@ -325,6 +334,14 @@ bool SdoClient::on_frame(const can::Frame& f, Timestamp now) {
     }
     ++segment_answers_;
     const std::size_t n = 7u - ((cmd >> 1) & 0x07u);
+    if (buf_.size() + n > kMaxUpload) {
+      send_abort(abort_code::kOutOfMemory, now);
+      fail(Status::error(ErrorCode::kProtocolError,
+                         "node %u: SDO upload 0x%04X:%02X: more than %zu bytes without a last "
+                         "segment",
+                         unsigned{node_}, unsigned{addr_.index}, unsigned{addr_.sub}, kMaxUpload));
+      return true;
+    }
     buf_.insert(buf_.end(), f.data.begin() + 1,
                 f.data.begin() + 1 + static_cast<std::ptrdiff_t>(n));
     if (cmd & 0x01) {

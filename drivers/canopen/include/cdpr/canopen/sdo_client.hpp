@@ -82,6 +82,10 @@ class BusPump final : public Pump {
 class SdoClient {
  public:
   static constexpr std::size_t kReserved = 1024;
+  // The largest upload the client takes (announced or, without a size, received): a server that
+  // announces more, or sends more segments than this without the last one, is aborted with
+  // "out of memory" (0x05040005) and the transfer fails naming the size.
+  static constexpr std::size_t kMaxUpload = 64 * 1024;
   enum class State { kIdle, kBusy, kDone, kFailed };
 
   SdoClient(can::CanBus& bus, NodeId node, SdoTiming timing = {});
