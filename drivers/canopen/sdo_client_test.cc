@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <memory>
 #include <set>
 #include <string>
+#include <vector>
 
 #include "cdpr/canopen/codes.hpp"
 #include "testing/sim_network.hpp"
@@ -268,35 +270,46 @@ TEST(SdoClientStateMachine, RejectsSecondTransferAndIgnoresOtherNodes) {
   EXPECT_EQ(get_u16(c.data().data()), 0x1234);
 }
 
-// Found by fuzz/sdo_client: a server that never sends the last segment of an upload without a
-// size made the client's buffer grow without limit.
-TEST(SdoClientStateMachine, UploadLargerThanTheLimitIsAbortedWhetherAnnouncedOrNot) {
-  cdpr::ManualClock clock;
-  can::VirtualCanBus bus(clock);
-  auto a = bus.endpoint("a");
-  auto b = bus.endpoint("b");
-  SdoClient c(*a, 5, SdoTiming{100ms, 0, 0ms});
-  auto answer = [&](std::array<std::uint8_t, 8> d) {
+// A client on one end of a virtual bus and the test as the server on the other end: it feeds the
+// server's answers by hand and reads what the client sent.
+struct RawServer {
+  explicit RawServer(SdoTiming timing) : c(*a, 5, timing) {}
+  bool answer(std::array<std::uint8_t, 8> d) {
     can::Frame f = make_frame(0x585, 8);
     f.data = d;
     return c.on_frame(f, clock.now());
-  };
-  auto last_sent = [&] {
-    can::Frame f, last;
-    while (b->receive(f, 0ns).ok()) last = f;
-    return last;
-  };
+  }
+  std::vector<can::Frame> sent() {
+    std::vector<can::Frame> frames;
+    can::Frame f;
+    while (b->receive(f, 0ns).ok()) frames.push_back(f);
+    return frames;
+  }
+  cdpr::ManualClock clock;
+  can::VirtualCanBus bus{clock};
+  std::unique_ptr<can::CanBus> a = bus.endpoint("a");
+  std::unique_ptr<can::CanBus> b = bus.endpoint("b");
+  SdoClient c;
+};
+
+// Found by fuzz/sdo_client: a server that never sends the last segment of an upload without a
+// size made the client's buffer grow without limit.
+TEST(SdoClientStateMachine, UploadLargerThanTheLimitIsAbortedWhetherAnnouncedOrNot) {
+  RawServer server(SdoTiming{100ms, 0, 0ms});
+  SdoClient& c = server.c;
+  auto answer = [&](std::array<std::uint8_t, 8> d) { return server.answer(d); };
+  auto last_sent = [&] { return server.sent().back(); };
   auto abort_code_of = [](const can::Frame& f) { return get_u32(&f.data[4]); };
 
   // Without a size: segments keep coming, none is the last.
-  ASSERT_TRUE(c.start_upload({0x1008, 0}, clock.now()).ok());
+  ASSERT_TRUE(c.start_upload({0x1008, 0}, server.clock.now()).ok());
   ASSERT_TRUE(answer({0x40, 0x08, 0x10, 0x00, 0, 0, 0, 0}));  // segmented, size not indicated
   std::size_t segments = 0;
   bool toggle = false;
   while (c.busy() && segments < 2 * SdoClient::kMaxUpload / 7) {
     const std::uint8_t cmd = toggle ? 0x10 : 0x00;  // 7 bytes, not the last
     can::Frame request;
-    ASSERT_TRUE(b->receive(request, 0ns).ok());  // the client's segment request (or its abort)
+    ASSERT_TRUE(server.b->receive(request, 0ns).ok());  // the client's segment request (or abort)
     ASSERT_TRUE(answer({cmd, 1, 2, 3, 4, 5, 6, 7}));
     toggle = !toggle;
     ++segments;
@@ -310,7 +323,7 @@ TEST(SdoClientStateMachine, UploadLargerThanTheLimitIsAbortedWhetherAnnouncedOrN
   EXPECT_EQ(abort_code_of(abort), abort_code::kOutOfMemory);
 
   // Announced too large: refused at the initiate answer.
-  ASSERT_TRUE(c.start_upload({0x1008, 0}, clock.now()).ok());
+  ASSERT_TRUE(c.start_upload({0x1008, 0}, server.clock.now()).ok());
   const auto big = static_cast<std::uint32_t>(SdoClient::kMaxUpload + 1);
   ASSERT_TRUE(answer({0x41, 0x08, 0x10, 0x00, static_cast<std::uint8_t>(big & 0xFF),
                       static_cast<std::uint8_t>((big >> 8) & 0xFF),
@@ -322,20 +335,13 @@ TEST(SdoClientStateMachine, UploadLargerThanTheLimitIsAbortedWhetherAnnouncedOrN
 }
 
 TEST(SdoClientStateMachine, DiscardsAnswersThatCannotBelongToTheAttempt) {
-  cdpr::ManualClock clock;
-  can::VirtualCanBus bus(clock);
-  auto a = bus.endpoint("a");
-  auto b = bus.endpoint("b");
-  SdoClient c(*a, 5, SdoTiming{100ms, 1, 20ms});
-  auto answer = [&](std::array<std::uint8_t, 8> d) {
-    can::Frame f = make_frame(0x585, 8);
-    f.data = d;
-    return c.on_frame(f, clock.now());
-  };
+  RawServer server(SdoTiming{100ms, 1, 20ms});
+  SdoClient& c = server.c;
+  cdpr::ManualClock& clock = server.clock;
+  auto answer = [&](std::array<std::uint8_t, 8> d) { return server.answer(d); };
   auto sent = [&] {
     std::vector<std::uint8_t> cmds;
-    can::Frame f;
-    while (b->receive(f, 0ns).ok()) cmds.push_back(f.data[0]);
+    for (const can::Frame& f : server.sent()) cmds.push_back(f.data[0]);
     return cmds;
   };
   // Idle: a late answer is consumed and counted.
@@ -398,7 +404,7 @@ TEST(SdoClientStateMachine, DiscardsAnswersThatCannotBelongToTheAttempt) {
   // and is a protocol error after it.
   clock.advance(20ms);
   sent();
-  ASSERT_TRUE(c.start_upload({0x1008, 0}, clock.now()).ok());
+  ASSERT_TRUE(c.start_upload({0x1008, 0}, server.clock.now()).ok());
   EXPECT_TRUE(answer({0x41, 0x08, 0x10, 0x00, 10, 0, 0, 0}));
   EXPECT_TRUE(answer({0x41, 0x08, 0x10, 0x00, 10, 0, 0, 0}));
   EXPECT_TRUE(c.busy());

@@ -219,16 +219,21 @@ TEST(RobotConfig, LaserSeesTheFloorAtHomeWithinItsRange) {
   }
 }
 
+// Saving, loading the text again and saving once more gives the same model and the same text.
+void expect_save_load_exact(const RobotModel& model) {
+  const std::string saved = save_robot_config(model);
+  const Result<RobotModel> again = parse_robot_config(saved, "saved.yaml");
+  ASSERT_TRUE(again.ok()) << again.status().to_string() << "\n" << saved;
+  expect_identical(model, *again);
+  EXPECT_EQ(save_robot_config(*again), saved);
+}
+
 TEST(RobotConfig, SaveThenLoadIsExact) {
   for (const char* file : kShipped) {
     SCOPED_TRACE(file);
     const Result<RobotModel> model = load_robot_config(source_path(file));
     ASSERT_TRUE(model.ok()) << model.status().to_string();
-    const std::string saved = save_robot_config(*model);
-    const Result<RobotModel> again = parse_robot_config(saved, "saved.yaml");
-    ASSERT_TRUE(again.ok()) << again.status().to_string() << "\n" << saved;
-    expect_identical(*model, *again);
-    EXPECT_EQ(save_robot_config(*again), saved);
+    expect_save_load_exact(*model);
   }
 }
 
@@ -260,11 +265,7 @@ TEST(RobotConfig, SaveThenLoadIsExactForAPulleyGivenWithATiltedAxisAndAnObliqueR
   text.replace(at, given.size(), "pulley: {axis: [4, 0, 1], reference: [-0.5, -0.378, 0]}");
   const Result<RobotModel> model = parse_robot_config(text, "tilted.yaml");
   ASSERT_TRUE(model.ok()) << model.status().to_string();
-  const std::string saved = save_robot_config(*model);
-  const Result<RobotModel> again = parse_robot_config(saved, "saved.yaml");
-  ASSERT_TRUE(again.ok()) << again.status().to_string() << "\n" << saved;
-  expect_identical(*model, *again);
-  EXPECT_EQ(save_robot_config(*again), saved);
+  expect_save_load_exact(*model);
 }
 
 TEST(RobotConfig, SaveKeepsNumbersThatNeedAllSeventeenDigits) {
