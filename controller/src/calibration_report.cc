@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <sstream>
 
 #include "cdpr/calibration/mismatch.hpp"
@@ -236,8 +237,8 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
   }
   h << "</table>\n<p>" << report::html_escape(c.daemon)
     << "; geometry version before: " << c.geometry_version << "; recording <code>"
-    << report::html_escape(c.recording) << "</code>; " << o.poses << " poses; started "
-    << report::html_escape(c.started) << ".</p>\n</section>\n";
+    << report::html_escape(std::filesystem::path(c.recording).filename().string()) << "</code>; "
+    << o.poses << " poses; started " << report::html_escape(c.started) << ".</p>\n</section>\n";
   std::string page = report_page;
   const std::size_t body = page.find("<body>");
   if (body == std::string::npos)

@@ -25,6 +25,7 @@
 #pragma once
 
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -55,6 +56,12 @@ struct ReportContext {
   std::string calibrated_config;  // the config written from this run, "" when none
   std::string truth;              // the true robot's config (simulation studies), "" when none
   std::vector<std::string> warnings;
+  // The parameters the identification estimated: with them the HTML page shows the predicted
+  // position accuracy over the ISO 9283 box (AccuracyBox's cube about the nominal home pose):
+  // before = the nominal model's error if the calibrated model is right
+  // (measure_position_accuracy), after = the Cramer-Rao bound of the recorded pose set
+  // (predict_accuracy, as the daemon's gate). Unset: not computed.
+  std::optional<IdentificationOptions> identification;
 };
 
 struct CalibrationReportInput {
