@@ -683,10 +683,10 @@ std::string anchor_table(const PageInput& in) {
 std::string statistics_table(const PageInput& in) {
   const Diagnosis* d = in.diagnosis;
   std::ostringstream h;
-  h << "<h2 id=\"statistics\">Statistics per channel and per cable</h2>\n<table>\n<tr>"
-    << th("group") << th("residuals") << th("RMS before") << th("RMS after") << th("RMS / sigma")
-    << th("chi² / expected") << th("p") << "</tr>\n";
+  h << "<h2 id=\"statistics\">Statistics per channel and per cable</h2>\n<table>\n<tr>";
   if (d != nullptr && !d->screen.channels.empty()) {
+    h << th("group") << th("residuals") << th("RMS before") << th("RMS after") << th("RMS / sigma")
+      << th("chi² / expected") << th("p") << "</tr>\n";
     auto row = [&](const MisfitGroup& g, const ChannelRms* ch) {
       h << "<tr" << (g.flagged ? " class=\"flag\"" : "") << ">" << td(g.name)
         << td(std::to_string(g.count), true)
@@ -739,20 +739,28 @@ std::string statistics_table(const PageInput& in) {
         << td(p_text(g.p_value) + (g.flagged ? " (beyond the noise)" : ""), true) << "</tr>\n";
     }
   } else if (in.fit != nullptr) {
+    // The identification alone: the calibrated model's RMS per channel and per cable.
     const IdentificationReport& r = *in.fit;
-    h << "<tr>" << td("cable lengths") << td("-", true) << td("-", true)
-      << td(mm(r.rms_length_m) + " mm", true) << td("-", true) << td("-", true) << td("-", true)
-      << "</tr>\n<tr>" << td("laser") << td("-", true) << td("-", true)
-      << td(mm(r.rms_laser_m) + " mm", true) << td("-", true) << td("-", true) << td("-", true)
-      << "</tr>\n<tr>" << td("wrench") << td("-", true) << td("-", true)
-      << td(num(r.rms_wrench_n) + " N", true) << td("-", true) << td("-", true) << td("-", true)
-      << "</tr>\n";
+    h << th("group") << th("residuals") << th("RMS") << th("RMS / sigma") << "</tr>\n";
+    const std::vector<double> si = cable_rms_m(r.residuals, in.before->num_cables());
     const std::vector<double> rms = cable_rms(r.residuals, in.before->num_cables());
+    h << "<tr>" << td("cable lengths") << td("-", true) << td(shown(r.rms_length_m, "m"), true)
+      << td("-", true) << "</tr>\n<tr>" << td("laser") << td("-", true)
+      << td(shown(r.rms_laser_m, "m"), true) << td("-", true) << "</tr>\n<tr>" << td("wrench")
+      << td("-", true) << td(shown(r.rms_wrench_n, "N"), true) << td("-", true) << "</tr>\n";
     for (std::size_t i = 0; i < rms.size(); ++i) {
-      h << "<tr>" << td("cable " + std::to_string(i + 1))
-        << td(std::to_string(r.residuals.size()), true) << td("-", true) << td("-", true)
-        << td(num(rms[i], 3), true) << td("-", true) << td("-", true) << "</tr>\n";
+      int n = 0;
+      for (const PoseResiduals& p : r.residuals) {
+        n += static_cast<Eigen::Index>(i) < p.length_normalized.size() &&
+                     std::isfinite(p.length_normalized(static_cast<Eigen::Index>(i)))
+                 ? 1
+                 : 0;
+      }
+      h << "<tr>" << td("cable " + std::to_string(i + 1)) << td(std::to_string(n), true)
+        << td(shown(si[i], "m"), true) << td(num(rms[i], 3), true) << "</tr>\n";
     }
+  } else {
+    h << th("group") << "</tr>\n<tr>" << td("no identification was run") << "</tr>\n";
   }
   h << "</table>\n<p class=\"small\">RMS / sigma 1 is the noise level; chi&sup2; / expected "
        "compares a group's sum of squared normalised residuals with its effective degrees of "
