@@ -229,7 +229,13 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
     << (o.gates_passed ? "Every gate passed"
                        : "Gates failed: " + report::html_escape(o.failed_gates))
     << "</strong>. " << report::html_escape(o.verdict) << "</p>\n";
-  h << "<p>Next step: <code>cdprctl accept</code> or <code>cdprctl reject</code>.</p>\n";
+  h << "<p>Next step: "
+    << (o.gates_passed
+            ? "<code>cdprctl accept</code> to run on the proposed geometry (every gate passed; "
+              "the summary below says what changed), or <code>cdprctl reject</code>."
+            : "<code>cdprctl reject</code>, or <code>cdprctl accept</code> only if the failed "
+              "gates are understood (the summary and the plots below show why they failed).")
+    << "</p>\n";
   h << "<table><tr><th>gate</th><th>result</th><th>detail</th></tr>\n";
   for (const Gate& g : o.gates) {
     h << "<tr><td>" << g.name << "</td><td>" << (g.passed ? "pass" : "<strong>fail</strong>")
