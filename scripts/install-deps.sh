@@ -14,6 +14,8 @@ PACKAGES=(
   # virtual CAN bus through user-mode-linux, and independent protocol peers for interop tests
   user-mode-linux kmod iproute2 can-utils socat python3 python3-can python3-pymodbus python3-yaml
   tshark mbpoll
+  # the report's browser test (tests/report) and the docs screenshot: headless Chromium
+  chromium
 )
 
 missing=()

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <sstream>
 
 #include "cdpr/calibration/mismatch.hpp"
@@ -228,7 +229,13 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
     << (o.gates_passed ? "Every gate passed"
                        : "Gates failed: " + report::html_escape(o.failed_gates))
     << "</strong>. " << report::html_escape(o.verdict) << "</p>\n";
-  h << "<p>Next step: <code>cdprctl accept</code> or <code>cdprctl reject</code>.</p>\n";
+  h << "<p>Next step: "
+    << (o.gates_passed
+            ? "<code>cdprctl accept</code> to run on the proposed geometry (every gate passed; "
+              "the summary below says what changed), or <code>cdprctl reject</code>."
+            : "<code>cdprctl reject</code>, or <code>cdprctl accept</code> only if the failed "
+              "gates are understood (the summary and the plots below show why they failed).")
+    << "</p>\n";
   h << "<table><tr><th>gate</th><th>result</th><th>detail</th></tr>\n";
   for (const Gate& g : o.gates) {
     h << "<tr><td>" << g.name << "</td><td>" << (g.passed ? "pass" : "<strong>fail</strong>")
@@ -236,8 +243,8 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
   }
   h << "</table>\n<p>" << report::html_escape(c.daemon)
     << "; geometry version before: " << c.geometry_version << "; recording <code>"
-    << report::html_escape(c.recording) << "</code>; " << o.poses << " poses; started "
-    << report::html_escape(c.started) << ".</p>\n</section>\n";
+    << report::html_escape(std::filesystem::path(c.recording).filename().string()) << "</code>; "
+    << o.poses << " poses; started " << report::html_escape(c.started) << ".</p>\n</section>\n";
   std::string page = report_page;
   const std::size_t body = page.find("<body>");
   if (body == std::string::npos)

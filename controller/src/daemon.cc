@@ -1079,9 +1079,12 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   rin.set = &set;
   rin.diagnosis = diagnosis.ok() ? &*diagnosis : nullptr;
   rin.context.title = "cdprd calibration " + std::to_string(id);
-  rin.context.config = store_->geometry_path(g->version);
+  // Files named relative to the report's directory (the page sits beside the recording).
+  rin.context.config =
+      std::filesystem::path(store_->geometry_path(g->version)).lexically_relative(dir).string();
   rin.context.config_hash = rec.metadata.get(recording::key::kConfigHash);
-  rin.context.recording = rec_path;
+  rin.context.recording = std::filesystem::path(rec_path).lexically_relative(dir).string();
+  rin.context.identification = config_.identification.options;
   if (auto h = recording::file_hash(rec_path); h.ok()) rin.context.recording_hash = *h;
   rin.context.bootstrap = config_.identification.bootstrap;
   rin.context.folds = config_.identification.folds;

@@ -3,9 +3,12 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
+#include "cdpr/calibration/mismatch.hpp"
+#include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/report/format.hpp"
 #include "testing/identification_scenario.hpp"
@@ -78,9 +81,10 @@ TEST_F(CalibrationReport, HtmlShowsAnchorsWithTheirStdAndResidualsPerCableAndPos
   const Rendered r = render_calibration_report(in_);
   EXPECT_EQ(r.html.rfind("<!DOCTYPE html>", 0), 0u);
   EXPECT_THAT(r.html, HasSubstr("</html>\n"));
-  EXPECT_THAT(r.html, HasSubstr("frame anchors: distance from the nominal position"));
-  EXPECT_THAT(r.html, HasSubstr("length residuals per pose"));
-  EXPECT_THAT(r.html, HasSubstr("length residual RMS per cable"));
+  EXPECT_THAT(r.html, HasSubstr("length residual / sigma per cable and pose, calibrated model"));
+  EXPECT_THAT(r.html, HasSubstr("frame anchors, top view (x, y)"));
+  EXPECT_THAT(r.html, HasSubstr("frame anchors, side view (x, z)"));
+  EXPECT_THAT(r.html, HasSubstr("measured poses, top view (x, y)"));
   // Cable 3's standard deviation in the anchor table, from its three coordinates.
   double var = 0.0;
   for (const ParameterEstimate& p : id_.parameters) {
@@ -88,7 +92,105 @@ TEST_F(CalibrationReport, HtmlShowsAnchorsWithTheirStdAndResidualsPerCableAndPos
   }
   ASSERT_GT(var, 0.0);
   EXPECT_THAT(r.html, HasSubstr("<td class=\"n\">" + fmt(1e3 * std::sqrt(var), 3) + "</td></tr>"));
-  EXPECT_THAT(r.html, Not(HasSubstr("Mismatch diagnosis")));
+  EXPECT_THAT(r.html, Not(HasSubstr("<details><summary>All findings")));
+}
+
+// The decision comes before every plot: verdict, next step, effects, key figures.
+TEST_F(CalibrationReport, TheDecisionComesBeforeThePlots) {
+  const Rendered r = render_calibration_report(in_);
+  const std::size_t first_plot = r.html.find("<svg");
+  ASSERT_NE(first_plot, std::string::npos);
+  for (const char* id :
+       {"id=\"verdict\"", "id=\"next-step\"", "id=\"effects\"", "id=\"key-figures\""}) {
+    SCOPED_TRACE(id);
+    EXPECT_LT(r.html.find(id), first_plot);
+  }
+  // chi^2 / dof with its p-value (the daemon's gate computes the same).
+  const double p = chi2_upper_tail(id_.chi2, std::max(1, id_.dof));
+  EXPECT_THAT(r.html, HasSubstr("chi&sup2;/dof " + fmt(id_.chi2 / id_.dof, 4) + " (chi&sup2; " +
+                                fmt(id_.chi2, 5) + " on " + std::to_string(id_.dof) +
+                                " dof), p = " + fmt(p, 3)));
+  EXPECT_THAT(r.html, HasSubstr("Next step:</b> Accept the calibrated model"));
+}
+
+// The largest anchor change and its standard deviation along the change (from the covariance).
+TEST_F(CalibrationReport, LargestAnchorChangeCarriesItsUncertaintyAlongTheChange) {
+  int worst = 0;
+  double change = 0.0;
+  const Eigen::Matrix3Xd& a0 = s_.nominal.robot.frame_anchors;
+  const Eigen::Matrix3Xd& a1 = id_.estimate.robot.frame_anchors;
+  for (int i = 0; i < a0.cols(); ++i) {
+    if ((a1.col(i) - a0.col(i)).norm() > change) {
+      change = (a1.col(i) - a0.col(i)).norm();
+      worst = i;
+    }
+  }
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (std::size_t q = 0; q < id_.parameters.size(); ++q) {
+    for (std::size_t k = 0; k < id_.parameters.size(); ++k) {
+      const std::string& a = id_.parameters[q].name;
+      const std::string& b = id_.parameters[k].name;
+      const std::string prefix = "a_" + std::to_string(worst + 1) + ".";
+      if (a.rfind(prefix, 0) != 0 || b.rfind(prefix, 0) != 0) continue;
+      cov(a.back() - 'x', b.back() - 'x') =
+          id_.covariance(static_cast<Eigen::Index>(q), static_cast<Eigen::Index>(k));
+    }
+  }
+  const Eigen::Vector3d u = (a1.col(worst) - a0.col(worst)).normalized();
+  const double sd = std::sqrt(u.dot(cov * u));
+  ASSERT_GT(sd, 0.0);
+  const Rendered r = render_calibration_report(in_);
+  EXPECT_THAT(r.html, HasSubstr("largest " + fmt(1e3 * change, 3) + " mm (cable " +
+                                std::to_string(worst + 1) + ") ± " + fmt(1e3 * sd, 2) + " mm"));
+}
+
+// With the identification options: the nominal model's error over the ISO 9283 box if the
+// calibration is right, and the Cramer-Rao bound of the pose set after; without: said so.
+TEST_F(CalibrationReport, PositionAccuracyBeforeAndAfterOverTheIsoBox) {
+  const Rendered without = render_calibration_report(in_);
+  EXPECT_THAT(without.html, HasSubstr("not computed (the identification options were not given)"));
+
+  in_.context.identification = IdentificationOptions{};
+  AccuracyBox box;
+  box.center = s_.nominal.robot.home.position;
+  auto before = measure_position_accuracy(id_.estimate, s_.nominal, box);
+  ASSERT_TRUE(before.ok()) << before.status().to_string();
+  std::vector<Pose> poses;
+  for (const PoseMeasurement& p : set_.poses) poses.push_back(p.commanded);
+  PredictedAccuracyOptions po;
+  po.box = box;
+  auto after = predict_accuracy(s_.nominal, poses, set_.noise, po);
+  ASSERT_TRUE(after.ok()) << after.status().to_string();
+  ASSERT_GT(before->position_rms_m, after->position_rms_m);  // the calibration matters here
+  const Rendered r = render_calibration_report(in_);
+  EXPECT_THAT(r.html,
+              HasSubstr("nominal model " + fmt(1e3 * before->position_rms_m, 3) + " mm RMS (max " +
+                        fmt(1e3 * before->position_max_m, 3) + ") &rarr; calibrated " +
+                        fmt(1e3 * after->position_rms_m, 3) + " mm RMS"));
+}
+
+// Every plot has a text alternative: aria-label, <title> and <desc> with content.
+TEST_F(CalibrationReport, EveryPlotHasATextAlternative) {
+  const Rendered r = render_calibration_report(in_);
+  int plots = 0;
+  for (std::size_t at = r.html.find("<svg"); at != std::string::npos;
+       at = r.html.find("<svg", at + 1)) {
+    const std::string svg = r.html.substr(at, r.html.find("</svg>", at) - at);
+    SCOPED_TRACE(svg.substr(0, 200));
+    EXPECT_THAT(svg, HasSubstr("role=\"img\" aria-label=\""));
+    EXPECT_THAT(svg, Not(HasSubstr("aria-label=\"\"")));
+    EXPECT_THAT(svg, HasSubstr("<title>"));
+    EXPECT_THAT(svg, Not(HasSubstr("<desc></desc>")));
+    ++plots;
+  }
+  EXPECT_EQ(plots, 5);  // heat map, two anchor views, two pose views
+  EXPECT_THAT(r.html, HasSubstr("@media print"));
+  EXPECT_THAT(r.html, Not(HasSubstr("<script")));
+  std::string page = r.html;  // nothing fetched: no address but the SVG namespace
+  for (std::size_t at; (at = page.find("http://www.w3.org/2000/svg")) != std::string::npos;) {
+    page.erase(at, 26);
+  }
+  EXPECT_THAT(page, Not(HasSubstr("http")));
 }
 
 TEST_F(CalibrationReport, ADiagnosisAddsItsSectionsToEveryRendering) {
@@ -102,9 +204,79 @@ TEST_F(CalibrationReport, ADiagnosisAddsItsSectionsToEveryRendering) {
   EXPECT_EQ(r.json.at("diagnosis").at("verdict"), "no_mismatch");
   EXPECT_EQ(r.json.at("diagnosis"), diagnosis_json(d, s_.nominal.robot, set_, in_.context));
   EXPECT_THAT(r.text, HasSubstr("verdict: no_mismatch\n" + d.headline));
-  EXPECT_THAT(r.html, HasSubstr("Mismatch diagnosis"));
+  EXPECT_THAT(r.html, HasSubstr("no_mismatch: " + d.headline));
   EXPECT_THAT(r.html, HasSubstr("Residuals against the explaining variable"));
   EXPECT_EQ(r.html.find("</body>"), r.html.rfind("</body>"));  // one page
+}
+
+// A named effect with its value +- std and the share of the standard fit's excess chi^2 it
+// removes; the residual maps before/after; the findings folded.
+TEST_F(CalibrationReport, NamedEffectsTableShowsValueStdAndShareOfTheMisfit) {
+  Diagnosis d;
+  d.verdict = Diagnosis::Verdict::kMismatchNamed;
+  d.headline = "Missing physics found: cable elasticity.";
+  d.findings = {d.headline, "Channel 'cable lengths' misfits."};
+  d.before = id_;
+  d.before.chi2 = 2.0 * id_.dof;
+  d.after = id_;
+  d.model_after = id_.estimate;
+  EffectFit e;
+  e.id = "hooke_shared";
+  e.name = "cable elasticity";
+  e.accepted = true;
+  e.modelled_in_config = true;
+  e.chi2_before = d.before.chi2;
+  e.chi2_after = 1.1 * id_.dof;
+  e.parameters.push_back({"EA", "N", 21400.0, 600.0, "EA = 21.4 +- 0.6 kN"});
+  d.accepted = {e};
+  d.candidates = {e};
+  in_.diagnosis = &d;
+  const Rendered r = render_calibration_report(in_);
+  const double share = (e.chi2_before - e.chi2_after) / (d.before.chi2 - d.before.dof);
+  EXPECT_THAT(r.html, HasSubstr("<tr><td>cable elasticity</td><td class=\"vals\">EA = 21.4 +- 0.6 "
+                                "kN</td><td class=\"n\">" +
+                                fmt(100.0 * share, 3) + " %</td></tr>"));
+  EXPECT_THAT(r.html, HasSubstr("Next step:</b> Accept the calibrated model: it carries the "
+                                "named effect."));
+  EXPECT_THAT(r.html, HasSubstr("per cable and pose, before: standard identification"));
+  EXPECT_THAT(r.html, HasSubstr("per cable and pose, after: with the named effects"));
+  EXPECT_THAT(r.html, HasSubstr("<details><summary>All findings (2)</summary>"));
+  EXPECT_THAT(r.html, Not(HasSubstr("<h2>Findings")));
+}
+
+// Confounded pairs: those with a named effect in a short table, the others folded.
+TEST_F(CalibrationReport, ConfoundedPairsThatBearOnTheVerdictComeFirstTheRestFolded) {
+  Diagnosis d;
+  d.verdict = Diagnosis::Verdict::kMismatchNamed;
+  d.headline = "Missing physics found: cable elasticity.";
+  d.before = id_;
+  d.model_after = id_.estimate;
+  EffectFit e;
+  e.id = "hooke_shared";
+  e.name = "cable elasticity";
+  e.accepted = true;
+  d.accepted = {e};
+  ConfoundedFinding f;
+  f.first = "hooke_shared";
+  f.second = "compliance_shared";
+  f.first_fit.name = "cable elasticity";
+  f.second_fit.name = "winch compliance";
+  f.correlation = 0.95;
+  d.confounded = {f};
+  for (int k = 0; k < 3; ++k) {
+    d.screen.confounded.push_back({"drift_" + std::to_string(k), "creep_" + std::to_string(k), 0.99,
+                                   "drift and creep are confounded"});
+  }
+  in_.diagnosis = &d;
+  const Rendered r = render_calibration_report(in_);
+  const std::size_t relevant = r.html.find("<table id=\"confounded-relevant\">");
+  const std::size_t folded = r.html.find("<details><summary>3 other confounded pairs");
+  ASSERT_NE(relevant, std::string::npos);
+  ASSERT_NE(folded, std::string::npos);
+  EXPECT_LT(relevant, folded);
+  EXPECT_LT(r.html.find("<td>winch compliance</td>", relevant), folded);
+  EXPECT_GT(r.html.find("<td>drift_0</td>"), folded);
+  EXPECT_THAT(r.html, HasSubstr("measure the separating poses of the 1 confounded pair"));
 }
 
 }  // namespace

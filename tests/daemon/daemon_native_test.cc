@@ -110,6 +110,22 @@ TEST_F(DaemonNative, CalibratesMiniAcceptsBumplesslyAndTheNextMoveLandsOnTarget)
               rep["verdict"].get<std::string>().c_str(), rep["gates_passed"].get<bool>());
   std::printf("[daemon-native] fit: %s\n", rep["fit"].dump().c_str());
   EXPECT_TRUE(rep["gates_passed"].get<bool>()) << rep["gates"].dump(2);
+  // The page: the daemon's decision first, then the calibration report's summary (verdict,
+  // effects, key figures with the ISO box accuracy) before the first plot; files named
+  // relative to the calibration's folder.
+  auto page = request("report", {{"html", true}});
+  ASSERT_TRUE(page.ok) << page.message;
+  const std::string html = page.result["html"].get<std::string>();
+  const std::size_t decision = html.find("<section id=\"cdprd-decision\">");
+  const std::size_t verdict = html.find("id=\"verdict\"");
+  const std::size_t figures = html.find("id=\"key-figures\"");
+  const std::size_t first_plot = html.find("<svg");
+  ASSERT_NE(decision, std::string::npos);
+  EXPECT_LT(decision, verdict);
+  EXPECT_LT(verdict, figures);
+  EXPECT_LT(figures, first_plot);
+  EXPECT_NE(html.find("over the ISO 9283 box"), std::string::npos);
+  EXPECT_NE(html.find("recording <code>recording.csv</code> ("), std::string::npos);
   auto after =
       config::load_robot_config(daemon().store().calibration_dir(id) + "/model_after.yaml");
   ASSERT_TRUE(after.ok()) << after.status().to_string();

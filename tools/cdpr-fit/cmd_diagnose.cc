@@ -175,6 +175,7 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
     c.validation_hash = hash_or_unknown(args.validate);
   }
   c.estimated = estimated_items(identification);
+  c.identification = identification;  // the HTML page's position accuracy
   c.seed = args.seed;
   c.bootstrap = args.bootstrap;
   c.folds = args.folds;

@@ -17,12 +17,6 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-std::string printf_string(const char* format, double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, format, v);
-  return buf;
-}
-
 // "12.3" style with a fixed number of significant digits, "-" for NaN.
 std::string num(double v, int digits = 4) {
   if (!std::isfinite(v)) return "-";
@@ -110,24 +104,7 @@ nlohmann::json vector_json(const std::vector<double>& v) {
   return a;
 }
 
-// ---- HTML helpers ---------------------------------------------------------------------------
-
-// Extra poses to measure (separating or follow-up) as an HTML table / text lines.
-std::string pose_table_html(const std::vector<Pose>& poses,
-                            const std::vector<double>& pretensions) {
-  std::ostringstream h;
-  h << "<table>\n<tr>" << th("x (m)") << th("y (m)") << th("z (m)") << th("roll (rad)")
-    << th("pitch (rad)") << th("yaw (rad)") << th("pretension (N)") << "</tr>\n";
-  for (std::size_t k = 0; k < poses.size(); ++k) {
-    h << "<tr>";
-    const auto v = poses[k].vector();
-    for (int q = 0; q < 6; ++q) h << td(printf_string("%.4f", v(q)), true);
-    h << td(k < pretensions.size() ? num(pretensions[k]) : "-", true) << "</tr>\n";
-  }
-  h << "</table>\n";
-  return h.str();
-}
-
+// Extra poses to measure (separating or follow-up) as text lines.
 std::string pose_list_text(const std::vector<Pose>& poses, const std::vector<double>& pretensions) {
   std::string out;
   for (std::size_t k = 0; k < poses.size(); ++k) {
@@ -376,157 +353,6 @@ std::string diagnosis_text(const Diagnosis& d, const RobotModel& nominal, const 
   if (!c.warnings.empty()) {
     h << "\nWarnings:\n";
     for (const std::string& w : c.warnings) h << "  - " << w << "\n";
-  }
-  return h.str();
-}
-
-std::string diagnosis_html(const Diagnosis& d, const RobotModel& nominal, const MeasurementSet& set,
-                           const ReportContext& c) {
-  std::ostringstream h;
-  h << page_head(c.title + ": " + c.recording);
-  h << diagnosis_html_body(d, nominal, set, c);
-  h << "</body>\n</html>\n";
-  return h.str();
-}
-
-std::string diagnosis_html_body(const Diagnosis& d, const RobotModel& nominal,
-                                const MeasurementSet& set, const ReportContext& c) {
-  const std::vector<ExplainedResiduals> plots = explained_residuals(d, set);
-  const CableMisfit misfit = cable_misfit(d, nominal.num_cables());
-  const int lasers = static_cast<int>(nominal.lasers.size());
-  std::ostringstream h;
-  const std::string key = verdict_key(d.verdict);
-  h << "<h1>Mismatch diagnosis</h1>\n<p class=\"small\">config " << html_escape(c.config) << " ("
-    << html_escape(c.config_hash) << "), recording " << html_escape(c.recording) << " ("
-    << html_escape(c.recording_hash) << "), " << set.num_poses() << " poses, "
-    << nominal.num_cables() << " cables, " << lasers << (lasers == 1 ? " laser" : " lasers");
-  if (!c.validation.empty()) h << ", validation " << html_escape(c.validation);
-  h << "; estimated:";
-  for (const std::string& e : c.estimated) h << " " << html_escape(e);
-  h << "; seed " << c.seed << ", bootstrap " << c.bootstrap << ", folds " << c.folds << "</p>\n";
-  h << "<p class=\"verdict v-" << key << "\">" << html_escape(key) << ": "
-    << html_escape(d.headline) << "</p>\n";
-
-  if (!d.findings.empty()) {
-    h << "<h2>Findings</h2>\n<ul>\n";
-    for (const std::string& f : d.findings) h << "<li>" << html_escape(f) << "</li>\n";
-    h << "</ul>\n";
-  }
-  if (!d.accepted.empty()) {
-    h << "<h2>Named effects</h2>\n<ul>\n";
-    for (const EffectFit& e : d.accepted) {
-      h << "<li><b>" << html_escape(e.name) << "</b> [" << html_escape(e.id) << "]"
-        << (e.modelled_in_config ? "" : " (reported only, the config cannot carry it)");
-      if (!e.parameters.empty()) {
-        h << "<ul>";
-        for (const EffectParameter& p : e.parameters) {
-          h << "<li>" << html_escape(p.text.empty() ? p.name + " = " + num(p.value) : p.text)
-            << "</li>";
-        }
-        h << "</ul>";
-      }
-      h << "</li>\n";
-    }
-    h << "</ul>\n";
-  }
-
-  h << "<h2>Residuals against the explaining variable</h2>\n"
-    << "<p class=\"small\">Normalised cable-length residuals (residual / sigma) of the standard "
-       "identification (before) and with the accepted effects modelled (after). Dashed: "
-       "&plusmn;2 sigma.</p>\n";
-  bool any_points = false;
-  for (const ExplainedResiduals& p : plots) {
-    if (p.x.empty()) continue;
-    svg::Scatter plot;
-    plot.title = p.title;
-    plot.xlabel = p.variable + (p.unit.empty() ? "" : " (" + p.unit + ")");
-    plot.ylabel = "length residual / sigma";
-    plot.x = p.x;
-    plot.cable = p.cable;
-    plot.before = p.before;
-    plot.after = p.after;
-    h << svg::scatter(plot);
-    any_points = true;
-  }
-  if (!any_points) h << "<p>No residuals to plot (the standard identification was not run).</p>\n";
-  bool any_misfit = false;
-  for (double v : misfit.before) any_misfit = any_misfit || std::isfinite(v);
-  if (any_misfit) {
-    svg::Bars bars;
-    bars.title = "misfit per cable: length residual RMS in sigmas (1 = noise)";
-    bars.xlabel = "cable";
-    bars.ylabel = "RMS / sigma";
-    bars.before = misfit.before;
-    bars.after = misfit.after;
-    h << "<h2>Misfit per cable</h2>\n" << svg::bars(bars);
-  }
-
-  if (!d.channels.empty()) {
-    h << "<h2>Residual RMS per channel</h2>\n<table>\n<tr>" << th("channel") << th("before")
-      << th("after") << "</tr>\n";
-    for (const ChannelRms& ch : d.channels) {
-      h << "<tr>" << td(ch.channel) << td(shown(ch.before, ch.unit), true)
-        << td(shown(ch.after, ch.unit), true) << "</tr>\n";
-    }
-    h << "</table>\n";
-  }
-  if (!d.held_out_source.empty()) {
-    h << "<p>Held-out length RMS (" << html_escape(d.held_out_source)
-      << "): " << html_escape(mm(d.held_out_rms_before)) << " mm before, "
-      << html_escape(mm(d.held_out_rms_after)) << " mm after.</p>\n";
-  }
-
-  if (!d.candidates.empty()) {
-    h << "<h2>Candidates (refitted)</h2>\n<table>\n<tr>" << th("candidate") << th("inclusion")
-      << th("LRT p") << th("dBIC") << th("CV RMS before (mm)") << th("CV RMS after (mm)")
-      << th("accepted") << "</tr>\n";
-    for (const EffectFit& e : d.candidates) {
-      h << "<tr" << (e.accepted ? " class=\"acc\"" : "") << ">" << td(e.name + " [" + e.id + "]")
-        << td(num(e.inclusion_probability, 3), true) << td(p_text(e.lrt_p_value), true)
-        << td(num(e.bic_delta, 4), true) << td(mm(e.cv_rms_before), true)
-        << td(mm(e.cv_rms_after), true) << td(e.accepted ? "yes" : "") << "</tr>\n";
-    }
-    h << "</table>\n";
-  }
-  if (!d.screen.candidates.empty()) {
-    h << "<h2>Screen (added-variable tests)</h2>\n<table>\n<tr>" << th("candidate") << th("rank")
-      << th("p (Holm)") << th("explained") << th("dBIC") << "</tr>\n";
-    for (const CandidateScreen& s : d.screen.candidates) {
-      h << "<tr>" << td(s.name + " [" + s.id + "]") << td(std::to_string(s.rank), true)
-        << td(s.modelled ? "modelled" : p_text(s.p_adjusted), true)
-        << td(num(100.0 * s.explained_fraction, 3) + " %", true) << td(num(s.bic_delta, 4), true)
-        << "</tr>\n";
-    }
-    h << "</table>\n";
-  }
-  if (!d.confounded.empty()) {
-    h << "<h2>Confounded pairs</h2>\n";
-    for (const ConfoundedFinding& f : d.confounded) {
-      h << "<p><b>" << html_escape(f.first) << "</b> / <b>" << html_escape(f.second)
-        << "</b>, canonical correlation " << html_escape(num(f.correlation, 3)) << ": "
-        << html_escape(f.description) << "</p>\n";
-      if (!f.separating_poses.empty()) {
-        h << "<p>Extra poses that would separate them (correlation "
-          << html_escape(num(f.correlation_with_extra, 3)) << " with them added):</p>\n"
-          << pose_table_html(f.separating_poses, f.separating_pretensions);
-      }
-    }
-  }
-  if (d.follow_up) {
-    h << "<h2>Suspected, not proven</h2>\n<p><b>" << html_escape(d.follow_up->name)
-      << "</b>: p = " << html_escape(num(d.follow_up->p_value, 3)) << " alone, "
-      << html_escape(num(d.follow_up->p_adjusted, 3))
-      << " after Holm's correction over the candidates. Measure these poses, append them to the "
-         "recording and diagnose again to decide:</p>\n"
-      << pose_table_html(d.follow_up->poses, d.follow_up->pretensions);
-  }
-  if (!c.warnings.empty()) {
-    h << "<h2>Warnings</h2>\n<ul>\n";
-    for (const std::string& w : c.warnings) h << "<li>" << html_escape(w) << "</li>\n";
-    h << "</ul>\n";
-  }
-  if (!c.calibrated_config.empty()) {
-    h << "<p class=\"small\">Calibrated config: " << html_escape(c.calibrated_config) << "</p>\n";
   }
   return h.str();
 }

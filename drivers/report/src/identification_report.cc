@@ -56,22 +56,6 @@ int pose_number(const ReportContext& c, std::size_t row) {
   return row < c.pose_indices.size() ? c.pose_indices[row] : static_cast<int>(row);
 }
 
-// The standard deviation (m) of each frame anchor's position: sqrt(var x + var y + var z) of the
-// estimated coordinates "a_<i>.x/y/z"; NaN for an anchor that was not estimated.
-std::vector<double> anchor_std(const IdentificationReport& r, int num_cables) {
-  std::vector<double> var(static_cast<std::size_t>(num_cables), kNaN);
-  for (const ParameterEstimate& p : r.parameters) {
-    int cable = 0;
-    char axis = 0;
-    if (std::sscanf(p.name.c_str(), "a_%d.%c", &cable, &axis) != 2) continue;
-    if (cable < 1 || cable > num_cables) continue;
-    double& v = var[static_cast<std::size_t>(cable - 1)];
-    v = (std::isfinite(v) ? v : 0.0) + p.std_dev * p.std_dev;
-  }
-  for (double& v : var) v = std::sqrt(v);
-  return var;
-}
-
 nlohmann::json inputs_json(const ReportContext& c, const RobotModel& nominal,
                            const MeasurementSet& set) {
   return {{"config", c.config},
@@ -237,94 +221,6 @@ std::string identification_text(const CalibrationReportInput& in) {
   return h.str();
 }
 
-namespace {
-
-// The HTML sections of the identification: summary, anchors, residuals.
-std::string identification_html_body(const CalibrationReportInput& in) {
-  const ReportContext& c = in.context;
-  const IdentificationReport& r = *in.identification;
-  const RobotModel& before = in.before->robot;
-  const RobotModel& after = in.after->robot;
-  const int m = before.num_cables();
-  std::ostringstream h;
-  h << "<h1>Calibration report</h1>\n<p class=\"small\">config " << html_escape(c.config) << " ("
-    << html_escape(c.config_hash) << "), recording " << html_escape(c.recording) << " ("
-    << html_escape(c.recording_hash) << "), " << in.set->num_poses() << " poses, " << m
-    << " cables; estimated:";
-  for (const std::string& e : c.estimated) h << " " << html_escape(e);
-  h << "</p>\n";
-  const bool trustworthy = r.converged && c.warnings.empty();
-  h << "<p class=\"verdict " << (trustworthy ? "v-no_mismatch" : "v-mismatch_named") << "\">"
-    << (trustworthy   ? "converged, no warning"
-        : r.converged ? "converged with warnings"
-                      : "did not converge")
-    << ": chi2 " << html_escape(fmt(r.chi2, 5)) << " for " << r.dof << " degrees of freedom, "
-    << "length RMS " << html_escape(fmt(1e3 * r.rms_length_m, 4)) << " mm</p>\n";
-
-  // Anchors: displacement from the nominal model with its standard deviation.
-  const std::vector<double> sd = anchor_std(r, m);
-  svg::Bars anchors;
-  anchors.title = "frame anchors: distance from the nominal position (mm), +-1 standard deviation";
-  anchors.xlabel = "cable";
-  anchors.ylabel = "mm";
-  anchors.reference = kNaN;
-  anchors.y_ceiling = 0.0;
-  anchors.before_label = "moved by";
-  for (int i = 0; i < m; ++i) {
-    anchors.before.push_back(1e3 *
-                             (after.frame_anchors.col(i) - before.frame_anchors.col(i)).norm());
-    anchors.whiskers.push_back(1e3 * sd[static_cast<std::size_t>(i)]);
-  }
-  h << "<h2>Frame anchors</h2>\n" << svg::bars(anchors);
-  h << "<table>\n<tr>" << th("cable") << th("before x (m)") << th("before y (m)")
-    << th("before z (m)") << th("after x (m)") << th("after y (m)") << th("after z (m)")
-    << th("std (mm)") << "</tr>\n";
-  for (int i = 0; i < m; ++i) {
-    h << "<tr>" << td(std::to_string(i + 1), true);
-    for (int q = 0; q < 3; ++q) h << td(fmt(before.frame_anchors(q, i), 6), true);
-    for (int q = 0; q < 3; ++q) h << td(fmt(after.frame_anchors(q, i), 6), true);
-    const double s = sd[static_cast<std::size_t>(i)];
-    h << td(std::isfinite(s) ? fmt(1e3 * s, 3) : "-", true) << "</tr>\n";
-  }
-  h << "</table>\n";
-
-  // Residuals per pose (every cable) and per cable (RMS).
-  svg::Scatter per_pose;
-  per_pose.title = "length residuals per pose (residual / sigma), every cable";
-  per_pose.xlabel = "pose (row of the recording)";
-  per_pose.ylabel = "length residual / sigma";
-  for (std::size_t j = 0; j < r.residuals.size(); ++j) {
-    const Eigen::VectorXd& res = r.residuals[j].length_normalized;
-    for (int i = 0; i < res.size(); ++i) {
-      if (!std::isfinite(res(i))) continue;
-      per_pose.x.push_back(static_cast<double>(j));
-      per_pose.cable.push_back(i);
-      per_pose.before.push_back(res(i));
-    }
-  }
-  h << "<h2>Residuals</h2>\n";
-  if (!per_pose.x.empty()) h << svg::scatter(per_pose);
-  svg::Bars per_cable;
-  per_cable.title = "length residual RMS per cable in sigmas (1 = noise)";
-  per_cable.xlabel = "cable";
-  per_cable.ylabel = "RMS / sigma";
-  per_cable.before = cable_rms(r.residuals, m);
-  per_cable.before_label = "calibrated";
-  h << svg::bars(per_cable);
-  h << "<table>\n<tr>" << th("channel") << th("RMS") << "</tr>\n"
-    << "<tr>" << td("cable length") << td(fmt(1e3 * r.rms_length_m, 4) + " mm", true) << "</tr>\n"
-    << "<tr>" << td("laser") << td(fmt(1e3 * r.rms_laser_m, 4) + " mm", true) << "</tr>\n"
-    << "<tr>" << td("wrench") << td(fmt(r.rms_wrench_n, 4) + " N", true) << "</tr>\n</table>\n";
-  if (!c.warnings.empty()) {
-    h << "<h2>Warnings</h2>\n<ul>\n";
-    for (const std::string& w : c.warnings) h << "<li>" << html_escape(w) << "</li>\n";
-    h << "</ul>\n";
-  }
-  return h.str();
-}
-
-}  // namespace
-
 nlohmann::json paper_method_json(const PaperReportInput& in) {
   const ReportContext& c = in.context;
   const PaperMethodReport& r = *in.paper;
@@ -383,15 +279,20 @@ Rendered render_calibration_report(const CalibrationReportInput& in) {
   Rendered out;
   out.json = identification_json(in);
   out.text = identification_text(in);
-  std::ostringstream html;
-  html << page_head(in.context.title + ": " + in.context.recording) << identification_html_body(in);
   if (in.diagnosis != nullptr) {
     out.json["diagnosis"] = diagnosis_json(*in.diagnosis, in.before->robot, *in.set, in.context);
     out.text += "\n" + diagnosis_text(*in.diagnosis, in.before->robot, *in.set, in.context);
-    html << diagnosis_html_body(*in.diagnosis, in.before->robot, *in.set, in.context);
   }
-  html << "</body>\n</html>\n";
-  out.html = html.str();
+  PageInput page;
+  page.before = &in.before->robot;
+  page.after = in.after;
+  page.standard = in.identification;
+  page.fit =
+      in.diagnosis != nullptr && in.diagnosis->after ? &*in.diagnosis->after : in.identification;
+  page.diagnosis = in.diagnosis;
+  page.set = in.set;
+  page.context = &in.context;
+  out.html = html_page(page);
   return out;
 }
 

@@ -10,16 +10,30 @@ namespace cdpr::report {
 namespace {
 
 constexpr const char* kStyle = R"(
-body{font-family:sans-serif;max-width:1000px;margin:1em auto;padding:0 1em;color:#222}
-h1{font-size:1.4em}h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
-.verdict{padding:.6em 1em;border-radius:4px;font-weight:bold}
-.v-no_mismatch{background:#e3f4e3}.v-mismatch_named,.v-mismatch_unexplained{background:#fde8d7}
+body{font-family:sans-serif;max-width:1000px;margin:.6em auto;padding:0 1em;color:#222;
+line-height:1.35}
+h1{font-size:1.3em;margin:.3em 0}h2{font-size:1.15em;margin-top:1.4em;border-bottom:1px solid #ccc}
+.verdict{padding:.5em 1em;border-radius:4px;font-weight:bold;margin:.4em 0;
+border-left:6px solid #888}
+.v-no_mismatch{background:#e3f4e3;border-left-color:#2a7d2a}
+.v-mismatch_named{background:#fdf0d7;border-left-color:#c77c00}
+.v-mismatch_unexplained{background:#fde2dc;border-left-color:#b3261e}
 .v-inconclusive{background:#eee}
+.next{margin:.4em 0 .6em}
 table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:2px 8px}
-th{background:#f4f4f4}td.n{text-align:right;font-variant-numeric:tabular-nums}
-tr.acc td{font-weight:bold}
-svg{display:block;margin:.5em 0}
-.small{color:#555;font-size:.9em}
+th{background:#f4f4f4;text-align:left}td.n{text-align:right;font-variant-numeric:tabular-nums;white-space:nowrap}
+caption{text-align:left;font-weight:bold;padding:2px 0}
+table.keys th{width:11em}table.keys,table.effects{width:100%}td.vals{font-size:.92em}
+tr.acc td{font-weight:bold}tr.flag td{background:#fff4e5}
+svg{display:block;margin:.5em 0;max-width:100%;height:auto}
+.pair{display:flex;flex-wrap:wrap;gap:16px}.pair svg{margin:.3em 0}
+.small{color:#555;font-size:.9em}nav{margin:.5em 0}
+details{margin:.4em 0}summary{cursor:pointer;color:#1f4e79}
+.scroll{overflow-x:auto;max-width:100%}
+@media print{body{max-width:none;margin:0;font-size:10pt}nav,details.data{display:none}
+h2{break-after:avoid}svg,table,.verdict{break-inside:avoid}a{color:inherit;text-decoration:none}
+.verdict{-webkit-print-color-adjust:exact;print-color-adjust:exact}
+@page{margin:12mm}}
 )";
 
 double rms_of(const std::vector<double>& v) {

@@ -19,8 +19,19 @@ std::string page_head(const std::string& title);
 std::string td(const std::string& text, bool numeric = false);
 std::string th(const std::string& text);
 
-// The diagnosis sections of an HTML page (verdict to warnings), without the page around them.
-std::string diagnosis_html_body(const Diagnosis& d, const RobotModel& nominal,
-                                const MeasurementSet& set, const ReportContext& c);
+// What one HTML page shows: an identification, a diagnosis, or both (html_page.cc).
+struct PageInput {
+  std::string heading = "Calibration report";
+  const RobotModel* before = nullptr;              // required: the model identified from
+  const CalibratedModel* after = nullptr;          // required: the proposed model
+  const IdentificationReport* standard = nullptr;  // the standard identification (null: none ran)
+  const IdentificationReport* fit = nullptr;       // the final fit (standard, or with the effects)
+  const Diagnosis* diagnosis = nullptr;            // optional
+  const MeasurementSet* set = nullptr;             // required
+  const ReportContext* context = nullptr;          // required
+};
+// The whole page: the decision summary on the first screen, then the plots, then the tables and
+// the details.
+std::string html_page(const PageInput& in);
 
 }  // namespace cdpr::report

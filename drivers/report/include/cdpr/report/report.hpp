@@ -17,14 +17,20 @@
 //
 // The JSON of the identification is cdpr-fit calibrate's document, the JSON of a diagnosis is
 // cdpr-fit diagnose's (docs/cdpr-fit.md describes both); the combined report is the
-// identification's document with the diagnosis's under "diagnosis". The HTML page shows the
-// frame anchors before and after with their standard deviations, the length residuals per cable
-// and per pose, and with a diagnosis its verdict, named effects and the residuals against the
-// variable that would explain each effect. No physics is computed here: the explaining variables
-// come from calibration/ (residual_explanation.hpp).
+// identification's document with the diagnosis's under "diagnosis". The HTML page is laid out for
+// the decision to accept the calibration (docs/cdpr-fit.md, "HTML report"): on the first screen
+// the verdict and the next step, the named effects (value +- std, share of the misfit), the
+// largest anchor change with its uncertainty, the position accuracy over the ISO 9283 box
+// before/after (with context.identification) and chi^2/dof with its p-value; then residual heat
+// maps per cable and pose, the residuals against the variable each named effect follows, the
+// anchor changes on a top and a side view with uncertainty ellipses and the measured poses; then
+// the tables, with what does not bear on the verdict folded. No physics is computed here: the
+// explaining variables and the accuracy figures come from calibration/ (residual_explanation.hpp,
+// predicted_accuracy.hpp).
 #pragma once
 
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -55,6 +61,12 @@ struct ReportContext {
   std::string calibrated_config;  // the config written from this run, "" when none
   std::string truth;              // the true robot's config (simulation studies), "" when none
   std::vector<std::string> warnings;
+  // The parameters the identification estimated: with them the HTML page shows the predicted
+  // position accuracy over the ISO 9283 box (AccuracyBox's cube about the nominal home pose):
+  // before = the nominal model's error if the calibrated model is right
+  // (measure_position_accuracy), after = the Cramer-Rao bound of the recorded pose set
+  // (predict_accuracy, as the daemon's gate). Unset: not computed.
+  std::optional<IdentificationOptions> identification;
 };
 
 struct CalibrationReportInput {
