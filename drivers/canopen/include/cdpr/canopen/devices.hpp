@@ -113,6 +113,8 @@ class ForceSensor {
   double tension(std::size_t ch) const {
     return (static_cast<double>(raw(ch)) - offset_[ch]) / gain_[ch];
   }
+  // Raw units per N.
+  double gain(std::size_t ch) const { return gain_[ch]; }
 
  private:
   NodeId node_ = 0;
