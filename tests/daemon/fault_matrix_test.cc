@@ -180,7 +180,10 @@ class MatrixCell {
       // homing of a first start.
       if (!at_rename && phase_ == Phase::kStartup) signal_parent();
       if (!cell_->start_daemon(extra_config()).ok()) ::_exit(4);
-      if (!reach_phase().empty()) ::_exit(5);
+      if (const std::string why = reach_phase(); !why.empty()) {
+        std::fprintf(stderr, "[matrix] child: %s\n", why.c_str());  // the parent says UNSAFE
+        ::_exit(5);
+      }
       if (!at_rename && phase_ != Phase::kStartup) signal_parent();
       for (;;) cell_->cycle();  // until killed
     }
