@@ -280,6 +280,11 @@ void RtController::watch_stuck(canopen::Timestamp now) noexcept {
     snap_.unchanged_span.fill(0.0);
     return;
   }
+  // Only a reading that arrived this cycle can be unchanged: when the node's PDOs stop (the
+  // node is gone) the readings are old, which is the heartbeat watch's fault to name.
+  const std::uint64_t pdos = force_->pdos_received();
+  const bool fresh = pdos != force_pdos_;
+  force_pdos_ = pdos;
   for (int i = 0; i < m_; ++i) {
     const auto k = static_cast<std::size_t>(i);
     const std::int64_t raw = force_->raw(k);
@@ -316,7 +321,7 @@ void RtController::watch_stuck(canopen::Timestamp now) noexcept {
       stuck_count_[k] = 0;
       continue;
     }
-    if (++stuck_count_[k] < options_.stuck_confirm_cycles) continue;
+    if (!fresh || ++stuck_count_[k] < options_.stuck_confirm_cycles) continue;
     // Still: hold (the robot is safe where it is; the measurement is refused); moving or
     // slewing: quick stop (the overload watch of this cable is blind).
     const RtFault f{FaultKind::kForceStuck, 0, i, 0, snap_.tensions[k], now.count()};

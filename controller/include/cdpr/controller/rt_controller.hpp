@@ -219,6 +219,7 @@ class RtController {
   std::array<std::int64_t, kMaxAxes> stuck_raw_{};
   std::array<double, kMaxAxes> plan_min_{}, plan_max_{}, trim_min_{}, trim_max_{};
   std::array<int, kMaxAxes> stuck_count_{};
+  std::uint64_t force_pdos_ = 0;  // the force node's TPDO count last cycle
 
   // Stillness window: ring of the last settle_cycles actual counts and tensions.
   static constexpr int kMaxWindow = 512;
