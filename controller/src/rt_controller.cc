@@ -266,12 +266,12 @@ void RtController::watch_stuck(canopen::Timestamp now) noexcept {
   // over the loaded length) times the trimmed length. The platform yields to a trim of one
   // cable and the others share it, so a trim changes the real tension by less than that (a
   // third of it at home on the MINI, less elsewhere): trims count against
-  // kStuckTrimFactor times the threshold. (A fading trim during a move is not counted: the
-  // platform's motion takes it up.) A reading that keeps its raw value while (1) or (2) spans
-  // more than its threshold for stuck_confirm_cycles cycles is stuck. On a still robot without
-  // trims neither changes: noise, or a reading that happens to stay bit-identical for a long
-  // time, cannot raise it. A slack cable (below the slack limit) follows neither, so the watch
-  // starts again there.
+  // kStuckTrimFactor times the threshold. (A fading trim during a move is not counted, and
+  // while it fades the plan is no evidence for that cable either: the two may cancel.) A reading
+  // that keeps its raw value while (1) or (2) spans more than its threshold for
+  // stuck_confirm_cycles cycles is stuck. On a still robot without trims neither changes: noise, or
+  // a reading that happens to stay bit-identical for a long time, cannot raise it. A slack cable
+  // (below the slack limit) follows neither, so the watch starts again there.
   const bool applies =
       options_.stuck_raw_units > 0.0 && force_ != nullptr && fault_.kind == FaultKind::kNone &&
       (mode_ == RtMode::kMoving || mode_ == RtMode::kHolding || mode_ == RtMode::kSlewing);
@@ -307,6 +307,11 @@ void RtController::watch_stuck(canopen::Timestamp now) noexcept {
       continue;
     }
     if (mode_ != RtMode::kHolding) trim_min_[k] = trim_max_[k] = trimmed;
+    if (mode_ == RtMode::kMoving && trim_at_move_[k] != 0.0) {
+      // A trim fading out during the move changes the tension too, by an amount the platform's
+      // motion makes unknown: it may cancel the plan's change, so the plan is no evidence here.
+      plan_min_[k] = plan_max_[k] = planned;
+    }
     plan_min_[k] = std::min(plan_min_[k], planned);
     plan_max_[k] = std::max(plan_max_[k], planned);
     trim_min_[k] = std::min(trim_min_[k], trimmed);

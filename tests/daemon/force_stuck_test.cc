@@ -200,6 +200,27 @@ TEST_F(ForceStuck, AStuckReadingFoundWhileMovingQuickStops) {
       << "move to " << target.position.transpose();
 }
 
+TEST_F(ForceStuck, AForceNodeThatFallsSilentWhileMovingIsNodeLostNotStuck) {
+  // Its readings stop changing because none arrive: the heartbeat watch names that.
+  const Pose home = daemon().rt().snapshot().pose();
+  Pose target = home;
+  target.position += Eigen::Vector3d(0.05, -0.04, 0.03);
+  ASSERT_TRUE(cell_
+                  ->request("move", {{"pose",
+                                      {target.position.x(), target.position.y(),
+                                       target.position.z(), 0.0, 0.0, 0.0}}})
+                  .ok);
+  ASSERT_TRUE(
+      cell_->run_until([&] { return daemon().rt().snapshot().mode == RtMode::kMoving; }, 2.0));
+  const int force_node = daemon().master().force_sensors()[0].node();
+  cell_->robot->node(force_node).faults().silent = true;
+  ASSERT_TRUE(cell_->run_until(
+      [&] { return daemon().rt().snapshot().fault.kind != FaultKind::kNone; }, 10.0));
+  const RtSnapshot s = daemon().rt().snapshot();
+  EXPECT_EQ(s.fault.kind, FaultKind::kNodeLost) << to_string(s.fault.kind);
+  EXPECT_EQ(s.fault.node, force_node);
+}
+
 TEST_F(ForceStuck, AStillHealthyRobotWithSensorNoiseRaisesNoFalseAlarmOverALongHold) {
   // Ten minutes of holding still: the readings carry the scenario's noise and sit on one raw
   // value for long stretches, which alone must not look stuck.
