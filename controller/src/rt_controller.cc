@@ -266,7 +266,9 @@ void RtController::watch_stuck(canopen::Timestamp now) noexcept {
   // over the loaded length) times the trimmed length. The platform yields to a trim of one
   // cable and the others share it, so a trim changes the real tension by less than that (a
   // third of it at home on the MINI, less elsewhere): trims count against
-  // kStuckTrimFactor times the threshold. (A fading trim during a move is not counted, and
+  // kStuckTrimFactor times the threshold. The plan's own threshold is wide too: with the nominal
+  // geometry (anchors 14.5 mm from the truth) a real tension was seen to stay on one raw value
+  // while its plan moved 4.2 N. (A fading trim during a move is not counted, and
   // while it fades the plan is no evidence for that cable either: the two may cancel.) A reading
   // that keeps its raw value while (1) or (2) spans more than its threshold for
   // stuck_confirm_cycles cycles is stuck. On a still robot without trims neither changes: noise, or

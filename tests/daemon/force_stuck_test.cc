@@ -168,7 +168,7 @@ TEST_F(ForceStuck, AStuckReadingFoundWhileMovingQuickStops) {
   Eigen::Index k = 0;
   double largest = 0.0;
   for (int axis = 0; axis < 3; ++axis) {
-    for (double d : {-0.1, -0.07, 0.07, 0.1}) {
+    for (double d : {-0.15, -0.12, -0.1, 0.1, 0.12, 0.15}) {
       Pose p = home;
       p.position(axis) += d;
       if (!check_pose(cell_->nominal, p, PathCheckOptions{}).ok()) continue;

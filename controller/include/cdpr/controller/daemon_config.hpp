@@ -51,7 +51,7 @@ struct TensionWatch {
   // A force reading whose raw value does not change while its cable's expected tension (planned
   // tension and commanded stretch: moves, trims, slews) spans more than this many raw units for
   // stuck_confirm_s is stuck (force_stuck). 0: off.
-  double stuck_raw_units = 6.0;
+  double stuck_raw_units = 12.0;
   double stuck_confirm_s = 0.2;
 };
 

@@ -81,9 +81,9 @@ struct RtControllerOptions {
   double trim_velocity = 0.002;    // m/s of cable, rate of a tension-regulation trim
   // Stuck force reading: a channel whose raw value stays the same while its cable's planned
   // tension spans more than `stuck_raw_units` raw units (or, while holding, its tension-regulation
-  // trims are worth 4 times that by the cable's stiffness), for `stuck_confirm_cycles` cycles
+  // trims are worth 2 times that by the cable's stiffness), for `stuck_confirm_cycles` cycles
   // (the cable's response lags the command). 0: off.
-  double stuck_raw_units = 6.0;
+  double stuck_raw_units = 12.0;
   int stuck_confirm_cycles = 50;
 };
 
@@ -134,7 +134,7 @@ struct RtEvent {
 class RtController {
  public:
   // Trims count against this many times the stuck-reading threshold (see watch_stuck).
-  static constexpr double kStuckTrimFactor = 4.0;
+  static constexpr double kStuckTrimFactor = 2.0;
   // Binds to the master's drives (cables 1..m in the master's drive order) and its first force
   // node (channels = cables). Allocates here only.
   static Result<std::unique_ptr<RtController>> create(canopen::Master& master,
