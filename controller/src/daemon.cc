@@ -193,6 +193,20 @@ Status Daemon::load_state() {
       return s;
     }
     active = *v;
+  } else if (!active.ok() && store_->geometry_versions() == std::vector<int>{1} &&
+             store_->geometry_meta(1).ok() &&
+             store_->geometry_meta(1)->value("source", std::string()) == "nominal") {
+    // A first start killed between writing version 1 and activating it: finish it.
+    spdlog::warn(
+        "state directory: version 1 (the nominal geometry) exists but was never made "
+        "active (a first start interrupted); activating it");
+    if (Status s = store_->activate(1, {{"why",
+                                         "first start: nominal geometry (completed after "
+                                         "an interrupted first start)"}});
+        !s.ok()) {
+      return s;
+    }
+    active = 1;
   } else if (!active.ok()) {
     return Status::error(ErrorCode::kFailedPrecondition,
                          "%s: geometry versions exist but none is active (file 'active' missing);"
