@@ -230,10 +230,14 @@ class MatrixCell {
     if (temps > 0) {
       const std::size_t left = count_temps();
       const bool logged = log_capture().take().find("leftover temporary file") != std::string::npos;
-      parts.push_back(left == 0 && logged
-                          ? "temp file removed at restart"
-                          : std::to_string(left) + " of " + std::to_string(temps) +
-                                " temp file left after restart" + (logged ? "" : ", not logged"));
+      // (a SIGKILL at a wall-clock moment may or may not land while a file is written: its cells
+      // name only a temporary that stays)
+      if (left > 0 || !logged) {
+        parts.push_back(std::to_string(left) + " of " + std::to_string(temps) +
+                        " temp file left after restart" + (logged ? "" : ", not logged"));
+      } else if (power_loss) {
+        parts.push_back("temp file removed at restart");
+      }
     }
     const int v = daemon().status()["geometry_version"].get<int>();
     auto v1 = daemon().store().load_geometry(1);
