@@ -57,11 +57,21 @@ int open_fds() {
   return n - 1;  // the iterator's own
 }
 
+// Heap in use (malloc's arenas and mmapped blocks), bytes.
+std::size_t heap_in_use() {
+  const struct mallinfo2 mi = mallinfo2();
+  return mi.uordblks + mi.hblkhd;
+}
+
 struct Soak {
-  explicit Soak(testing::VirtualCell& c) : cell(c) {}
+  // The cycle-time samples are stored in buffers sized (and touched) once, before the baseline:
+  // growing vectors of samples would be the soak's own RSS growth (16 bytes per cycle).
+  Soak(testing::VirtualCell& c, std::size_t capacity)
+      : cell(c), cycle_us(capacity, 0.0), cycle_cpu_us(capacity, 0.0) {}
   testing::VirtualCell& cell;
   std::vector<double> cycle_us;      // wall time (includes being preempted by other processes)
   std::vector<double> cycle_cpu_us;  // the thread's CPU time: what the program itself costs
+  std::size_t samples = 0;           // cycles recorded (at most the capacity)
   static double thread_cpu_us() {
     timespec ts{};
     ::clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
@@ -74,8 +84,13 @@ struct Soak {
     const auto t0 = WallClock::now();
     const double c0 = thread_cpu_us();
     cell.daemon->cycle(cell.clock.now());
-    cycle_cpu_us.push_back(thread_cpu_us() - c0);
-    cycle_us.push_back(std::chrono::duration<double, std::micro>(WallClock::now() - t0).count());
+    const double cpu = thread_cpu_us() - c0;
+    const double wall = std::chrono::duration<double, std::micro>(WallClock::now() - t0).count();
+    if (samples < cycle_us.size()) {
+      cycle_cpu_us[samples] = cpu;
+      cycle_us[samples] = wall;
+      ++samples;
+    }
     const can::Timestamp next = cell.clock.now() + cell.network.sync_period;
     while (cell.clock.now() < next) cell.idle();
     if (++n_ % 5 == 0) cell.daemon->service();
@@ -155,12 +170,17 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "daemon_soak: %s\n", s.to_string().c_str());
       return 2;
     }
-    Soak soak(cell);
+    // The cell keeps every event the daemon publishes (for the tests' saw_event): in the soak
+    // they are only counted, or that list would be the soak's own growth.
+    std::size_t events = 0;
+    cell.daemon->set_event_sink([&events](const nlohmann::json&) { ++events; });
     const double period_us =
         std::chrono::duration<double, std::micro>(cell.network.sync_period).count();
+    Soak soak(cell, static_cast<std::size_t>(minutes * 60.0e6 / period_us * 1.1) + 100000);
     const auto wall0 = WallClock::now();
     const double t0 = cell.seconds();
     long rss_start = -1, rss_mid = -1;
+    std::size_t heap_start = 0, heap_mid = 0;
     int fds_start = -1, fds_mid = -1;
     // Round r: calibrate; accept (even r) or reject (odd r); moves; every 4th round a rollback.
     for (int round = 0; cell.seconds() - t0 < minutes * 60.0; ++round) {
@@ -187,22 +207,29 @@ int main(int argc, char** argv) {
       }
       if (round == 0) {  // the baseline: after the first of everything
         rss_start = rss_kib();
+        heap_start = heap_in_use();
         fds_start = open_fds();
       }
       if (rss_mid < 0 && cell.seconds() - t0 >= minutes * 30.0) {
         rss_mid = rss_kib();
+        heap_mid = heap_in_use();
         fds_mid = open_fds();
       }
       std::printf(
-          "[soak] round %d: robot time %.1f min, state %s, geometry v%d, RSS %ld KiB, %d fds\n",
+          "[soak] round %d: robot time %.1f min, state %s, geometry v%d, RSS %ld KiB, heap in use "
+          "%.1f KiB, %d fds\n",
           round, (cell.seconds() - t0) / 60.0,
           cell.daemon->status()["state"].get<std::string>().c_str(),
-          cell.daemon->status()["geometry_version"].get<int>(), rss_kib(), open_fds());
+          cell.daemon->status()["geometry_version"].get<int>(), rss_kib(),
+          static_cast<double>(heap_in_use()) / 1024.0, open_fds());
       std::fflush(stdout);
     }
     const long rss_end = rss_kib();
+    const std::size_t heap_end = heap_in_use();
     const int fds_end = open_fds();
-    std::vector<double> v = soak.cycle_us, cpu = soak.cycle_cpu_us;
+    const auto n = static_cast<std::ptrdiff_t>(soak.samples);
+    std::vector<double> v(soak.cycle_us.begin(), soak.cycle_us.begin() + n);
+    std::vector<double> cpu(soak.cycle_cpu_us.begin(), soak.cycle_cpu_us.begin() + n);
     std::sort(v.begin(), v.end());
     std::sort(cpu.begin(), cpu.end());
     auto at = [&](double q) {
@@ -231,6 +258,12 @@ int main(int argc, char** argv) {
     std::printf(
         "[soak] RSS %ld KiB after round 0, %ld KiB half-way, %ld KiB at the end (%+ld KiB)\n",
         rss_start, rss_mid, rss_end, rss_end - rss_start);
+    auto kib = [](std::size_t b) { return static_cast<double>(b) / 1024.0; };
+    std::printf(
+        "[soak] heap in use %.1f KiB after round 0, %.1f KiB half-way, %.1f KiB at the end "
+        "(first half %+.1f KiB, second half %+.1f KiB); %zu events published\n",
+        kib(heap_start), kib(heap_mid), kib(heap_end), kib(heap_mid) - kib(heap_start),
+        kib(heap_end) - kib(heap_mid), events);
     std::printf("[soak] open fds %d after round 0, %d half-way, %d at the end\n", fds_start,
                 fds_mid, fds_end);
     std::printf(

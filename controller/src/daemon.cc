@@ -81,6 +81,12 @@ std::string fault_text(const RtFault& f) {
     std::snprintf(buf, sizeof buf, " at %.1f N", f.value);
     s += buf;
   }
+  if (f.kind == FaultKind::kForceStuck) {
+    char buf[96];
+    std::snprintf(buf, sizeof buf,
+                  " (reading unchanged at %.1f N while the tension was made to change)", f.value);
+    s += buf;
+  }
   return s;
 }
 
@@ -139,6 +145,9 @@ Result<std::unique_ptr<Daemon>> Daemon::create(DaemonConfig config, DaemonIo io)
   ro.slack_below = d->config_.tension_watch.slack_below;
   ro.overload_above = d->config_.tension_watch.overload_above;
   ro.watch_cycles = d->config_.tension_watch.cycles;
+  ro.stuck_raw_units = d->config_.tension_watch.stuck_raw_units;
+  ro.stuck_confirm_cycles = std::clamp(
+      static_cast<int>(std::ceil(d->config_.tension_watch.stuck_confirm_s / cycle_s)), 1, 100000);
   ro.settle_cycles = std::clamp(static_cast<int>(std::ceil(ms.settle_window_s / cycle_s)), 2, 512);
   ro.settle_counts =
       ms.settle_position_tolerance / winch_metres_per_count(d->active_->model.winches[0]);
@@ -164,6 +173,16 @@ Status Daemon::load_state() {
   auto store = StateStore::open(config_.state_directory);
   if (!store.ok()) return store.status();
   store_ = std::make_unique<StateStore>(std::move(*store));
+  // A crash or a power loss between a write and its rename left its temporary file: never read,
+  // removed here (logged) before anything is written.
+  auto temps = store_->remove_leftover_temporaries();
+  if (!temps.ok()) return temps.status();
+  for (const std::string& t : *temps) {
+    spdlog::warn(
+        "state directory: leftover temporary file {} removed (a write interrupted before "
+        "its rename)",
+        t);
+  }
   auto active = store_->active_version();
   if (!active.ok() && active.status().code() != ErrorCode::kNotFound) return active.status();
   if (!active.ok() && store_->geometry_versions().empty()) {
@@ -174,6 +193,20 @@ Status Daemon::load_state() {
       return s;
     }
     active = *v;
+  } else if (!active.ok() && store_->geometry_versions() == std::vector<int>{1} &&
+             store_->geometry_meta(1).ok() &&
+             store_->geometry_meta(1)->value("source", std::string()) == "nominal") {
+    // A first start killed between writing version 1 and activating it: finish it.
+    spdlog::warn(
+        "state directory: version 1 (the nominal geometry) exists but was never made "
+        "active (a first start interrupted); activating it");
+    if (Status s = store_->activate(1, {{"why",
+                                         "first start: nominal geometry (completed after "
+                                         "an interrupted first start)"}});
+        !s.ok()) {
+      return s;
+    }
+    active = 1;
   } else if (!active.ok()) {
     return Status::error(ErrorCode::kFailedPrecondition,
                          "%s: geometry versions exist but none is active (file 'active' missing);"
@@ -833,6 +866,10 @@ Status Daemon::measure_pose(const Pose& pose, double reference_tension,
     return s;
   }
   const RtSnapshot r = rt_->snapshot();
+  if (r.fault.kind != FaultKind::kNone) {  // (e.g. a stuck force reading: the row is refused)
+    return Status::error(ErrorCode::kAborted, "encoder averaging: robot fault: %s",
+                         fault_text(r.fault).c_str());
+  }
   if (!r.settled) return Status(ErrorCode::kAborted, "the platform moved while it was measured");
 
   const Geometry* g;

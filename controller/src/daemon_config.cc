@@ -69,9 +69,12 @@ Status read_motion(const YamlField& n, MotionSettings& m) {
 
 Status read_tension_watch(const YamlField& n, TensionWatch& t) {
   if (!n.present()) return Status::success();
-  CDPR_RETURN_IF_ERROR(n.check_keys({"slack_below", "overload_above", "cycles"}));
+  CDPR_RETURN_IF_ERROR(n.check_keys(
+      {"slack_below", "overload_above", "cycles", "stuck_raw_units", "stuck_confirm_s"}));
   CDPR_RETURN_IF_ERROR(in_range(n, "slack_below", 0.0, 1e6, "N", t.slack_below));
   CDPR_RETURN_IF_ERROR(in_range(n, "overload_above", 0.0, 1e7, "N", t.overload_above));
+  CDPR_RETURN_IF_ERROR(in_range(n, "stuck_raw_units", 0.0, 1e6, "raw units", t.stuck_raw_units));
+  CDPR_RETURN_IF_ERROR(in_range(n, "stuck_confirm_s", 0.0, 60.0, "s", t.stuck_confirm_s));
   return n.optional("cycles", t.cycles, 1, 10000);
 }
 

@@ -16,6 +16,7 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
       "realtime: {priority: 70, cpu: 1, sync_period_ms: 20}\n"
       "identity: {vendor_id: 0x00CD9001}\n"
       "motion: {max_linear_velocity: 0.2}\n"
+      "tension_watch: {stuck_raw_units: 10, stuck_confirm_s: 0.5}\n"
       "measuring: {poses: 30, laser_samples: 10}\n"
       "identification: {length_scales: true, diagnose: false}\n"
       "acceptance: {mode: auto, max_anchor_change_m: 0.01}\n"
@@ -31,6 +32,8 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
   EXPECT_EQ(c->realtime.sync_period, std::chrono::milliseconds(20));
   EXPECT_EQ(c->identity.vendor_id, 0x00CD9001u);
   EXPECT_DOUBLE_EQ(c->motion.max_linear_velocity, 0.2);
+  EXPECT_DOUBLE_EQ(c->tension_watch.stuck_raw_units, 10.0);
+  EXPECT_DOUBLE_EQ(c->tension_watch.stuck_confirm_s, 0.5);
   EXPECT_EQ(c->measuring.poses, 30);
   EXPECT_TRUE(c->identification.options.estimate_length_scales);
   EXPECT_FALSE(c->identification.diagnose);
@@ -69,6 +72,12 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
   ASSERT_FALSE(twice.ok());
   EXPECT_NE(twice.status().to_string().find("given twice"), std::string::npos)
       << twice.status().to_string();
+
+  auto stuck =
+      parse_daemon_config("robot: r\ncanopen: n\ntension_watch: {stuck_raw_units: -2}\n", "d.yaml");
+  ASSERT_FALSE(stuck.ok());
+  EXPECT_NE(stuck.status().to_string().find("tension_watch.stuck_raw_units"), std::string::npos)
+      << stuck.status().to_string();
 
   auto bad_yaml = parse_daemon_config("robot: [unclosed\n", "d.yaml");
   ASSERT_FALSE(bad_yaml.ok());

@@ -41,6 +41,8 @@ const char* to_string(FaultKind f) {
       return "quick_stop";
     case FaultKind::kForceSensor:
       return "force_sensor";
+    case FaultKind::kForceStuck:
+      return "force_stuck";
   }
   return "?";
 }
@@ -99,10 +101,19 @@ double RtController::cable_counts_per_metre(int i) const noexcept {
 }
 
 void RtController::set_fault(const RtFault& f) noexcept {
-  if (fault_.kind != FaultKind::kNone) return;  // the first fault is the one that counts
-  fault_ = f;
+  if (fault_.kind == FaultKind::kNone) fault_ = f;  // the first fault is the one that counts
+  // A fault that only held the robot (hold_fault) does not stand in the way of a quick stop.
+  if (mode_ == RtMode::kDisabled) return;
   master_.quick_stop_all();
   mode_ = RtMode::kDisabled;
+}
+
+void RtController::hold_fault(const RtFault& f) noexcept {
+  if (fault_.kind != FaultKind::kNone) return;
+  fault_ = f;
+  // Latched like any fault (no command is taken until fault_reset); the drives keep holding the
+  // pose, a trim in progress stops where it is.
+  trim_goal_ = trim_;
 }
 
 bool RtController::compute_targets(const Pose& pose) noexcept {
@@ -162,6 +173,7 @@ void RtController::take_command(canopen::Timestamp now) noexcept {
   }
   ref_tension_ = geometry_->reference_tension;
   hold_pose_ = pose_ = c->pose;
+  reset_stuck_watch();  // the commanded lengths are derived again: the expected tensions jump
   trim_.fill(0.0);
   trim_goal_.fill(0.0);
   std::array<double, kMaxAxes> start{};
@@ -243,6 +255,90 @@ void RtController::watch(canopen::Timestamp now) noexcept {
       set_fault({FaultKind::kOverload, 0, i, 0, f, now.count()});
     }
   }
+  watch_stuck(now);
+}
+
+void RtController::watch_stuck(canopen::Timestamp now) noexcept {
+  // What a cable's tension is made to do, from the commands alone: (1) the planned tension at
+  // the commanded pose (the compensated inverse kinematics stretches the cable to it, and the
+  // plan is in equilibrium with the platform, so the real tension follows it up to the model's
+  // errors); (2) while holding, the tension-regulation trims, as the cable's own stiffness (EA
+  // over the loaded length) times the trimmed length. The platform yields to a trim of one
+  // cable and the others share it, so a trim changes the real tension by less than that (a
+  // third of it at home on the MINI, less elsewhere): trims count against
+  // kStuckTrimFactor times the threshold. The plan's own threshold is wide too: with the nominal
+  // geometry (anchors 14.5 mm from the truth) a real tension was seen to stay on one raw value
+  // while its plan moved 4.2 N. (A fading trim during a move is not counted, and
+  // while it fades the plan is no evidence for that cable either: the two may cancel.) A reading
+  // that keeps its raw value while (1) or (2) spans more than its threshold for
+  // stuck_confirm_cycles cycles is stuck. On a still robot without trims neither changes: noise, or
+  // a reading that happens to stay bit-identical for a long time, cannot raise it. A slack cable
+  // (below the slack limit) follows neither, so the watch starts again there.
+  const bool applies =
+      options_.stuck_raw_units > 0.0 && force_ != nullptr && fault_.kind == FaultKind::kNone &&
+      (mode_ == RtMode::kMoving || mode_ == RtMode::kHolding || mode_ == RtMode::kSlewing);
+  if (!applies) {
+    reset_stuck_watch();
+    snap_.unchanged_span.fill(0.0);
+    return;
+  }
+  // Only a reading that arrived this cycle can be unchanged: when the node's PDOs stop (the
+  // node is gone) the readings are old, which is the heartbeat watch's fault to name.
+  const std::uint64_t pdos = force_->pdos_received();
+  const bool fresh = pdos != force_pdos_;
+  force_pdos_ = pdos;
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    const std::int64_t raw = force_->raw(k);
+    const double planned = snap_.planned[k];
+    double trimmed = 0.0;  // N
+    if (mode_ == RtMode::kHolding) {
+      const CableModel& cable = geometry_->model.cables[k];
+      const WinchModel& winch = geometry_->model.winches[k];
+      const double loaded = command_data_.cable.loaded_lengths(i);
+      const double stiffness = cable.ea > 0.0 && loaded > 0.0 ? cable.ea / loaded : 0.0;  // N/m
+      trimmed = -stiffness * trim_[k] * winch.direction * winch_metres_per_count(winch);
+    }
+    if (!stuck_valid_[k] || raw != stuck_raw_[k] || snap_.tensions[k] < options_.slack_below) {
+      stuck_valid_[k] = true;
+      stuck_raw_[k] = raw;
+      plan_min_[k] = plan_max_[k] = planned;
+      trim_min_[k] = trim_max_[k] = trimmed;
+      stuck_count_[k] = 0;
+      snap_.unchanged_span[k] = 0.0;
+      continue;
+    }
+    if (mode_ != RtMode::kHolding) trim_min_[k] = trim_max_[k] = trimmed;
+    if (mode_ == RtMode::kMoving && trim_at_move_[k] != 0.0) {
+      // A trim fading out during the move changes the tension too, by an amount the platform's
+      // motion makes unknown: it may cancel the plan's change, so the plan is no evidence here.
+      plan_min_[k] = plan_max_[k] = planned;
+    }
+    plan_min_[k] = std::min(plan_min_[k], planned);
+    plan_max_[k] = std::max(plan_max_[k], planned);
+    trim_min_[k] = std::min(trim_min_[k], trimmed);
+    trim_max_[k] = std::max(trim_max_[k], trimmed);
+    // In threshold units: > 1 is evidence enough.
+    const double gain = std::abs(force_->gain(k));
+    const double evidence =
+        std::max(plan_max_[k] - plan_min_[k], (trim_max_[k] - trim_min_[k]) / kStuckTrimFactor) *
+        gain / options_.stuck_raw_units;
+    snap_.unchanged_span[k] = evidence;
+    if (evidence <= 1.0) {
+      stuck_count_[k] = 0;
+      continue;
+    }
+    if (!fresh || ++stuck_count_[k] < options_.stuck_confirm_cycles) continue;
+    // Still: hold (the robot is safe where it is; the measurement is refused); moving or
+    // slewing: quick stop (the overload watch of this cable is blind).
+    const RtFault f{FaultKind::kForceStuck, 0, i, 0, snap_.tensions[k], now.count()};
+    if (mode_ == RtMode::kHolding) {
+      hold_fault(f);
+    } else {
+      set_fault(f);
+    }
+    return;
+  }
 }
 
 void RtController::update_settle() noexcept {
@@ -296,6 +392,7 @@ void RtController::cycle(canopen::Timestamp now) noexcept {
     }
     slack_count_.fill(0);
     overload_count_.fill(0);
+    reset_stuck_watch();
   }
   take_command(now);
 

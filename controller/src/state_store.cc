@@ -1,6 +1,7 @@
 #include "cdpr/controller/state_store.hpp"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -123,6 +124,35 @@ Result<StateStore> StateStore::open(const std::string& directory) {
     return errno_status("state directory is not writable:", directory);
   }
   return StateStore(directory);
+}
+
+Result<std::vector<std::string>> StateStore::remove_leftover_temporaries() const {
+  std::vector<std::string> removed;
+  std::error_code ec;
+  // (a recursive_directory_iterator does not follow symbolic links to folders by default)
+  fs::recursive_directory_iterator it(dir_, ec), end;
+  if (ec) {
+    return Status::error(ErrorCode::kIoError, "state directory %s: %s", dir_.c_str(),
+                         ec.message().c_str());
+  }
+  for (; it != end; it.increment(ec)) {
+    if (ec) {
+      return Status::error(ErrorCode::kIoError, "state directory %s: %s", dir_.c_str(),
+                           ec.message().c_str());
+    }
+    int pid = 0;
+    if (!io::is_temporary_name(it->path().filename().string(), &pid)) continue;
+    if (!fs::is_regular_file(it->symlink_status())) continue;
+    if (pid != ::getpid() && ::kill(pid, 0) == 0) continue;  // a writer that is still running
+    const std::string rel = fs::relative(it->path(), dir_).string();
+    if (!fs::remove(it->path(), ec) && ec) {
+      return Status::error(ErrorCode::kIoError, "cannot remove %s/%s: %s", dir_.c_str(),
+                           rel.c_str(), ec.message().c_str());
+    }
+    removed.push_back(rel);
+  }
+  std::sort(removed.begin(), removed.end());
+  return removed;
 }
 
 std::string StateStore::geometry_path(int version) const {

@@ -1,12 +1,15 @@
 #include "cdpr/controller/state_store.hpp"
 
 #include <gtest/gtest.h>
+#include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
 
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/io/atomic_file.hpp"
 
 namespace cdpr::controller {
 namespace {
@@ -75,6 +78,83 @@ TEST_F(StateStoreTest, AppendedRecordsSurviveAndATornLastHistoryLineIsSkipped) {
   auto h = s->history();
   ASSERT_TRUE(h.ok());
   EXPECT_EQ(h->size(), 1u);
+}
+
+// A writer killed between the write and the rename of cdpr/io/atomic_file.hpp (its temporary
+// stays behind); returns its (now dead) pid.
+pid_t kill_writer_before_rename(const std::string& target) {
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    io::AtomicFileSet set;
+    if (set.stage(target, "new content\n").ok()) ::raise(SIGKILL);
+    ::_exit(1);
+  }
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  EXPECT_TRUE(WIFSIGNALED(status));
+  return pid;
+}
+
+std::size_t temporaries_under(const fs::path& dir) {
+  std::size_t n = 0;
+  for (const auto& e : fs::recursive_directory_iterator(dir)) {
+    n += io::is_temporary_name(e.path().filename().string()) ? 1 : 0;
+  }
+  return n;
+}
+
+TEST_F(StateStoreTest, RemovesOnlyTheLeftoverTemporariesOfKilledWritersInsideTheStateDirectory) {
+  auto s = StateStore::open(dir_.string());
+  ASSERT_TRUE(s.ok()) << s.status().to_string();
+  auto v1 = s->add_geometry(robot_, {{"source", "nominal"}});
+  ASSERT_TRUE(v1.ok());
+  ASSERT_TRUE(s->activate(*v1, {{"why", "test"}}).ok());
+  fs::create_directories(dir_ / "calibrations" / "000001");
+  kill_writer_before_rename((dir_ / "active").string());
+  kill_writer_before_rename((dir_ / "calibrations" / "000001" / "report.json").string());
+  ASSERT_EQ(temporaries_under(dir_), 2u);
+
+  // Not removed: a temporary that a running process is writing, files that only look similar,
+  // a symbolic link with a temporary's name, and anything behind a linked folder.
+  const pid_t writer = ::fork();
+  if (writer == 0) {
+    ::pause();
+    ::_exit(0);
+  }
+  const std::string live = ".homing.json.tmp-" + std::to_string(writer) + "-0";
+  const fs::path outside = dir_.string() + "-outside";
+  fs::remove_all(outside);
+  fs::create_directories(outside);
+  const std::string outside_temp = ".x.yaml.tmp-1-0";
+  for (const fs::path& p : {dir_ / live, dir_ / "notes.tmp", dir_ / "geometry" / ".a.tmp.XYZ",
+                            outside / outside_temp, outside / "target"}) {
+    std::ofstream(p) << "keep\n";
+  }
+  fs::create_directory_symlink(outside, dir_ / "calibrations" / "linked");
+  fs::create_symlink(outside / "target", dir_ / ".link.tmp-1-0");
+
+  auto removed = s->remove_leftover_temporaries();
+  ::kill(writer, SIGKILL);
+  ::waitpid(writer, nullptr, 0);
+  ASSERT_TRUE(removed.ok()) << removed.status().to_string();
+  ASSERT_EQ(removed->size(), 2u);
+  EXPECT_EQ((*removed)[0].rfind(".active.tmp-", 0), 0u) << (*removed)[0];
+  EXPECT_EQ((*removed)[1].rfind("calibrations/000001/.report.json.tmp-", 0), 0u) << (*removed)[1];
+  EXPECT_TRUE(fs::exists(dir_ / live));
+  EXPECT_TRUE(fs::exists(dir_ / "notes.tmp"));
+  EXPECT_TRUE(fs::exists(dir_ / "geometry" / ".a.tmp.XYZ"));
+  EXPECT_TRUE(fs::is_symlink(dir_ / ".link.tmp-1-0"));
+  EXPECT_TRUE(fs::exists(outside / outside_temp));
+  EXPECT_TRUE(fs::exists(outside / "target"));
+  auto active = s->active_version();
+  ASSERT_TRUE(active.ok());
+  EXPECT_EQ(*active, 1);  // the killed writer's content never replaced it
+  // Once its writer is gone, the other temporary goes too (and nothing else).
+  auto again = s->remove_leftover_temporaries();
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(*again, std::vector<std::string>{live});
+  EXPECT_TRUE(fs::exists(dir_ / "notes.tmp"));
+  fs::remove_all(outside);
 }
 
 }  // namespace

@@ -109,6 +109,23 @@ TEST_F(AtomicFile, KilledBetweenWriteAndRenameLeavesTheOldFileIntact) {
   ASSERT_EQ(left.size(), 1u);
   EXPECT_EQ(left[0].rfind(".rec.csv.tmp-", 0), 0u) << left[0];
   EXPECT_EQ(slurp(dir_ / left[0]), fresh);
+  // ... and is recognised as one, with the writer's pid.
+  int pid = 0;
+  EXPECT_TRUE(is_temporary_name(left[0], &pid)) << left[0];
+  EXPECT_GT(pid, 0);
+  EXPECT_NE(pid, ::getpid());
+}
+
+TEST_F(AtomicFile, RecognisesOnlyItsOwnTemporaryNames) {
+  int pid = 0;
+  EXPECT_TRUE(is_temporary_name(".active.tmp-4242-7", &pid));
+  EXPECT_EQ(pid, 4242);
+  EXPECT_TRUE(is_temporary_name(".000001.yaml.tmp-1-0"));
+  for (const char* other : {"active", "000001.yaml", ".tmp-1-2", "..tmp-1-2", ".a.tmp-1",
+                            ".a.tmp--2", ".a.tmp-1-", ".a.tmp-x-2", ".a.tmp-1-2x", "a.tmp-1-2",
+                            ".a.tmp-1-2/b", ".a.tmp.XXXXXX", ".a.tmp-12345678901-1", ""}) {
+    EXPECT_FALSE(is_temporary_name(other)) << other;
+  }
 }
 
 TEST_F(AtomicFile, KilledAtAnyMomentLeavesTheOldOrTheNewFileWhole) {

@@ -22,6 +22,7 @@
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/controller/daemon.hpp"
+#include "cdpr/controller/state_store.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
 #include "cdpr/modbus/register_map.hpp"
 #include "cdpr/sim/can_robot.hpp"
@@ -288,6 +289,21 @@ TEST_F(DaemonNative, AnOperatorQuickStopFaultsAndFaultResetHoldsWhereThePlatform
   ASSERT_TRUE(run_until([&] { return daemon().state() == DaemonState::kHolding; }, 10.0))
       << daemon().status().dump(2);
   EXPECT_LE(daemon().rt().snapshot().largest_reference_step, one_cycle_counts());
+}
+
+TEST_F(DaemonNative, AFirstStartKilledBeforeItActivatedTheNominalGeometryIsCompletedAtTheNext) {
+  // What a first start leaves when it is killed between writing version 1 and activating it.
+  {
+    auto store = StateStore::open((dir_ / "state").string());
+    ASSERT_TRUE(store.ok());
+    ASSERT_TRUE(store->add_geometry(cell_->nominal, {{"source", "nominal"}}).ok());
+    ASSERT_EQ(store->active_version().status().code(), ErrorCode::kNotFound);
+  }
+  start_daemon();
+  EXPECT_EQ(daemon().status()["geometry_version"], 1);
+  auto active = daemon().store().active_version();
+  ASSERT_TRUE(active.ok());
+  EXPECT_EQ(*active, 1);
 }
 
 TEST_F(DaemonNative, RequestsWithBadArgumentsAreNamedErrors) {

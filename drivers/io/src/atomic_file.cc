@@ -33,6 +33,14 @@ std::string temp_name(const std::string& path) {
   return (p.parent_path() / name).string();
 }
 
+bool all_digits(std::string_view s) {
+  if (s.empty() || s.size() > 18) return false;
+  for (char c : s) {
+    if (c < '0' || c > '9') return false;
+  }
+  return true;
+}
+
 Status write_all(int fd, std::string_view contents, const std::string& temp) {
   const char* p = contents.data();
   std::size_t left = contents.size();
@@ -134,6 +142,24 @@ Status AtomicFileSet::commit() {
 void AtomicFileSet::abandon() {
   for (const Staged& f : files_) ::unlink(f.temp.c_str());
   files_.clear();
+}
+
+bool is_temporary_name(std::string_view file_name, int* writer_pid) {
+  // "." + name + ".tmp-" + pid + "-" + n, with a non-empty name.
+  if (file_name.size() < 2 || file_name.front() != '.') return false;
+  const std::size_t tag = file_name.rfind(".tmp-");
+  if (tag == std::string_view::npos || tag < 2) return false;
+  const std::string_view numbers = file_name.substr(tag + 5);
+  const std::size_t dash = numbers.find('-');
+  if (dash == std::string_view::npos) return false;
+  const std::string_view pid = numbers.substr(0, dash), n = numbers.substr(dash + 1);
+  if (!all_digits(pid) || !all_digits(n) || pid.size() > 9) return false;
+  if (writer_pid != nullptr) {
+    int v = 0;
+    for (char c : pid) v = v * 10 + (c - '0');
+    *writer_pid = v;
+  }
+  return true;
 }
 
 }  // namespace cdpr::io

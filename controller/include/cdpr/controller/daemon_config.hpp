@@ -48,6 +48,11 @@ struct TensionWatch {
   double slack_below = 1.0;     // N: a measured tension below this while moving is a slack cable
   double overload_above = 0.0;  // N: above this is an overload; 0: 1.1 x the cable's f_max
   int cycles = 5;               // consecutive cycles before the fault is declared
+  // A force reading whose raw value does not change while its cable's expected tension (planned
+  // tension and commanded stretch: moves, trims, slews) spans more than this many raw units for
+  // stuck_confirm_s is stuck (force_stuck). 0: off.
+  double stuck_raw_units = 12.0;
+  double stuck_confirm_s = 0.2;
 };
 
 struct MeasuringSettings {

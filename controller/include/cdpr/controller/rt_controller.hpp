@@ -55,6 +55,7 @@ enum class FaultKind : std::uint8_t {
   kCommand,      // the inverse kinematics or the tension planner failed at the commanded pose
   kQuickStop,    // an operator's quick stop
   kForceSensor,  // no force readings while they are required
+  kForceStuck,   // a force reading did not change while its cable's tension was made to change
 };
 const char* to_string(FaultKind f);
 
@@ -78,6 +79,12 @@ struct RtControllerOptions {
   double slew_velocity = 0.2;      // m/s of cable, re-reference slew
   double slew_acceleration = 1.0;  // m/s^2
   double trim_velocity = 0.002;    // m/s of cable, rate of a tension-regulation trim
+  // Stuck force reading: a channel whose raw value stays the same while its cable's planned
+  // tension spans more than `stuck_raw_units` raw units (or, while holding, its tension-regulation
+  // trims are worth 2 times that by the cable's stiffness), for `stuck_confirm_cycles` cycles
+  // (the cable's response lags the command). 0: off.
+  double stuck_raw_units = 12.0;
+  int stuck_confirm_cycles = 50;
 };
 
 // What any thread may read about the loop (trivially copyable, published every cycle).
@@ -105,6 +112,9 @@ struct RtSnapshot {
   std::array<double, kMaxAxes> target_counts{};  // drive target sent
   std::array<double, kMaxAxes> trim_counts{};    // tension-regulation trims in force
   std::array<int, kMaxAxes> slack_cycles{};      // consecutive cycles below the slack limit
+  // Stuck-reading watch: how far each cable's tension was made to change since its raw reading
+  // last changed, in units of the watch's threshold (above 1: evidence of a stuck reading).
+  std::array<double, kMaxAxes> unchanged_span{};
   // Averages over the cycles since the last request_average() while settled.
   std::uint64_t average_id = 0;
   int average_cycles = 0;
@@ -123,6 +133,8 @@ struct RtEvent {
 
 class RtController {
  public:
+  // Trims count against this many times the stuck-reading threshold (see watch_stuck).
+  static constexpr double kStuckTrimFactor = 2.0;
   // Binds to the master's drives (cables 1..m in the master's drive order) and its first force
   // node (channels = cables). Allocates here only.
   static Result<std::unique_ptr<RtController>> create(canopen::Master& master,
@@ -163,7 +175,10 @@ class RtController {
                const RtControllerOptions& options);
   void take_command(canopen::Timestamp now) noexcept;
   void set_fault(const RtFault& f) noexcept;
+  void hold_fault(const RtFault& f) noexcept;
   void watch(canopen::Timestamp now) noexcept;
+  void watch_stuck(canopen::Timestamp now) noexcept;
+  void reset_stuck_watch() noexcept { stuck_valid_.fill(false); }
   void update_settle() noexcept;
   bool compute_targets(const Pose& pose) noexcept;
   double cable_counts_per_metre(int i) const noexcept;
@@ -198,6 +213,13 @@ class RtController {
   std::uint64_t done_ = 0;
   std::array<double, kMaxAxes> trim_{}, trim_goal_{}, trim_at_move_{};
   std::array<int, kMaxAxes> slack_count_{}, overload_count_{};
+  // Stuck-reading watch: the raw value seen last, the range of the expected tension since it
+  // changed, and for how many cycles that range has been too wide.
+  std::array<bool, kMaxAxes> stuck_valid_{};
+  std::array<std::int64_t, kMaxAxes> stuck_raw_{};
+  std::array<double, kMaxAxes> plan_min_{}, plan_max_{}, trim_min_{}, trim_max_{};
+  std::array<int, kMaxAxes> stuck_count_{};
+  std::uint64_t force_pdos_ = 0;  // the force node's TPDO count last cycle
 
   // Stillness window: ring of the last settle_cycles actual counts and tensions.
   static constexpr int kMaxWindow = 512;

@@ -69,6 +69,13 @@ class StateStore {
   Status save_offsets(const std::vector<double>& offsets, std::string_view how);
   Result<std::vector<double>> load_offsets() const;
 
+  // Removes the temporary files of cdpr/io/atomic_file.hpp that a crash or a power loss between
+  // a write and its rename left in the state directory (its folders, no symbolic link followed;
+  // only regular files with exactly those names; not those of a process still running, other
+  // than this one). For start-up, before anything is written. Returns what was removed (paths
+  // relative to the state directory), or what could not be removed as an error naming it.
+  Result<std::vector<std::string>> remove_leftover_temporaries() const;
+
   // Calibrations: 1, 2, ...
   Result<int> new_calibration();
   std::string calibration_dir(int id) const;

@@ -113,12 +113,18 @@ class ForceSensor {
   double tension(std::size_t ch) const {
     return (static_cast<double>(raw(ch)) - offset_[ch]) / gain_[ch];
   }
+  // Raw units per N.
+  double gain(std::size_t ch) const { return gain_[ch]; }
+  // TPDOs of this node decoded so far (a reading is fresh when this count moved).
+  void on_pdo() { ++pdos_; }
+  std::uint64_t pdos_received() const { return pdos_; }
 
  private:
   NodeId node_ = 0;
   const ProcessImage* image_ = nullptr;
   std::vector<std::uint16_t> slots_;
   std::vector<double> gain_, offset_;
+  std::uint64_t pdos_ = 0;
 };
 
 }  // namespace cdpr::canopen

@@ -37,6 +37,11 @@ namespace cdpr::io {
 // Replaces (or creates) `path` with `contents`, atomically.
 Status write_file_atomically(const std::string& path, std::string_view contents);
 
+// Whether `file_name` (a name, not a path) is one of the temporary files this header writes,
+// ".<name>.tmp-<pid>-<n>", and if so the pid of the process that wrote it. A crash between a
+// write and its rename leaves one behind; its owner may remove it once no process writes it.
+bool is_temporary_name(std::string_view file_name, int* writer_pid = nullptr);
+
 // Tests only (fault injection, e.g. a power loss between write and rename): called with each
 // target path after its temporary file is written and flushed, just before it is renamed over the
 // target. nullptr (the default): none.
