@@ -853,8 +853,12 @@ TEST(FaultMatrix, EveryFaultInEveryPhaseEndsSafeAndMatchesDocsReliability) {
               std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count());
   const std::string generated = table(rows, cells);
   {
+    // The observed table, to compare with docs/reliability.md after a failure: in the test's
+    // working directory (the build tree under ctest).
     std::ofstream out("reliability-matrix.md");
     out << generated;
+    std::printf(
+        "[matrix] observed table written to reliability-matrix.md in the working directory\n");
   }
   if (only != nullptr) return;
   const std::string doc_path = kSource + "/docs/reliability.md";
