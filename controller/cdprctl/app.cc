@@ -19,6 +19,7 @@
 
 #include "cdpr/controller/control_client.hpp"
 #include "cdpr/controller/control_protocol.hpp"
+#include "cdpr/version.hpp"
 #include "render.hpp"
 
 namespace cdpr::ctl {

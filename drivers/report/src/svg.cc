@@ -208,7 +208,8 @@ std::string bars(const Bars& m) {
 
 namespace cdpr::report {
 
-std::string html_escape(const std::string& s) {
+std::string html_escape(const std::string& text) {
+  const std::string s = valid_utf8(text);
   std::string o;
   o.reserve(s.size());
   for (char c : s) {

@@ -38,15 +38,17 @@
 #include "cdpr/controller/state_store.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
 #include "cdpr/recording/recording.hpp"
+#include "cdpr/version.hpp"
 
 namespace cdpr::controller {
 
-inline constexpr const char* kDaemonVersion = "cdprd 0.1.0";
+// `cdprd --version`, and the daemon named in its recordings and reports (cmake/CdprVersion.cmake).
+inline constexpr const char* kDaemonVersion = "cdprd " CDPR_VERSION_STRING;
 
 struct DaemonIo {
   can::CanBus* bus = nullptr;            // the master's endpoint
   modbus::LaserSensor* laser = nullptr;  // nullptr: no laser (calibration refused)
-  const cdpr::Clock* clock = nullptr;     // CLOCK_MONOTONIC in cdprd, a ManualClock in tests
+  const cdpr::Clock* clock = nullptr;    // CLOCK_MONOTONIC in cdprd, a ManualClock in tests
   std::function<void()> idle;            // while a blocking master call waits (tests step sims)
   // Wall-clock sleep of the supervisor's and the sequence's polling (tests may shorten it).
   std::chrono::microseconds poll{1000};
