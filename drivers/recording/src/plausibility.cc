@@ -40,12 +40,13 @@ Frame frame_of(const RobotModel& model) {
 
 // "<where>: <value> <unit> is outside the plausible range [lo, hi] <unit> (<why>)", with a unit
 // hint when the value would fit in mm.
+// `open_low`: the range excludes `lo` ("(0, 1]").
 Status out_of_range(const std::string& where, double v, double lo, double hi, const char* unit,
-                    const std::string& why) {
+                    const std::string& why, bool open_low = false) {
   const bool mm = std::string(unit) == "m" && v / 1000.0 >= lo && v / 1000.0 <= hi;
   return Status::error(ErrorCode::kInvalidArgument,
-                       "%s: %.6g %s is outside the plausible range [%.6g, %.6g] %s (%s%s)",
-                       where.c_str(), v, unit, lo, hi, unit, why.c_str(),
+                       "%s: %.6g %s is outside the plausible range %c%.6g, %.6g] %s (%s%s)",
+                       where.c_str(), v, unit, open_low ? '(' : '[', lo, hi, unit, why.c_str(),
                        mm ? "; looks like mm, expected m" : "");
 }
 
@@ -104,7 +105,7 @@ Status check_noise(const Metadata& md, std::string_view file, const Plausibility
     if (!v.ok()) continue;  // not a number: to_measurement_set names it
     if (!(*v > 0.0 && *v <= n.max)) {
       return out_of_range(std::string(file) + ": metadata " + n.key, *v, 0.0, n.max, n.unit,
-                          "a sensor standard deviation");
+                          "a sensor standard deviation", /*open_low=*/true);
     }
   }
   return Status::success();
