@@ -881,19 +881,38 @@ Eigen::MatrixXd pseudo_inverse_normalized(const Eigen::MatrixXd& S, double rel_t
 
 }  // namespace
 
-Result<GeometryInformation> geometry_information(const CalibratedModel& model,
-                                                 const MeasurementSet& set,
-                                                 const std::vector<Pose>& poses,
-                                                 const IdentificationOptions& options,
-                                                 bool keep_jacobians) {
+namespace {
+
+// geometry_information, with or without the per-pose matrices.
+Result<GeometryInformation> geometry_information_impl(const CalibratedModel& model,
+                                                      const MeasurementSet& set,
+                                                      const std::vector<Pose>& poses,
+                                                      const IdentificationOptions& options,
+                                                      bool keep_jacobians, bool with_per_pose) {
   auto built = build(model, set, poses, options);
   if (!built) return built.status();
-  auto info = information(**built, false, keep_jacobians, /*with_per_pose=*/true);
+  auto info = information(**built, false, keep_jacobians, with_per_pose);
   if (!info) return info.status();
   GeometryInformation gi = to_public(**built, *info, model);
   gi.jacobian_geometry = std::move(info->jg);
   gi.jacobian_pose = std::move(info->jp);
   return gi;
+}
+
+}  // namespace
+
+Result<GeometryInformation> geometry_information(const CalibratedModel& model,
+                                                 const MeasurementSet& set,
+                                                 const std::vector<Pose>& poses,
+                                                 const IdentificationOptions& options,
+                                                 bool keep_jacobians) {
+  return geometry_information_impl(model, set, poses, options, keep_jacobians, true);
+}
+
+Result<GeometryInformation> ident_detail::total_geometry_information(
+    const CalibratedModel& model, const MeasurementSet& set, const std::vector<Pose>& poses,
+    const IdentificationOptions& options) {
+  return geometry_information_impl(model, set, poses, options, false, false);
 }
 
 Result<IdentificationReport> identify(const CalibratedModel& initial, const MeasurementSet& set,
