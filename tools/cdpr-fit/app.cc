@@ -63,7 +63,8 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
   bool json = false;
   bool verbose = false;
   app.add_flag("--json", json, "print the result as JSON on stdout instead of text");
-  app.add_flag("-v,--verbose", verbose, "progress messages on stderr");
+  app.add_flag("-v,--verbose", verbose,
+               "\"started\"/\"done\" and the solver's own diagnostics on stderr");
   std::string progress_mode = "auto";
   app.add_option("--progress", progress_mode,
                  "a progress line on stderr for long work (solver iterations, poses designed, "
