@@ -214,9 +214,12 @@ TEST_F(NewUser, ExtremeNumbersAreRefusedAtTheReaderInOneReadableLine) {
   struct Case {
     std::string column, value, expect;
   };
-  const std::vector<Case> cases = {{"cmd_x", "1e300", "column 3 (cmd_x): 1e+300 m is outside"},
-                                   {"length_2", "-1e308", "(length_2): -1e+308 m is outside"},
-                                   {"tension_1", "1e200", "(tension_1): 1e+200 N is outside"}};
+  const std::vector<Case> cases = {
+      {"cmd_x", "1e300", "column 3 (cmd_x): 1e+300 m is outside"},
+      {"length_2", "-1e308", "(length_2): -1e+308 m is outside"},
+      {"tension_1", "1e200", "(tension_1): 1e+200 N is outside"},
+      // found by fuzz_cli.py: a zero length made diagnose run 30 s
+      {"length_7", "-0", "(length_7): -0 m is outside the plausible range (0, "}};
   for (const Case& c : cases) {
     int line = 0;
     write(path("bad.csv"), with_cell(rec, c.column, 3, c.value, &line));

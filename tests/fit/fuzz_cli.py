@@ -23,7 +23,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 EXTREMES = ["1e300", "-1e308", "1e-320", "nan", "inf", "-inf", "", "0", "-0", "1e", "0x10",
             "99999999999999999999", "+-1", "1,2", "\xff", "\x00", "1e308", "-1e300"]
@@ -193,8 +193,11 @@ def main():
                 pending.append(pool.submit(one, n, target, data, command, rng.random() < 0.5,
                                            rng.random() < 0.5))
                 n += 1
-                while len(pending) >= 4 * a.jobs:
-                    outcomes.append(pending.pop(0).result())
+                # Keep the workers busy: wait for any run (a slow one does not hold the others).
+                while len(pending) >= 2 * a.jobs:
+                    done, rest = wait(pending, return_when=FIRST_COMPLETED)
+                    outcomes += [p.result() for p in done]
+                    pending = list(rest)
             outcomes += [p.result() for p in pending]
         elapsed = a.seconds - max(0.0, deadline - time.monotonic())
         for _, command, code, _, _, _, _ in outcomes:

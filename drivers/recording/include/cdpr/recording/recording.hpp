@@ -115,7 +115,7 @@ Status check_against_model(const Recording& recording, const RobotModel& model);
 struct PlausibilityLimits {
   double position_frame_multiple = 10.0;  // commanded and reference positions: within this many
                                           // frame sizes of the frame centre, per axis
-  double length_frame_multiple = 10.0;    // |length_i| and |laser_j| up to this many frame sizes
+  double length_frame_multiple = 10.0;    // length_i and laser_j in (0, this many frame sizes]
   double max_abs_angle_rad = 6.283185307179586;  // roll, pitch, yaw
   double max_abs_tension_n = 1e6;                // tension_i
   double min_temperature_c = -100.0, max_temperature_c = 200.0;
