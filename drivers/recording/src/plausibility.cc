@@ -43,7 +43,8 @@ Frame frame_of(const RobotModel& model) {
 // `open_low`: the range excludes `lo` ("(0, 1]").
 Status out_of_range(const std::string& where, double v, double lo, double hi, const char* unit,
                     const std::string& why, bool open_low = false) {
-  const bool mm = std::string(unit) == "m" && v / 1000.0 >= lo && v / 1000.0 <= hi;
+  const bool mm =
+      std::string(unit) == "m" && std::abs(v) > hi && v / 1000.0 >= lo && v / 1000.0 <= hi;
   return Status::error(ErrorCode::kInvalidArgument,
                        "%s: %.6g %s is outside the plausible range %c%.6g, %.6g] %s (%s%s)",
                        where.c_str(), v, unit, open_low ? '(' : '[', lo, hi, unit, why.c_str(),
@@ -180,23 +181,26 @@ Status check_plausible(const Recording& rec, const RobotModel& model, std::strin
                 limits.length_frame_multiple, frame.size);
   for (const RecordedPose& p : rec.poses) {
     CDPR_RETURN_IF_ERROR(check_pose(p.commanded, frame, limits, file, p.line, kCmd, cmd_cols));
+    // `positive`: the range is (0, bound] (a cable length, a distance), else [-bound, bound].
     auto check_cells = [&](const Eigen::VectorXd& v, const char* prefix, int first_col,
-                           double bound, const char* unit, const char* why) {
+                           double bound, const char* unit, const char* why, bool positive) {
       for (Eigen::Index i = 0; i < v.size(); ++i) {
         const double x = v(i);
-        if (std::isnan(x) || std::abs(x) <= bound) continue;
+        if (std::isnan(x) || (positive ? x > 0.0 && x <= bound : std::abs(x) <= bound)) continue;
         char name[32];
         std::snprintf(name, sizeof name, "%s%ld", prefix, static_cast<long>(i) + 1);
         return out_of_range(cell(file, p.line, column(name, first_col + static_cast<int>(i)), name),
-                            x, -bound, bound, unit, why);
+                            x, positive ? 0.0 : -bound, bound, unit, why, positive);
       }
       return Status::success();
     };
-    CDPR_RETURN_IF_ERROR(
-        check_cells(p.lengths, "length_", first_length, max_length, "m", length_why));
+    CDPR_RETURN_IF_ERROR(check_cells(p.lengths, "length_", first_length, max_length, "m",
+                                     length_why, /*positive=*/true));
     CDPR_RETURN_IF_ERROR(check_cells(p.tensions, "tension_", first_tension,
-                                     limits.max_abs_tension_n, "N", "a cable tension"));
-    CDPR_RETURN_IF_ERROR(check_cells(p.lasers, "laser_", first_laser, max_length, "m", length_why));
+                                     limits.max_abs_tension_n, "N", "a cable tension",
+                                     /*positive=*/false));
+    CDPR_RETURN_IF_ERROR(check_cells(p.lasers, "laser_", first_laser, max_length, "m", length_why,
+                                     /*positive=*/true));
     if (rec.has_reference) {
       CDPR_RETURN_IF_ERROR(check_pose(p.reference, frame, limits, file, p.line, kRef, ref_cols));
     }
