@@ -136,12 +136,15 @@ Status check_plausible(const Recording& rec, const RobotModel& model, std::strin
   // The unit of the lengths as a whole: the median ratio to the nominal inverse kinematics is
   // not moved by a few bad cells (those are named below, one by one).
   KinematicsData kin(model.num_cables());
+  // The inverse kinematics needs a complete model (a loaded config is one).
+  const bool complete = model.platform_anchors.cols() == model.num_cables() &&
+                        static_cast<int>(model.pulleys.size()) == model.num_cables();
   std::vector<double> ratios;
   double largest = 0.0;
   int largest_cable = 0, largest_line = 0;
   double sum_reading = 0.0, sum_nominal = 0.0;
   for (const RecordedPose& p : rec.poses) {
-    const bool ik = p.commanded.vector().allFinite() &&
+    const bool ik = complete && p.commanded.vector().allFinite() &&
                     (p.commanded.position - frame.centre).cwiseAbs().maxCoeff() <=
                         limits.position_frame_multiple * frame.size &&
                     inverse_kinematics(model, p.commanded, kin);
