@@ -10,7 +10,7 @@ add_library(cdpr_daemon STATIC
 target_include_directories(cdpr_daemon PUBLIC ${_d}/include)
 target_link_libraries(cdpr_daemon
   PUBLIC cdpr_io cdpr_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording
-         cdpr_calibration nlohmann_json::nlohmann_json Threads::Threads
+         cdpr_calibration nlohmann_json::nlohmann_json Threads::Threads cdpr_version
   PRIVATE spdlog::spdlog cdpr_yaml cdpr_report cdpr_options)
 
 cdpr_add_gtest(NAME daemon_config_test SOURCES ${_d}/src/daemon_config_test.cc LIBS cdpr_daemon)

@@ -4,6 +4,7 @@
 
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 namespace cdpr {
@@ -48,6 +49,36 @@ TEST(Status, PrependShortensALongContextInTheMiddleAndKeepsTheReason) {
   EXPECT_NE(m.find("..."), std::string_view::npos);
   EXPECT_NE(m.find("mini.yaml: " + reason), std::string_view::npos) << m;
 }
+
+// Issue 16 item 6: a long message keeps the start (file, field) and the end of its reason.
+TEST(Status, ErrorLongerThanTheBufferKeepsBothEndsOfTheMessage) {
+  const std::string path = "/data/" + std::string(300, 'p') + "/samepose.csv";
+  const std::string directions(600, 'd');
+  const Status s = Status::error(ErrorCode::kFailedPrecondition,
+                                 "%s: unidentifiable parameter choice: %s and a_6.", path.c_str(),
+                                 directions.c_str());
+  const std::string_view m = s.message();
+  EXPECT_EQ(m.size(), Status::kMaxMessage - 1);
+  EXPECT_EQ(m.substr(0, 12), "/data/pppppp");
+  EXPECT_NE(m.find("..."), std::string_view::npos);
+  EXPECT_EQ(m.substr(m.size() - 9), " and a_6.") << m;
+}
+
+TEST(Status, PrependToAFullMessageKeepsTheContextFileAndTheEndOfTheReason) {
+  const std::string reason =
+      "unidentifiable parameter choice: " + std::string(600, 'd') + " and a_6.";
+  Status s(ErrorCode::kFailedPrecondition, reason);
+  const std::string context = "calibrating config/mini.yaml from /tmp/check/samepose.csv: ";
+  s.prepend(context);
+  const std::string_view m = s.message();
+  EXPECT_EQ(m.size(), Status::kMaxMessage - 1);
+  EXPECT_EQ(m.substr(0, context.size()), context);
+  EXPECT_NE(m.find("samepose.csv: unidentifiable parameter choice: "), std::string_view::npos) << m;
+  EXPECT_EQ(m.substr(m.size() - 9), " and a_6.") << m;
+}
+
+// Status travels through the RT loop: copying it must stay a plain memory copy.
+static_assert(std::is_trivially_copyable_v<Status>);
 
 TEST(Result, CarriesValueOrStatus) {
   const Result<int> good(7);

@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <sstream>
 
+#include "identification_internal.hpp"
+
 namespace cdpr {
 
 namespace {
@@ -223,7 +225,8 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
   std::vector<Pose> poses;
   for (const PoseMeasurement& pm : set.poses)
     poses.push_back(pm.reference ? *pm.reference : pm.commanded);
-  auto gi = geometry_information(model, set, poses, identification);
+  // Only the total information is analysed: no per-pose matrices (a gigabyte on 100,000 poses).
+  auto gi = ident_detail::total_geometry_information(model, set, poses, identification);
   if (!gi) return gi.status();
   return analyze_identifiability(*gi, options);
 }

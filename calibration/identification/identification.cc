@@ -675,7 +675,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
 
 // Jacobian pieces per pose and the Schur complement onto the geometry columns.
 struct Information {
-  std::vector<Eigen::MatrixXd> per_pose;             // P x P
+  std::vector<Eigen::MatrixXd> per_pose;             // P x P (only when asked for: n P^2 doubles)
   Eigen::MatrixXd total;                             // P x P
   std::vector<Eigen::Matrix<double, 6, 6>> hpp_inv;  // per free pose
   std::vector<Eigen::MatrixXd> hpg;                  // 6 x P per free pose
@@ -683,7 +683,10 @@ struct Information {
   std::vector<Eigen::MatrixXd> jg, jp;               // raw blocks (only when kept)
 };
 
-Result<Information> information(Built& B, bool apply_loss, bool keep = false) {
+// `with_per_pose`: keep each pose's Schur-reduced P x P information (pose design needs them; the
+// identification does not, and on 100,000 poses they are a gigabyte).
+Result<Information> information(Built& B, bool apply_loss, bool keep = false,
+                                bool with_per_pose = false) {
   const int P = B.num_geometry;
   const int n = static_cast<int>(B.poses.size());
   ceres::Problem::EvaluateOptions eo;
@@ -701,7 +704,7 @@ Result<Information> information(Built& B, bool apply_loss, bool keep = false) {
     eo.residual_blocks.insert(eo.residual_blocks.end(), v.begin(), v.end());
   }
   Information info;
-  info.per_pose.assign(static_cast<std::size_t>(n), Eigen::MatrixXd::Zero(P, P));
+  if (with_per_pose) info.per_pose.assign(static_cast<std::size_t>(n), Eigen::MatrixXd::Zero(P, P));
   info.total = Eigen::MatrixXd::Zero(P, P);
   info.hpp_inv.assign(static_cast<std::size_t>(n), Eigen::Matrix<double, 6, 6>::Zero());
   info.hpg.assign(static_cast<std::size_t>(n), Eigen::MatrixXd::Zero(6, P));
@@ -759,19 +762,19 @@ Result<Information> information(Built& B, bool apply_loss, bool keep = false) {
     }
     S = 0.5 * (S + S.transpose());
     info.total += S;
-    info.per_pose[static_cast<std::size_t>(j)] = std::move(S);
+    if (with_per_pose) info.per_pose[static_cast<std::size_t>(j)] = std::move(S);
   }
   return info;
 }
 
-GeometryInformation to_public(const Built& B, const Information& info,
-                              const CalibratedModel& model) {
+// Moves the per-pose information out of `info`.
+GeometryInformation to_public(const Built& B, Information& info, const CalibratedModel& model) {
   GeometryInformation gi;
   gi.names = B.names;
   gi.units = B.units;
   gi.values.resize(B.num_geometry);
   for (int q = 0; q < B.num_geometry; ++q) gi.values(q) = *B.value_ptr[static_cast<std::size_t>(q)];
-  gi.per_pose = info.per_pose;
+  gi.per_pose = std::move(info.per_pose);
   gi.information = info.total;
   gi.anchor_columns = B.anchor_columns;
   KinematicsData kin(model.robot);
@@ -878,19 +881,38 @@ Eigen::MatrixXd pseudo_inverse_normalized(const Eigen::MatrixXd& S, double rel_t
 
 }  // namespace
 
-Result<GeometryInformation> geometry_information(const CalibratedModel& model,
-                                                 const MeasurementSet& set,
-                                                 const std::vector<Pose>& poses,
-                                                 const IdentificationOptions& options,
-                                                 bool keep_jacobians) {
+namespace {
+
+// geometry_information, with or without the per-pose matrices.
+Result<GeometryInformation> geometry_information_impl(const CalibratedModel& model,
+                                                      const MeasurementSet& set,
+                                                      const std::vector<Pose>& poses,
+                                                      const IdentificationOptions& options,
+                                                      bool keep_jacobians, bool with_per_pose) {
   auto built = build(model, set, poses, options);
   if (!built) return built.status();
-  auto info = information(**built, false, keep_jacobians);
+  auto info = information(**built, false, keep_jacobians, with_per_pose);
   if (!info) return info.status();
   GeometryInformation gi = to_public(**built, *info, model);
   gi.jacobian_geometry = std::move(info->jg);
   gi.jacobian_pose = std::move(info->jp);
   return gi;
+}
+
+}  // namespace
+
+Result<GeometryInformation> geometry_information(const CalibratedModel& model,
+                                                 const MeasurementSet& set,
+                                                 const std::vector<Pose>& poses,
+                                                 const IdentificationOptions& options,
+                                                 bool keep_jacobians) {
+  return geometry_information_impl(model, set, poses, options, keep_jacobians, true);
+}
+
+Result<GeometryInformation> ident_detail::total_geometry_information(
+    const CalibratedModel& model, const MeasurementSet& set, const std::vector<Pose>& poses,
+    const IdentificationOptions& options) {
+  return geometry_information_impl(model, set, poses, options, false, false);
 }
 
 Result<IdentificationReport> identify(const CalibratedModel& initial, const MeasurementSet& set,
@@ -932,6 +954,16 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   so.parameter_tolerance = options.parameter_tolerance;
   so.num_threads = options.num_threads;
   so.logging_type = ceres::SILENT;
+  // Solver iterations as progress (IdentificationOptions::progress).
+  struct IterationProgress final : ceres::IterationCallback {
+    const IdentificationOptions* o = nullptr;
+    ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
+      o->progress("solver iteration", s.iteration, o->max_iterations);
+      return ceres::SOLVER_CONTINUE;
+    }
+  } iteration_progress;
+  iteration_progress.o = &options;
+  if (options.progress) so.callbacks.push_back(&iteration_progress);
   if (free_pose_params > 0) {
     so.linear_solver_type = ceres::DENSE_SCHUR;
     // Poses are eliminated first (group 0). Every other block gets a group of its own, in the
@@ -1196,9 +1228,9 @@ std::string IdentificationReport::full_report() const {
   os << "\nTermination: " << (converged ? "CONVERGENCE" : "NO CONVERGENCE") << " (" << termination
      << ")\n";
   if (warnings.empty()) {
-    os << "No warnings.\n";
+    os << "Solver: no warnings.\n";
   } else {
-    os << "Warnings:\n";
+    os << "Solver warnings:\n";
     for (const std::string& w : warnings) os << "  - " << w << "\n";
   }
   return os.str();

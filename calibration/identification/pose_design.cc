@@ -178,6 +178,7 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
     chosen(best) = 1;
     sel.push_back(best);
     M += S[static_cast<std::size_t>(best)];
+    if (options.progress) options.progress("poses designed", k + 1, options.num_poses);
   }
   PoseDesign out;
   out.candidates = C;
@@ -187,6 +188,7 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
   auto exchange = [&](auto&& criterion, double margin) {
     double current = criterion(M);
     for (int pass = 0; pass < options.exchange_passes; ++pass) {
+      if (options.progress) options.progress("exchange passes", pass, options.exchange_passes);
       bool any = false;
       for (std::size_t s = 0; s < sel.size(); ++s) {
         const Eigen::MatrixXd without = M - S[static_cast<std::size_t>(sel[s])];

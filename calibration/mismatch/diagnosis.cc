@@ -730,6 +730,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       fams.insert(sel.family[static_cast<std::size_t>(c)]);
     }
     selected_families.push_back(std::move(fams));
+    if (options.progress) options.progress("bootstrap resamples", b + 1, options.bootstrap_samples);
   }
   if (options.bootstrap_samples == 0) {
     for (int c : full_selection) {
@@ -1573,9 +1574,9 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     }
     s += format(
         " (LRT %.1f on %d parameters, p = %.3g; BIC %+.1f; held-out RMS %.3f -> %.3f mm; "
-        "selected in %.0f %% of the bootstrap resamples)%s.",
+        "its family '%s' selected in %.0f %% of the bootstrap resamples)%s.",
         f.lrt_statistic, f.extra_parameters, f.lrt_p_value, f.bic_delta, 1e3 * f.cv_rms_before,
-        1e3 * f.cv_rms_after, 100 * f.inclusion_probability,
+        1e3 * f.cv_rms_after, f.family.c_str(), 100 * f.family_inclusion_probability,
         f.modelled_in_config ? "" : "; the config cannot carry it (report only)");
     d.findings.push_back(s);
   }

@@ -19,6 +19,7 @@
 
 #include "cdpr/controller/control_client.hpp"
 #include "cdpr/controller/control_protocol.hpp"
+#include "cdpr/version.hpp"
 #include "render.hpp"
 
 namespace cdpr::ctl {
@@ -399,6 +400,7 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err,
         const Environment& env) {
   CLI::App app{"cdprctl: the maintenance command of the cable robot daemon cdprd"};
   app.footer(kExitNote);
+  app.set_version_flag("--version", std::string("cdprctl ") + cdpr::kVersion);
   app.require_subcommand(1);
   app.fallthrough();
   Invocation inv;

@@ -292,6 +292,108 @@ TEST(Recording, CableAndLaserCountsAreCheckedAgainstTheConfig) {
   EXPECT_THAT(std::string(lasers.message()), HasSubstr("1 laser columns but config 'MINI' has 2"));
 }
 
+// A 4-cable robot in the cube [-1, 1]^3 (frame size 2 sqrt(3) m, centre 0), and a recording of
+// it: three poses near the centre, every length 1.7 m (line 4 is the first data row).
+RobotModel cube_robot() {
+  RobotModel model = model_with(4, 1);
+  model.pulleys.resize(4);              // point anchors
+  model.frame_anchors << 1, -1, 1, -1,  //
+      1, 1, -1, -1,                     //
+      1, 1, 1, -1;
+  return model;
+}
+
+std::string cube_recording(const std::string& row1_change = "") {
+  std::string text =
+      "# units: SI\n# noise_length_m: 1e-4\n"
+      "pose,time_s,cmd_x,cmd_y,cmd_z,cmd_roll,cmd_pitch,cmd_yaw,length_1,length_2,length_3,"
+      "length_4,tension_1,tension_2,tension_3,tension_4,laser_1\n";
+  for (int j = 0; j < 3; ++j) {
+    text += std::to_string(j) + ",0,0.0" + std::to_string(j) +
+            ",0,0,0,0,0,1.7,1.7,1.7,1.7,10,10,10,10,0.5\n";
+  }
+  if (!row1_change.empty()) {
+    const std::size_t at = text.find("\n1,");
+    text.replace(at + 1, text.find('\n', at + 1) - at - 1, row1_change);
+  }
+  return text;
+}
+
+Status plausibility_of(const std::string& text) {
+  const Result<Recording> rec = parse_recording(text, "rec.csv");
+  EXPECT_TRUE(rec.ok()) << rec.status().to_string();
+  return rec.ok() ? check_plausible(*rec, cube_robot(), "rec.csv") : rec.status();
+}
+
+// Issue 16 items 4 and 5: what a recording of the robot in SI units cannot hold, named by line
+// and column with readable numbers.
+TEST(Plausibility, APlausibleRecordingPasses) {
+  EXPECT_TRUE(plausibility_of(cube_recording()).ok())
+      << plausibility_of(cube_recording()).message();
+}
+
+TEST(Plausibility, CellsOutOfRangeAreNamedByLineAndColumn) {
+  const double size = 2.0 * std::sqrt(3.0);
+  char bound[32], frame[32];
+  std::snprintf(bound, sizeof bound, "%.6g", 10 * size);
+  std::snprintf(frame, sizeof frame, "%.6g", size);
+  const Status x =
+      plausibility_of(cube_recording("1,0,1e300,0,0,0,0,0,1.7,1.7,1.7,1.7,10,10,10,10,0.5"));
+  EXPECT_EQ(x.code(), ErrorCode::kInvalidArgument);
+  EXPECT_EQ(std::string(x.message()),
+            std::string("rec.csv:5: column 3 (cmd_x): 1e+300 m is outside the plausible range [-") +
+                bound + ", " + bound + "] m (10 frame sizes of " + frame +
+                " m around the frame centre)");
+  const Status length =
+      plausibility_of(cube_recording("1,0,0,0,0,0,0,0,1.7,-1e308,1.7,1.7,10,10,10,10,0.5"));
+  EXPECT_THAT(
+      std::string(length.message()),
+      HasSubstr("rec.csv:5: column 10 (length_2): -1e+308 m is outside the plausible range (0, "));
+  const Status zero =
+      plausibility_of(cube_recording("1,0,0,0,0,0,0,0,1.7,1.7,0,1.7,10,10,10,10,0.5"));
+  EXPECT_THAT(std::string(zero.message()), HasSubstr("column 11 (length_3): 0 m is outside"));
+  const Status laser =
+      plausibility_of(cube_recording("1,0,0,0,0,0,0,0,1.7,1.7,1.7,1.7,10,10,10,10,500"));
+  EXPECT_THAT(std::string(laser.message()), HasSubstr("column 17 (laser_1): 500 m"));
+  EXPECT_THAT(std::string(laser.message()), HasSubstr("looks like mm, expected m"));
+  const Status angle =
+      plausibility_of(cube_recording("1,0,0,0,0,0,0,40,1.7,1.7,1.7,1.7,10,10,10,10,0.5"));
+  EXPECT_THAT(std::string(angle.message()), HasSubstr("column 8 (cmd_yaw): 40 rad is outside"));
+}
+
+TEST(Plausibility, LengthsInMillimetresAreRefusedAsAWhole) {
+  std::string text = cube_recording();
+  for (std::size_t at = text.find("1.7"); at != std::string::npos; at = text.find("1.7", at + 4)) {
+    text.replace(at, 3, "1700");
+  }
+  const Status s = plausibility_of(text);
+  EXPECT_THAT(std::string(s.message()),
+              HasSubstr("rec.csv: length_1..length_4: looks like mm, expected m"));
+}
+
+TEST(Plausibility, NoiseMetadataOutsideItsRangeIsRefused) {
+  std::string text = cube_recording();
+  text.replace(text.find("1e-4"), 4, "1e300");
+  EXPECT_THAT(std::string(plausibility_of(text).message()),
+              HasSubstr("rec.csv: metadata noise_length_m: 1e+300 m is outside the plausible "
+                        "range (0, 1] m"));
+}
+
+TEST(Plausibility, PoseListsAreCheckedWithTheirLines) {
+  const Result<PoseList> list = parse_pose_list(
+      "# units: SI\npose,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1,0,-99,0,0,0,0\n", "p.csv");
+  ASSERT_TRUE(list.ok()) << list.status().to_string();
+  EXPECT_THAT(std::string(check_plausible(*list, cube_robot(), "p.csv").message()),
+              HasSubstr("p.csv:4: column 3 (y): -99 m is outside the plausible range"));
+}
+
+TEST(Recording, AByteOrderMarkIsIgnored) {
+  const Result<Recording> rec = parse_recording("\xEF\xBB\xBF" + cube_recording(), "bom.csv");
+  ASSERT_TRUE(rec.ok()) << rec.status().to_string();
+  EXPECT_EQ(rec->poses.size(), 3u);
+  EXPECT_EQ(rec->poses[0].line, 4);
+}
+
 TEST(Recording, WriterRefusesInconsistentData) {
   Recording rec = random_recording(3, 1, 3, false, false, 5);
   Recording bad = rec;

@@ -29,6 +29,29 @@ TEST(ReportFormat, NonFiniteNumbersBecomeNull) {
   EXPECT_EQ(to_json(Eigen::VectorXd(Eigen::Vector2d(1.5, INFINITY))).dump(), "[1.5,null]");
 }
 
+// Issue 16 item 1: bytes from inputs (paths, robot names, cells) reach the reports.
+TEST(ReportFormat, InvalidUtf8BytesAreReplacedAndValidTextIsKept) {
+  const std::string replacement = "\xEF\xBF\xBD";
+  EXPECT_EQ(valid_utf8("MINI \xC3\xA9t\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x98\x80"),
+            "MINI \xC3\xA9t\xC3\xA9 \xE2\x82\xAC \xF0\x9F\x98\x80");
+  EXPECT_EQ(valid_utf8("a\xFF"
+                       "b"),
+            "a" + replacement + "b");
+  EXPECT_EQ(valid_utf8("\xC3"), replacement);                                      // truncated
+  EXPECT_EQ(valid_utf8("\xC0\xAF"), replacement + replacement);                    // overlong '/'
+  EXPECT_EQ(valid_utf8("\xED\xA0\x80"), replacement + replacement + replacement);  // surrogate
+  EXPECT_EQ(html_escape("<\xFF>"), "&lt;" + replacement + "&gt;");
+}
+
+TEST(ReportFormat, JsonTextNeverThrowsOnInvalidUtf8) {
+  nlohmann::json j = {{"robot", "MINI\xFF"}, {"path\xFE", "rec.csv"}};
+  std::string text;
+  ASSERT_NO_THROW(text = json_text(j));
+  const nlohmann::json back = nlohmann::json::parse(text);
+  EXPECT_EQ(back["robot"], "MINI\xEF\xBF\xBD");
+  EXPECT_EQ(back["path\xEF\xBF\xBD"], "rec.csv");
+}
+
 // An identification of simulated MINI data: the report's inputs.
 class CalibrationReport : public ::testing::Test {
  protected:

@@ -18,6 +18,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <exception>
 #include <memory>
 #include <string>
 #include <thread>
@@ -28,6 +29,7 @@
 #include "cdpr/can/socketcan_bus.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/io/output_paths.hpp"
 #include "cdpr/modbus/register_map.hpp"
 #include "cdpr/recording/recording.hpp"
 #include "cdpr/sim/can_robot.hpp"
@@ -35,8 +37,16 @@
 #include "cdpr/sim/lockstep_io.hpp"
 #include "cdpr/sim/physics.hpp"
 #include "cdpr/sim/scenario.hpp"
+#include "cdpr/version.hpp"
 
 namespace {
+
+// Exit statuses (docs/sim-scenarios.md): 0 done (or stopped by a signal), 1 an input was refused
+// or the work failed, 2 command-line usage error (also an output path naming an input), 70
+// internal error (an unexpected exception: a bug).
+constexpr int kExitFailed = 1;
+constexpr int kExitUsage = 2;
+constexpr int kExitInternal = 70;
 
 std::atomic<bool> g_stop{false};
 std::atomic<bool> g_report_pose{false};
@@ -50,13 +60,12 @@ void on_report(int) {
 
 int fail(const std::string& what) {
   std::fprintf(stderr, "cdpr-sim: %s\n", what.c_str());
-  return 1;
+  return kExitFailed;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
   CLI::App app{"cdpr-sim: the virtual cable robot (physics with hidden effects, Modbus laser)"};
+  app.set_version_flag("--version", std::string("cdpr-sim ") + cdpr::kVersion);
   std::string config_path, scenario_path, modbus_spec, can_if, canopen_path, lockstep_path,
       out_path, laser_map_path;
   std::uint64_t seed = 1;
@@ -94,12 +103,35 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 10000));
   app.add_option("--substeps", substeps, "lock-step: SYNC steps per pose")
       ->check(CLI::Range(1, 100000));
-  CLI11_PARSE(app, argc, argv);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : kExitUsage;
+  }
+  std::vector<cdpr::io::NamedPath> inputs = {{"--config", config_path},
+                                             {"--scenario", scenario_path},
+                                             {"--lockstep", lockstep_path},
+                                             {"--laser-map", laser_map_path},
+                                             {"--canopen", canopen_path}};
+  for (const std::string& e : evaluate) inputs.push_back({"--evaluate", e});
+  auto usage = [](const cdpr::Status& s) {
+    std::fprintf(stderr, "cdpr-sim: %s\n", s.to_string().c_str());
+    return kExitUsage;
+  };
+  if (cdpr::Status s = cdpr::io::check_output_paths(inputs, {{"--out", out_path}}); !s.ok()) {
+    return usage(s);
+  }
 
   cdpr::Result<cdpr::RobotModel> nominal = cdpr::config::load_robot_config(config_path);
   if (!nominal.ok()) return fail(nominal.status().to_string());
   cdpr::Result<cdpr::sim::Scenario> scenario = cdpr::sim::load_scenario(scenario_path);
   if (!scenario.ok()) return fail(scenario.status().to_string());
+  // The scenario's files are inputs too (its true robot's config, its laser register map).
+  inputs.push_back({"the scenario's truth.config", scenario->truth.config_path});
+  inputs.push_back({"the scenario's laser.register_map", scenario->laser.register_map_path});
+  if (cdpr::Status s = cdpr::io::check_output_paths(inputs, {{"--out", out_path}}); !s.ok()) {
+    return usage(s);
+  }
   cdpr::Result<cdpr::RobotModel> truth = cdpr::sim::resolve_truth(*scenario, *nominal);
   if (!truth.ok()) return fail(truth.status().to_string());
   cdpr::Result<cdpr::sim::Physics> physics =
@@ -144,6 +176,10 @@ int main(int argc, char** argv) {
     }
     cdpr::Result<cdpr::recording::PoseList> poses = cdpr::recording::read_pose_list(lockstep_path);
     if (!poses.ok()) return fail(poses.status().to_string());
+    if (cdpr::Status s = cdpr::recording::check_plausible(*poses, *nominal, lockstep_path);
+        !s.ok()) {
+      return fail(s.to_string());
+    }
     cdpr::sim::LockstepOptions lo;
     lo.dwell_s = dwell_s;
     lo.laser_samples = laser_samples;
@@ -321,4 +357,18 @@ int main(int argc, char** argv) {
               static_cast<unsigned long long>(laser ? laser->answered() : 0),
               static_cast<unsigned long long>(robot ? robot->stats().syncs : 0));
   return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // Nothing escapes: an unexpected exception is a bug, reported as one.
+  try {
+    return run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "cdpr-sim: internal error: %s (please report it)\n", e.what());
+  } catch (...) {
+    std::fprintf(stderr, "cdpr-sim: internal error: unknown exception (please report it)\n");
+  }
+  return kExitInternal;
 }

@@ -128,6 +128,23 @@ TEST(Scenario, ErrorsNameFileLineAndField) {
   EXPECT_EQ(missing.status().code(), ErrorCode::kNotFound);
 }
 
+// Issue 16 item 10: as the robot loader, the scenario loader refuses a key given twice (the
+// second would silently win) and reads a file saved with a UTF-8 byte order mark.
+TEST(Scenario, DuplicateKeysAreRefusedAtTheirLine) {
+  EXPECT_NE(error_of("name: a\nnoise: {laser: 0.001}\nname: b\n")
+                .find("bad.yaml:3: name: field given twice"),
+            std::string::npos);
+  EXPECT_NE(
+      error_of("effects:\n  hooke: {ea: 3, ea: 4}\n").find("effects.hooke.ea: field given twice"),
+      std::string::npos);
+}
+
+TEST(Scenario, AByteOrderMarkIsAccepted) {
+  Result<Scenario> s = parse_scenario("\xEF\xBB\xBFname: bom\nnoise: {laser: 0.001}\n", "bom.yaml");
+  ASSERT_TRUE(s.ok()) << s.status().to_string();
+  EXPECT_EQ(s->name, "bom");
+}
+
 TEST(Scenario, PerCableListsMustMatchTheRobot) {
   Result<Scenario> s = parse_scenario("effects:\n  pulley_radius: [0.02, 0.03]\n", "pc.yaml");
   ASSERT_TRUE(s.ok());

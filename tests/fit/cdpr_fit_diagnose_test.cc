@@ -191,7 +191,9 @@ TEST_F(Diagnose, RecordingsThatDoNotFitTheConfigAreRefusedWithFileAndReason) {
        [](cdpr::recording::Recording& r) {
          for (auto& p : r.poses) p.lasers *= 1000.0;
        },
-       {"laser-mm.csv: laser_1: reading", "looks like mm, expected m"}},
+       // every cell is checked in file order: the first laser reading names its line and column
+       {"laser-mm.csv:", " (laser_1): ", "outside the plausible range",
+        "looks like mm, expected m"}},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.name);

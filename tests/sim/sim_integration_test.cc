@@ -169,6 +169,43 @@ TEST(SimProcess, ReportsBadScenarioWithFileAndLine) {
   EXPECT_NE(out.find("bad.yaml:3: effects.hooke.ea"), std::string::npos) << out;
 }
 
+// Issue 16 item 10: usage errors exit 2 (CLI11's own codes 105, 106, 109 before), --version.
+TEST(SimProcess, UsageErrorsExitWithTwoAndVersionWithZero) {
+  std::string out;
+  EXPECT_EQ(run(kSim, out), 2) << out;  // --config and --scenario missing
+  EXPECT_EQ(run(kSim + " --config a.yaml --scenario b.yaml --no-such-option", out), 2) << out;
+  EXPECT_EQ(run(kSim + " --config a.yaml --scenario b.yaml --rate 0", out), 2) << out;
+  EXPECT_EQ(run(kSim + " --config a.yaml --scenario b.yaml --home sideways", out), 2) << out;
+  EXPECT_EQ(run(kSim + " --version", out), 0) << out;
+  EXPECT_EQ(out.rfind("cdpr-sim 0.", 0), 0u) << out;
+}
+
+// Issue 16 item 2: the recording written by --lockstep never replaces an input.
+TEST(SimProcess, LockstepRefusesAnOutputThatIsAnInput) {
+  TempDir dir;
+  cdpr::recording::PoseList poses;
+  poses.poses.push_back(cdpr::Pose{});
+  const std::string pose_file = dir.file("poses.csv");
+  ASSERT_TRUE(cdpr::recording::write_pose_list(poses, pose_file).ok());
+  const std::string before = read_text(pose_file);
+  // The scenario's true robot is a copy: were the check missing, the shipped file stays intact.
+  const std::string truth = dir.file("truth.yaml");
+  std::ofstream(truth) << read_text(kSource + "/config/mini-measured.yaml");
+  const std::string scenario = dir.file("scenario.yaml");
+  std::ofstream(scenario) << "name: it\ntruth: {config: " << truth << "}\n";
+  const std::string base = kSim + " --config " + kSource + "/config/mini.yaml --scenario " +
+                           scenario + " --lockstep " + pose_file + " --out ";
+  std::string out;
+  EXPECT_EQ(run(base + pose_file, out), 2) << out;
+  EXPECT_NE(out.find("--lockstep"), std::string::npos) << out;
+  EXPECT_EQ(run(base + scenario, out), 2) << out;
+  EXPECT_NE(out.find("--scenario"), std::string::npos) << out;
+  EXPECT_EQ(run(base + truth, out), 2) << out;
+  EXPECT_NE(out.find("truth.config"), std::string::npos) << out;
+  EXPECT_EQ(read_text(pose_file), before);
+  EXPECT_EQ(read_text(truth), read_text(kSource + "/config/mini-measured.yaml"));
+}
+
 TEST(SimProcess, LockstepWritesARecording) {
   TempDir dir;
   cdpr::recording::PoseList poses;

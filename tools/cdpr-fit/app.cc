@@ -1,14 +1,21 @@
 #include "app.hpp"
 
+#include <glog/logging.h>
 #include <spdlog/sinks/ostream_sink.h>
 #include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <exception>
 #include <functional>
 #include <memory>
 
+#include "cdpr/io/output_paths.hpp"
+#include "cdpr/report/format.hpp"
+#include "cdpr/version.hpp"
 #include "commands.hpp"
+#include "common.hpp"
+#include "progress.hpp"
 
 namespace cdpr::fit {
 
@@ -18,20 +25,57 @@ constexpr const char* kFileNote =
     "Files: recordings, experiments and pose lists are CSV (docs/recording-format.md), robot "
     "configs YAML (docs/config.md). SI units throughout.";
 
+// The error document of --json: {"command", "ok": false, "error": {code, message}}.
+std::string error_json(const std::string& command, std::string_view code,
+                       std::string_view message) {
+  const nlohmann::json j = {
+      {"command", command},
+      {"ok", false},
+      {"error", {{"code", std::string(code)}, {"message", std::string(message)}}}};
+  return report::json_text(j) + "\n";
+}
+
+int run_command(int argc, const char* const* argv, std::ostream& out, std::ostream& err);
+
 }  // namespace
 
 int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err) {
+  // Nothing escapes: a bug (an exception we did not expect) is reported and exits kExitInternal,
+  // so a script never mistakes it for a result.
+  try {
+    return run_command(argc, argv, out, err);
+  } catch (const std::exception& e) {
+    err << "cdpr-fit: internal error: " << e.what() << " (please report it)\n";
+  } catch (...) {
+    err << "cdpr-fit: internal error: unknown exception (please report it)\n";
+  }
+  return kExitInternal;
+}
+
+namespace {
+
+int run_command(int argc, const char* const* argv, std::ostream& out, std::ostream& err) {
   CLI::App app{"cdpr-fit: offline identification of cable-driven parallel robots"};
   app.footer(kFileNote);
+  app.set_version_flag("--version", std::string("cdpr-fit ") + kVersion);
   app.require_subcommand(1);
   app.fallthrough();
   bool json = false;
   bool verbose = false;
   app.add_flag("--json", json, "print the result as JSON on stdout instead of text");
-  app.add_flag("-v,--verbose", verbose, "progress messages on stderr");
+  app.add_flag("-v,--verbose", verbose,
+               "\"started\"/\"done\" and the solver's own diagnostics on stderr");
+  std::string progress_mode = "auto";
+  app.add_option("--progress", progress_mode,
+                 "a progress line on stderr for long work (solver iterations, poses designed, "
+                 "bootstrap resamples): auto (when stderr is a terminal), always, never")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "always", "never"}));
 
   std::string command;
   std::function<Result<Output>()> action;
+  // The files the command reads and writes: no output may be an input or another output.
+  std::vector<io::NamedPath> inputs, outputs;
 
   // ---- simulate -------------------------------------------------------------------------------
   SimulateArgs sim;
@@ -92,6 +136,8 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
     }
     sim.add_noise = !no_noise;
     sim.elastic = physics == "elastic";
+    inputs = {{"--config", sim.config}, {"--poses", sim.poses}, {"--nominal", sim.nominal}};
+    outputs = {{"--out", sim.out}};
     action = [&] { return simulate(sim); };
   });
 
@@ -127,6 +173,8 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
       ->check(CLI::ExistingFile);
   c->callback([&] {
     command = "calibrate";
+    inputs = {{"--config", cal.config}, {"--recording", cal.recording}, {"--truth", cal.truth}};
+    outputs = {{"--out", cal.out}, {"--report", cal.report}};
     action = [&] { return calibrate(cal); };
   });
 
@@ -153,9 +201,11 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
                  "half side of the test cube for --criterion position and --compare, m")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
-  dp->add_option("--points-per-axis", design.points_per_axis, "candidate grid points per axis")
+  dp->add_option("--points-per-axis", design.points_per_axis,
+                 "candidate grid points per axis (7 orientations each; above 12 the design takes "
+                 "minutes and a warning says so)")
       ->capture_default_str()
-      ->check(CLI::Range(2, 50));
+      ->check(CLI::Range(2, 20));
   dp->add_option("--max-angle", design.max_angle, "candidate orientations up to this angle, rad")
       ->capture_default_str();
   dp->add_option("--noise-laser", design.noise.sigma_laser, "laser noise std dev, m")
@@ -169,6 +219,8 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
   dp->add_option("--seed", design.seed, "seed of the random comparison set")->capture_default_str();
   dp->callback([&] {
     command = "design-poses";
+    inputs = {{"--config", design.config}};
+    outputs = {{"--out", design.out}};
     action = [&] { return design_poses(design); };
   });
 
@@ -281,6 +333,9 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
         diag.json_report = diag_json;
       }
     }
+    inputs = {
+        {"--config", diag.config}, {"--recording", diag.recording}, {"--validate", diag.validate}};
+    outputs = {{"--out", diag.out}, {"--json", diag.json_report}, {"--html", diag.html}};
     action = [&] { return diagnose(diag); };
   });
 
@@ -288,40 +343,51 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int code = app.exit(e, out, err);
-    return code == 0 ? 0 : 2;
+    return code == 0 ? 0 : kExitUsage;
+  }
+  if (Status paths = io::check_output_paths(inputs, outputs); !paths.ok()) {
+    err << "cdpr-fit " << command << ": error: " << paths.message() << "\n";
+    if (json) out << error_json(command, to_string(paths.code()), paths.message());
+    return kExitUsage;
   }
 
+  // Ceres reports evaluation trouble through glog (dozens of lines per residual block): only
+  // with -v. The reason reaches the user as the command's one-line error.
+  FLAGS_minloglevel = verbose ? google::GLOG_INFO : google::GLOG_ERROR;
   auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(err);
   spdlog::logger log("cdpr-fit", sink);
   log.set_pattern("cdpr-fit: %v");
   log.set_level(verbose ? spdlog::level::info : spdlog::level::warn);
   log.info("{} started", command);
+  ProgressLine progress(err, progress_wanted(progress_mode, err));
+  console().progress = progress.callback();
+  console().warn = [&](const std::string& w) {
+    progress.finish();
+    err << "cdpr-fit " << command << ": warning: " << w << "\n";
+  };
   const auto t0 = std::chrono::steady_clock::now();
   Result<Output> result = action();
+  progress.finish();
+  console() = Console{};
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   if (!result.ok()) {
     const Status& st = result.status();
     err << "cdpr-fit " << command << ": error: " << st.message() << "\n";
-    if (json) {
-      nlohmann::json j = {
-          {"command", command},
-          {"ok", false},
-          {"error",
-           {{"code", std::string(to_string(st.code()))}, {"message", std::string(st.message())}}}};
-      out << j.dump(2) << "\n";
-    }
-    return 1;
+    if (json) out << error_json(command, to_string(st.code()), st.message());
+    return kExitFailed;
   }
   log.info("{} done in {:.3f} s", command, seconds);
   if (json) {
     result->json["ok"] = true;
-    out << result->json.dump(2) << "\n";
+    out << report::json_text(result->json) << "\n";
   } else {
     out << result->human;
   }
   out.flush();
   return result->exit_status;
 }
+
+}  // namespace
 
 }  // namespace cdpr::fit

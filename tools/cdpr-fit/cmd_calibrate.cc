@@ -96,6 +96,9 @@ std::vector<std::string> estimated_items(const IdentificationOptions& o) {
 
 namespace {
 
+// Above this many poses calibrate warns before it starts (100,000 poses: minutes, gigabytes).
+constexpr int kManyPoses = 20000;
+
 // Writes the calibrated config (with a comment header) and the JSON report together: both or,
 // when one cannot be written, neither (io::AtomicFileSet).
 Status write_outputs(const CalibrateArgs& args, const RobotModel& calibrated,
@@ -110,7 +113,8 @@ Status write_outputs(const CalibrateArgs& args, const RobotModel& calibrated,
                              config::save_robot_config(calibrated);
     CDPR_RETURN_IF_ERROR(outputs.stage(args.out, yaml));
   }
-  if (!args.report.empty()) CDPR_RETURN_IF_ERROR(outputs.stage(args.report, j.dump(2) + "\n"));
+  if (!args.report.empty())
+    CDPR_RETURN_IF_ERROR(outputs.stage(args.report, report::json_text(j) + "\n"));
   return outputs.commit();
 }
 
@@ -224,6 +228,8 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   if (Status s = recording::check_against_model(*rec, *nominal); !s.ok()) {
     return with_context(s, args.recording + " vs " + args.config);
   }
+  // Units (a file in mm under "# units: SI") and ranges, naming the line and column.
+  CDPR_RETURN_IF_ERROR(recording::check_plausible(*rec, *nominal, args.recording));
   std::vector<std::string> warnings;
   const std::string recorded_robot = rec->metadata.get(recording::key::kRobot);
   if (!recorded_robot.empty() && recorded_robot != nominal->name) {
@@ -274,6 +280,11 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   }
   options.home_pose_index = args.home_pose;
   options.max_iterations = args.max_iterations;
+  options.progress = console().progress;
+  if (set->num_poses() > kManyPoses) {
+    console().warn(std::to_string(set->num_poses()) +
+                   " poses: the identification and its report take minutes and gigabytes");
+  }
   if (options.gauge == Gauge::kHomePose || options.gauge == Gauge::kHomePoseAndLaserPlane) {
     const auto& home = set->poses[static_cast<std::size_t>(args.home_pose)];
     if (!home.reference && (home.commanded.vector() - nominal->home.vector()).norm() > 1e-6) {

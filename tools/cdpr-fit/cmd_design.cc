@@ -12,6 +12,9 @@ namespace cdpr::fit {
 
 namespace {
 
+// Above this --points-per-axis (7 x 12^3 = 12,096 candidates) design-poses warns before it starts.
+constexpr int kSlowPointsPerAxis = 12;
+
 nlohmann::json poses_json(const std::vector<Pose>& poses) {
   nlohmann::json a = nlohmann::json::array();
   for (const Pose& p : poses) a.push_back(to_json(Eigen::VectorXd(p.vector())));
@@ -37,6 +40,13 @@ Result<Output> design_poses(const DesignArgs& args) {
   options.accuracy_box = test_box;
   if (args.criterion == "position") options.criterion = DesignCriterion::kPositionAccuracy;
   options.points_per_axis = args.points_per_axis;
+  options.progress = console().progress;
+  if (args.points_per_axis > kSlowPointsPerAxis) {
+    const long candidates = 7L * args.points_per_axis * args.points_per_axis * args.points_per_axis;
+    console().warn("--points-per-axis " + std::to_string(args.points_per_axis) + " gives " +
+                   std::to_string(candidates) +
+                   " candidate poses: the design takes minutes and gigabytes");
+  }
   options.max_angle = args.max_angle;
   options.noise = args.noise;
   CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, model->num_cables(), &options.identification));

@@ -1,11 +1,11 @@
 // cdpr-fit diagnose: the mismatch locator's front end (diagnosis.hpp). Loads the config and the
-// recording(s) as calibrate does, refuses recordings that do not fit the config (counts, units),
+// recording(s) as calibrate does, refuses recordings that do not fit the config (counts, units and
+// ranges: recording::check_plausible),
 // runs cdpr::diagnose and writes the JSON and HTML reports and the calibrated config.
 #include <cmath>
 #include <sstream>
 
 #include "cdpr/calibration/diagnosis.hpp"
-#include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/io/atomic_file.hpp"
 #include "cdpr/recording/recording.hpp"
@@ -16,66 +16,6 @@
 namespace cdpr::fit {
 
 namespace {
-
-// Readings above this (m) cannot be a cable length or a laser distance of a cable robot in m.
-constexpr double kImplausibleMetres = 100.0;
-// Mean reading / mean nominal length beyond this factor (either way): the unit is wrong.
-constexpr double kImplausibleRatio = 100.0;
-
-// A unit name for a factor between the readings and what the config expects.
-std::string unit_guess(double ratio) {
-  if (ratio > 300.0 && ratio < 3000.0) return "looks like mm, expected m";
-  if (ratio > 30.0 && ratio < 300.0) return "looks like cm, expected m";
-  if (ratio > 0.0003 && ratio < 0.003) return "looks like km, expected m";
-  return "does not look like m";
-}
-
-// Lengths (and laser distances) that are implausible for the config by orders of magnitude, i.e.
-// a file written in mm (or another unit) under "# units: SI".
-Status check_plausible_units(const recording::Recording& rec, const RobotModel& nominal,
-                             const std::string& file) {
-  KinematicsData kin(nominal.num_cables());
-  double sum_reading = 0.0, sum_nominal = 0.0, largest = 0.0;
-  int largest_cable = 0, count = 0;
-  for (std::size_t j = 0; j < rec.poses.size(); ++j) {
-    const recording::RecordedPose& p = rec.poses[j];
-    const bool ik = inverse_kinematics(nominal, p.commanded, kin);
-    for (Eigen::Index i = 0; i < p.lengths.size() && i < nominal.num_cables(); ++i) {
-      const double v = p.lengths(i);
-      if (!std::isfinite(v)) continue;
-      if (std::abs(v) > largest) {
-        largest = std::abs(v);
-        largest_cable = static_cast<int>(i) + 1;
-      }
-      if (!ik) continue;
-      sum_reading += std::abs(v);
-      sum_nominal += kin.lengths(i);
-      ++count;
-    }
-  }
-  const double ratio = count > 0 && sum_nominal > 0.0 ? sum_reading / sum_nominal : 1.0;
-  if (largest > kImplausibleMetres || ratio > kImplausibleRatio ||
-      ratio < 1.0 / kImplausibleRatio) {
-    // Short enough for Status (240 characters) after a long path.
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "%s: length_1..length_%d: %s (mean %.4g vs %.4g m of the nominal inverse "
-                         "kinematics at the commanded poses; largest %.4g in length_%d)",
-                         file.c_str(), rec.num_cables, unit_guess(ratio).c_str(),
-                         count > 0 ? sum_reading / count : 0.0,
-                         count > 0 ? sum_nominal / count : 0.0, largest, largest_cable);
-  }
-  for (int k = 0; k < rec.num_lasers; ++k) {
-    for (std::size_t j = 0; j < rec.poses.size(); ++j) {
-      const Eigen::VectorXd& l = rec.poses[j].lasers;
-      if (k < l.size() && std::isfinite(l(k)) && std::abs(l(k)) > kImplausibleMetres) {
-        return Status::error(ErrorCode::kInvalidArgument,
-                             "%s: laser_%d: reading %.6g in data row %zu looks like mm, expected m",
-                             file.c_str(), k + 1, l(k), j + 1);
-      }
-    }
-  }
-  return Status::success();
-}
 
 struct Loaded {
   recording::Recording recording;
@@ -90,7 +30,8 @@ Result<Loaded> load_recording(const std::string& file, const DiagnoseArgs& args,
   if (Status s = recording::check_against_model(*rec, nominal); !s.ok()) {
     return with_context(s, file + " vs " + args.config);
   }
-  CDPR_RETURN_IF_ERROR(check_plausible_units(*rec, nominal, file));
+  // Units (a file in mm under "# units: SI") and ranges, naming the line and column.
+  CDPR_RETURN_IF_ERROR(recording::check_plausible(*rec, nominal, file));
   const std::string recorded_robot = rec->metadata.get(recording::key::kRobot);
   if (!recorded_robot.empty() && recorded_robot != nominal.name) {
     warnings->push_back(file + " is a recording of robot '" + recorded_robot + "' but " +
@@ -155,6 +96,7 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
   options.seed = args.seed;
   options.bootstrap_samples = args.bootstrap;
   options.cv_folds = args.folds;
+  options.progress = console().progress;
 
   const CalibratedModel initial = CalibratedModel::from_robot(*nominal);
   auto result = cdpr::diagnose(initial, primary->set, validation ? &validation->set : nullptr,
@@ -220,7 +162,7 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
   if (!args.json_report.empty()) {
     nlohmann::json file = out.json;
     file["ok"] = true;
-    CDPR_RETURN_IF_ERROR(outputs.stage(args.json_report, file.dump(2) + "\n"));
+    CDPR_RETURN_IF_ERROR(outputs.stage(args.json_report, report::json_text(file) + "\n"));
   }
   CDPR_RETURN_IF_ERROR(outputs.commit());
 

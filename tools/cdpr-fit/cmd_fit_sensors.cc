@@ -110,6 +110,15 @@ Result<Output> fit_force_sensor(const FitForceArgs& args) {
     if (!v.ok()) return with_context(v.status(), args.experiment);
     g = *v;
   }
+  // A gravity far from any planet's makes every mass read as the same 0 kg: refuse it here.
+  constexpr double kMaxGravity = 100.0;  // m/s^2
+  if (!(g > 0.0 && g <= kMaxGravity)) {
+    return Status::error(
+        ErrorCode::kInvalidArgument,
+        "%s: gravity %.6g m/s^2 (%s) is outside the plausible range (0, %.6g] m/s^2",
+        args.experiment.c_str(), g, std::isfinite(args.gravity) ? "--gravity" : "gravity_m_s2",
+        kMaxGravity);
+  }
   std::map<int, std::vector<ForceCalibrationSample>> channels;
   for (const auto& s : e->samples) channels[s.channel].push_back({s.mass_kg, s.raw});
 

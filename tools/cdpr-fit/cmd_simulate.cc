@@ -40,6 +40,7 @@ Result<Output> simulate(const SimulateArgs& args) {
     PoseDesignOptions design;
     design.num_poses = args.design;
     design.noise = args.noise;
+    design.progress = console().progress;
     const CalibratedModel planner = nominal ? *nominal : CalibratedModel::from_robot(*truth);
     fit_design_box_to_robot(planner.robot, design);
     auto d = cdpr::design_poses(planner, design);
@@ -49,6 +50,7 @@ Result<Output> simulate(const SimulateArgs& args) {
   } else {
     list = recording::read_pose_list(args.poses);
     if (!list.ok()) return list.status();
+    CDPR_RETURN_IF_ERROR(recording::check_plausible(*list, *truth, args.poses));
   }
 
   SimulationOptions options;
@@ -75,16 +77,26 @@ Result<Output> simulate(const SimulateArgs& args) {
   const CalibratedModel& truth_model = *homed;
   auto sim = simulate_measurements(truth_model, list->poses, args.noise, args.seed, options);
   if (!sim.ok()) {
-    return Status::error(sim.status().code(), "simulating %s at the poses of %s: %.*s",
+    // Poses designed for the nominal robot can lie just outside the true robot's workspace: the
+    // rigid physics puts the platform exactly there, the elastic one lets it settle.
+    const bool hint =
+        !args.elastic && sim.status().message().find("wrench-feasible") != std::string_view::npos;
+    return Status::error(sim.status().code(), "simulating %s at the poses of %s: %.*s%s",
                          args.config.c_str(), poses_source.c_str(),
                          static_cast<int>(sim.status().message().size()),
-                         sim.status().message().data());
+                         sim.status().message().data(),
+                         hint ? " (with --physics elastic --nominal the true robot settles near "
+                                "each commanded pose instead)"
+                              : "");
   }
 
   recording::Metadata md;
   md.set(recording::key::kFormat, "cdpr-recording 1");
   md.set(recording::key::kUnits, "SI");
-  md.set(recording::key::kRobot, truth->name);
+  // The robot as the controller knows it (the daemon stamps its own config's name), so that a
+  // recording of the measured robot calibrates from the nominal config without a name warning.
+  md.set(recording::key::kRobot, nominal ? nominal->robot.name : truth->name);
+  md.set("truth_robot", truth->name);
   md.set(recording::key::kDate, recording::utc_timestamp());
   // The config in force while "recording" is the controller's; without one, the truth's.
   const std::string& config_file = args.nominal.empty() ? args.config : args.nominal;

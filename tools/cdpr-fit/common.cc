@@ -5,6 +5,11 @@
 
 namespace cdpr::fit {
 
+Console& console() {
+  static Console c;
+  return c;
+}
+
 Result<RobotModel> load_config(const std::string& path) {
   auto model = config::load_robot_config(path);
   if (!model.ok()) return model.status();  // the loader names the file, line and field

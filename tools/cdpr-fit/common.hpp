@@ -2,6 +2,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -12,6 +13,15 @@
 #include "cdpr/status.hpp"
 
 namespace cdpr::fit {
+
+// Where a running command reports progress and early warnings (set by run() for one command):
+// `progress` is empty unless progress is shown (progress.hpp); `warn` prints one line on stderr
+// ("cdpr-fit <command>: warning: ...") before long work starts.
+struct Console {
+  ProgressCallback progress;
+  std::function<void(const std::string&)> warn = [](const std::string&) {};
+};
+Console& console();
 
 // load_robot_config with the file named in the message.
 Result<RobotModel> load_config(const std::string& path);

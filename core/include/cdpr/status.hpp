@@ -84,14 +84,20 @@ class Status {
   constexpr Status() = default;
   Status(ErrorCode code, std::string_view message) : code_(code) { set(message); }
 
-  // printf-style constructor for messages with values: Status::error(kTimeout, "node %d ...", id)
+  // printf-style constructor for messages with values: Status::error(kTimeout, "node %d ...", id).
+  // A message longer than the buffer loses its middle ("...") so that both the file and field at
+  // its start and the end of the reason survive.
   [[gnu::format(printf, 2, 3)]] static Status error(ErrorCode code, const char* fmt, ...) {
     Status s;
     s.code_ = code;
+    std::array<char, kFormatBuffer> wide;  // on the stack: no allocation
     va_list args;
     va_start(args, fmt);
-    std::vsnprintf(s.msg_.data(), s.msg_.size(), fmt, args);
+    const int n = std::vsnprintf(wide.data(), wide.size(), fmt, args);
     va_end(args);
+    const std::size_t len =
+        n < 0 ? 0 : (static_cast<std::size_t>(n) < wide.size() ? n : wide.size() - 1);
+    s.set(std::string_view(wide.data(), len));
     return s;
   }
   static constexpr Status success() { return {}; }
@@ -109,41 +115,53 @@ class Status {
     }
     return s;
   }
-  // Prefixes context to the message: "reading config.yaml: " + old message. The reason is what
-  // the reader needs most, so when both do not fit, the context (usually a long path) loses its
-  // middle ("/check/wo...ven-cables.csv: ") before the message loses its end.
+  // Prefixes context to the message: "reading config.yaml: " + old message. When both do not
+  // fit, each loses its middle ("..."), never its ends: the context (usually a long path) keeps
+  // its start and its file name, the message keeps the start and the end of the reason. The
+  // context gets what the message leaves, and at least a third of the buffer.
   Status& prepend(std::string_view context) {
     constexpr std::size_t kCap = kMaxMessage - 1;
-    constexpr std::string_view kEllipsis = "...";
-    constexpr std::size_t kMinContext = 24;  // keep at least this much of the context
     const std::size_t old_len = std::strlen(msg_.data());
-    std::size_t budget = kCap > old_len ? kCap - old_len : 0;
-    if (budget < kMinContext) budget = context.size() < kMinContext ? context.size() : kMinContext;
-    std::array<char, kMaxMessage> ctx{};
-    std::size_t n = 0;
-    if (context.size() <= budget) {
-      n = context.size();
-      std::memcpy(ctx.data(), context.data(), n);
-    } else {  // head + "..." + tail: the file name and the ": " at the end survive
-      const std::size_t keep = budget - kEllipsis.size();
-      const std::size_t head = keep / 3, tail = keep - head;
-      std::memcpy(ctx.data(), context.data(), head);
-      std::memcpy(ctx.data() + head, kEllipsis.data(), kEllipsis.size());
-      std::memcpy(ctx.data() + head + kEllipsis.size(), context.data() + context.size() - tail,
-                  tail);
-      n = budget;
+    std::size_t ctx_budget = context.size();
+    if (ctx_budget + old_len > kCap) {
+      const std::size_t left = kCap > old_len ? kCap - old_len : 0;
+      const std::size_t share = left > kCap / 3 ? left : kCap / 3;
+      ctx_budget = context.size() < share ? context.size() : share;
     }
-    const std::size_t keep = old_len < kCap - n ? old_len : kCap - n;
-    std::memmove(msg_.data() + n, msg_.data(), keep);
-    std::memcpy(msg_.data(), ctx.data(), n);
-    msg_[n + keep] = '\0';
+    std::array<char, kMaxMessage> out{};
+    const std::size_t n = elide(context, out.data(), ctx_budget, /*head_thirds=*/1);
+    const std::size_t m =
+        elide(std::string_view(msg_.data(), old_len), out.data() + n, kCap - n, /*head_thirds=*/2);
+    out[n + m] = '\0';
+    msg_ = out;
     return *this;
   }
 
  private:
+  // Size of the stack buffer error() formats into before shortening to kMaxMessage.
+  static constexpr std::size_t kFormatBuffer = 4096;
+
+  // Copies `src` to `dst` (no terminator), at most `budget` characters: when longer, its start
+  // (head_thirds / 3 of the budget), "..." and its end. Returns the characters written.
+  static std::size_t elide(std::string_view src, char* dst, std::size_t budget, int head_thirds) {
+    constexpr std::string_view kEllipsis = "...";
+    if (src.size() <= budget) {
+      std::memcpy(dst, src.data(), src.size());
+      return src.size();
+    }
+    if (budget <= kEllipsis.size()) {
+      std::memcpy(dst, src.data(), budget);
+      return budget;
+    }
+    const std::size_t keep = budget - kEllipsis.size();
+    const std::size_t head = keep * static_cast<std::size_t>(head_thirds) / 3, tail = keep - head;
+    std::memcpy(dst, src.data(), head);
+    std::memcpy(dst + head, kEllipsis.data(), kEllipsis.size());
+    std::memcpy(dst + head + kEllipsis.size(), src.data() + src.size() - tail, tail);
+    return budget;
+  }
   void set(std::string_view m) {
-    const std::size_t n = m.size() < kMaxMessage - 1 ? m.size() : kMaxMessage - 1;
-    std::memcpy(msg_.data(), m.data(), n);
+    const std::size_t n = elide(m, msg_.data(), kMaxMessage - 1, /*head_thirds=*/2);
     msg_[n] = '\0';
   }
   ErrorCode code_ = ErrorCode::kOk;

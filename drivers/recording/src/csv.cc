@@ -167,6 +167,8 @@ Result<CsvTable> parse_table(std::string_view text, std::string_view name) {
   std::vector<int> metadata_lines;
   int line_no = 0;
   std::size_t pos = 0;
+  // A UTF-8 byte order mark (spreadsheet exports write one) is not part of the first line.
+  if (text.substr(0, 3) == "\xEF\xBB\xBF") pos = 3;
   while (pos < text.size()) {
     std::size_t nl = text.find('\n', pos);
     if (nl == std::string_view::npos) nl = text.size();

@@ -184,6 +184,7 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
   rec.num_lasers = static_cast<int>(layout.lasers.size());
   rec.has_reference = layout.ref[0] >= 0;
   rec.has_temperature = layout.temperature >= 0;
+  rec.header = t.header;
   rec.poses.reserve(t.rows.size());
   const double nan = std::numeric_limits<double>::quiet_NaN();
   int previous_line = 0;
@@ -197,6 +198,7 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
                                 static_cast<long long>(rec.poses.back().index));
     }
     previous_line = row.line;
+    p.line = row.line;
     CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, layout.time, false, &p.time_s));
     for (int a = 0; a < 6; ++a) {
       double v = 0.0;
@@ -493,6 +495,7 @@ Result<PoseList> parse_pose_list(std::string_view text, std::string_view name) {
       (a < 3 ? p.position : p.rpy)(a % 3) = v;
     }
     list.poses.push_back(p);
+    list.lines.push_back(row.line);
   }
   return list;
 }

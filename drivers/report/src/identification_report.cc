@@ -1,5 +1,6 @@
 // The renderings of an identification (cdpr-fit calibrate's documents) and the combined
 // calibration report.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -217,7 +218,13 @@ std::string identification_text(const CalibrationReportInput& in) {
     nlohmann::json unused;
     h << truth_comparison(c, nominal, in.after->robot, *in.truth, &unused);
   }
-  h << warnings_text(c.warnings);
+  // The solver's own warnings are in full_report() above; the rest are about the inputs.
+  std::vector<std::string> others;
+  for (const std::string& w : c.warnings) {
+    const auto& own = in.identification->warnings;
+    if (std::find(own.begin(), own.end(), w) == own.end()) others.push_back(w);
+  }
+  h << warnings_text(others);
   return h.str();
 }
 

@@ -449,7 +449,8 @@ std::string plan_view(const PlanView& v) {
 
 namespace cdpr::report {
 
-std::string html_escape(const std::string& s) {
+std::string html_escape(const std::string& text) {
+  const std::string s = valid_utf8(text);
   std::string o;
   o.reserve(s.size());
   for (char c : s) {

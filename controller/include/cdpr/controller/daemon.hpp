@@ -38,10 +38,12 @@
 #include "cdpr/controller/state_store.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
 #include "cdpr/recording/recording.hpp"
+#include "cdpr/version.hpp"
 
 namespace cdpr::controller {
 
-inline constexpr const char* kDaemonVersion = "cdprd 0.1.0";
+// `cdprd --version`, and the daemon named in its recordings and reports (cmake/CdprVersion.cmake).
+inline constexpr const char* kDaemonVersion = "cdprd " CDPR_VERSION_STRING;
 
 struct DaemonIo {
   can::CanBus* bus = nullptr;            // the master's endpoint

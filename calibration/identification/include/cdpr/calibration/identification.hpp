@@ -38,8 +38,10 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <functional>
 #include <limits>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "cdpr/calibration/measurement.hpp"
@@ -47,6 +49,12 @@
 #include "cdpr/status.hpp"
 
 namespace cdpr {
+
+// Progress of long offline work, for a display: `what` ("solver iteration", "poses designed",
+// "bootstrap resamples"), `done` of `total` (for the solver: the iteration and the iteration
+// limit). Called on the calling thread between steps; it must not throw. The mathematics does no
+// I/O: printing is the caller's.
+using ProgressCallback = std::function<void(std::string_view what, int done, int total)>;
 
 enum class Gauge { kHomePose, kLaserPlane, kHomePoseAndLaserPlane, kNone };
 enum class RobustLoss { kNone, kHuber, kCauchy };
@@ -99,6 +107,7 @@ struct IdentificationOptions {
   double gradient_tolerance = 1e-14;
   double parameter_tolerance = 1e-10;
   int num_threads = 1;
+  ProgressCallback progress;  // after each solver iteration; empty: none
 
   // --- Checks and report ---------------------------------------------------------------------
   // Refuse (kFailedPrecondition) a choice whose column-normalised geometry information has

@@ -49,6 +49,9 @@ struct PoseDesignOptions {
   IdentificationOptions identification;
   int exchange_passes = 4;
   double angle_weight = 0.1;  // m per rad in the path length
+  // "poses designed" k of num_poses during the greedy selection, then "exchange passes" p of
+  // exchange_passes; empty: none.
+  ProgressCallback progress;
 };
 
 struct PoseDesign {

@@ -100,6 +100,7 @@ namespace cdpr {
 struct DiagnosisOptions {
   MismatchOptions screen;            // alpha, confounding threshold, rank tolerance
   int bootstrap_samples = 100;       // resamples over poses for inclusion probabilities
+  ProgressCallback progress;         // "bootstrap resamples" b of bootstrap_samples; empty: none
   double inclusion_threshold = 0.6;  // keep candidates selected in at least this fraction
   int cv_folds = 5;                  // K-fold cross-validation over poses (2 <= K <= N)
   unsigned seed = 1;                 // bootstrap and fold assignment (deterministic)

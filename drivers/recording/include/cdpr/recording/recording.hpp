@@ -30,6 +30,8 @@ namespace cdpr::recording {
 
 inline constexpr std::string_view kUnitsSI = "SI";
 
+struct PoseList;
+
 // Ordered `# key: value` lines. Keys are unique; writers keep the order they were added in.
 class Metadata {
  public:
@@ -76,6 +78,7 @@ struct RecordedPose {
   Eigen::VectorXd lasers;    // k entries, m
   Pose reference;            // ref_*; NaN when not measured (or when the file has no ref_ columns)
   double temperature_c = std::numeric_limits<double>::quiet_NaN();  // degrees Celsius
+  int line = 0;  // the row's line in the file it was read from (1-based); 0 when not read
 };
 
 struct Recording {
@@ -85,6 +88,7 @@ struct Recording {
   bool has_reference = false;    // the file has the six ref_* columns
   bool has_temperature = false;  // the file has the temperature_c column
   std::vector<RecordedPose> poses;
+  std::vector<std::string> header;  // the column names in the file's order; empty when not read
 };
 
 // Reads and checks a recording. Errors: kNotFound/kIoError (file), kParseError (syntax; the
@@ -101,6 +105,39 @@ Result<std::string> format_recording(const Recording& recording);
 // count k. kFailedPrecondition with a message naming both counts on mismatch. (A different robot
 // name is not an error: a nominal and a measured config of one robot may carry different names.)
 Status check_against_model(const Recording& recording, const RobotModel& model);
+
+// ---------------------------------------------------------------------------------------------
+// Plausibility against the robot (every command that reads a recording or a pose list)
+// ---------------------------------------------------------------------------------------------
+
+// Bounds of what a recording of a cable robot in SI units can hold. The frame size is the diagonal
+// of the box around the frame anchors (at least 1 mm), its centre the box's centre.
+struct PlausibilityLimits {
+  double position_frame_multiple = 10.0;  // commanded and reference positions: within this many
+                                          // frame sizes of the frame centre, per axis
+  double length_frame_multiple = 10.0;    // length_i and laser_j in (0, this many frame sizes]
+  double max_abs_angle_rad = 6.283185307179586;  // roll, pitch, yaw
+  double max_abs_tension_n = 1e6;                // tension_i
+  double min_temperature_c = -100.0, max_temperature_c = 200.0;
+  double max_noise_m = 1.0;        // noise_length_m, noise_laser_m, noise_reference_position_m
+  double max_noise_force_n = 1e4;  // noise_force_n
+  double max_noise_angle_rad = 3.141592653589793;  // noise_reference_angle_rad
+  // Median |length_i| / nominal inverse-kinematics length at the commanded pose beyond this
+  // factor, either way: the file is in another unit (mm, cm, km) whatever its `# units` says.
+  double unit_ratio = 100.0;
+};
+
+// Checks every cell and noise statement of `recording` against `model` and `limits`, first the
+// unit of the cable lengths as a whole ("<file>: length_1..length_8: looks like mm, expected m
+// (median 710.2 vs 0.7128 m ...)"), then each cell in file order ("<file>:<line>: column <c>
+// (cmd_x): 1e+300 m is outside the plausible range [-23.1, 23.6] m (10 frame sizes of 2.3 m
+// around the frame centre)"). Numbers are printed with 6 significant digits. kInvalidArgument.
+// Use after check_against_model (the counts must agree).
+Status check_plausible(const Recording& recording, const RobotModel& model, std::string_view file,
+                       const PlausibilityLimits& limits = {});
+// The same for the poses of a pose list (positions and angles).
+Status check_plausible(const PoseList& list, const RobotModel& model, std::string_view file,
+                       const PlausibilityLimits& limits = {});
 
 // ---------------------------------------------------------------------------------------------
 // Recording <-> MeasurementSet (calibration/measurement.hpp)
@@ -166,6 +203,7 @@ Result<std::string> format_force_experiment(const ForceSensorExperiment& experim
 struct PoseList {
   Metadata metadata;
   std::vector<Pose> poses;
+  std::vector<int> lines;  // line of each pose in the file read (1-based); empty when not read
 };
 
 Result<PoseList> read_pose_list(const std::string& path);
