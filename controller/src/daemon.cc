@@ -1128,7 +1128,9 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   const report::Rendered rendered = report::render_calibration_report(rin);
   json summary = calibration_json(out, ctx);
   summary["calibration_report"] = rendered.json;
-  Status wrote = io::write_file_atomically(dir + "/report.json", summary.dump(2) + "\n");
+  Status wrote = io::write_file_atomically(
+      dir + "/report.json",
+      summary.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
   if (wrote.ok()) {
     wrote =
         io::write_file_atomically(dir + "/report.html", calibration_html(out, ctx, rendered.html));
@@ -1306,7 +1308,9 @@ Reply Daemon::cmd_accept(const PeerInfo& peer) {
                    {"version", *version},
                    {"peer", {{"pid", peer.pid}, {"uid", peer.uid}, {"gid", peer.gid}}},
                    {"time", recording::utc_timestamp()}};
-  (void)io::write_file_atomically(dir + "/decision.json", decision.dump(2) + "\n");
+  (void)io::write_file_atomically(
+      dir + "/decision.json",
+      decision.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
   {
     std::lock_guard lock(mu_);
     calibration_->outcome = "applying";
@@ -1338,8 +1342,9 @@ Reply Daemon::cmd_reject(const PeerInfo& peer) {
   json decision = {{"decision", "rejected"},
                    {"peer", {{"pid", peer.pid}, {"uid", peer.uid}, {"gid", peer.gid}}},
                    {"time", recording::utc_timestamp()}};
-  (void)io::write_file_atomically(store_->calibration_dir(id) + "/decision.json",
-                                  decision.dump(2) + "\n");
+  (void)io::write_file_atomically(
+      store_->calibration_dir(id) + "/decision.json",
+      decision.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
   spdlog::info("reject: calibration {} (pid {} uid {} gid {})", id, peer.pid, peer.uid, peer.gid);
   publish("calibration", {{"calibration", id},
                           {"version", nullptr},

@@ -174,7 +174,10 @@ Result<int> StateStore::add_geometry(const RobotModel& model, nlohmann::json met
   // The metadata first: a version exists once its YAML does.
   const std::string meta_path =
       (fs::path(dir_) / "geometry" / (numbered(version) + ".json")).string();
-  if (Status s = io::write_file_atomically(meta_path, meta.dump(2) + "\n"); !s.ok()) return s;
+  if (Status s = io::write_file_atomically(
+          meta_path, meta.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
+      !s.ok())
+    return s;
   if (Status s = io::write_file_atomically(geometry_path(version), yaml); !s.ok()) return s;
   return version;
 }
@@ -226,7 +229,7 @@ Status StateStore::activate(int version, nlohmann::json why) {
   why["time"] = recording::utc_timestamp();
   AppendOnlyFile log;
   if (Status s = log.open((fs::path(dir_) / "history.jsonl").string(), false); !s.ok()) return s;
-  return log.append(why.dump() + "\n");
+  return log.append(why.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
 }
 
 Result<std::vector<nlohmann::json>> StateStore::history() const {
