@@ -305,13 +305,23 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
     IdentificationOptions without = identification;
     without.*(v.use) = false;
     auto g2 = geometry_information(model, set, poses, without);
-    if (!g2 || static_cast<int>(g2->names.size()) != P) continue;
+    if (!g2) continue;
     ChannelContribution cc;
     cc.channel = v.name;
     cc.rows = v.rows;
     const IdentifiabilityReport r2 = analyze_identifiability(*g2, options);
-    cc.rank_without = r2.rank;
-    const Eigen::VectorXd wo = stds(g2->information);
+    cc.rank_without = r2.rank;  // of the parameters still estimated without the channel
+    // Without the channel, parameters only it observes are not estimated at all (the
+    // identification frees a mounting parameter only where its channel is used): they count as
+    // unidentifiable without it, and the rank is that of the full choice minus them.
+    const int P2 = static_cast<int>(g2->names.size());
+    const Eigen::VectorXd wo2 = stds(g2->information);
+    Eigen::VectorXd wo = Eigen::VectorXd::Constant(P, std::numeric_limits<double>::infinity());
+    for (int q2 = 0; q2 < P2; ++q2) {
+      const auto it = std::find(gi->names.begin(), gi->names.end(),
+                                g2->names[static_cast<std::size_t>(q2)]);
+      if (it != gi->names.end()) wo(static_cast<int>(it - gi->names.begin())) = wo2(q2);
+    }
     std::vector<std::pair<std::string, double>> gains;
     for (int q = 0; q < P; ++q) {
       if (!std::isfinite(with(q))) continue;

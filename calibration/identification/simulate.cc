@@ -209,8 +209,10 @@ Result<SimulatedMeasurements> simulate_measurements(const CalibratedModel& truth
   std::normal_distribution<double> normal(0.0, 1.0);
   auto noisy = [&](double sigma) { return options.add_noise ? sigma * normal(rng) : 0.0; };
   // The issue 18 channels draw from their own stream (see SimulationOptions).
+  // (Its own distribution object too: std::normal_distribution caches a second variate.)
   std::mt19937_64 rng2(seed ^ 0x9e3779b97f4a7c15ULL);
-  auto noisy2 = [&](double sigma) { return options.add_noise ? sigma * normal(rng2) : 0.0; };
+  std::normal_distribution<double> normal2(0.0, 1.0);
+  auto noisy2 = [&](double sigma) { return options.add_noise ? sigma * normal2(rng2) : 0.0; };
   auto wrap = [](double x) { return std::atan2(std::sin(x), std::cos(x)); };
 
   SimulatedMeasurements out;
