@@ -80,8 +80,8 @@ double crb_at_truth(const cdpr::scenario::Scenario& s, const std::vector<cdpr::P
   const cdpr::SimulatedMeasurements sim = must(
       cdpr::simulate_measurements(s.truth, commands, bench_noise(), 0, sim_options(s, c, false)),
       "simulate");
-  const cdpr::GeometryInformation gi = must(
-      cdpr::geometry_information(s.truth, sim.set, sim.true_poses, ident_options(c)), "info");
+  const cdpr::GeometryInformation gi =
+      must(cdpr::geometry_information(s.truth, sim.set, sim.true_poses, ident_options(c)), "info");
   const Eigen::VectorXd d = gi.information.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
   const Eigen::MatrixXd In = d.asDiagonal() * gi.information * d.asDiagonal();
   const Eigen::MatrixXd cov =
@@ -122,7 +122,8 @@ int main(int argc, char** argv) {
           .position_rms_m;
   std::printf("cdpr sensor-channel benchmark: MINI, %zu designed poses, %d seeds, elastic\n",
               poses.poses.size(), seeds);
-  std::printf("noise: encoder 0.1 mm, force 1 N, laser 1 mm, swivel 1 mrad, inclinometer 0.5 mrad\n");
+  std::printf(
+      "noise: encoder 0.1 mm, force 1 N, laser 1 mm, swivel 1 mrad, inclinometer 0.5 mrad\n");
   std::printf("nominal model: box position RMS %.3f mm\n\n", 1e3 * nominal_pos);
 
   const Config configs[] = {
@@ -168,12 +169,12 @@ int main(int argc, char** argv) {
       }
     }
     const double rms = std::sqrt(sum_sq / std::max<long>(1, total));
-    std::printf("%-26s %9.3f %9.3f %8.3f %9.3f %9.1f %9.3f %9.3f %8.3f %6d  (%.0f s)\n", c.name,
-                1e3 * rms, 1e3 * crb, rms / crb, 1e3 * std::sqrt(sum_std2 / std::max<long>(1, total)),
-                100.0 * static_cast<double>(covered) / static_cast<double>(std::max<long>(1, total)),
-                1e3 * std::sqrt(sum_pos2 / std::max(1, ok)), 1e3 * pos_max,
-                sum_chi2 / std::max(1, ok), ok,
-                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    std::printf(
+        "%-26s %9.3f %9.3f %8.3f %9.3f %9.1f %9.3f %9.3f %8.3f %6d  (%.0f s)\n", c.name, 1e3 * rms,
+        1e3 * crb, rms / crb, 1e3 * std::sqrt(sum_std2 / std::max<long>(1, total)),
+        100.0 * static_cast<double>(covered) / static_cast<double>(std::max<long>(1, total)),
+        1e3 * std::sqrt(sum_pos2 / std::max(1, ok)), 1e3 * pos_max, sum_chi2 / std::max(1, ok), ok,
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     std::fflush(stdout);
   }
   std::printf("\nIdentifiability at the truth (per configuration):\n");

@@ -272,16 +272,16 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
   };
   const int P = static_cast<int>(gi->names.size());
   auto stds = [&](const Eigen::MatrixXd& S) {
-    Eigen::VectorXd d(P);
-    for (int q = 0; q < P; ++q) d(q) = S(q, q) > 0 ? std::sqrt(S(q, q)) : 1.0;
+    const int n = static_cast<int>(S.rows());
+    Eigen::VectorXd d(n);
+    for (int q = 0; q < n; ++q) d(q) = S(q, q) > 0 ? std::sqrt(S(q, q)) : 1.0;
     const Eigen::MatrixXd N = d.cwiseInverse().asDiagonal() * S * d.cwiseInverse().asDiagonal();
     const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(N);
     const double lmax = es.eigenvalues().maxCoeff();
-    Eigen::VectorXd out(P);
-    Eigen::VectorXd inv = Eigen::VectorXd::Zero(P);
-    Eigen::MatrixXd null_part = Eigen::MatrixXd::Zero(P, 0);
+    Eigen::VectorXd out(n);
+    Eigen::VectorXd inv = Eigen::VectorXd::Zero(n);
     std::vector<int> nulls;
-    for (int q = 0; q < P; ++q) {
+    for (int q = 0; q < n; ++q) {
       const double lam = es.eigenvalues()(q);
       if (lmax > 0 && lam > 0 && std::sqrt(lam / lmax) > options.rank_tolerance) {
         inv(q) = 1.0 / lam;
@@ -291,11 +291,11 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
     }
     const Eigen::MatrixXd Ninv =
         es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose();
-    for (int q = 0; q < P; ++q) {
+    for (int q = 0; q < n; ++q) {
       double in_null = 0.0;
       for (const int k : nulls) in_null += es.eigenvectors()(q, k) * es.eigenvectors()(q, k);
       out(q) = (in_null > 1e-2 || !(S(q, q) > 0)) ? std::numeric_limits<double>::infinity()
-                                                   : std::sqrt(std::max(0.0, Ninv(q, q))) / d(q);
+                                                  : std::sqrt(std::max(0.0, Ninv(q, q))) / d(q);
     }
     return out;
   };
@@ -318,15 +318,15 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
     const Eigen::VectorXd wo2 = stds(g2->information);
     Eigen::VectorXd wo = Eigen::VectorXd::Constant(P, std::numeric_limits<double>::infinity());
     for (int q2 = 0; q2 < P2; ++q2) {
-      const auto it = std::find(gi->names.begin(), gi->names.end(),
-                                g2->names[static_cast<std::size_t>(q2)]);
+      const auto it =
+          std::find(gi->names.begin(), gi->names.end(), g2->names[static_cast<std::size_t>(q2)]);
       if (it != gi->names.end()) wo(static_cast<int>(it - gi->names.begin())) = wo2(q2);
     }
     std::vector<std::pair<std::string, double>> gains;
     for (int q = 0; q < P; ++q) {
       if (!std::isfinite(with(q))) continue;
-      const double ratio = std::isfinite(wo(q)) ? wo(q) / with(q)
-                                                : std::numeric_limits<double>::infinity();
+      const double ratio =
+          std::isfinite(wo(q)) ? wo(q) / with(q) : std::numeric_limits<double>::infinity();
       if (ratio > 1.1) gains.emplace_back(gi->names[static_cast<std::size_t>(q)], ratio);
     }
     std::stable_sort(gains.begin(), gains.end(),

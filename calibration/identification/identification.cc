@@ -382,12 +382,12 @@ struct Built {
   std::vector<std::array<double, 3>> a, b;
   std::vector<double> o, s, e, g, c;
   std::vector<LaserBlocks> lasers;
-  std::vector<double> swivel_zero;             // zero_i, rad (issue 18)
-  bool swivel_zero_free = false;               // some zero_i is estimated
-  std::array<double, 2> incl_mount{};          // mounting correction (roll, pitch), rad
+  std::vector<double> swivel_zero;     // zero_i, rad (issue 18)
+  bool swivel_zero_free = false;       // some zero_i is estimated
+  std::array<double, 2> incl_mount{};  // mounting correction (roll, pitch), rad
   Eigen::Matrix3d incl_mount0 = Eigen::Matrix3d::Identity();
   bool incl_mount_free = false;
-  double imu_yaw_zero = 0.0;                   // rad
+  double imu_yaw_zero = 0.0;  // rad
   bool imu_yaw_zero_free = false;
   std::vector<std::array<double, 6>> poses;
   std::vector<bool> pose_free;
@@ -804,9 +804,9 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       f->mount0 = B->incl_mount0;
       f->reading = pm.inclination;
       f->sigma = noise.sigma_inclination;
-      auto id = B->problem.AddResidualBlock(
-          new ceres::AutoDiffCostFunction<InclinometerCost, 2, 6, 2>(f), make_loss(), pose,
-          B->incl_mount.data());
+      auto id =
+          B->problem.AddResidualBlock(new ceres::AutoDiffCostFunction<InclinometerCost, 2, 6, 2>(f),
+                                      make_loss(), pose, B->incl_mount.data());
       B->blocks_per_pose[uj].push_back(id);
       B->rows_per_pose[uj].push_back({Channel::kInclination, 0});
       B->rows_per_pose[uj].push_back({Channel::kInclination, 1});
@@ -816,9 +816,9 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       f->mount0 = B->incl_mount0;
       f->reading = pm.imu_yaw;
       f->sigma = noise.sigma_imu_yaw;
-      auto id = B->problem.AddResidualBlock(
-          new ceres::AutoDiffCostFunction<ImuYawCost, 1, 6, 2, 1>(f), make_loss(), pose,
-          B->incl_mount.data(), &B->imu_yaw_zero);
+      auto id =
+          B->problem.AddResidualBlock(new ceres::AutoDiffCostFunction<ImuYawCost, 1, 6, 2, 1>(f),
+                                      make_loss(), pose, B->incl_mount.data(), &B->imu_yaw_zero);
       B->blocks_per_pose[uj].push_back(id);
       B->rows_per_pose[uj].push_back({Channel::kImuYaw, 0});
     }
@@ -940,13 +940,27 @@ GeometryInformation to_public(const Built& B, const Information& info,
   for (const auto& rows : B.rows_per_pose) {
     for (const RowInfo& ri : rows) {
       switch (ri.channel) {
-        case Channel::kLength: ++gi.channel_rows.length; break;
-        case Channel::kLaser: ++gi.channel_rows.laser; break;
-        case Channel::kWrench: ++gi.channel_rows.wrench; break;
-        case Channel::kReference: ++gi.channel_rows.reference; break;
-        case Channel::kSwivel: ++gi.channel_rows.swivel; break;
-        case Channel::kInclination: ++gi.channel_rows.inclination; break;
-        case Channel::kImuYaw: ++gi.channel_rows.imu_yaw; break;
+        case Channel::kLength:
+          ++gi.channel_rows.length;
+          break;
+        case Channel::kLaser:
+          ++gi.channel_rows.laser;
+          break;
+        case Channel::kWrench:
+          ++gi.channel_rows.wrench;
+          break;
+        case Channel::kReference:
+          ++gi.channel_rows.reference;
+          break;
+        case Channel::kSwivel:
+          ++gi.channel_rows.swivel;
+          break;
+        case Channel::kInclination:
+          ++gi.channel_rows.inclination;
+          break;
+        case Channel::kImuYaw:
+          ++gi.channel_rows.imu_yaw;
+          break;
       }
     }
   }

@@ -67,8 +67,8 @@ TEST(SensorChannels, SimulatedReadingsFollowTheStatedModels) {
     EXPECT_NEAR(pm.swivel_angles(i), std::atan2(std::sin(x), std::cos(x)), 1e-14) << i;
   }
   // Inclinometer: roll and pitch of R(pose) R_m; the IMU heading is its yaw minus the zero.
-  const Eigen::Matrix3d Rs = rotation_from_rpy<double>(p.rpy) *
-                             rotation_from_rpy<double>(truth.inclinometer.mounting_rpy);
+  const Eigen::Matrix3d Rs =
+      rotation_from_rpy<double>(p.rpy) * rotation_from_rpy<double>(truth.inclinometer.mounting_rpy);
   const Eigen::Vector3d rpy = rpy_from_rotation(Rs);
   EXPECT_NEAR(pm.inclination(0), rpy(0), 1e-14);
   EXPECT_NEAR(pm.inclination(1), rpy(1), 1e-14);
@@ -248,10 +248,9 @@ TEST(SensorChannels, SelfCalibrationWithEncodersAndForceSensorsOnly) {
   EXPECT_TRUE(said) << ir->summary();
   auto rep = identify(d.s.nominal, sim.set, o);
   ASSERT_TRUE(rep.ok()) << rep.status().to_string();
-  EXPECT_LT((rep->estimate.robot.frame_anchors - d.s.truth.robot.frame_anchors)
-                .cwiseAbs()
-                .maxCoeff(),
-            1e-6)
+  EXPECT_LT(
+      (rep->estimate.robot.frame_anchors - d.s.truth.robot.frame_anchors).cwiseAbs().maxCoeff(),
+      1e-6)
       << rep->full_report();
 }
 

@@ -133,7 +133,8 @@ double swivel_reading(const RobotModel& model, int cable, const Pose& pose) {
   const auto k = static_cast<std::size_t>(cable);
   const Eigen::Vector3d p =
       pose.position + rotation_from_rpy<double>(pose.rpy) * model.platform_anchors.col(cable);
-  const Eigen::Vector3d v = model.pulleys[k].frame.transpose() * (p - model.frame_anchors.col(cable));
+  const Eigen::Vector3d v =
+      model.pulleys[k].frame.transpose() * (p - model.frame_anchors.col(cable));
   if (!(v.x() * v.x() + v.y() * v.y() > 1e-18)) return std::numeric_limits<double>::quiet_NaN();
   const SwivelEncoderModel e = model.swivel_encoder(cable);
   const double x = e.direction * (std::atan2(v.y(), v.x()) - e.zero);

@@ -483,9 +483,9 @@ TEST(Recording, SwivelInclinometerAndImuColumnsRoundTrip) {
     p.swivels = Eigen::VectorXd::NullaryExpr(4, [&] { return u(rng); });
     p.inclination = Eigen::Vector2d(0.1 * u(rng), 0.1 * u(rng));
     p.imu_yaw = u(rng);
-    if (j == 2) p.swivels(1) = kNaN;                     // one encoder not read
-    if (j == 3) p.inclination.setConstant(kNaN);         // inclinometer not read
-    if (j == 4) p.imu_yaw = kNaN;                        // no heading
+    if (j == 2) p.swivels(1) = kNaN;              // one encoder not read
+    if (j == 3) p.inclination.setConstant(kNaN);  // inclinometer not read
+    if (j == 4) p.imu_yaw = kNaN;                 // no heading
   }
   rec.metadata.set_number(key::kNoiseSwivel, 2e-3);
   auto text = format_recording(rec);

@@ -47,9 +47,9 @@ class FitSensors : public cdpr::fit_test::FitProcessTest {
 TEST_F(FitSensors, SwivelAndInclinometerRecordingIsCalibratedAndDiagnosedWithoutALaser) {
   const std::string truth = truth_with_mounting_errors();
   const std::string rec = path("rec.csv");
-  const Process s = fit({"simulate", "--config", truth, "--nominal", kNominal, "--physics",
-                         "elastic", "--design", "25", "--channels", "swivel,inclinometer",
-                         "--seed", "4", "--out", rec});
+  const Process s =
+      fit({"simulate", "--config", truth, "--nominal", kNominal, "--physics", "elastic", "--design",
+           "25", "--channels", "swivel,inclinometer", "--seed", "4", "--out", rec});
   ASSERT_EQ(s.status, 0) << s.err << s.out;
   EXPECT_THAT(s.out, HasSubstr("swivel angles, inclinometer"));
 

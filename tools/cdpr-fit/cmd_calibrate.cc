@@ -15,11 +15,21 @@
 namespace cdpr::fit {
 
 const std::vector<std::string>& estimate_names() {
-  static const std::vector<std::string> names = {
-      "anchors",       "paper-anchors", "platform-anchors",    "offsets",
-      "scales",        "stiffness",     "stiffness-per-cable", "force-gains",
-      "force-offsets", "laser-origin",  "laser-direction",     "laser-plane",
-      "swivel-zeros",  "inclinometer-mounting", "imu-yaw-zero"};
+  static const std::vector<std::string> names = {"anchors",
+                                                 "paper-anchors",
+                                                 "platform-anchors",
+                                                 "offsets",
+                                                 "scales",
+                                                 "stiffness",
+                                                 "stiffness-per-cable",
+                                                 "force-gains",
+                                                 "force-offsets",
+                                                 "laser-origin",
+                                                 "laser-direction",
+                                                 "laser-plane",
+                                                 "swivel-zeros",
+                                                 "inclinometer-mounting",
+                                                 "imu-yaw-zero"};
   return names;
 }
 
@@ -259,10 +269,9 @@ Result<Output> calibrate(const CalibrateArgs& args) {
     warnings.push_back("the recording is of robot '" + recorded_robot + "' but " + args.config +
                        " is '" + nominal->name + "'");
   }
-  for (const char* k :
-       {recording::key::kNoiseLength, recording::key::kNoiseLaser, recording::key::kNoiseForce,
-        recording::key::kNoiseSwivel, recording::key::kNoiseInclination,
-        recording::key::kNoiseImuYaw}) {
+  for (const char* k : {recording::key::kNoiseLength, recording::key::kNoiseLaser,
+                        recording::key::kNoiseForce, recording::key::kNoiseSwivel,
+                        recording::key::kNoiseInclination, recording::key::kNoiseImuYaw}) {
     // Only the channels the recording has.
     const std::string key(k);
     if ((key == recording::key::kNoiseLaser && rec->num_lasers == 0) ||

@@ -155,9 +155,9 @@ Result<Output> simulate(const SimulateArgs& args) {
   h << "simulated " << rec->poses.size() << " poses of " << truth->name << " (" << rec->num_cables
     << " cables, " << rec->num_lasers << " laser" << (rec->num_lasers == 1 ? "" : "s") << ", "
     << (args.elastic ? "elastic" : "rigid") << " physics, seed " << args.seed << ")\n"
-    << "channels: lengths, tensions"
-    << (want_laser ? ", laser" : "") << (want_swivel ? ", swivel angles" : "")
-    << (want_incl ? ", inclinometer" : "") << (want_yaw ? ", IMU yaw" : "") << "\n"
+    << "channels: lengths, tensions" << (want_laser ? ", laser" : "")
+    << (want_swivel ? ", swivel angles" : "") << (want_incl ? ", inclinometer" : "")
+    << (want_yaw ? ", IMU yaw" : "") << "\n"
     << "noise: length " << args.noise.sigma_length << " m, force " << args.noise.sigma_force
     << " N, laser " << args.noise.sigma_laser << " m" << (args.add_noise ? "" : " (not added)")
     << "\nwrote " << args.out << "\n";

@@ -137,10 +137,9 @@ Status resolve_layout(const CsvTable& t, Layout* layout) {
   }
   CDPR_RETURN_IF_ERROR(contiguous(swivels, "swivel_", &layout->swivels));
   if (!layout->swivels.empty() && layout->swivels.size() != layout->lengths.size()) {
-    return Status::error(ErrorCode::kParseError,
-                         "%s:%d: %zu swivel_ columns but %zu cables (one per cable or none)",
-                         t.name.c_str(), t.header_line, layout->swivels.size(),
-                         layout->lengths.size());
+    return Status::error(
+        ErrorCode::kParseError, "%s:%d: %zu swivel_ columns but %zu cables (one per cable or none)",
+        t.name.c_str(), t.header_line, layout->swivels.size(), layout->lengths.size());
   }
   if ((layout->incl_roll < 0) != (layout->incl_pitch < 0)) {
     return header_error(t, "missing column '%s' (incl_roll and incl_pitch come together)",
@@ -239,8 +238,7 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
     CDPR_RETURN_IF_ERROR(fill(layout.lasers, &p.lasers));
     if (rec.has_swivel) CDPR_RETURN_IF_ERROR(fill(layout.swivels, &p.swivels));
     if (rec.has_inclinometer) {
-      CDPR_RETURN_IF_ERROR(
-          detail::parse_double(t, row, layout.incl_roll, true, &p.inclination(0)));
+      CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, layout.incl_roll, true, &p.inclination(0)));
       CDPR_RETURN_IF_ERROR(
           detail::parse_double(t, row, layout.incl_pitch, true, &p.inclination(1)));
       if (std::isnan(p.inclination(0)) != std::isnan(p.inclination(1))) {

@@ -47,9 +47,9 @@ struct ParameterDirection {
 
 // What one measurement channel contributes (issue 18): the analysis repeated without it.
 struct ChannelContribution {
-  std::string channel;     // "cable lengths", "laser", "equilibrium", "swivel angles", ...
-  int rows = 0;            // residual rows of the channel
-  int rank_without = 0;    // rank of the information without the channel
+  std::string channel;   // "cable lengths", "laser", "equilibrium", "swivel angles", ...
+  int rows = 0;          // residual rows of the channel
+  int rank_without = 0;  // rank of the information without the channel
   // Parameters whose Cramer-Rao std the channel lowers the most: (name, std without / std with),
   // largest first; infinity when the parameter is unidentifiable without the channel.
   std::vector<std::pair<std::string, double>> gains;

@@ -152,7 +152,8 @@ struct PoseResiduals {
   Eigen::Matrix<double, 6, 1> reference_normalized =
       Eigen::Matrix<double, 6, 1>::Constant(std::numeric_limits<double>::quiet_NaN());
   Eigen::VectorXd swivel_rad, swivel_normalized;  // m entries (issue 18)
-  Eigen::Vector2d inclination_rad = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+  Eigen::Vector2d inclination_rad =
+      Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
   Eigen::Vector2d inclination_normalized =
       Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
   double imu_yaw_rad = std::numeric_limits<double>::quiet_NaN();
@@ -221,8 +222,7 @@ struct GeometryInformation {
   int num_pose_parameters = 0;
   // Rows of each channel (what the identifiability analysis says about the gauge).
   struct ChannelRows {
-    int length = 0, laser = 0, wrench = 0, reference = 0, swivel = 0, inclination = 0,
-        imu_yaw = 0;
+    int length = 0, laser = 0, wrench = 0, reference = 0, swivel = 0, inclination = 0, imu_yaw = 0;
   } channel_rows;
   bool home_pose_fixed = false;  // the gauge holds a pose at the home pose
   // Whitened Jacobian blocks per pose (rows = that pose's residuals), filled only when

@@ -49,9 +49,9 @@ struct SensorNoise {
   double sigma_reference_angle = 1.0e-3;     // rad, reference pose roll/pitch/yaw
   // Issue 18 channels. Defaults: a 12-bit magnetic swivel encoder (1.5 mrad steps plus play),
   // a MEMS inclinometer of about 0.03 degrees, an IMU heading of about 0.6 degrees.
-  double sigma_swivel = 1.0e-3;        // rad, swivel angle
-  double sigma_inclination = 5.0e-4;   // rad, inclinometer roll and pitch
-  double sigma_imu_yaw = 1.0e-2;       // rad, IMU heading
+  double sigma_swivel = 1.0e-3;       // rad, swivel angle
+  double sigma_inclination = 5.0e-4;  // rad, inclinometer roll and pitch
+  double sigma_imu_yaw = 1.0e-2;      // rad, IMU heading
 };
 
 // How readings relate to physics beyond RobotModel: per-cable encoder-zero offset o_i (m) and
@@ -85,8 +85,8 @@ struct PoseMeasurement {
   Eigen::VectorXd laser_distances;  // m, size = number of lasers (may be 0); NaN = missing
   Eigen::VectorXd swivel_angles;    // rad, size m or empty; NaN = missing
   Eigen::Vector2d inclination = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
-  double imu_yaw = std::numeric_limits<double>::quiet_NaN();  // rad
-  std::optional<Pose> reference;    // known pose, if any
+  double imu_yaw = std::numeric_limits<double>::quiet_NaN();      // rad
+  std::optional<Pose> reference;                                  // known pose, if any
   double time = std::numeric_limits<double>::quiet_NaN();         // s
   double temperature = std::numeric_limits<double>::quiet_NaN();  // degC
   // A known wrench on the platform besides gravity and the cables (force N, moment N m about the

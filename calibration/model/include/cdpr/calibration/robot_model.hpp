@@ -124,7 +124,8 @@ struct SwivelEncoderModel {
 // has the orientation R_s = R(pose) * R_m in the world, R_m = rotation_from_rpy(mounting_rpy)
 // (the sensor frame in the platform frame). It reads the roll and pitch of R_s (gravity's
 // direction in the sensor frame, R_s = Rz(yaw) Ry(pitch) Rx(roll)):
-//   incl_roll = atan2(R_s(2,1), R_s(2,2)),  incl_pitch = atan2(-R_s(2,0), hypot(R_s(2,1), R_s(2,2)))
+//   incl_roll = atan2(R_s(2,1), R_s(2,2)),  incl_pitch = atan2(-R_s(2,0), hypot(R_s(2,1),
+//   R_s(2,2)))
 // and, for an IMU with a heading, imu_yaw = wrap(atan2(R_s(1,0), R_s(0,0)) - yaw_zero).
 struct InclinometerModel {
   Eigen::Vector3d mounting_rpy = Eigen::Vector3d::Zero();  // rad, sensor frame in platform frame
