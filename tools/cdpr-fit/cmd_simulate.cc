@@ -146,11 +146,14 @@ Result<Output> simulate(const SimulateArgs& args) {
                {{"length_m", args.noise.sigma_length},
                 {"force_n", args.noise.sigma_force},
                 {"laser_m", args.noise.sigma_laser},
-                {"swivel_rad", args.noise.sigma_swivel},
-                {"inclination_rad", args.noise.sigma_inclination},
-                {"imu_yaw_rad", args.noise.sigma_imu_yaw},
-                {"added", args.add_noise}}},
-              {"channels", args.channels}};
+                {"added", args.add_noise}}}};
+  // The issue 18 channels only when asked for (the default report is unchanged).
+  if (want_swivel || want_incl || want_yaw || !want_laser) {
+    out.json["channels"] = args.channels;
+    if (want_swivel) out.json["noise"]["swivel_rad"] = args.noise.sigma_swivel;
+    if (want_incl) out.json["noise"]["inclination_rad"] = args.noise.sigma_inclination;
+    if (want_yaw) out.json["noise"]["imu_yaw_rad"] = args.noise.sigma_imu_yaw;
+  }
   std::ostringstream h;
   h << "simulated " << rec->poses.size() << " poses of " << truth->name << " (" << rec->num_cables
     << " cables, " << rec->num_lasers << " laser" << (rec->num_lasers == 1 ? "" : "s") << ", "
