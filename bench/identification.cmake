@@ -4,3 +4,9 @@
 #   build/<dir>/bench/identification_bench [--seeds N] [--quick]
 add_executable(identification_bench ${CMAKE_CURRENT_LIST_DIR}/identification_bench.cc)
 target_link_libraries(identification_bench PRIVATE cdpr_calibration cdpr_calibration_testing cdpr_options)
+
+# Issue 18: MINI with laser / with swivel angles + inclinometer / with nothing extra, side by side
+# (Monte Carlo, Cramer-Rao bound, coverage, box position error):
+#   build/<dir>/bench/sensors_bench [--seeds N]
+add_executable(sensors_bench ${CMAKE_CURRENT_LIST_DIR}/sensors_bench.cc)
+target_link_libraries(sensors_bench PRIVATE cdpr_calibration cdpr_calibration_testing cdpr_options)

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <sstream>
 
 #include "identification_internal.hpp"
@@ -23,6 +24,10 @@ std::string words(const std::string& name) {
   if (name.rfind("force_offset_", 0) == 0)
     return "the force sensor offset of cable " + cable_of(13);
   if (name.rfind("b_", 0) == 0) return name + " (platform anchor)";
+  if (name.rfind("swivel_zero_", 0) == 0) return "the swivel encoder zero of cable " + cable_of(12);
+  if (name == "inclinometer.mount.roll") return "the inclinometer's mounting roll";
+  if (name == "inclinometer.mount.pitch") return "the inclinometer's mounting pitch";
+  if (name == "imu.yaw_zero") return "the IMU's heading zero";
   return name;
 }
 
@@ -182,6 +187,30 @@ IdentifiabilityReport analyze_identifiability(const GeometryInformation& gi,
   r.o3 = sl;
   r.o4 = s1 > 0 ? sl * sl / s1 : 0.0;
   r.o5 = zero ? 0.0 : 1.0 / invsum;
+  // The gauge in words.
+  {
+    const auto& c = gi.channel_rows;
+    const bool gravity = c.wrench > 0 || c.inclination > 0;
+    std::string what;
+    if (gi.home_pose_fixed) what = "the home pose (held fixed)";
+    if (c.laser > 0) what += std::string(what.empty() ? "" : ", ") + "the laser target plane";
+    if (c.reference > 0) what += std::string(what.empty() ? "" : ", ") + "reference poses";
+    if (c.imu_yaw > 0) what += std::string(what.empty() ? "" : ", ") + "the IMU heading (yaw)";
+    if (gravity) {
+      what += std::string(what.empty() ? "" : " and ") + "gravity (" +
+              (c.wrench > 0 && c.inclination > 0 ? "equilibrium and inclinometer"
+               : c.wrench > 0                    ? "equilibrium"
+                                                 : "inclinometer") +
+              ": the frame's tilt)";
+    }
+    r.notes.push_back("world frame fixed by " + (what.empty() ? std::string("nothing") : what));
+    if (c.laser == 0 && c.reference == 0) {
+      r.notes.push_back(
+          "no laser or tracker: the world frame is fixed by the home pose and gravity only; the "
+          "anchors are found relative to where the platform is at home, and an error in the "
+          "home pose moves every anchor with it");
+    }
+  }
   // Directions (ascending order = weakest first).
   for (int q = 0; q < P; ++q) {
     if (!(sig(q) <= opt.weak_tolerance * smax)) break;
@@ -228,7 +257,113 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
   // Only the total information is analysed: no per-pose matrices (a gigabyte on 100,000 poses).
   auto gi = ident_detail::total_geometry_information(model, set, poses, identification);
   if (!gi) return gi.status();
-  return analyze_identifiability(*gi, options);
+  IdentifiabilityReport report = analyze_identifiability(*gi, options);
+  // Each channel present, left out in turn.
+  const auto& c = gi->channel_rows;
+  struct Variant {
+    const char* name;
+    int rows;
+    bool IdentificationOptions::*use;
+  };
+  const Variant variants[] = {
+      {"cable lengths", c.length, &IdentificationOptions::use_lengths},
+      {"laser", c.laser, &IdentificationOptions::use_laser},
+      {"equilibrium", c.wrench, &IdentificationOptions::use_equilibrium},
+      {"swivel angles", c.swivel, &IdentificationOptions::use_swivel},
+      {"inclinometer", c.inclination, &IdentificationOptions::use_inclinometer},
+      {"IMU yaw", c.imu_yaw, &IdentificationOptions::use_imu_yaw},
+  };
+  const int P = static_cast<int>(gi->names.size());
+  auto stds = [&](const Eigen::MatrixXd& S) {
+    const int n = static_cast<int>(S.rows());
+    Eigen::VectorXd d(n);
+    for (int q = 0; q < n; ++q) d(q) = S(q, q) > 0 ? std::sqrt(S(q, q)) : 1.0;
+    const Eigen::MatrixXd N = d.cwiseInverse().asDiagonal() * S * d.cwiseInverse().asDiagonal();
+    const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(N);
+    const double lmax = es.eigenvalues().maxCoeff();
+    Eigen::VectorXd out(n);
+    Eigen::VectorXd inv = Eigen::VectorXd::Zero(n);
+    std::vector<int> nulls;
+    for (int q = 0; q < n; ++q) {
+      const double lam = es.eigenvalues()(q);
+      if (lmax > 0 && lam > 0 && std::sqrt(lam / lmax) > options.rank_tolerance) {
+        inv(q) = 1.0 / lam;
+      } else {
+        nulls.push_back(q);
+      }
+    }
+    const Eigen::MatrixXd Ninv =
+        es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose();
+    for (int q = 0; q < n; ++q) {
+      double in_null = 0.0;
+      for (const int k : nulls) in_null += es.eigenvectors()(q, k) * es.eigenvectors()(q, k);
+      out(q) = (in_null > 1e-2 || !(S(q, q) > 0)) ? std::numeric_limits<double>::infinity()
+                                                  : std::sqrt(std::max(0.0, Ninv(q, q))) / d(q);
+    }
+    return out;
+  };
+  const Eigen::VectorXd with = stds(gi->information);
+  for (const Variant& v : variants) {
+    if (v.rows == 0 || P == 0) continue;
+    IdentificationOptions without = identification;
+    without.*(v.use) = false;
+    auto g2 = geometry_information(model, set, poses, without);
+    if (!g2) continue;
+    ChannelContribution cc;
+    cc.channel = v.name;
+    cc.rows = v.rows;
+    const IdentifiabilityReport r2 = analyze_identifiability(*g2, options);
+    cc.rank_without = r2.rank;  // of the parameters still estimated without the channel
+    // Without the channel, parameters only it observes are not estimated at all (the
+    // identification frees a mounting parameter only where its channel is used): they count as
+    // unidentifiable without it, and the rank is that of the full choice minus them.
+    const int P2 = static_cast<int>(g2->names.size());
+    const Eigen::VectorXd wo2 = stds(g2->information);
+    Eigen::VectorXd wo = Eigen::VectorXd::Constant(P, std::numeric_limits<double>::infinity());
+    for (int q2 = 0; q2 < P2; ++q2) {
+      const auto it =
+          std::find(gi->names.begin(), gi->names.end(), g2->names[static_cast<std::size_t>(q2)]);
+      if (it != gi->names.end()) wo(static_cast<int>(it - gi->names.begin())) = wo2(q2);
+    }
+    std::vector<std::pair<std::string, double>> gains;
+    for (int q = 0; q < P; ++q) {
+      if (!std::isfinite(with(q))) continue;
+      const double ratio =
+          std::isfinite(wo(q)) ? wo(q) / with(q) : std::numeric_limits<double>::infinity();
+      if (ratio > 1.1) gains.emplace_back(gi->names[static_cast<std::size_t>(q)], ratio);
+    }
+    std::stable_sort(gains.begin(), gains.end(),
+                     [](const auto& x, const auto& y) { return x.second > y.second; });
+    int unidentifiable_without = 0;
+    for (const auto& g : gains) unidentifiable_without += std::isinf(g.second) ? 1 : 0;
+    std::ostringstream os;
+    os << v.name << " (" << v.rows << " rows): ";
+    if (gains.empty()) {
+      os << "adds little (no parameter's bound improves by more than 10 %)";
+    } else {
+      if (unidentifiable_without > 0) {
+        os << "makes " << unidentifiable_without << " parameter"
+           << (unidentifiable_without == 1 ? "" : "s") << " identifiable (rank " << r2.rank
+           << " -> " << report.rank << ")";
+      }
+      const std::size_t shown = std::min<std::size_t>(gains.size(), 4);
+      os << (unidentifiable_without > 0 ? "; " : "") << "sharpens";
+      for (std::size_t k = 0; k < shown; ++k) {
+        char buf[96];
+        if (std::isinf(gains[k].second)) {
+          std::snprintf(buf, sizeof(buf), " %s (from unidentifiable)", gains[k].first.c_str());
+        } else {
+          std::snprintf(buf, sizeof(buf), " %s (x%.1f)", gains[k].first.c_str(), gains[k].second);
+        }
+        os << (k ? "," : "") << buf;
+      }
+      if (gains.size() > shown) os << " and " << gains.size() - shown << " more";
+    }
+    cc.description = os.str();
+    cc.gains = std::move(gains);
+    report.channels.push_back(std::move(cc));
+  }
+  return report;
 }
 
 Status require_identifiable(const IdentifiabilityReport& report) {
@@ -262,6 +397,8 @@ std::string IdentifiabilityReport::summary() const {
   std::snprintf(buf, sizeof(buf), "  O1 %.4g  O2 %.4g  O3 %.4g  O4 %.4g  O5 %.4g (SI)\n", o1, o2,
                 o3, o4, o5);
   os << buf;
+  for (const std::string& n : notes) os << "  " << n << "\n";
+  for (const ChannelContribution& c : channels) os << "  channel " << c.description << "\n";
   for (int q : unobserved) {
     os << "  not observed at all: " << parameter_names[static_cast<std::size_t>(q)] << "\n";
   }

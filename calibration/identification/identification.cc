@@ -285,7 +285,82 @@ struct ReferenceCost {
   }
 };
 
-enum class Channel { kLength, kLaser, kWrench, kReference };
+// Angle difference wrapped to (-pi, pi]; the derivative is exactly 1 (atan2(sin, cos)).
+template <typename T>
+T wrap_angle(const T& x) {
+  using std::atan2;
+  using std::cos;
+  using std::sin;
+  return atan2(sin(x), cos(x));
+}
+
+// Swivel-angle residual (issue 18). Blocks: a(3), b(3), pose(6), zero(1).
+//   r = wrap(direction (gamma - zero) - reading) / sigma,  gamma = atan2(v_y, v_x),
+//   v = Rp^T (r + R b - a)   (the swivel angle of kinematics.hpp, pulley frame Rp of the model)
+struct SwivelCost {
+  Eigen::Matrix3d pulley_frame = Eigen::Matrix3d::Identity();
+  int direction = 1;
+  double reading = 0.0;
+  double sigma = 1.0;
+  template <typename T>
+  bool operator()(const T* a, const T* b, const T* pose, const T* zero, T* residual) const {
+    Vec3<T> r;
+    Mat3<T> R;
+    pose_from_block(pose, r, R);
+    const Vec3<T> P = r + R * Vec3<T>(b[0], b[1], b[2]);
+    const Vec3<T> v = pulley_frame.transpose().cast<T>() * (P - Vec3<T>(a[0], a[1], a[2]));
+    // On the swivel axis the angle is undefined.
+    if (!(v(0) * v(0) + v(1) * v(1) > T(1e-18))) return false;
+    const T gamma = atan2(v(1), v(0));
+    residual[0] =
+        wrap_angle<T>(T(static_cast<double>(direction)) * (gamma - zero[0]) - T(reading)) /
+        T(sigma);
+    return true;
+  }
+};
+
+// Orientation of the inclinometer / IMU frame: R(pose) R_m0 rotation_from_rpy(d0, d1, 0).
+template <typename T>
+Mat3<T> sensor_rotation(const T* pose, const Eigen::Matrix3d& mount0, const T* d) {
+  return rotation_from_rpy<T>(pose[3], pose[4], pose[5]) * mount0.cast<T>() *
+         rotation_from_rpy<T>(d[0], d[1], T(0));
+}
+
+// Inclinometer residuals (issue 18), 2 per pose. Blocks: pose(6), mounting correction(2).
+struct InclinometerCost {
+  Eigen::Matrix3d mount0 = Eigen::Matrix3d::Identity();
+  Eigen::Vector2d reading = Eigen::Vector2d::Zero();
+  double sigma = 1.0;
+  template <typename T>
+  bool operator()(const T* pose, const T* mount, T* residual) const {
+    using std::sqrt;
+    const Mat3<T> Rs = sensor_rotation<T>(pose, mount0, mount);
+    const T c = sqrt(Rs(2, 1) * Rs(2, 1) + Rs(2, 2) * Rs(2, 2));
+    if (!(c > T(1e-9))) return false;  // sensor x axis vertical: roll undefined
+    const T roll = atan2(Rs(2, 1), Rs(2, 2));
+    const T pitch = atan2(-Rs(2, 0), c);
+    residual[0] = wrap_angle<T>(roll - T(reading(0))) / T(sigma);
+    residual[1] = wrap_angle<T>(pitch - T(reading(1))) / T(sigma);
+    return true;
+  }
+};
+
+// IMU heading residual (issue 18). Blocks: pose(6), mounting correction(2), yaw zero(1).
+struct ImuYawCost {
+  Eigen::Matrix3d mount0 = Eigen::Matrix3d::Identity();
+  double reading = 0.0;
+  double sigma = 1.0;
+  template <typename T>
+  bool operator()(const T* pose, const T* mount, const T* yaw_zero, T* residual) const {
+    const Mat3<T> Rs = sensor_rotation<T>(pose, mount0, mount);
+    if (!(Rs(0, 0) * Rs(0, 0) + Rs(1, 0) * Rs(1, 0) > T(1e-18))) return false;
+    const T yaw = atan2(Rs(1, 0), Rs(0, 0));
+    residual[0] = wrap_angle<T>(yaw - yaw_zero[0] - T(reading)) / T(sigma);
+    return true;
+  }
+};
+
+enum class Channel { kLength, kLaser, kWrench, kReference, kSwivel, kInclination, kImuYaw };
 
 struct RowInfo {
   Channel channel;
@@ -307,6 +382,13 @@ struct Built {
   std::vector<std::array<double, 3>> a, b;
   std::vector<double> o, s, e, g, c;
   std::vector<LaserBlocks> lasers;
+  std::vector<double> swivel_zero;     // zero_i, rad (issue 18)
+  bool swivel_zero_free = false;       // some zero_i is estimated
+  std::array<double, 2> incl_mount{};  // mounting correction (roll, pitch), rad
+  Eigen::Matrix3d incl_mount0 = Eigen::Matrix3d::Identity();
+  bool incl_mount_free = false;
+  double imu_yaw_zero = 0.0;  // rad
+  bool imu_yaw_zero_free = false;
   std::vector<std::array<double, 6>> poses;
   std::vector<bool> pose_free;
   std::vector<CableConstants> constants;
@@ -496,6 +578,39 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     add_geometry_block(*B, &L.c, 1, {true}, {p + ".plane.c"}, "m",
                        opt.estimate_laser_plane && !fix_plane);
   }
+  // Issue 18 channels: free only when estimated and measured somewhere.
+  {
+    std::vector<bool> swivel_seen(static_cast<std::size_t>(m), false);
+    bool incl_seen = false, yaw_seen = false;
+    for (const PoseMeasurement& pm : set.poses) {
+      if (pm.swivel_angles.size() == m) {
+        for (int i = 0; i < m; ++i) {
+          if (!std::isnan(pm.swivel_angles(i))) swivel_seen[static_cast<std::size_t>(i)] = true;
+        }
+      }
+      if (!std::isnan(pm.inclination(0))) incl_seen = true;
+      if (!std::isnan(pm.imu_yaw)) yaw_seen = true;
+    }
+    B->swivel_zero.assign(static_cast<std::size_t>(m), 0.0);
+    for (int i = 0; i < m; ++i) {
+      const auto ui = static_cast<std::size_t>(i);
+      B->swivel_zero[ui] = robot.swivel_encoder(i).zero;
+      const bool free_i = opt.estimate_swivel_zeros && opt.use_swivel && swivel_seen[ui];
+      B->swivel_zero_free = B->swivel_zero_free || free_i;
+      add_geometry_block(*B, &B->swivel_zero[ui], 1, {true},
+                         {"swivel_zero_" + std::to_string(i + 1)}, "rad", free_i);
+    }
+    B->incl_mount0 = rotation_from_rpy<double>(robot.inclinometer.mounting_rpy);
+    B->incl_mount_free = opt.estimate_inclinometer_mounting &&
+                         ((opt.use_inclinometer && incl_seen) || (opt.use_imu_yaw && yaw_seen));
+    add_geometry_block(*B, B->incl_mount.data(), 2, {true, true},
+                       {"inclinometer.mount.roll", "inclinometer.mount.pitch"}, "rad",
+                       B->incl_mount_free);
+    B->imu_yaw_zero = robot.inclinometer.yaw_zero;
+    B->imu_yaw_zero_free = opt.estimate_imu_yaw_zero && opt.use_imu_yaw && yaw_seen;
+    add_geometry_block(*B, &B->imu_yaw_zero, 1, {true}, {"imu.yaw_zero"}, "rad",
+                       B->imu_yaw_zero_free);
+  }
   B->num_geometry = static_cast<int>(B->names.size());
 
   // Poses.
@@ -668,6 +783,45 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       B->blocks_per_pose[uj].push_back(id);
       for (int q = 0; q < 6; ++q) B->rows_per_pose[uj].push_back({Channel::kReference, q});
     }
+    if (opt.use_swivel && pm.swivel_angles.size() == m) {
+      for (int i = 0; i < m; ++i) {
+        const auto ui = static_cast<std::size_t>(i);
+        if (std::isnan(pm.swivel_angles(i))) continue;
+        auto* f = new SwivelCost;
+        f->pulley_frame = robot.pulleys[ui].frame;
+        f->direction = robot.swivel_encoder(i).direction;
+        f->reading = pm.swivel_angles(i);
+        f->sigma = noise.sigma_swivel;
+        auto id = B->problem.AddResidualBlock(
+            new ceres::AutoDiffCostFunction<SwivelCost, 1, 3, 3, 6, 1>(f), make_loss(),
+            B->a[ui].data(), B->b[ui].data(), pose, &B->swivel_zero[ui]);
+        B->blocks_per_pose[uj].push_back(id);
+        B->rows_per_pose[uj].push_back({Channel::kSwivel, i});
+      }
+    }
+    if (opt.use_inclinometer && !std::isnan(pm.inclination(0)) && !std::isnan(pm.inclination(1))) {
+      auto* f = new InclinometerCost;
+      f->mount0 = B->incl_mount0;
+      f->reading = pm.inclination;
+      f->sigma = noise.sigma_inclination;
+      auto id =
+          B->problem.AddResidualBlock(new ceres::AutoDiffCostFunction<InclinometerCost, 2, 6, 2>(f),
+                                      make_loss(), pose, B->incl_mount.data());
+      B->blocks_per_pose[uj].push_back(id);
+      B->rows_per_pose[uj].push_back({Channel::kInclination, 0});
+      B->rows_per_pose[uj].push_back({Channel::kInclination, 1});
+    }
+    if (opt.use_imu_yaw && !std::isnan(pm.imu_yaw)) {
+      auto* f = new ImuYawCost;
+      f->mount0 = B->incl_mount0;
+      f->reading = pm.imu_yaw;
+      f->sigma = noise.sigma_imu_yaw;
+      auto id =
+          B->problem.AddResidualBlock(new ceres::AutoDiffCostFunction<ImuYawCost, 1, 6, 2, 1>(f),
+                                      make_loss(), pose, B->incl_mount.data(), &B->imu_yaw_zero);
+      B->blocks_per_pose[uj].push_back(id);
+      B->rows_per_pose[uj].push_back({Channel::kImuYaw, 0});
+    }
     B->num_residuals += static_cast<int>(B->rows_per_pose[uj].size());
   }
   return B;
@@ -786,6 +940,34 @@ GeometryInformation to_public(const Built& B, Information& info, const Calibrate
       gi.frame_anchors(q, i) = B.a[static_cast<std::size_t>(i)][static_cast<std::size_t>(q)];
   }
   gi.num_residuals = B.num_residuals;
+  for (const auto& rows : B.rows_per_pose) {
+    for (const RowInfo& ri : rows) {
+      switch (ri.channel) {
+        case Channel::kLength:
+          ++gi.channel_rows.length;
+          break;
+        case Channel::kLaser:
+          ++gi.channel_rows.laser;
+          break;
+        case Channel::kWrench:
+          ++gi.channel_rows.wrench;
+          break;
+        case Channel::kReference:
+          ++gi.channel_rows.reference;
+          break;
+        case Channel::kSwivel:
+          ++gi.channel_rows.swivel;
+          break;
+        case Channel::kInclination:
+          ++gi.channel_rows.inclination;
+          break;
+        case Channel::kImuYaw:
+          ++gi.channel_rows.imu_yaw;
+          break;
+      }
+    }
+  }
+  for (bool f : B.pose_free) gi.home_pose_fixed = gi.home_pose_fixed || !f;
   int free_poses = 0;
   for (bool f : B.pose_free) free_poses += f ? 1 : 0;
   gi.num_pose_parameters = 6 * free_poses;
@@ -820,6 +1002,19 @@ CalibratedModel extract(const Built& B, const CalibratedModel& initial) {
     out.robot.cables[ui].ea = initial.robot.cables[ui].ea * (1.0 + e);
     out.robot.cables[ui].elongation = ElongationKind::kHooke;
   }
+  if (B.swivel_zero_free) {
+    out.robot.swivel_encoders.resize(static_cast<std::size_t>(m));
+    for (int i = 0; i < m; ++i) {
+      const auto ui = static_cast<std::size_t>(i);
+      out.robot.swivel_encoders[ui].direction = initial.robot.swivel_encoder(i).direction;
+      out.robot.swivel_encoders[ui].zero = B.swivel_zero[ui];
+    }
+  }
+  if (B.incl_mount_free) {
+    out.robot.inclinometer.mounting_rpy = rpy_from_rotation(
+        B.incl_mount0 * rotation_from_rpy<double>(B.incl_mount[0], B.incl_mount[1], 0.0));
+  }
+  if (B.imu_yaw_zero_free) out.robot.inclinometer.yaw_zero = B.imu_yaw_zero;
   for (std::size_t l = 0; l < B.lasers.size(); ++l) {
     const LaserBlocks& L = B.lasers[l];
     LaserModel& lm = out.robot.lasers[l];
@@ -913,6 +1108,36 @@ Result<GeometryInformation> ident_detail::total_geometry_information(
     const CalibratedModel& model, const MeasurementSet& set, const std::vector<Pose>& poses,
     const IdentificationOptions& options) {
   return geometry_information_impl(model, set, poses, options, false, false);
+}
+
+Result<std::vector<Eigen::VectorXd>> evaluate_residuals(const CalibratedModel& model,
+                                                        const MeasurementSet& set,
+                                                        const std::vector<Pose>& poses,
+                                                        const IdentificationOptions& options) {
+  auto built = build(model, set, poses, options);
+  if (!built) return built.status();
+  Built& B = **built;
+  std::vector<ceres::ResidualBlockId> blocks;
+  for (const auto& v : B.blocks_per_pose) blocks.insert(blocks.end(), v.begin(), v.end());
+  std::vector<Eigen::VectorXd> out;
+  std::vector<double> r;
+  if (!blocks.empty()) {
+    ceres::Problem::EvaluateOptions eo;
+    eo.apply_loss_function = false;
+    eo.residual_blocks = blocks;
+    double cost = 0.0;
+    if (!B.problem.Evaluate(eo, &cost, &r, nullptr, nullptr)) {
+      return Status(ErrorCode::kNumericalFailure,
+                    "evaluate_residuals: the model cannot be evaluated at these poses");
+    }
+  }
+  std::size_t row = 0;
+  for (const auto& rows : B.rows_per_pose) {
+    Eigen::VectorXd v(static_cast<Eigen::Index>(rows.size()));
+    for (Eigen::Index q = 0; q < v.size(); ++q) v(q) = r[row++];
+    out.push_back(std::move(v));
+  }
+  return out;
 }
 
 Result<IdentificationReport> identify(const CalibratedModel& initial, const MeasurementSet& set,
@@ -1012,8 +1237,8 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   const int nl = static_cast<int>(robot.lasers.size());
   const SensorNoise& noise = set.noise;
   KinematicsData kin(robot);
-  double sl = 0, sla = 0, sw = 0;
-  int nlen = 0, nlas = 0, nw = 0;
+  double sl = 0, sla = 0, sw = 0, ssw = 0, sinc = 0, syaw = 0;
+  int nlen = 0, nlas = 0, nw = 0, nsw = 0, ninc = 0, nyaw = 0;
   std::size_t row = 0;
   for (std::size_t j = 0; j < B.poses.size(); ++j) {
     PoseResiduals pr;
@@ -1021,6 +1246,8 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
     pr.length_normalized = Eigen::VectorXd::Constant(m, kNaN);
     pr.laser_m = Eigen::VectorXd::Constant(nl, kNaN);
     pr.laser_normalized = Eigen::VectorXd::Constant(nl, kNaN);
+    pr.swivel_rad = Eigen::VectorXd::Constant(m, kNaN);
+    pr.swivel_normalized = Eigen::VectorXd::Constant(m, kNaN);
     for (const RowInfo& ri : B.rows_per_pose[j]) {
       const double r = info_noloss->residuals[row++];
       rep.chi2 += r * r;
@@ -1041,6 +1268,27 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
           break;
         case Channel::kReference:
           pr.reference_normalized(ri.index) = r;
+          break;
+        case Channel::kSwivel:
+          pr.swivel_normalized(ri.index) = r;
+          pr.swivel_rad(ri.index) = r * noise.sigma_swivel;
+          rep.log_det_covariance += 2.0 * std::log(noise.sigma_swivel);
+          ssw += pr.swivel_rad(ri.index) * pr.swivel_rad(ri.index);
+          ++nsw;
+          break;
+        case Channel::kInclination:
+          pr.inclination_normalized(ri.index) = r;
+          pr.inclination_rad(ri.index) = r * noise.sigma_inclination;
+          rep.log_det_covariance += 2.0 * std::log(noise.sigma_inclination);
+          sinc += pr.inclination_rad(ri.index) * pr.inclination_rad(ri.index);
+          ++ninc;
+          break;
+        case Channel::kImuYaw:
+          pr.imu_yaw_normalized = r;
+          pr.imu_yaw_rad = r * noise.sigma_imu_yaw;
+          rep.log_det_covariance += 2.0 * std::log(noise.sigma_imu_yaw);
+          syaw += pr.imu_yaw_rad * pr.imu_yaw_rad;
+          ++nyaw;
           break;
       }
     }
@@ -1103,6 +1351,9 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   rep.rms_length_m = nlen ? std::sqrt(sl / nlen) : 0.0;
   rep.rms_laser_m = nlas ? std::sqrt(sla / nlas) : 0.0;
   rep.rms_wrench_n = nw ? std::sqrt(sw / nw) : 0.0;
+  rep.rms_swivel_rad = nsw ? std::sqrt(ssw / nsw) : 0.0;
+  rep.rms_inclination_rad = ninc ? std::sqrt(sinc / ninc) : 0.0;
+  rep.rms_imu_yaw_rad = nyaw ? std::sqrt(syaw / nyaw) : 0.0;
 
   // Covariance of the geometry (Schur complement, pseudo-inverse with null-space handling) and of
   // the poses.
@@ -1216,6 +1467,12 @@ std::string IdentificationReport::full_report() const {
                 "RMS length residual (m)", rms_length_m, "RMS laser residual (m)", rms_laser_m,
                 "RMS wrench residual (N)", rms_wrench_n);
   os << buf;
+  if (rms_swivel_rad > 0 || rms_inclination_rad > 0 || rms_imu_yaw_rad > 0) {
+    std::snprintf(buf, sizeof(buf), "%-28s %12.4g\n%-28s %12.4g\n%-28s %12.4g\n",
+                  "RMS swivel residual (rad)", rms_swivel_rad, "RMS inclin. residual (rad)",
+                  rms_inclination_rad, "RMS IMU yaw residual (rad)", rms_imu_yaw_rad);
+    os << buf;
+  }
   os << "\nParameters:\n";
   std::snprintf(buf, sizeof(buf), "  %-24s %14s %14s %14s %12s  %s\n", "name", "initial",
                 "estimate", "change", "std dev", "unit");

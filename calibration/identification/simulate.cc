@@ -129,6 +129,36 @@ double laser_distance(const RobotModel& model, int laser, const Pose& pose) {
   return t;
 }
 
+double swivel_reading(const RobotModel& model, int cable, const Pose& pose) {
+  const auto k = static_cast<std::size_t>(cable);
+  const Eigen::Vector3d p =
+      pose.position + rotation_from_rpy<double>(pose.rpy) * model.platform_anchors.col(cable);
+  const Eigen::Vector3d v =
+      model.pulleys[k].frame.transpose() * (p - model.frame_anchors.col(cable));
+  if (!(v.x() * v.x() + v.y() * v.y() > 1e-18)) return std::numeric_limits<double>::quiet_NaN();
+  const SwivelEncoderModel e = model.swivel_encoder(cable);
+  const double x = e.direction * (std::atan2(v.y(), v.x()) - e.zero);
+  return std::atan2(std::sin(x), std::cos(x));
+}
+
+namespace {
+Eigen::Matrix3d sensor_rotation(const RobotModel& model, const Pose& pose) {
+  return rotation_from_rpy<double>(pose.rpy) *
+         rotation_from_rpy<double>(model.inclinometer.mounting_rpy);
+}
+}  // namespace
+
+Eigen::Vector2d inclinometer_reading(const RobotModel& model, const Pose& pose) {
+  const Eigen::Matrix3d Rs = sensor_rotation(model, pose);
+  return {std::atan2(Rs(2, 1), Rs(2, 2)), std::atan2(-Rs(2, 0), std::hypot(Rs(2, 1), Rs(2, 2)))};
+}
+
+double imu_yaw_reading(const RobotModel& model, const Pose& pose) {
+  const Eigen::Matrix3d Rs = sensor_rotation(model, pose);
+  const double x = std::atan2(Rs(1, 0), Rs(0, 0)) - model.inclinometer.yaw_zero;
+  return std::atan2(std::sin(x), std::cos(x));
+}
+
 Result<Eigen::VectorXd> homing_offsets(const RobotModel& truth, const RobotModel& nominal,
                                        double reference_tension) {
   auto ft = simple_tension_distribution(truth, truth.home, reference_tension);
@@ -179,6 +209,12 @@ Result<SimulatedMeasurements> simulate_measurements(const CalibratedModel& truth
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> normal(0.0, 1.0);
   auto noisy = [&](double sigma) { return options.add_noise ? sigma * normal(rng) : 0.0; };
+  // The issue 18 channels draw from their own stream (see SimulationOptions).
+  // (Its own distribution object too: std::normal_distribution caches a second variate.)
+  std::mt19937_64 rng2(seed ^ 0x9e3779b97f4a7c15ULL);
+  std::normal_distribution<double> normal2(0.0, 1.0);
+  auto noisy2 = [&](double sigma) { return options.add_noise ? sigma * normal2(rng2) : 0.0; };
+  auto wrap = [](double x) { return std::atan2(std::sin(x), std::cos(x)); };
 
   SimulatedMeasurements out;
   out.set.noise = noise;
@@ -230,10 +266,28 @@ Result<SimulatedMeasurements> simulate_measurements(const CalibratedModel& truth
       const double raw = st.gain * f_true(i) + st.offset;
       pm.tensions(i) = (raw - sn.offset) / sn.gain + noisy(noise.sigma_force);
     }
+    // Without a laser the laser noise is still drawn (and dropped), so that the lengths and
+    // forces of a seed are the same with and without the laser (paired comparisons).
     pm.laser_distances.resize(k);
     for (int l = 0; l < k; ++l) {
       const double d = laser_distance(robot, l, true_pose);
       pm.laser_distances(l) = std::isnan(d) ? d : d + noisy(noise.sigma_laser);
+    }
+    if (!options.laser) pm.laser_distances.resize(0);
+    if (options.swivel) {
+      pm.swivel_angles.resize(m);
+      for (int i = 0; i < m; ++i) {
+        const double g = swivel_reading(robot, i, true_pose);
+        pm.swivel_angles(i) = std::isnan(g) ? g : wrap(g + noisy2(noise.sigma_swivel));
+      }
+    }
+    if (options.inclinometer) {
+      const Eigen::Vector2d rp = inclinometer_reading(robot, true_pose);
+      pm.inclination = rp;
+      for (int q = 0; q < 2; ++q) pm.inclination(q) = wrap(rp(q) + noisy2(noise.sigma_inclination));
+    }
+    if (options.imu_yaw) {
+      pm.imu_yaw = wrap(imu_yaw_reading(robot, true_pose) + noisy2(noise.sigma_imu_yaw));
     }
     if (std::find(options.reference_pose_indices.begin(), options.reference_pose_indices.end(),
                   static_cast<int>(j)) != options.reference_pose_indices.end()) {

@@ -1526,11 +1526,34 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   }
   const IdentificationReport& aft = d.after ? *d.after : d.before;
   d.channels.push_back({"cable lengths", "m", d.before.rms_length_m, aft.rms_length_m});
-  if (nl > 0 && identification.use_laser) {
+  // A channel is listed when the recording has it (a laser in the config need not be measured).
+  auto measured = [&](auto rows_of) {
+    for (const PoseResiduals& pr : d.before.residuals) {
+      if (rows_of(pr)) return true;
+    }
+    return false;
+  };
+  if (nl > 0 && identification.use_laser && measured([](const PoseResiduals& pr) {
+        return pr.laser_normalized.size() > 0 && !pr.laser_normalized.array().isNaN().all();
+      })) {
     d.channels.push_back({"laser", "m", d.before.rms_laser_m, aft.rms_laser_m});
   }
   if (identification.use_equilibrium && d.before.rms_wrench_n > 0) {
     d.channels.push_back({"equilibrium (force)", "N", d.before.rms_wrench_n, aft.rms_wrench_n});
+  }
+  if (identification.use_swivel && measured([](const PoseResiduals& pr) {
+        return pr.swivel_normalized.size() > 0 && !pr.swivel_normalized.array().isNaN().all();
+      })) {
+    d.channels.push_back({"swivel angles", "rad", d.before.rms_swivel_rad, aft.rms_swivel_rad});
+  }
+  if (identification.use_inclinometer &&
+      measured([](const PoseResiduals& pr) { return !std::isnan(pr.inclination_normalized(0)); })) {
+    d.channels.push_back(
+        {"inclinometer", "rad", d.before.rms_inclination_rad, aft.rms_inclination_rad});
+  }
+  if (identification.use_imu_yaw &&
+      measured([](const PoseResiduals& pr) { return !std::isnan(pr.imu_yaw_normalized); })) {
+    d.channels.push_back({"IMU yaw", "rad", d.before.rms_imu_yaw_rad, aft.rms_imu_yaw_rad});
   }
 
   // --- 8. Verdict and findings.

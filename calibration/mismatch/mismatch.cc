@@ -296,17 +296,45 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
         si.push_back(q < 3 && residuals ? (*residuals)[uj].wrench_si(q) : kNaN);
       }
     }
+    // The issue 18 channels come after the reference rows (identification.cc's order).
+    int extra = 0;
+    if (options.use_swivel && pm.swivel_angles.size() == m) {
+      extra += static_cast<int>((pm.swivel_angles.array() == pm.swivel_angles.array()).count());
+    }
+    if (options.use_inclinometer && !std::isnan(pm.inclination(0)) &&
+        !std::isnan(pm.inclination(1))) {
+      extra += 2;
+    }
+    if (options.use_imu_yaw && !std::isnan(pm.imu_yaw)) extra += 1;
     const int have = static_cast<int>(rows.size()) - pose_start[uj];
     const int jac_rows = static_cast<int>(base->jacobian_geometry[uj].rows());
-    if (jac_rows == have + 6 && options.use_reference && pm.reference) {
+    if (jac_rows == have + 6 + extra && options.use_reference && pm.reference) {
       for (int q = 0; q < 6; ++q) {
         rows.push_back({RowKind::kReference, j, q});
         si.push_back(kNaN);
       }
-    } else if (jac_rows != have) {
+    } else if (jac_rows != have + extra) {
       return Status::error(ErrorCode::kInternal,
                            "mismatch: pose %d has %d Jacobian rows, the residual layout %d", j,
                            jac_rows, have);
+    }
+    if (options.use_swivel && pm.swivel_angles.size() == m) {
+      for (int i = 0; i < m; ++i) {
+        if (std::isnan(pm.swivel_angles(i))) continue;
+        rows.push_back({RowKind::kSwivel, j, i});
+        si.push_back(residuals ? (*residuals)[uj].swivel_rad(i) : kNaN);
+      }
+    }
+    if (options.use_inclinometer && !std::isnan(pm.inclination(0)) &&
+        !std::isnan(pm.inclination(1))) {
+      for (int q = 0; q < 2; ++q) {
+        rows.push_back({RowKind::kInclination, j, q});
+        si.push_back(residuals ? (*residuals)[uj].inclination_rad(q) : kNaN);
+      }
+    }
+    if (options.use_imu_yaw && !std::isnan(pm.imu_yaw)) {
+      rows.push_back({RowKind::kImuYaw, j, 0});
+      si.push_back(residuals ? (*residuals)[uj].imu_yaw_rad : kNaN);
     }
     if (ext->jacobian_geometry[uj].rows() != jac_rows) {
       return Status::error(ErrorCode::kInternal,
@@ -344,6 +372,15 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
         break;
       case RowKind::kReference:
         r(k) = pr.reference_normalized(row.index);
+        break;
+      case RowKind::kSwivel:
+        r(k) = pr.swivel_normalized(row.index);
+        break;
+      case RowKind::kInclination:
+        r(k) = pr.inclination_normalized(row.index);
+        break;
+      case RowKind::kImuYaw:
+        r(k) = pr.imu_yaw_normalized;
         break;
     }
     if (!std::isfinite(r(k))) {
@@ -849,7 +886,7 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
 
   // --- LOCATE: misfit per channel, cable and pose.
   {
-    std::vector<int> len, wr, ref;
+    std::vector<int> len, wr, ref, swv, inc, yaw;
     std::vector<std::vector<int>> las(static_cast<std::size_t>(nl));
     std::vector<std::vector<int>> cab(static_cast<std::size_t>(m));
     for (int k = 0; k < n; ++k) {
@@ -868,6 +905,15 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
         case RowKind::kReference:
           ref.push_back(k);
           break;
+        case RowKind::kSwivel:
+          swv.push_back(k);
+          break;
+        case RowKind::kInclination:
+          inc.push_back(k);
+          break;
+        case RowKind::kImuYaw:
+          yaw.push_back(k);
+          break;
       }
     }
     if (!len.empty()) {
@@ -884,6 +930,15 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
     }
     if (!ref.empty()) {
       out.channels.push_back(make_group("reference pose", ref, r, leverage, si, "", alpha));
+    }
+    if (!swv.empty()) {
+      out.channels.push_back(make_group("swivel angles", swv, r, leverage, si, "rad", alpha));
+    }
+    if (!inc.empty()) {
+      out.channels.push_back(make_group("inclinometer", inc, r, leverage, si, "rad", alpha));
+    }
+    if (!yaw.empty()) {
+      out.channels.push_back(make_group("IMU yaw", yaw, r, leverage, si, "rad", alpha));
     }
     for (int i = 0; i < m; ++i) {
       if (cab[static_cast<std::size_t>(i)].empty()) continue;

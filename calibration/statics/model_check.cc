@@ -147,6 +147,25 @@ Status check_sizes(const RobotModel& model) {
   if (model.winches.size() != m) return mismatch("winches", model.winches.size());
   if (model.cables.size() != m) return mismatch("cables", model.cables.size());
   if (model.force_sensors.size() != m) return mismatch("force_sensors", model.force_sensors.size());
+  if (!model.swivel_encoders.empty() && model.swivel_encoders.size() != m) {
+    return mismatch("swivel_encoders", model.swivel_encoders.size());
+  }
+  for (std::size_t k = 0; k < model.swivel_encoders.size(); ++k) {
+    const SwivelEncoderModel& e = model.swivel_encoders[k];
+    if (!std::isfinite(e.zero)) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "cables[%zu].swivel_encoder.zero: expected a finite number (rad)", k);
+    }
+    if (e.direction != 1 && e.direction != -1) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "cables[%zu].swivel_encoder.direction: expected 1 or -1, got %d", k,
+                           e.direction);
+    }
+  }
+  if (!model.inclinometer.mounting_rpy.allFinite() || !std::isfinite(model.inclinometer.yaw_zero)) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "inclinometer: mounting_rpy and yaw_zero must be finite (rad)");
+  }
   return Status::success();
 }
 

@@ -18,6 +18,7 @@ namespace cdpr::config {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 std::string source_path(const std::string& relative) {
   return std::string(CDPR_SOURCE_DIR) + "/" + relative;
@@ -432,6 +433,48 @@ TEST(RobotConfig, PerCableOverridesWinOverDefaults) {
   EXPECT_EQ(model->pulleys[7].radius, 0.0);
   EXPECT_EQ(model->pulleys[6].radius, 0.025);
   EXPECT_EQ(model->pulleys[7].frame, Eigen::Matrix3d::Identity());
+}
+
+// Issue 18: swivel encoders (per cable, with defaults) and the inclinometer / IMU mounting.
+TEST(RobotConfig, SwivelEncodersAndInclinometerLoadAndSaveExactly) {
+  std::string text = read_text(source_path("config/mini.yaml"));
+  text = replace(text, "  force_sensor: {gain: 2, offset: 0}\n",
+                 "  force_sensor: {gain: 2, offset: 0}\n  swivel_encoder: {zero: 0.1}\n");
+  text = replace(text, "platform_anchor: [-0.06, -0.075, 0.03]",
+                 "platform_anchor: [-0.06, -0.075, 0.03]\n    swivel_encoder: {direction: -1}");
+  text += "inclinometer: {mounting_rpy: [0.01, -0.02, 1.5], yaw_zero: 0.25}\n";
+  const Result<RobotModel> model = parse_robot_config(text, "config/mini.yaml");
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  ASSERT_EQ(model->swivel_encoders.size(), 8u);
+  EXPECT_EQ(model->swivel_encoder(0).zero, 0.1);
+  EXPECT_EQ(model->swivel_encoder(0).direction, 1);
+  EXPECT_EQ(model->swivel_encoder(5).zero, 0.1);  // the rest of the group still defaulted
+  EXPECT_EQ(model->swivel_encoder(5).direction, -1);
+  EXPECT_EQ(model->inclinometer.mounting_rpy, Eigen::Vector3d(0.01, -0.02, 1.5));
+  EXPECT_EQ(model->inclinometer.yaw_zero, 0.25);
+  const std::string saved = save_robot_config(*model);
+  EXPECT_THAT(saved, HasSubstr("swivel_encoder: {zero: 0.1, direction: -1}"));
+  EXPECT_THAT(saved, HasSubstr("inclinometer: {mounting_rpy: [0.01, -0.02, 1.5], yaw_zero: 0.25}"));
+  const Result<RobotModel> again = parse_robot_config(saved, "saved.yaml");
+  ASSERT_TRUE(again.ok()) << again.status().to_string() << "\n" << saved;
+  EXPECT_EQ(save_robot_config(*again), saved);
+  for (int i = 0; i < 8; ++i) {
+    EXPECT_EQ(again->swivel_encoder(i).zero, model->swivel_encoder(i).zero);
+    EXPECT_EQ(again->swivel_encoder(i).direction, model->swivel_encoder(i).direction);
+  }
+  EXPECT_EQ(again->inclinometer.mounting_rpy, model->inclinometer.mounting_rpy);
+  // Without them a config saves as before: no swivel_encoder or inclinometer key.
+  const Result<RobotModel> plain = load_robot_config(source_path("config/mini.yaml"));
+  ASSERT_TRUE(plain.ok());
+  EXPECT_THAT(save_robot_config(*plain), Not(HasSubstr("swivel_encoder")));
+  EXPECT_THAT(save_robot_config(*plain), Not(HasSubstr("inclinometer")));
+  // A direction other than +-1 is refused with the line and field.
+  const std::string bad =
+      replace(text, "swivel_encoder: {direction: -1}", "swivel_encoder: {direction: 2}");
+  const Result<RobotModel> refused = parse_robot_config(bad, "config/mini.yaml");
+  ASSERT_FALSE(refused.ok());
+  EXPECT_THAT(std::string(refused.status().message()),
+              HasSubstr("cables[5].swivel_encoder.direction"));
 }
 
 }  // namespace

@@ -15,6 +15,7 @@ namespace cdpr::recording {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
@@ -63,7 +64,7 @@ Recording random_recording(int m, int k, int n, bool reference, bool temperature
     if (j == 1) p.lengths(0) = kNaN;
     if (j == 2) p.tensions(m - 1) = 4.9406564584124654e-324;
     if (j == 3) p.commanded.rpy(2) = -0.0;
-    if (j == 4) p.lasers(0) = 0.1;
+    if (j == 4 && k > 0) p.lasers(0) = 0.1;
     p.reference.position.setConstant(kNaN);
     p.reference.rpy.setConstant(kNaN);
     if (reference && j % 2 == 0) p.reference = p.commanded;
@@ -227,10 +228,15 @@ TEST(Recording, EveryBadCellIsNamedByLineAndColumn) {
                   "tension_1,laser_1",
                   "0,0,0,0,0,0,0,0,1,1,1,1\n"),
        "bad.csv:4: 2 length_ columns but 1 tension_ columns"},
-      {"no laser",
-       small_file("pose,time_s,cmd_x,cmd_y,cmd_z,cmd_roll,cmd_pitch,cmd_yaw,length_1,tension_1",
-                  "0,0,0,0,0,0,0,0,1,1\n"),
-       "bad.csv:4: missing required column 'laser_1'"},
+      {"swivel columns for some cables only",
+       small_file(h + ",swivel_1", "0,0,0.1,0.2,0.3,0,0,0,1.5,1.6,50,51,0.7,0.1\n"),
+       "bad.csv:4: 1 swivel_ columns but 2 cables"},
+      {"inclinometer roll without pitch",
+       small_file(h + ",incl_roll", "0,0,0.1,0.2,0.3,0,0,0,1.5,1.6,50,51,0.7,0.1\n"),
+       "bad.csv:4: missing column 'incl_pitch'"},
+      {"inclinometer pitch missing in a row",
+       small_file(h + ",incl_roll,incl_pitch", "0,0,0.1,0.2,0.3,0,0,0,1.5,1.6,50,51,0.7,0.1,\n"),
+       "bad.csv:5: column 15 (incl_pitch): empty cell, but incl_roll and incl_pitch"},
       {"unknown column", small_file(h + ",colour", "0,0,0.1,0.2,0.3,0,0,0,1.5,1.6,50,51,0.7,1\n"),
        "bad.csv:4: column 14 (colour): unknown column"},
       {"partial reference",
@@ -542,6 +548,90 @@ TEST(Helpers, HashAndNumbers) {
   ASSERT_TRUE(h.ok());
   EXPECT_EQ(*h, "fnv1a64:85944171f73967e8");
   std::filesystem::remove(path);
+}
+
+// Issue 18: the laser columns are optional (k = 0).
+TEST(Recording, RecordingWithoutLaserColumnsIsRead) {
+  const std::string text =
+      "# units: SI\n"
+      "pose,time_s,cmd_x,cmd_y,cmd_z,cmd_roll,cmd_pitch,cmd_yaw,length_1,length_2,tension_1,"
+      "tension_2\n"
+      "0,0,0.1,0.2,0.3,0,0,0,1.5,1.6,50,51\n";
+  auto r = parse_recording(text, "nolaser.csv");
+  ASSERT_TRUE(r.ok()) << r.status().to_string();
+  EXPECT_EQ(r->num_lasers, 0);
+  EXPECT_EQ(r->poses[0].lasers.size(), 0);
+  // It fits a config with lasers too (the laser was simply not used) ...
+  EXPECT_TRUE(check_against_model(*r, model_with(2, 1)).ok());
+  // ... and gives poses without laser distances.
+  auto set = to_measurement_set(*r);
+  ASSERT_TRUE(set.ok()) << set.status().to_string();
+  EXPECT_EQ(set->poses[0].laser_distances.size(), 0);
+  // Written back, it has no laser column and no laser noise key.
+  auto back = format_recording(*r);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  EXPECT_THAT(*back, Not(HasSubstr("laser")));
+}
+
+TEST(Recording, SwivelInclinometerAndImuColumnsRoundTrip) {
+  Recording rec = random_recording(4, 0, 12, false, false, 21);
+  rec.has_swivel = true;
+  rec.has_inclinometer = true;
+  rec.has_imu_yaw = true;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-3.0, 3.0);
+  for (std::size_t j = 0; j < rec.poses.size(); ++j) {
+    RecordedPose& p = rec.poses[j];
+    p.swivels = Eigen::VectorXd::NullaryExpr(4, [&] { return u(rng); });
+    p.inclination = Eigen::Vector2d(0.1 * u(rng), 0.1 * u(rng));
+    p.imu_yaw = u(rng);
+    if (j == 2) p.swivels(1) = kNaN;              // one encoder not read
+    if (j == 3) p.inclination.setConstant(kNaN);  // inclinometer not read
+    if (j == 4) p.imu_yaw = kNaN;                 // no heading
+  }
+  rec.metadata.set_number(key::kNoiseSwivel, 2e-3);
+  auto text = format_recording(rec);
+  ASSERT_TRUE(text.ok()) << text.status().to_string();
+  EXPECT_THAT(*text, HasSubstr("swivel_1,swivel_2,swivel_3,swivel_4,incl_roll,incl_pitch,imu_yaw"));
+  auto back = parse_recording(*text, "mem.csv");
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  expect_same(rec, *back);
+  ASSERT_TRUE(back->has_swivel && back->has_inclinometer && back->has_imu_yaw);
+  for (std::size_t j = 0; j < rec.poses.size(); ++j) {
+    EXPECT_TRUE(same_bits(rec.poses[j].swivels, back->poses[j].swivels));
+    EXPECT_TRUE(same_bits(Eigen::VectorXd(rec.poses[j].inclination),
+                          Eigen::VectorXd(back->poses[j].inclination)));
+    EXPECT_TRUE(same_bits(Eigen::VectorXd::Constant(1, rec.poses[j].imu_yaw),
+                          Eigen::VectorXd::Constant(1, back->poses[j].imu_yaw)));
+  }
+  // Into the identification's view: readings, NaN where empty, and the stated noise.
+  auto set = to_measurement_set(*back);
+  ASSERT_TRUE(set.ok()) << set.status().to_string();
+  EXPECT_EQ(set->noise.sigma_swivel, 2e-3);
+  EXPECT_EQ(set->noise.sigma_inclination, SensorNoise{}.sigma_inclination);
+  EXPECT_TRUE(std::isnan(set->poses[2].swivel_angles(1)));
+  EXPECT_TRUE(std::isnan(set->poses[3].inclination(0)));
+  EXPECT_TRUE(std::isnan(set->poses[4].imu_yaw));
+  EXPECT_EQ(set->poses[5].swivel_angles(0), rec.poses[5].swivels(0));
+  // And back into a recording with the same columns and the noise keys.
+  auto again = from_measurement_set(*set, back->metadata);
+  ASSERT_TRUE(again.ok()) << again.status().to_string();
+  EXPECT_TRUE(again->has_swivel && again->has_inclinometer && again->has_imu_yaw);
+  EXPECT_EQ(again->metadata.get(key::kNoiseSwivel), "0.002");
+  EXPECT_TRUE(again->metadata.has(key::kNoiseInclination));
+}
+
+TEST(Recording, SwivelColumnsNeedSwivelPulleys) {
+  Recording rec = random_recording(2, 0, 2, false, false, 3);
+  rec.has_swivel = true;
+  for (RecordedPose& p : rec.poses) p.swivels = Eigen::VectorXd::Zero(2);
+  RobotModel model = model_with(2, 0);
+  model.pulleys.resize(2);
+  const Status s = check_against_model(rec, model);
+  EXPECT_EQ(s.code(), ErrorCode::kFailedPrecondition);
+  EXPECT_THAT(std::string(s.message()), HasSubstr("swivel_1: cable 1 has no swivel pulley"));
+  for (PulleyModel& p : model.pulleys) p.radius = 0.02;
+  EXPECT_TRUE(check_against_model(rec, model).ok());
 }
 
 }  // namespace

@@ -12,13 +12,14 @@ Result<recording::Recording> make_recording(const std::vector<LockstepSample>& s
   namespace key = recording::key;
   const int m = nominal.num_cables();
   const int k = static_cast<int>(nominal.lasers.size());
-  if (k < 1) {
-    return Status(ErrorCode::kInvalidArgument,
-                  "recording: the nominal robot has no laser (a recording needs one)");
-  }
   recording::Recording rec;
   rec.num_cables = m;
   rec.num_lasers = k;
+  for (const LockstepSample& s : samples) {
+    rec.has_swivel = rec.has_swivel || s.swivels.size() == m;
+    rec.has_inclinometer = rec.has_inclinometer || !s.inclination.array().isNaN().all();
+    rec.has_imu_yaw = rec.has_imu_yaw || !std::isnan(s.imu_yaw);
+  }
   recording::Metadata& md = rec.metadata;
   md.set(key::kFormat, "cdpr-recording 1");
   md.set(key::kUnits, std::string(recording::kUnitsSI));
@@ -44,7 +45,16 @@ Result<recording::Recording> make_recording(const std::vector<LockstepSample>& s
       scenario.noise.force_raw / std::abs(nominal.force_sensors.front().gain);
   if (length_sigma > 0.0) md.set_number(key::kNoiseLength, length_sigma);
   if (force_sigma > 0.0) md.set_number(key::kNoiseForce, force_sigma);
-  if (scenario.noise.laser > 0.0) md.set_number(key::kNoiseLaser, scenario.noise.laser);
+  if (scenario.noise.laser > 0.0 && k > 0) md.set_number(key::kNoiseLaser, scenario.noise.laser);
+  if (rec.has_swivel && provenance.sigma_swivel > 0.0) {
+    md.set_number(key::kNoiseSwivel, provenance.sigma_swivel);
+  }
+  if (rec.has_inclinometer && provenance.sigma_inclination > 0.0) {
+    md.set_number(key::kNoiseInclination, provenance.sigma_inclination);
+  }
+  if (rec.has_imu_yaw && provenance.sigma_imu_yaw > 0.0) {
+    md.set_number(key::kNoiseImuYaw, provenance.sigma_imu_yaw);
+  }
 
   for (std::size_t j = 0; j < samples.size(); ++j) {
     const LockstepSample& s = samples[j];
@@ -55,6 +65,11 @@ Result<recording::Recording> make_recording(const std::vector<LockstepSample>& s
     p.lengths = s.lengths;
     p.tensions = s.tensions;
     p.lasers = s.lasers;
+    if (rec.has_swivel) {
+      p.swivels = s.swivels.size() == m ? s.swivels : Eigen::VectorXd::Constant(m, kNaN);
+    }
+    p.inclination = s.inclination;
+    p.imu_yaw = s.imu_yaw;
     p.reference = Pose{Eigen::Vector3d::Constant(kNaN), Eigen::Vector3d::Constant(kNaN)};
     rec.poses.push_back(p);
   }

@@ -101,6 +101,12 @@ int run(int argc, char** argv) {
       ->check(CLI::PositiveNumber);
   app.add_option("--laser-samples", laser_samples, "lock-step: laser readings averaged per pose")
       ->check(CLI::Range(1, 10000));
+  std::vector<std::string> channels;
+  app.add_option("--channels", channels,
+                 "lock-step: extra channels read at the true pose: swivel, inclinometer, imu-yaw "
+                 "(noise 1 mrad, 0.5 mrad, 10 mrad from a stream seeded by --seed)")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"swivel", "inclinometer", "imu-yaw"}));
   app.add_option("--substeps", substeps, "lock-step: SYNC steps per pose")
       ->check(CLI::Range(1, 100000));
   try {
@@ -184,11 +190,20 @@ int run(int argc, char** argv) {
     lo.dwell_s = dwell_s;
     lo.laser_samples = laser_samples;
     lo.substeps = substeps;
+    for (const std::string& c : channels) {
+      lo.swivel = lo.swivel || c == "swivel";
+      lo.inclinometer = lo.inclinometer || c == "inclinometer";
+      lo.imu_yaw = lo.imu_yaw || c == "imu-yaw";
+    }
+    lo.channel_seed = seed ^ 0x9e3779b97f4a7c15ULL;
     const auto t0 = std::chrono::steady_clock::now();
     auto samples = cdpr::sim::run_lockstep(*physics, *nominal, poses->poses, lo);
     if (!samples.ok()) return fail(samples.status().to_string());
     const double cpu = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     cdpr::sim::RecordingProvenance prov{config_path, scenario_path, seed, dwell_s};
+    prov.sigma_swivel = lo.sigma_swivel;
+    prov.sigma_inclination = lo.sigma_inclination;
+    prov.sigma_imu_yaw = lo.sigma_imu_yaw;
     auto rec = cdpr::sim::make_recording(*samples, *nominal, *scenario, prov);
     if (!rec.ok()) return fail(rec.status().to_string());
     const cdpr::Status st = cdpr::recording::write_recording(*rec, out_path);

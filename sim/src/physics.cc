@@ -523,6 +523,12 @@ Result<std::vector<LockstepSample>> run_lockstep(Physics& physics, const RobotMo
   Eigen::VectorXd previous;
   if (physics.state().steps > 0) previous = physics.state().counts;
   const int k = static_cast<int>(physics.true_lasers().size());
+  std::mt19937_64 channel_rng(options.channel_seed);
+  std::normal_distribution<double> channel_normal(0.0, 1.0);
+  auto channel_noise = [&](double sigma) {
+    return sigma > 0.0 ? sigma * channel_normal(channel_rng) : 0.0;
+  };
+  auto wrap = [](double x) { return std::atan2(std::sin(x), std::cos(x)); };
   for (std::size_t j = 0; j < poses.size(); ++j) {
     Result<Eigen::VectorXd> target = nominal_counts(nominal, poses[j], options.reference_tension);
     if (!target.ok()) {
@@ -571,6 +577,24 @@ Result<std::vector<LockstepSample>> run_lockstep(Physics& physics, const RobotMo
       }
       if (used > 0) sample.lasers(q) = sum / used;
       sample.laser_status.push_back(c.status);
+    }
+    const RobotModel& truth = physics.truth();
+    if (options.swivel) {
+      sample.swivels.resize(m);
+      for (int i = 0; i < m; ++i) {
+        const double g = swivel_reading(truth, i, state.pose);
+        sample.swivels(i) = std::isnan(g) ? g : wrap(g + channel_noise(options.sigma_swivel));
+      }
+    }
+    if (options.inclinometer) {
+      const Eigen::Vector2d rp = inclinometer_reading(truth, state.pose);
+      for (int q = 0; q < 2; ++q) {
+        sample.inclination(q) = wrap(rp(q) + channel_noise(options.sigma_inclination));
+      }
+    }
+    if (options.imu_yaw) {
+      sample.imu_yaw =
+          wrap(imu_yaw_reading(truth, state.pose) + channel_noise(options.sigma_imu_yaw));
     }
     sample.true_pose = state.pose;
     sample.true_tensions = state.tensions;

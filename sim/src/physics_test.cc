@@ -407,5 +407,47 @@ TEST(Lockstep, SameSeedSameRecording) {
   }
 }
 
+// Issue 18: the lock-step mode also reads swivel encoders, an inclinometer and an IMU heading at
+// the true pose, with their own noise stream (the physics' readings of a seed do not change).
+TEST(Lockstep, SwivelAndInclinometerChannelsSeeTheTruePose) {
+  const RobotModel nominal = load("mini.yaml");
+  const Scenario s = scenario("noise: {encoder_counts: 2, force_raw: 0.3, laser: 0.0002}\n");
+  Physics a = make(s, 7), b = make(s, 7);
+  LockstepOptions plain;
+  LockstepOptions with = plain;
+  with.swivel = with.inclinometer = with.imu_yaw = true;
+  with.sigma_swivel = with.sigma_inclination = with.sigma_imu_yaw = 0.0;  // exact readings
+  auto ra = run_lockstep(a, nominal, test_poses(), plain);
+  auto rb = run_lockstep(b, nominal, test_poses(), with);
+  ASSERT_TRUE(ra.ok() && rb.ok()) << rb.status().to_string();
+  const RobotModel& truth = b.truth();
+  for (std::size_t j = 0; j < rb->size(); ++j) {
+    const LockstepSample& x = (*rb)[j];
+    EXPECT_EQ((*ra)[j].lengths, x.lengths);
+    EXPECT_EQ((*ra)[j].tensions, x.tensions);
+    EXPECT_EQ((*ra)[j].lasers, x.lasers);
+    EXPECT_TRUE((*ra)[j].swivels.size() == 0 && std::isnan((*ra)[j].imu_yaw));
+    ASSERT_EQ(x.swivels.size(), 8);
+    KinematicsData kin(truth);
+    ASSERT_TRUE(inverse_kinematics(truth, x.true_pose, kin));
+    for (int i = 0; i < 8; ++i) EXPECT_NEAR(x.swivels(i), kin.swivel_angles(i), 1e-12) << i;
+    EXPECT_NEAR(x.inclination(0), x.true_pose.rpy(0), 1e-12);  // level mount
+    EXPECT_NEAR(x.inclination(1), x.true_pose.rpy(1), 1e-12);
+    EXPECT_NEAR(x.imu_yaw, x.true_pose.rpy(2), 1e-12);
+  }
+  // The recording carries the columns.
+  RecordingProvenance prov;
+  prov.sigma_swivel = 1e-3;
+  Result<recording::Recording> rec = make_recording(*rb, nominal, s, prov);
+  ASSERT_TRUE(rec.ok()) << rec.status().to_string();
+  EXPECT_TRUE(rec->has_swivel && rec->has_inclinometer && rec->has_imu_yaw);
+  EXPECT_EQ(rec->metadata.get(recording::key::kNoiseSwivel), "0.001");
+  Result<std::string> text = recording::format_recording(*rec);
+  ASSERT_TRUE(text.ok()) << text.status().to_string();
+  Result<recording::Recording> back = recording::parse_recording(*text, "rec.csv");
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  EXPECT_EQ(back->poses[1].swivels, (*rb)[1].swivels);
+}
+
 }  // namespace
 }  // namespace cdpr::sim

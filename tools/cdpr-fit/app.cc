@@ -115,6 +115,20 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
                 "reference pose angle noise std dev, rad")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
+  s->add_option("--noise-swivel", sim.noise.sigma_swivel, "swivel angle noise std dev, rad")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  s->add_option("--noise-inclination", sim.noise.sigma_inclination,
+                "inclinometer roll/pitch noise std dev, rad")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  s->add_option("--noise-imu-yaw", sim.noise.sigma_imu_yaw, "IMU heading noise std dev, rad")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  s->add_option("--channels", sim.channels,
+                "channels besides lengths and tensions, comma-separated: laser, swivel, "
+                "inclinometer, imu-yaw (default laser; 'none' for none)")
+      ->delimiter(',');
   s->add_flag("--no-noise", no_noise, "write exact readings (the sigmas are still recorded)");
   s->add_option("--seed", sim.seed, "random seed (same seed, same recording)")
       ->capture_default_str();
@@ -138,14 +152,16 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
     sim.elastic = physics == "elastic";
     inputs = {{"--config", sim.config}, {"--poses", sim.poses}, {"--nominal", sim.nominal}};
     outputs = {{"--out", sim.out}};
+    if (sim.channels.size() == 1 && sim.channels[0] == "none") sim.channels.clear();
     action = [&] { return simulate(sim); };
   });
 
   // ---- calibrate ------------------------------------------------------------------------------
   CalibrateArgs cal;
   std::string estimate_help =
-      "comma-separated parameters to estimate (default: anchors, offsets, "
-      "laser-plane); any of:";
+      "comma-separated parameters to estimate (default: anchors, offsets and the mounting of "
+      "each channel the recording has: laser-plane, swivel-zeros, inclinometer-mounting, "
+      "imu-yaw-zero); any of:";
   for (const std::string& n : estimate_names()) estimate_help += " " + n;
   auto* c = app.add_subcommand("calibrate", "identify the robot from a recording");
   c->add_option("--config", cal.config, "nominal robot (YAML): the starting point")

@@ -15,11 +15,38 @@
 namespace cdpr::fit {
 
 const std::vector<std::string>& estimate_names() {
-  static const std::vector<std::string> names = {
-      "anchors",       "paper-anchors", "platform-anchors",    "offsets",
-      "scales",        "stiffness",     "stiffness-per-cable", "force-gains",
-      "force-offsets", "laser-origin",  "laser-direction",     "laser-plane"};
+  static const std::vector<std::string> names = {"anchors",
+                                                 "paper-anchors",
+                                                 "platform-anchors",
+                                                 "offsets",
+                                                 "scales",
+                                                 "stiffness",
+                                                 "stiffness-per-cable",
+                                                 "force-gains",
+                                                 "force-offsets",
+                                                 "laser-origin",
+                                                 "laser-direction",
+                                                 "laser-plane",
+                                                 "swivel-zeros",
+                                                 "inclinometer-mounting",
+                                                 "imu-yaw-zero"};
   return names;
+}
+
+void adapt_to_channels(const MeasurementSet& set, const std::vector<std::string>& names,
+                       IdentificationOptions* o) {
+  if (!names.empty()) return;
+  bool laser = false, swivel = false, incl = false, yaw = false;
+  for (const PoseMeasurement& p : set.poses) {
+    laser = laser || (p.laser_distances.size() > 0 && !p.laser_distances.array().isNaN().all());
+    swivel = swivel || (p.swivel_angles.size() > 0 && !p.swivel_angles.array().isNaN().all());
+    incl = incl || !std::isnan(p.inclination(0));
+    yaw = yaw || !std::isnan(p.imu_yaw);
+  }
+  if (!laser) o->estimate_laser_plane = false;
+  o->estimate_swivel_zeros = swivel;
+  o->estimate_inclinometer_mounting = incl || yaw;
+  o->estimate_imu_yaw_zero = yaw;
 }
 
 Status apply_estimate(const std::vector<std::string>& names, int num_cables,
@@ -35,6 +62,9 @@ Status apply_estimate(const std::vector<std::string>& names, int num_cables,
   o->estimate_laser_origin = false;
   o->estimate_laser_direction = false;
   o->estimate_laser_plane = false;
+  o->estimate_swivel_zeros = false;
+  o->estimate_inclinometer_mounting = false;
+  o->estimate_imu_yaw_zero = false;
   for (const std::string& n : names) {
     if (n == "anchors") {
       o->estimate_frame_anchors = true;
@@ -67,6 +97,12 @@ Status apply_estimate(const std::vector<std::string>& names, int num_cables,
       o->estimate_laser_direction = true;
     } else if (n == "laser-plane") {
       o->estimate_laser_plane = true;
+    } else if (n == "swivel-zeros") {
+      o->estimate_swivel_zeros = true;
+    } else if (n == "inclinometer-mounting") {
+      o->estimate_inclinometer_mounting = true;
+    } else if (n == "imu-yaw-zero") {
+      o->estimate_imu_yaw_zero = true;
     } else {
       std::string all;
       for (const std::string& k : estimate_names()) all += (all.empty() ? "" : ", ") + k;
@@ -91,6 +127,9 @@ std::vector<std::string> estimated_items(const IdentificationOptions& o) {
   if (o.estimate_laser_origin) v.push_back("laser-origin");
   if (o.estimate_laser_direction) v.push_back("laser-direction");
   if (o.estimate_laser_plane) v.push_back("laser-plane");
+  if (o.estimate_swivel_zeros) v.push_back("swivel-zeros");
+  if (o.estimate_inclinometer_mounting) v.push_back("inclinometer-mounting");
+  if (o.estimate_imu_yaw_zero) v.push_back("imu-yaw-zero");
   return v;
 }
 
@@ -236,8 +275,17 @@ Result<Output> calibrate(const CalibrateArgs& args) {
     warnings.push_back("the recording is of robot '" + recorded_robot + "' but " + args.config +
                        " is '" + nominal->name + "'");
   }
-  for (const char* k :
-       {recording::key::kNoiseLength, recording::key::kNoiseLaser, recording::key::kNoiseForce}) {
+  for (const char* k : {recording::key::kNoiseLength, recording::key::kNoiseLaser,
+                        recording::key::kNoiseForce, recording::key::kNoiseSwivel,
+                        recording::key::kNoiseInclination, recording::key::kNoiseImuYaw}) {
+    // Only the channels the recording has.
+    const std::string key(k);
+    if ((key == recording::key::kNoiseLaser && rec->num_lasers == 0) ||
+        (key == recording::key::kNoiseSwivel && !rec->has_swivel) ||
+        (key == recording::key::kNoiseInclination && !rec->has_inclinometer) ||
+        (key == recording::key::kNoiseImuYaw && !rec->has_imu_yaw)) {
+      continue;
+    }
     if (!rec->metadata.has(k)) {
       warnings.push_back(std::string("the recording states no '") + k +
                          "'; the default sigma is used");
@@ -250,6 +298,7 @@ Result<Output> calibrate(const CalibrateArgs& args) {
 
   IdentificationOptions options;
   CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, nominal->num_cables(), &options));
+  adapt_to_channels(*set, args.estimate, &options);
   if (args.gauge == "home") {
     options.gauge = Gauge::kHomePose;
   } else if (args.gauge == "laser-plane") {

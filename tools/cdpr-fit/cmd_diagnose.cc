@@ -42,6 +42,7 @@ Result<Loaded> load_recording(const std::string& file, const DiagnoseArgs& args,
       {recording::key::kNoiseLaser, args.noise_laser},
       {recording::key::kNoiseForce, args.noise_force}};
   for (const auto& [k, value] : overrides) {
+    if (std::string(k) == recording::key::kNoiseLaser && rec->num_lasers == 0) continue;
     if (!rec->metadata.has(k) && !std::isfinite(value)) {
       warnings->push_back(file + " states no '" + k + "'; the default sigma is used");
     }
@@ -92,6 +93,7 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
 
   IdentificationOptions identification;
   CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, nominal->num_cables(), &identification));
+  adapt_to_channels(primary->set, args.estimate, &identification);
   DiagnosisOptions options;
   options.seed = args.seed;
   options.bootstrap_samples = args.bootstrap;

@@ -41,6 +41,8 @@ struct SimulateArgs {
   bool elastic = false;              // SimulationOptions::Physics::kElastic (needs nominal)
   std::vector<int> reference_poses;  // poses that also get a reference pose reading
   double reference_tension = std::numeric_limits<double>::quiet_NaN();  // N; NaN = default
+  // The channels the robot has (issue 18): any of laser, swivel, inclinometer, imu-yaw.
+  std::vector<std::string> channels = {"laser"};
 };
 Result<Output> simulate(const SimulateArgs& args);
 

@@ -40,6 +40,11 @@ using report::to_json;
 // Applies --estimate items (estimate_names()) to `options`; an empty list keeps its defaults.
 Status apply_estimate(const std::vector<std::string>& names, int num_cables,
                       IdentificationOptions* options);
+// Without --estimate items (`names` empty), fits the defaults to the channels `set` has: no
+// laser-plane without laser readings; swivel-zeros, inclinometer-mounting and imu-yaw-zero when
+// those channels are present (issue 18). With items, leaves `options` as they set it.
+void adapt_to_channels(const MeasurementSet& set, const std::vector<std::string>& names,
+                       IdentificationOptions* options);
 // The estimated items of `options`, for reports.
 std::vector<std::string> estimated_items(const IdentificationOptions& options);
 

@@ -146,11 +146,15 @@ class Parser {
 void Parser::check_cable_keys(const YamlField& entry, bool is_defaults) const {
   if (is_defaults) {
     take(entry.check_keys({"pulley", "winch", "ea", "mass_per_length", "routing_length",
-                           "elongation", "f_min", "f_max", "force_sensor"}));
+                           "elongation", "f_min", "f_max", "force_sensor", "swivel_encoder"}));
   } else {
     take(entry.check_keys({"frame_anchor", "platform_anchor", "pulley", "winch", "ea",
                            "mass_per_length", "routing_length", "elongation", "f_min", "f_max",
-                           "force_sensor"}));
+                           "force_sensor", "swivel_encoder"}));
+  }
+  if (const YamlField enc = entry["swivel_encoder"]; enc.present()) {
+    take(enc.expect_map("a map with zero and direction"));
+    take(enc.check_keys({"zero", "direction"}));
   }
   if (const YamlField pulley = entry["pulley"]; pulley.is_map()) {
     take(pulley.check_keys({"radius", "axis", "reference"}));
@@ -318,6 +322,16 @@ void Parser::parse_cable(const YamlField& cable, int i, RobotModel& model) {
                         "raw = gain * tension + offset", &one);
   s.offset = group_number(cable, "force_sensor", "offset", Sign::kAny, "raw units",
                           "raw = gain * tension + offset", &zero);
+
+  SwivelEncoderModel& enc = model.swivel_encoders[k];
+  enc.zero = group_number(cable, "swivel_encoder", "zero", Sign::kAny, "rad",
+                          "swivel angle at which the encoder reads 0", &zero);
+  if (const YamlField dir = lookup(cable, "swivel_encoder", "direction"); dir.present()) {
+    remember(cable.path() + ".swivel_encoder.direction", dir);
+    const double d = take(dir.number(Sign::kAny, ""));
+    if (d != 1.0 && d != -1.0) take(dir.error("expected 1 or -1, got " + dir.describe()));
+    enc.direction = static_cast<int>(d);
+  }
 }
 
 PlatformModel Parser::parse_platform(const YamlField& p) {
@@ -381,9 +395,11 @@ LaserModel Parser::parse_laser(const YamlField& l) {
 
 RobotModel Parser::parse(const YamlField& root) {
   take(root.expect_map("a map of fields"));
-  take(root.check_keys({"name", "gravity", "defaults", "cables", "platform", "home", "lasers"}));
+  take(root.check_keys(
+      {"name", "gravity", "defaults", "cables", "platform", "home", "lasers", "inclinometer"}));
   // Whole-section messages of check_model point at the section's key line.
-  for (const char* key : {"name", "gravity", "defaults", "cables", "platform", "home", "lasers"}) {
+  for (const char* key :
+       {"name", "gravity", "defaults", "cables", "platform", "home", "lasers", "inclinometer"}) {
     if (const int line = root.key_line(key); line > 0) lines_.emplace(key, line);
   }
   for (const char* alias : {"pulleys", "winches", "force_sensors", "platform_anchors"}) {
@@ -413,6 +429,7 @@ RobotModel Parser::parse(const YamlField& root) {
   model.winches.resize(static_cast<std::size_t>(m));
   model.cables.resize(static_cast<std::size_t>(m));
   model.force_sensors.resize(static_cast<std::size_t>(m));
+  model.swivel_encoders.resize(static_cast<std::size_t>(m));
   for (int i = 0; i < m; ++i) parse_cable(cables[static_cast<std::size_t>(i)], i, model);
 
   model.platform = parse_platform(required(root, "platform", "mass, centre of mass"));
@@ -421,6 +438,17 @@ RobotModel Parser::parse(const YamlField& root) {
     remember("lasers", lasers);
     take(lasers.expect_list("a list of laser entries"));
     for (std::size_t j = 0; j < lasers.size(); ++j) model.lasers.push_back(parse_laser(lasers[j]));
+  }
+  if (const YamlField incl = root["inclinometer"]; incl.present()) {
+    remember("inclinometer", incl);
+    take(incl.expect_map("a map with mounting_rpy and yaw_zero"));
+    take(incl.check_keys({"mounting_rpy", "yaw_zero"}));
+    if (const YamlField rpy = incl["mounting_rpy"]; rpy.present()) {
+      model.inclinometer.mounting_rpy = vec3(rpy, "rad");
+    }
+    if (const YamlField yz = incl["yaw_zero"]; yz.present()) {
+      model.inclinometer.yaw_zero = number(yz, Sign::kAny, "rad");
+    }
   }
   return model;
 }
@@ -611,6 +639,13 @@ std::string save_robot_config(const RobotModel& model) {
     if (!same_bits(s.gain, s0.gain)) sf.emplace_back("gain", num(s.gain));
     if (!same_bits(s.offset, s0.offset)) sf.emplace_back("offset", num(s.offset));
     if (!sf.empty()) out += "    force_sensor: " + flow_map(sf) + "\n";
+    // Swivel encoders: written only when they differ from the default (zero 0, direction +1),
+    // so configs without them save as before.
+    const SwivelEncoderModel e = model.swivel_encoder(i);
+    std::vector<std::pair<std::string, std::string>> ef;
+    if (!same_bits(e.zero, 0.0)) ef.emplace_back("zero", num(e.zero));
+    if (e.direction != 1) ef.emplace_back("direction", std::to_string(e.direction));
+    if (!ef.empty()) out += "    swivel_encoder: " + flow_map(ef) + "\n";
   }
 
   const PlatformModel& pl = model.platform;
@@ -622,6 +657,12 @@ std::string save_robot_config(const RobotModel& model) {
   out += "home:\n";
   out += "  position: " + vec(model.home.position) + "\n";
   out += "  rpy: " + vec(model.home.rpy) + "\n";
+  const InclinometerModel& incl = model.inclinometer;
+  if (!same_bits(incl.mounting_rpy, Eigen::Vector3d::Zero()) || !same_bits(incl.yaw_zero, 0.0)) {
+    out += "inclinometer: " +
+           flow_map({{"mounting_rpy", vec(incl.mounting_rpy)}, {"yaw_zero", num(incl.yaw_zero)}}) +
+           "\n";
+  }
   if (model.lasers.empty()) {
     out += "lasers: []\n";
   } else {

@@ -29,6 +29,9 @@ Result<MeasurementSet> to_measurement_set(const Recording& rec, const SensorNois
   CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseLaser, &set.noise.sigma_laser));
   CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseRefPosition, &set.noise.sigma_reference_position));
   CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseRefAngle, &set.noise.sigma_reference_angle));
+  CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseSwivel, &set.noise.sigma_swivel));
+  CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseInclination, &set.noise.sigma_inclination));
+  CDPR_RETURN_IF_ERROR(sigma_from(md, key::kNoiseImuYaw, &set.noise.sigma_imu_yaw));
   bool any_tension = false;
   for (const RecordedPose& p : rec.poses) {
     if (p.tensions.size() > 0 && !p.tensions.array().isNaN().all()) any_tension = true;
@@ -36,7 +39,8 @@ Result<MeasurementSet> to_measurement_set(const Recording& rec, const SensorNois
   set.poses.reserve(rec.poses.size());
   for (const RecordedPose& p : rec.poses) {
     if (p.lengths.size() != rec.num_cables || p.tensions.size() != rec.num_cables ||
-        p.lasers.size() != rec.num_lasers) {
+        p.lasers.size() != rec.num_lasers ||
+        (rec.has_swivel && p.swivels.size() != rec.num_cables)) {
       return Status::error(ErrorCode::kInvalidArgument,
                            "pose %lld: vector sizes do not match the recording's %d cables and %d "
                            "lasers",
@@ -47,6 +51,9 @@ Result<MeasurementSet> to_measurement_set(const Recording& rec, const SensorNois
     m.cable_lengths = p.lengths;
     if (any_tension) m.tensions = p.tensions;
     m.laser_distances = p.lasers;
+    if (rec.has_swivel) m.swivel_angles = p.swivels;
+    if (rec.has_inclinometer) m.inclination = p.inclination;
+    if (rec.has_imu_yaw) m.imu_yaw = p.imu_yaw;
     m.time = p.time_s;
     m.temperature = p.temperature_c;
     if (rec.has_reference) {
@@ -72,19 +79,23 @@ Result<Recording> from_measurement_set(const MeasurementSet& set, Metadata metad
   const PoseMeasurement& first = set.poses.front();
   rec.num_cables = static_cast<int>(first.cable_lengths.size());
   rec.num_lasers = static_cast<int>(first.laser_distances.size());
-  if (rec.num_lasers < 1) {
-    return Status(ErrorCode::kInvalidArgument,
-                  "measurement set has no laser distances; a recording needs at least one laser");
-  }
   rec.has_reference = false;
   rec.has_temperature = false;
   for (const PoseMeasurement& p : set.poses) {
     if (p.reference) rec.has_reference = true;
     if (std::isfinite(p.temperature)) rec.has_temperature = true;
+    if (p.swivel_angles.size() != 0) rec.has_swivel = true;
+    if (!p.inclination.array().isNaN().all()) rec.has_inclinometer = true;
+    if (!std::isnan(p.imu_yaw)) rec.has_imu_yaw = true;
   }
   metadata.set_number(key::kNoiseLength, set.noise.sigma_length);
   metadata.set_number(key::kNoiseForce, set.noise.sigma_force);
-  metadata.set_number(key::kNoiseLaser, set.noise.sigma_laser);
+  if (rec.num_lasers > 0) metadata.set_number(key::kNoiseLaser, set.noise.sigma_laser);
+  if (rec.has_swivel) metadata.set_number(key::kNoiseSwivel, set.noise.sigma_swivel);
+  if (rec.has_inclinometer) {
+    metadata.set_number(key::kNoiseInclination, set.noise.sigma_inclination);
+  }
+  if (rec.has_imu_yaw) metadata.set_number(key::kNoiseImuYaw, set.noise.sigma_imu_yaw);
   if (rec.has_reference) {
     metadata.set_number(key::kNoiseRefPosition, set.noise.sigma_reference_position);
     metadata.set_number(key::kNoiseRefAngle, set.noise.sigma_reference_angle);
@@ -95,7 +106,8 @@ Result<Recording> from_measurement_set(const MeasurementSet& set, Metadata metad
     const PoseMeasurement& p = set.poses[j];
     if (p.cable_lengths.size() != rec.num_cables ||
         (p.tensions.size() != 0 && p.tensions.size() != rec.num_cables) ||
-        p.laser_distances.size() != rec.num_lasers) {
+        p.laser_distances.size() != rec.num_lasers ||
+        (p.swivel_angles.size() != 0 && p.swivel_angles.size() != rec.num_cables)) {
       return Status::error(ErrorCode::kInvalidArgument,
                            "measurement set: pose %zu has other vector sizes than pose 0", j);
     }
@@ -107,6 +119,12 @@ Result<Recording> from_measurement_set(const MeasurementSet& set, Metadata metad
     r.tensions = p.tensions.size() == 0 ? Eigen::VectorXd::Constant(rec.num_cables, nan)
                                         : Eigen::VectorXd(p.tensions);
     r.lasers = p.laser_distances;
+    if (rec.has_swivel) {
+      r.swivels = p.swivel_angles.size() == 0 ? Eigen::VectorXd::Constant(rec.num_cables, nan)
+                                              : Eigen::VectorXd(p.swivel_angles);
+    }
+    r.inclination = p.inclination;
+    r.imu_yaw = p.imu_yaw;
     if (p.reference) {
       r.reference = *p.reference;
     } else {

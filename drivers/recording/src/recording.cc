@@ -63,12 +63,13 @@ struct Layout {
   int pose = -1, time = -1;
   std::array<int, 6> cmd{-1, -1, -1, -1, -1, -1};
   std::array<int, 6> ref{-1, -1, -1, -1, -1, -1};
-  std::vector<int> lengths, tensions, lasers;
+  std::vector<int> lengths, tensions, lasers, swivels;
   int temperature = -1;
+  int incl_roll = -1, incl_pitch = -1, imu_yaw = -1;
 };
 
 Status resolve_layout(const CsvTable& t, Layout* layout) {
-  std::map<int, int> lengths, tensions, lasers;  // index -> column
+  std::map<int, int> lengths, tensions, lasers, swivels;  // index -> column
   for (std::size_t c = 0; c < t.header.size(); ++c) {
     const std::string& h = t.header[c];
     const int col = static_cast<int>(c);
@@ -85,6 +86,14 @@ Status resolve_layout(const CsvTable& t, Layout* layout) {
       tensions[j] = col;
     } else if (int k = indexed(h, "laser_"); k > 0) {
       lasers[k] = col;
+    } else if (int w = indexed(h, "swivel_"); w > 0) {
+      swivels[w] = col;
+    } else if (h == "incl_roll") {
+      layout->incl_roll = col;
+    } else if (h == "incl_pitch") {
+      layout->incl_pitch = col;
+    } else if (h == "imu_yaw") {
+      layout->imu_yaw = col;
     } else {
       known = false;
       for (std::size_t a = 0; a < 6; ++a) {
@@ -126,8 +135,15 @@ Status resolve_layout(const CsvTable& t, Layout* layout) {
                          t.name.c_str(), t.header_line, layout->lengths.size(),
                          layout->tensions.size());
   }
-  if (layout->lasers.empty()) {
-    return header_error(t, "missing required column '%s' (at least one laser)", "laser_1");
+  CDPR_RETURN_IF_ERROR(contiguous(swivels, "swivel_", &layout->swivels));
+  if (!layout->swivels.empty() && layout->swivels.size() != layout->lengths.size()) {
+    return Status::error(
+        ErrorCode::kParseError, "%s:%d: %zu swivel_ columns but %zu cables (one per cable or none)",
+        t.name.c_str(), t.header_line, layout->swivels.size(), layout->lengths.size());
+  }
+  if ((layout->incl_roll < 0) != (layout->incl_pitch < 0)) {
+    return header_error(t, "missing column '%s' (incl_roll and incl_pitch come together)",
+                        layout->incl_roll < 0 ? "incl_roll" : "incl_pitch");
   }
   int refs = 0;
   for (const int c : layout->ref) refs += c >= 0 ? 1 : 0;
@@ -182,6 +198,9 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
   rec.metadata = t.metadata;
   rec.num_cables = static_cast<int>(layout.lengths.size());
   rec.num_lasers = static_cast<int>(layout.lasers.size());
+  rec.has_swivel = !layout.swivels.empty();
+  rec.has_inclinometer = layout.incl_roll >= 0;
+  rec.has_imu_yaw = layout.imu_yaw >= 0;
   rec.has_reference = layout.ref[0] >= 0;
   rec.has_temperature = layout.temperature >= 0;
   rec.header = t.header;
@@ -219,6 +238,20 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
     CDPR_RETURN_IF_ERROR(fill(layout.lengths, &p.lengths));
     CDPR_RETURN_IF_ERROR(fill(layout.tensions, &p.tensions));
     CDPR_RETURN_IF_ERROR(fill(layout.lasers, &p.lasers));
+    if (rec.has_swivel) CDPR_RETURN_IF_ERROR(fill(layout.swivels, &p.swivels));
+    if (rec.has_inclinometer) {
+      CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, layout.incl_roll, true, &p.inclination(0)));
+      CDPR_RETURN_IF_ERROR(
+          detail::parse_double(t, row, layout.incl_pitch, true, &p.inclination(1)));
+      if (std::isnan(p.inclination(0)) != std::isnan(p.inclination(1))) {
+        return detail::cell_error(
+            t, row, std::isnan(p.inclination(0)) ? layout.incl_roll : layout.incl_pitch,
+            "empty cell, but incl_roll and incl_pitch are measured together");
+      }
+    }
+    if (rec.has_imu_yaw) {
+      CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, layout.imu_yaw, true, &p.imu_yaw));
+    }
     p.reference.position.setConstant(nan);
     p.reference.rpy.setConstant(nan);
     if (rec.has_reference) {
@@ -243,9 +276,9 @@ Result<Recording> read_recording(const std::string& path) {
 }
 
 Result<std::string> format_recording(const Recording& rec) {
-  if (rec.num_cables < 1 || rec.num_lasers < 1) {
+  if (rec.num_cables < 1 || rec.num_lasers < 0) {
     return Status::error(ErrorCode::kInvalidArgument,
-                         "a recording needs at least one cable and one laser (has %d and %d)",
+                         "a recording needs at least one cable (has %d cables and %d lasers)",
                          rec.num_cables, rec.num_lasers);
   }
   if (rec.poses.empty()) {
@@ -258,6 +291,11 @@ Result<std::string> format_recording(const Recording& rec) {
   for (int i = 1; i <= rec.num_cables; ++i) out += ",length_" + std::to_string(i);
   for (int i = 1; i <= rec.num_cables; ++i) out += ",tension_" + std::to_string(i);
   for (int i = 1; i <= rec.num_lasers; ++i) out += ",laser_" + std::to_string(i);
+  if (rec.has_swivel) {
+    for (int i = 1; i <= rec.num_cables; ++i) out += ",swivel_" + std::to_string(i);
+  }
+  if (rec.has_inclinometer) out += ",incl_roll,incl_pitch";
+  if (rec.has_imu_yaw) out += ",imu_yaw";
   if (rec.has_reference) {
     for (const char* c : kRef) out += std::string(",") + c;
   }
@@ -272,6 +310,9 @@ Result<std::string> format_recording(const Recording& rec) {
     CDPR_RETURN_IF_ERROR(check_size("length", p.lengths.size(), rec.num_cables, p.index));
     CDPR_RETURN_IF_ERROR(check_size("tension", p.tensions.size(), rec.num_cables, p.index));
     CDPR_RETURN_IF_ERROR(check_size("laser", p.lasers.size(), rec.num_lasers, p.index));
+    if (rec.has_swivel) {
+      CDPR_RETURN_IF_ERROR(check_size("swivel", p.swivels.size(), rec.num_cables, p.index));
+    }
     if (!std::isfinite(p.time_s) || !p.commanded.vector().allFinite()) {
       return Status::error(ErrorCode::kInvalidArgument,
                            "pose %lld: time and commanded pose must be finite",
@@ -289,6 +330,18 @@ Result<std::string> format_recording(const Recording& rec) {
     }
     for (Eigen::Index i = 0; i < p.lasers.size(); ++i) {
       CDPR_RETURN_IF_ERROR(append(&out, p.lasers(i), "a laser distance", p.index));
+    }
+    if (rec.has_swivel) {
+      for (Eigen::Index i = 0; i < p.swivels.size(); ++i) {
+        CDPR_RETURN_IF_ERROR(append(&out, p.swivels(i), "a swivel angle", p.index));
+      }
+    }
+    if (rec.has_inclinometer) {
+      CDPR_RETURN_IF_ERROR(append(&out, p.inclination(0), "the inclinometer roll", p.index));
+      CDPR_RETURN_IF_ERROR(append(&out, p.inclination(1), "the inclinometer pitch", p.index));
+    }
+    if (rec.has_imu_yaw) {
+      CDPR_RETURN_IF_ERROR(append(&out, p.imu_yaw, "the IMU yaw", p.index));
     }
     if (rec.has_reference) {
       const auto ref = p.reference.vector();
@@ -321,11 +374,21 @@ Status check_against_model(const Recording& recording, const RobotModel& model) 
                          "but %s has %d",
                          recording.num_cables, recording.num_cables, robot.c_str(), m);
   }
-  if (recording.num_lasers != k) {
+  if (recording.num_lasers != 0 && recording.num_lasers != k) {
     return Status::error(ErrorCode::kFailedPrecondition,
                          "laser count mismatch: the recording has %d laser columns but %s has %d "
                          "lasers",
                          recording.num_lasers, robot.c_str(), k);
+  }
+  if (recording.has_swivel) {
+    for (int i = 0; i < m; ++i) {
+      if (!model.pulleys[static_cast<std::size_t>(i)].enabled()) {
+        return Status::error(ErrorCode::kFailedPrecondition,
+                             "swivel_%d: cable %d has no swivel pulley in %s (pulley.radius 0), so "
+                             "its swivel angle is undefined",
+                             i + 1, i + 1, robot.c_str());
+      }
+    }
   }
   return Status::success();
 }

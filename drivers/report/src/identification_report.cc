@@ -144,6 +144,20 @@ nlohmann::json identification_json(const CalibrationReportInput& in) {
          {"wrench_si", to_json(Eigen::VectorXd(pr.wrench_si))},
          {"wrench_normalized", to_json(Eigen::VectorXd(pr.wrench_normalized))},
          {"reference_normalized", to_json(Eigen::VectorXd(pr.reference_normalized))}});
+    // Issue 18 channels, only when the recording has them (reports without them are unchanged).
+    nlohmann::json& row = residuals.back();
+    if (pr.swivel_normalized.size() > 0 && !pr.swivel_normalized.array().isNaN().all()) {
+      row["swivel_rad"] = to_json(pr.swivel_rad);
+      row["swivel_normalized"] = to_json(pr.swivel_normalized);
+    }
+    if (!pr.inclination_normalized.array().isNaN().all()) {
+      row["inclination_rad"] = to_json(Eigen::VectorXd(pr.inclination_rad));
+      row["inclination_normalized"] = to_json(Eigen::VectorXd(pr.inclination_normalized));
+    }
+    if (!std::isnan(pr.imu_yaw_normalized)) {
+      row["imu_yaw_rad"] = pr.imu_yaw_rad;
+      row["imu_yaw_normalized"] = pr.imu_yaw_normalized;
+    }
   }
   nlohmann::json poses = nlohmann::json::array();
   for (std::size_t j = 0; j < r.poses.size(); ++j) {

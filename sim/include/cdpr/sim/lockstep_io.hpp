@@ -20,10 +20,15 @@ struct RecordingProvenance {
   std::string scenario_path;  // the scenario (its content stays hidden: only path and hash)
   std::uint64_t seed = 0;
   double dwell_s = 0.0;
+  // Sigmas of the issue 18 channels (LockstepOptions), written as noise keys when > 0 and the
+  // samples have the channel.
+  double sigma_swivel = 0.0, sigma_inclination = 0.0, sigma_imu_yaw = 0.0;  // rad
 };
 
 // The recording of lock-step samples: commanded poses, measured lengths, tensions and lasers
-// (through the nominal reading models), one row per pose, poses numbered from 0. Metadata: format,
+// (through the nominal reading models; no laser columns when the nominal robot has none), and the
+// swivel / inclinometer / IMU columns when the samples have them, one row per pose, poses
+// numbered from 0. Metadata: format,
 // units, robot, date, config file and hash, source "simulated", seed, scenario file and hash, and
 // the noise levels converted to SI through the nominal models (keys only for non-zero levels).
 Result<recording::Recording> make_recording(const std::vector<LockstepSample>& samples,

@@ -154,6 +154,17 @@ struct LockstepOptions {
   int substeps = 10;      // SYNC steps per pose (counts move linearly to the new targets)
   int laser_samples = 1;  // laser readings averaged per pose (each with fresh noise)
   double reference_tension = kNaN;  // N, the nominal planner's pretension; NaN: its default
+  // Issue 18 channels, read at the TRUE pose through the TRUE robot's swivel encoders and
+  // inclinometer (robot_model.hpp; their zeros and mounting are the config's), with Gaussian
+  // noise of these sigmas (0: none) drawn from a stream of its own (seed `channel_seed`), so the
+  // physics' own draws are the same with and without them.
+  bool swivel = false;
+  bool inclinometer = false;
+  bool imu_yaw = false;
+  double sigma_swivel = 1e-3;       // rad
+  double sigma_inclination = 5e-4;  // rad
+  double sigma_imu_yaw = 1e-2;      // rad
+  std::uint64_t channel_seed = 1;
 };
 
 struct LockstepSample {
@@ -164,8 +175,11 @@ struct LockstepSample {
   Eigen::VectorXd tensions;  // measured: nominal force-sensor calibration of the raw readings, N
   Eigen::VectorXd lasers;    // measured: mean of the ok readings, m (NaN when none is ok)
   std::vector<LaserStatus> laser_status;  // of the last reading
-  Pose true_pose;                         // hidden truth, for tests and reports
-  Eigen::VectorXd true_tensions;          // N
+  Eigen::VectorXd swivels;                // rad, m entries when LockstepOptions::swivel
+  Eigen::Vector2d inclination = Eigen::Vector2d::Constant(kNaN);  // rad (roll, pitch)
+  double imu_yaw = kNaN;                                          // rad
+  Pose true_pose;                 // hidden truth, for tests and reports
+  Eigen::VectorXd true_tensions;  // N
   bool converged = false;
 };
 

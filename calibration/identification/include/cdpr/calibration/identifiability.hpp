@@ -15,6 +15,7 @@
 
 #include <Eigen/Core>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cdpr/calibration/identification.hpp"
@@ -44,6 +45,17 @@ struct ParameterDirection {
   std::string description;  // one sentence in words
 };
 
+// What one measurement channel contributes (issue 18): the analysis repeated without it.
+struct ChannelContribution {
+  std::string channel;   // "cable lengths", "laser", "equilibrium", "swivel angles", ...
+  int rows = 0;          // residual rows of the channel
+  int rank_without = 0;  // rank of the information without the channel
+  // Parameters whose Cramer-Rao std the channel lowers the most: (name, std without / std with),
+  // largest first; infinity when the parameter is unidentifiable without the channel.
+  std::vector<std::pair<std::string, double>> gains;
+  std::string description;  // one line in words
+};
+
 struct IdentifiabilityReport {
   std::vector<std::string> parameter_names;
   Eigen::VectorXd singular_values;             // SI, descending
@@ -55,6 +67,10 @@ struct IdentifiabilityReport {
   double o1 = 0.0, o2 = 0.0, o3 = 0.0, o4 = 0.0, o5 = 0.0;  // SI
   std::vector<int> unobserved;                              // parameters with an all-zero column
   std::vector<ParameterDirection> directions;               // null first, then weak, weakest first
+  // What fixes the world frame, in words (the gauge), from the channels present.
+  std::vector<std::string> notes;
+  // Filled by the (model, set) overload: what each channel present makes observable.
+  std::vector<ChannelContribution> channels;
 
   bool identifiable() const { return rank == num_parameters; }
   std::string summary() const;
@@ -64,7 +80,8 @@ struct IdentifiabilityReport {
 IdentifiabilityReport analyze_identifiability(const GeometryInformation& information,
                                               const IdentifiabilityOptions& options = {});
 
-// Evaluates the information at the commanded poses of `set` with `model`, then analyses it.
+// Evaluates the information at the commanded poses of `set` with `model`, then analyses it,
+// and repeats the analysis without each channel present (IdentifiabilityReport::channels).
 Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& model,
                                                       const MeasurementSet& set,
                                                       const IdentificationOptions& identification,

@@ -16,6 +16,15 @@
 // - Static equilibrium (6 per pose with all tensions measured): A^T(pose) F + w(pose), whitened by
 //   the covariance sigma_force^2 A^T A computed at the initial pose (the force noise propagated).
 // - Reference pose (sigma_reference_position / _angle), when a PoseMeasurement has one.
+// - Swivel angle of cable i (sigma_swivel, issue 18): wrap(direction_i (gamma_i(pose; a_i, b_i) -
+//   zero_i) - reading), gamma from the pulley frame of the model (robot_model.hpp).
+// - Inclinometer (sigma_inclination, 2 per pose): roll and pitch of R(pose) R_m minus the
+//   readings (wrapped), R_m the mounting rotation, whose roll and pitch corrections can be
+//   estimated; the rotation about the sensor's own z stays at the config's value (an
+//   inclinometer sees it only through tilt x angle, second order).
+// - IMU heading (sigma_imu_yaw): wrap(yaw(R(pose) R_m) - yaw_zero - reading).
+// All residuals have exact derivatives (automatic differentiation); the angle residuals are
+// wrapped with atan2(sin, cos), whose derivative is exactly 1.
 //
 // Gauge. A cable robot's measurements are invariant under a rigid motion of the world frame, so
 // something must fix it (IdentificationOptions::gauge):
@@ -34,7 +43,9 @@
 // a_i.x/y/z (m), b_i.x/y/z (m), o_i (m), s_i (-), EA scale e_i (EA = EA_nominal (1 + e)),
 // force sensor gain error g_i (gain = nominal (1 + g)) and offset c_i (raw units), laser origin
 // (m, platform frame), laser direction (two small angles about the nominal direction, rad), plane
-// normal (two small angles, rad) and plane offset c (m, n.x = c).
+// normal (two small angles, rad) and plane offset c (m, n.x = c), swivel encoder zero zero_i
+// (rad), inclinometer mounting correction (roll, pitch, rad, applied as R_m = R_m,config
+// rotation_from_rpy(roll, pitch, 0)) and IMU yaw zero (rad).
 #pragma once
 
 #include <Eigen/Core>
@@ -80,12 +91,19 @@ struct IdentificationOptions {
   bool estimate_laser_origin = false;
   bool estimate_laser_direction = false;
   bool estimate_laser_plane = true;
+  // Issue 18 channels' mounting parameters.
+  bool estimate_swivel_zeros = false;           // zero_i of every cable with swivel readings
+  bool estimate_inclinometer_mounting = false;  // roll and pitch of the mounting rotation
+  bool estimate_imu_yaw_zero = false;
 
   // --- Which residuals are used --------------------------------------------------------------
   bool use_lengths = true;
   bool use_laser = true;
   bool use_equilibrium = true;
   bool use_reference = true;
+  bool use_swivel = true;
+  bool use_inclinometer = true;
+  bool use_imu_yaw = true;
   // Cables whose tension reading is below this (N), or below slack_tension_sigmas times the
   // force noise (SensorNoise::sigma_force), are slack: their length residual is skipped. A slack
   // cable reads 0 +- sigma_force, so at 3 sigma about one slack reading in 740 passes as taut, and
@@ -142,6 +160,13 @@ struct PoseResiduals {
       Eigen::Matrix<double, 6, 1>::Constant(std::numeric_limits<double>::quiet_NaN());
   Eigen::Matrix<double, 6, 1> reference_normalized =
       Eigen::Matrix<double, 6, 1>::Constant(std::numeric_limits<double>::quiet_NaN());
+  Eigen::VectorXd swivel_rad, swivel_normalized;  // m entries (issue 18)
+  Eigen::Vector2d inclination_rad =
+      Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+  Eigen::Vector2d inclination_normalized =
+      Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+  double imu_yaw_rad = std::numeric_limits<double>::quiet_NaN();
+  double imu_yaw_normalized = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct IdentificationReport {
@@ -157,6 +182,7 @@ struct IdentificationReport {
 
   // Channel RMS (SI) after the fit.
   double rms_length_m = 0.0, rms_laser_m = 0.0, rms_wrench_n = 0.0;
+  double rms_swivel_rad = 0.0, rms_inclination_rad = 0.0, rms_imu_yaw_rad = 0.0;
 
   double initial_cost = 0.0;  // 0.5 sum r^2 (normalised residuals, loss applied)
   double final_cost = 0.0;
@@ -203,6 +229,11 @@ struct GeometryInformation {
   Eigen::Matrix3Xi anchor_columns;  // 3 x m: column of a_i.x/y/z in `names`, -1 if not estimated
   int num_residuals = 0;
   int num_pose_parameters = 0;
+  // Rows of each channel (what the identifiability analysis says about the gauge).
+  struct ChannelRows {
+    int length = 0, laser = 0, wrench = 0, reference = 0, swivel = 0, inclination = 0, imu_yaw = 0;
+  } channel_rows;
+  bool home_pose_fixed = false;  // the gauge holds a pose at the home pose
   // Whitened Jacobian blocks per pose (rows = that pose's residuals), filled only when
   // geometry_information is called with keep_jacobians = true.
   std::vector<Eigen::MatrixXd> jacobian_geometry;  // rows x P
@@ -214,5 +245,15 @@ Result<GeometryInformation> geometry_information(const CalibratedModel& model,
                                                  const std::vector<Pose>& poses,
                                                  const IdentificationOptions& options,
                                                  bool keep_jacobians = false);
+
+// The whitened residuals of every pose at `model` and the poses `poses` (the rows of each pose
+// in the order GeometryInformation's Jacobian blocks have them: lengths, lasers, equilibrium,
+// reference, swivel angles, inclinometer, IMU yaw). With GeometryInformation's Jacobians this
+// lets tests compare the exact derivatives with finite differences, and checks that noise-free
+// data gives zero residuals at the true parameters.
+Result<std::vector<Eigen::VectorXd>> evaluate_residuals(const CalibratedModel& model,
+                                                        const MeasurementSet& set,
+                                                        const std::vector<Pose>& poses,
+                                                        const IdentificationOptions& options);
 
 }  // namespace cdpr

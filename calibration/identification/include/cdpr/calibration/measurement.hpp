@@ -17,6 +17,12 @@
 //   (RobotModel::force_sensors). NaN = not measured. An empty vector = no force sensors.
 // - `laser_distances(k)`: distance in m along the beam of laser k (RobotModel::lasers[k]) from
 //   its origin to the target plane. NaN = not measured / out of range.
+// - `swivel_angles(i)` (issue 18): the reading of cable i's swivel-angle encoder, rad, as
+//   RobotModel::swivel_encoders states (wrap(direction * (gamma - zero))). Empty vector = no
+//   swivel encoders; NaN = not measured.
+// - `inclination` (issue 18): the inclinometer's (roll, pitch), rad, of its sensor frame
+//   R(pose) R_m (RobotModel::inclinometer). NaN = not measured (both or none).
+// - `imu_yaw` (issue 18): an IMU's heading, rad (RobotModel::inclinometer.yaw_zero). NaN = none.
 // - `reference`: the pose given by an external reference (home-position reference platform,
 //   tracker), if any; weighted by the reference sigmas.
 // - `time` (s since the start of the recording) and `temperature` (degC): informative, NaN when
@@ -41,6 +47,11 @@ struct SensorNoise {
   double sigma_force = 1.0;                  // N, cable tension
   double sigma_reference_position = 1.0e-4;  // m, reference pose position (per axis)
   double sigma_reference_angle = 1.0e-3;     // rad, reference pose roll/pitch/yaw
+  // Issue 18 channels. Defaults: a 12-bit magnetic swivel encoder (1.5 mrad steps plus play),
+  // a MEMS inclinometer of about 0.03 degrees, an IMU heading of about 0.6 degrees.
+  double sigma_swivel = 1.0e-3;       // rad, swivel angle
+  double sigma_inclination = 5.0e-4;  // rad, inclinometer roll and pitch
+  double sigma_imu_yaw = 1.0e-2;      // rad, IMU heading
 };
 
 // How readings relate to physics beyond RobotModel: per-cable encoder-zero offset o_i (m) and
@@ -72,7 +83,10 @@ struct PoseMeasurement {
   Eigen::VectorXd cable_lengths;    // m, size m; NaN = missing
   Eigen::VectorXd tensions;         // N, size m or empty; NaN = missing
   Eigen::VectorXd laser_distances;  // m, size = number of lasers (may be 0); NaN = missing
-  std::optional<Pose> reference;    // known pose, if any
+  Eigen::VectorXd swivel_angles;    // rad, size m or empty; NaN = missing
+  Eigen::Vector2d inclination = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+  double imu_yaw = std::numeric_limits<double>::quiet_NaN();      // rad
+  std::optional<Pose> reference;                                  // known pose, if any
   double time = std::numeric_limits<double>::quiet_NaN();         // s
   double temperature = std::numeric_limits<double>::quiet_NaN();  // degC
   // A known wrench on the platform besides gravity and the cables (force N, moment N m about the
@@ -102,7 +116,8 @@ inline Status validate(const MeasurementSet& set, const RobotModel& model) {
   const int k = static_cast<int>(model.lasers.size());
   const SensorNoise& n = set.noise;
   if (!(n.sigma_length > 0) || !(n.sigma_laser > 0) || !(n.sigma_force > 0) ||
-      !(n.sigma_reference_position > 0) || !(n.sigma_reference_angle > 0)) {
+      !(n.sigma_reference_position > 0) || !(n.sigma_reference_angle > 0) ||
+      !(n.sigma_swivel > 0) || !(n.sigma_inclination > 0) || !(n.sigma_imu_yaw > 0)) {
     return Status(ErrorCode::kInvalidArgument,
                   "measurement set: every sensor sigma must be positive and finite");
   }
@@ -126,6 +141,17 @@ inline Status validate(const MeasurementSet& set, const RobotModel& model) {
       return Status::error(ErrorCode::kInvalidArgument,
                            "measurement set: pose %d: %d laser distances, the model has %d lasers",
                            j, static_cast<int>(p.laser_distances.size()), k);
+    }
+    if (p.swivel_angles.size() != 0 && p.swivel_angles.size() != m) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %d: %d swivel angles, the model has %d cables", j,
+                           static_cast<int>(p.swivel_angles.size()), m);
+    }
+    if (std::isnan(p.inclination(0)) != std::isnan(p.inclination(1))) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %d: inclinometer roll and pitch must be both "
+                           "measured or both missing",
+                           j);
     }
     if (p.reference && !p.reference->vector().allFinite()) {
       return Status::error(ErrorCode::kInvalidArgument,

@@ -61,6 +61,13 @@ Result<Pose> settle_platform(const RobotModel& model, const Eigen::VectorXd& uns
 // Ray-plane distance of laser k at `pose` (NaN when the beam misses the plane or is out of range).
 double laser_distance(const RobotModel& model, int laser, const Pose& pose);
 
+// Noise-free readings of the issue 18 channels at `pose` (robot_model.hpp states the models):
+// the swivel encoder of cable i (NaN when the platform anchor is on the swivel axis), the
+// inclinometer's (roll, pitch) and the IMU heading.
+double swivel_reading(const RobotModel& model, int cable, const Pose& pose);
+Eigen::Vector2d inclinometer_reading(const RobotModel& model, const Pose& pose);
+double imu_yaw_reading(const RobotModel& model, const Pose& pose);
+
 // Encoder-zero offsets produced by homing: the reading at the home pose is set to the nominal
 // model's unstretched length there, so o_i = U_true,i(home) - U_nominal,i(home) with the
 // tensions planned by each model at home.
@@ -92,6 +99,13 @@ struct SimulationOptions {
   bool add_noise = true;
   // Poses that also get a reference pose reading (e.g. {0} for a reference platform at home).
   std::vector<int> reference_pose_indices;
+  // Which channels the robot has (issue 18). Without the laser the poses get no laser distances
+  // (k = 0). The noise of the new channels comes from a second random stream seeded from `seed`,
+  // so switching them on leaves the length, force and laser readings of a seed unchanged.
+  bool laser = true;
+  bool swivel = false;
+  bool inclinometer = false;
+  bool imu_yaw = false;
 };
 
 struct SimulatedMeasurements {

@@ -139,7 +139,7 @@ struct MismatchSummary {
 // The residual-space view of the screen, exposed for the bootstrap, cross-validation and pose
 // design of diagnosis.hpp. Rows follow the identification's order (per pose: lengths, lasers,
 // equilibrium, reference pose); everything is whitened (divided by the row's sigma).
-enum class ResidualKind { kLength, kLaser, kWrench, kReference };
+enum class ResidualKind { kLength, kLaser, kWrench, kReference, kSwivel, kInclination, kImuYaw };
 
 // One candidate effect of the library as regressor columns in residual space.
 struct CandidateColumns {

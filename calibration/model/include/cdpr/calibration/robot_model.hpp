@@ -109,6 +109,29 @@ struct LaserModel {
   double range_max = 10.0;                                  // m
 };
 
+// Encoder on the swivel axis of pulley i (issue 18). With gamma the swivel angle of
+// kinematics.hpp (angle of the platform anchor about the pulley axis ez, from the pulley's
+// reference direction ex) it reads
+//   swivel_i = wrap(direction * (gamma - zero))          (rad, wrapped to (-pi, pi])
+// `zero` is the geometric swivel angle at which the encoder reads 0; it is what the
+// identification estimates ("swivel-zeros").
+struct SwivelEncoderModel {
+  double zero = 0.0;  // rad
+  int direction = 1;  // +1: the reading grows with gamma (about +ez); -1 reversed
+};
+
+// Inclinometer (optionally an IMU with a heading) on the platform (issue 18). Its sensor frame
+// has the orientation R_s = R(pose) * R_m in the world, R_m = rotation_from_rpy(mounting_rpy)
+// (the sensor frame in the platform frame). It reads the roll and pitch of R_s (gravity's
+// direction in the sensor frame, R_s = Rz(yaw) Ry(pitch) Rx(roll)):
+//   incl_roll = atan2(R_s(2,1), R_s(2,2)),  incl_pitch = atan2(-R_s(2,0), hypot(R_s(2,1),
+//   R_s(2,2)))
+// and, for an IMU with a heading, imu_yaw = wrap(atan2(R_s(1,0), R_s(0,0)) - yaw_zero).
+struct InclinometerModel {
+  Eigen::Vector3d mounting_rpy = Eigen::Vector3d::Zero();  // rad, sensor frame in platform frame
+  double yaw_zero = 0.0;  // rad, heading of the IMU's reference in the world (imu_yaw only)
+};
+
 struct RobotModel {
   std::string name;
   Eigen::Matrix3Xd frame_anchors;               // a_i, 3 x m, world
@@ -121,6 +144,15 @@ struct RobotModel {
   Pose home;
   std::vector<LaserModel> lasers;
   double gravity = 9.81;  // m/s^2, along -z of the world
+  // Swivel-angle encoders (issue 18): m entries, or empty = every cable zero 0, direction +1.
+  std::vector<SwivelEncoderModel> swivel_encoders;
+  InclinometerModel inclinometer;  // used only by recordings with incl_/imu_ columns
+
+  // The swivel encoder of cable i (the default one when swivel_encoders is empty).
+  SwivelEncoderModel swivel_encoder(int i) const {
+    return swivel_encoders.empty() ? SwivelEncoderModel{}
+                                   : swivel_encoders[static_cast<std::size_t>(i)];
+  }
 
   int num_cables() const { return static_cast<int>(frame_anchors.cols()); }
 };

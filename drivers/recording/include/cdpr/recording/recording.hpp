@@ -64,6 +64,9 @@ inline constexpr const char* kNoiseForce = "noise_force_n";    // std dev of ten
 inline constexpr const char* kNoiseLaser = "noise_laser_m";    // std dev of laser_j, m
 inline constexpr const char* kNoiseRefPosition = "noise_reference_position_m";  // m
 inline constexpr const char* kNoiseRefAngle = "noise_reference_angle_rad";      // rad
+inline constexpr const char* kNoiseSwivel = "noise_swivel_rad";                 // swivel_i, rad
+inline constexpr const char* kNoiseInclination = "noise_inclination_rad";       // incl_*, rad
+inline constexpr const char* kNoiseImuYaw = "noise_imu_yaw_rad";                // imu_yaw, rad
 inline constexpr const char* kSeed = "seed";      // simulator seed, if simulated
 inline constexpr const char* kSource = "source";  // "simulated", "robot", "hand-made"
 }  // namespace key
@@ -76,17 +79,23 @@ struct RecordedPose {
   Eigen::VectorXd lengths;   // m entries, m
   Eigen::VectorXd tensions;  // m entries, N
   Eigen::VectorXd lasers;    // k entries, m
-  Pose reference;            // ref_*; NaN when not measured (or when the file has no ref_ columns)
+  Eigen::VectorXd swivels;   // m entries when the file has swivel_ columns, rad
+  Eigen::Vector2d inclination = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+  double imu_yaw = std::numeric_limits<double>::quiet_NaN();  // rad
+  Pose reference;  // ref_*; NaN when not measured (or when the file has no ref_ columns)
   double temperature_c = std::numeric_limits<double>::quiet_NaN();  // degrees Celsius
   int line = 0;  // the row's line in the file it was read from (1-based); 0 when not read
 };
 
 struct Recording {
   Metadata metadata;
-  int num_cables = 0;            // m >= 1
-  int num_lasers = 0;            // k >= 1
-  bool has_reference = false;    // the file has the six ref_* columns
-  bool has_temperature = false;  // the file has the temperature_c column
+  int num_cables = 0;             // m >= 1
+  int num_lasers = 0;             // k >= 0 (0: no laser columns)
+  bool has_swivel = false;        // the file has swivel_1..swivel_m
+  bool has_inclinometer = false;  // the file has incl_roll and incl_pitch
+  bool has_imu_yaw = false;       // the file has imu_yaw
+  bool has_reference = false;     // the file has the six ref_* columns
+  bool has_temperature = false;   // the file has the temperature_c column
   std::vector<RecordedPose> poses;
   std::vector<std::string> header;  // the column names in the file's order; empty when not read
 };
@@ -102,8 +111,10 @@ Status write_recording(const Recording& recording, const std::string& path);
 Result<std::string> format_recording(const Recording& recording);
 
 // Checks a recording against the robot model it will be used with: cable count m and laser
-// count k. kFailedPrecondition with a message naming both counts on mismatch. (A different robot
-// name is not an error: a nominal and a measured config of one robot may carry different names.)
+// count k (a recording without laser columns fits any config), swivel columns only for cables
+// with a swivel pulley. kFailedPrecondition with a message naming both counts on mismatch. (A
+// different robot name is not an error: a nominal and a measured config of one robot may carry
+// different names.)
 Status check_against_model(const Recording& recording, const RobotModel& model);
 
 // ---------------------------------------------------------------------------------------------
@@ -153,8 +164,8 @@ Result<MeasurementSet> to_measurement_set(const Recording& recording,
                                           const SensorNoise& defaults = {});
 
 // The recording of a measurement set (poses numbered 0, 1, ...; the noise sigmas go to the
-// metadata next to `metadata`'s entries). Refuses sets whose poses disagree on sizes, or with no
-// laser.
+// metadata next to `metadata`'s entries). Refuses sets whose poses disagree on sizes. The
+// swivel / inclinometer / IMU columns are written when some pose has such a reading.
 Result<Recording> from_measurement_set(const MeasurementSet& set, Metadata metadata = {});
 
 // ---------------------------------------------------------------------------------------------

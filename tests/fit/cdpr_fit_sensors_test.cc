@@ -1,0 +1,113 @@
+// Issue 18 end to end through the cdpr-fit binary: a recording without a laser, with swivel
+// angles and an inclinometer, simulated from a truth with hidden mounting errors, calibrated and
+// diagnosed.
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "cdpr/config/robot_config.hpp"
+#include "cdpr/recording/recording.hpp"
+#include "fit_process.hpp"
+
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::Not;
+using Process = cdpr::fit_test::ProcessResult;
+using cdpr::fit_test::slurp;
+
+const std::string kSource = CDPR_SOURCE_DIR;
+const std::string kNominal = kSource + "/config/mini.yaml";
+const std::string kTruth = kSource + "/config/mini-measured.yaml";
+
+class FitSensors : public cdpr::fit_test::FitProcessTest {
+ protected:
+  FitSensors() : FitProcessTest("cdpr_fit_sensors_test_") {}
+
+  // The measured MINI with an inclinometer tilted on its mount and swivel encoders whose zeros
+  // are off (besides the pulley reference directions, which differ from the nominal config's).
+  std::string truth_with_mounting_errors() const {
+    std::string yaml = slurp(kTruth);
+    const std::string from = "  force_sensor: {gain: 2, offset: 0}\n";
+    const auto at = yaml.find(from);
+    EXPECT_NE(at, std::string::npos);
+    yaml.insert(at + from.size(), "  swivel_encoder: {zero: 0.02}\n");
+    yaml += "inclinometer: {mounting_rpy: [0.012, -0.017, 0]}\n";
+    const std::string out = path("truth.yaml");
+    std::ofstream(out) << yaml;
+    return out;
+  }
+};
+
+TEST_F(FitSensors, SwivelAndInclinometerRecordingIsCalibratedAndDiagnosedWithoutALaser) {
+  const std::string truth = truth_with_mounting_errors();
+  const std::string rec = path("rec.csv");
+  const Process s =
+      fit({"simulate", "--config", truth, "--nominal", kNominal, "--physics", "elastic", "--design",
+           "25", "--channels", "swivel,inclinometer", "--seed", "4", "--out", rec});
+  ASSERT_EQ(s.status, 0) << s.err << s.out;
+  EXPECT_THAT(s.out, HasSubstr("swivel angles, inclinometer"));
+
+  // The file has the new columns and no laser column; it reads back.
+  const std::string text = slurp(rec);
+  EXPECT_THAT(text, HasSubstr("swivel_8,incl_roll,incl_pitch"));
+  EXPECT_THAT(text, HasSubstr("# noise_swivel_rad: "));
+  EXPECT_THAT(text, Not(HasSubstr("laser_1")));
+  auto parsed = cdpr::recording::read_recording(rec);
+  ASSERT_TRUE(parsed.ok()) << parsed.status().to_string();
+  EXPECT_EQ(parsed->num_lasers, 0);
+
+  const std::string cal = path("calibrated.yaml"), report = path("report.json");
+  const Process c = fit(
+      {"calibrate", "--config", kNominal, "--recording", rec, "--out", cal, "--report", report});
+  ASSERT_EQ(c.status, 0) << c.err << c.out;
+  EXPECT_THAT(c.out, HasSubstr("fixed by the home pose and gravity only"));
+  const nlohmann::json j = nlohmann::json::parse(slurp(report));
+  EXPECT_TRUE(j.at("converged").get<bool>());
+  const std::string estimated = j.dump();
+  EXPECT_THAT(estimated, HasSubstr("swivel-zeros"));
+  EXPECT_THAT(estimated, HasSubstr("inclinometer-mounting"));
+  EXPECT_THAT(estimated, Not(HasSubstr("laser-plane")));
+
+  auto nominal = cdpr::config::load_robot_config(kNominal);
+  auto real = cdpr::config::load_robot_config(truth);
+  auto calibrated = cdpr::config::load_robot_config(cal);
+  ASSERT_TRUE(nominal.ok() && real.ok());
+  ASSERT_TRUE(calibrated.ok()) << calibrated.status().to_string();
+  auto rms = [](const cdpr::RobotModel& a, const cdpr::RobotModel& b) {
+    return std::sqrt((a.frame_anchors - b.frame_anchors).colwise().squaredNorm().mean());
+  };
+  const double before = rms(*nominal, *real), after = rms(*calibrated, *real);
+  EXPECT_LT(after, 0.5 * before) << before << " m -> " << after << " m";
+  // The inclinometer's tilt on its mount is found to a fraction of its 1 degree.
+  EXPECT_NEAR(calibrated->inclinometer.mounting_rpy(0), 0.012, 2e-3);
+  EXPECT_NEAR(calibrated->inclinometer.mounting_rpy(1), -0.017, 2e-3);
+  ASSERT_EQ(calibrated->swivel_encoders.size(), 8u);
+
+  // diagnose: the nominal model, calibrated with these channels, explains the recording.
+  const std::string djson = path("diagnose.json");
+  const Process d = fit({"diagnose", "--config", kNominal, "--recording", rec, "--json", djson,
+                         "--bootstrap", "20", "--folds", "3", "--seed", "2"});
+  EXPECT_EQ(d.status, 0) << d.err << d.out;
+  const nlohmann::json dj = nlohmann::json::parse(slurp(djson));
+  EXPECT_EQ(dj.at("verdict"), "no_mismatch") << d.out;
+  bool swivel_channel = false;
+  for (const auto& ch : dj.at("channels")) {
+    swivel_channel = swivel_channel || ch.dump().find("swivel angles") != std::string::npos;
+  }
+  EXPECT_TRUE(swivel_channel) << dj.at("channels").dump();
+}
+
+TEST_F(FitSensors, UnknownChannelIsRefused) {
+  const Process s = fit({"simulate", "--config", kTruth, "--design", "8", "--channels", "sonar",
+                         "--out", path("x.csv")});
+  EXPECT_NE(s.status, 0);
+  EXPECT_THAT(s.err + s.out, HasSubstr("unknown channel 'sonar'"));
+}
+
+}  // namespace
