@@ -101,7 +101,9 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
       "comma-separated parameters to estimate (default: anchors, offsets, "
       "laser-plane); any of:";
   for (const std::string& n : estimate_names()) estimate_help += " " + n;
-  auto* c = app.add_subcommand("calibrate", "identify the robot from a recording");
+  auto* c = app.add_subcommand("calibrate",
+                               "identify the robot from a recording (exit status: 0 passed, 3 fit "
+                               "test failed, 4 not trustworthy)");
   c->add_option("--config", cal.config, "nominal robot (YAML): the starting point")
       ->required()
       ->check(CLI::ExistingFile);
@@ -122,6 +124,10 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
       ->check(CLI::PositiveNumber);
   c->add_option("--out", cal.out, "calibrated robot config to write (YAML)");
   c->add_option("--report", cal.report, "JSON report to write");
+  c->add_option("--fit-alpha", cal.fit_alpha,
+                "significance level of the chi-square fit test (reject when p is below it)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   c->add_option("--truth", cal.truth,
                 "true robot (simulation studies): report the frame anchor errors before and after")
       ->check(CLI::ExistingFile);
@@ -314,6 +320,7 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
     return 1;
   }
   log.info("{} done in {:.3f} s", command, seconds);
+  if (!result->notice.empty()) err << result->notice;
   if (json) {
     result->json["ok"] = true;
     out << result->json.dump(2) << "\n";
