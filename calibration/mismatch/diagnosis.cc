@@ -1439,10 +1439,15 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   // poses that add the most information on its parameters (log det of its projected
   // information, the identification profiled out; greedy over the grid at the planned
   // pretension) are proposed; measured and appended, they decide it.
+  // When the screen's overall test already fails (the verdict will be "mismatch unexplained"),
+  // more poses are the next step anyway: the candidate with the lowest p-value is then the suspect
+  // whatever its corrected p-value.
   if (d.accepted.empty() && options.follow_up_poses > 0) {
+    const bool unexplained_misfit = d.screen.p_value < alpha;
     const CandidateScreen* suspect = nullptr;
     for (const auto& cs : d.screen.candidates) {
-      if (cs.modelled || cs.rank == 0 || !(cs.p_adjusted < options.suspect_p)) continue;
+      if (cs.modelled || cs.rank == 0) continue;
+      if (!(cs.p_adjusted < options.suspect_p) && !unexplained_misfit) continue;
       if (suspect == nullptr || cs.p_value < suspect->p_value) suspect = &cs;
     }
     if (suspect != nullptr) {

@@ -119,7 +119,9 @@ struct DiagnosisOptions {
   // (Diagnosis::follow_up). The corrected p-value is a family-wise error rate, so suspect_p is
   // about the fraction of recordings of a correct model that get a suspect (and cost
   // follow_up_poses poses of robot time); docs/mismatch-benchmark.md measures the trade against
-  // detection. 0: never; above 1: always (the lowest p-value).
+  // detection. 0: never; above 1: always (the lowest p-value). When the screen's overall misfit
+  // test fails and nothing is named (verdict "mismatch unexplained"), the candidate with the lowest
+  // p-value is a suspect whatever this threshold (more poses are the next step there anyway).
   double suspect_p = 0.2;
   int follow_up_poses = 20;
   // The first accepted effect must also be seen by the linear screen: its screen p-value
