@@ -976,6 +976,18 @@ void print_robot(const Robot& r, const Residual& baseline, const std::vector<Mag
               pct(pair.first, pair.second), pair.first, pair.second);
   std::printf("  false findings on null data             %6.1f %%  (%d/%d)   target <= 5 %%\n",
               pct(null.first, null.second), null.first, null.second);
+  // Suspects on null data: each costs DiagnosisOptions::follow_up_poses poses of robot time.
+  int null_runs = 0, null_suspects = 0;
+  for (const auto& s : stats) {
+    if (s.c->group != "null") continue;
+    for (const auto& run : s.runs) {
+      if (!run.ok) continue;
+      ++null_runs;
+      null_suspects += run.follow_up || !run.follow_up_error.empty() ? 1 : 0;
+    }
+  }
+  std::printf("  suspects (follow-up poses) on null data %6.1f %%  (%d/%d)   target <= 20 %%\n",
+              pct(null_suspects, null_runs), null_suspects, null_runs);
   std::printf("  held-out RMS reduction (effect present, median) %6.1f %%   target >= 80 %%\n",
               reduction(false));
   std::printf("  held-out misfit in excess of the noise, reduction (median) %6.1f %%\n",
