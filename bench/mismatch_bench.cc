@@ -578,6 +578,12 @@ struct RunResult {
   // A suspect with no effect named: its follow-up poses appended, the re-run decides.
   bool follow_up = false, follow_up_named = false;
   std::string follow_up_error;  // the follow-up poses could not be measured or diagnosed
+  // The first diagnosis's most significant unmodelled screen candidate (the suspect when nothing
+  // is named and it passes DiagnosisOptions::suspect_p): its p-values before / after Holm.
+  std::string top_id;
+  double top_p = 1.0, top_p_adjusted = 1.0;
+  bool first_named = false;     // the first diagnosis (before any appended poses) named an effect
+  std::string screen_channels;  // the screen's overall and per-channel misfit p-values
   double held_before = 0, held_after = 0;
   double len_rms_before = 0, len_rms_after = 0;  // "cable lengths" channel, m
   double param_error = std::nan("");             // RMS relative error of the fitted parameters
@@ -664,6 +670,17 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     }
   }
   if (const cdpr::CandidateScreen* b = d->screen.best()) out.screen_families = {b->family};
+  for (const auto& cs : d->screen.candidates) {
+    if (cs.modelled || cs.rank == 0 || !(cs.p_value < out.top_p)) continue;
+    out.top_id = cs.id;
+    out.top_p = cs.p_value;
+    out.top_p_adjusted = cs.p_adjusted;
+  }
+  out.first_named = !d->accepted.empty();
+  out.screen_channels = fmt("overall p %.3g", d->screen.p_value);
+  for (const auto& ch : d->screen.channels) {
+    out.screen_channels += fmt(", %s p %.3g", ch.name.c_str(), ch.p_value);
+  }
   out.named_families = accepted_families(*d);
   out.param_error = parameter_error(*d, r, c);
   const std::vector<std::string> present = c.keys();
@@ -959,6 +976,18 @@ void print_robot(const Robot& r, const Residual& baseline, const std::vector<Mag
               pct(pair.first, pair.second), pair.first, pair.second);
   std::printf("  false findings on null data             %6.1f %%  (%d/%d)   target <= 5 %%\n",
               pct(null.first, null.second), null.first, null.second);
+  // Suspects on null data: each costs DiagnosisOptions::follow_up_poses poses of robot time.
+  int null_runs = 0, null_suspects = 0;
+  for (const auto& s : stats) {
+    if (s.c->group != "null") continue;
+    for (const auto& run : s.runs) {
+      if (!run.ok) continue;
+      ++null_runs;
+      null_suspects += run.follow_up || !run.follow_up_error.empty() ? 1 : 0;
+    }
+  }
+  std::printf("  suspects (follow-up poses) on null data %6.1f %%  (%d/%d)   target <= 20 %%\n",
+              pct(null_suspects, null_runs), null_suspects, null_runs);
   std::printf("  held-out RMS reduction (effect present, median) %6.1f %%   target >= 80 %%\n",
               reduction(false));
   std::printf("  held-out misfit in excess of the noise, reduction (median) %6.1f %%\n",
@@ -1143,6 +1172,12 @@ int main(int argc, char** argv) {
       if (res.follow_up) {
         std::printf("        suspect: follow-up poses appended, re-run %s\n",
                     res.follow_up_named ? "named an effect" : "named nothing");
+      }
+      if (res.ok) {
+        std::printf("        screen top: %s p %.4g, Holm %.4g, first run %s\n",
+                    res.top_id.empty() ? "-" : res.top_id.c_str(), res.top_p, res.top_p_adjusted,
+                    res.first_named ? "named" : "named nothing");
+        std::printf("        screen misfit: %s\n", res.screen_channels.c_str());
       }
       if (verbose && res.ok) std::printf("%s\n", res.text.c_str());
       std::fflush(stdout);

@@ -396,7 +396,8 @@ struct Built {
   std::vector<double*> geometry_blocks;  // free geometry blocks, column order
   std::vector<int> geometry_sizes;       // tangent size of each
   std::vector<std::string> names, units;
-  std::vector<double*> value_ptr;  // ambient value of each geometry column
+  std::vector<double*> value_ptr;    // ambient value of each geometry column
+  std::vector<double> lower, upper;  // physical range of each geometry column (ParameterBounds)
   Eigen::Matrix3Xi anchor_columns;
   int num_geometry = 0;
 
@@ -410,9 +411,19 @@ struct Built {
   bool shared_stiffness = false;
 };
 
+// A geometry block of `size` coordinates; `half_range` bounds each free coordinate to its
+// starting value +- half_range (infinity: unbounded), or, with `absolute`, to [lo, hi] given in
+// `absolute` (lo, hi pairs per coordinate).
+struct BlockRange {
+  double half_range = std::numeric_limits<double>::infinity();
+  bool absolute = false;
+  double lo = -std::numeric_limits<double>::infinity();
+  double hi = std::numeric_limits<double>::infinity();
+};
+
 void add_geometry_block(Built& B, double* ptr, int size, const std::vector<bool>& estimated,
                         const std::vector<std::string>& names, const std::string& unit,
-                        bool any_free) {
+                        bool any_free, const BlockRange& range) {
   B.problem.AddParameterBlock(ptr, size);
   std::vector<int> fixed;
   for (int q = 0; q < size; ++q) {
@@ -430,6 +441,12 @@ void add_geometry_block(Built& B, double* ptr, int size, const std::vector<bool>
     B.names.push_back(names[static_cast<std::size_t>(q)]);
     B.units.push_back(unit);
     B.value_ptr.push_back(ptr + q);
+    const double lo = range.absolute ? range.lo : ptr[q] - range.half_range;
+    const double hi = range.absolute ? range.hi : ptr[q] + range.half_range;
+    B.lower.push_back(lo);
+    B.upper.push_back(hi);
+    if (std::isfinite(lo)) B.problem.SetParameterLowerBound(ptr, q, lo);
+    if (std::isfinite(hi)) B.problem.SetParameterUpperBound(ptr, q, hi);
   }
 }
 
@@ -506,7 +523,9 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     k.estimated_stiffness = ea_estimated;
     B->constants.push_back(k);
   }
-  // Geometry blocks in a fixed order: a, b, o, s, e, g, c, lasers.
+  // Geometry blocks in a fixed order: a, b, o, s, e, g, c, lasers, each free coordinate bounded
+  // to its physical range (ParameterBounds).
+  const ParameterBounds& bounds = opt.bounds;
   const char* axis = "xyz";
   for (int i = 0; i < m; ++i) {
     std::vector<bool> est(3);
@@ -518,7 +537,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     }
     const int before = static_cast<int>(B->names.size());
     add_geometry_block(*B, B->a[static_cast<std::size_t>(i)].data(), 3, est, nm, "m",
-                       opt.estimate_frame_anchors);
+                       opt.estimate_frame_anchors, {bounds.frame_anchor_m});
     int col = before;
     for (int q = 0; q < 3; ++q) {
       if (col < static_cast<int>(B->names.size()) &&
@@ -537,24 +556,37 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       nm[static_cast<std::size_t>(q)] = "b_" + std::to_string(i + 1) + "." + axis[q];
     }
     add_geometry_block(*B, B->b[static_cast<std::size_t>(i)].data(), 3, est, nm, "m",
-                       opt.estimate_platform_anchors);
+                       opt.estimate_platform_anchors, {bounds.platform_anchor_m});
   }
   auto scalar_blocks = [&](std::vector<double>& v, const char* prefix, const char* unit, bool on,
-                           int count) {
+                           int count, const auto& range_of) {
     for (int i = 0; i < m; ++i) {
       const bool free_i = on && i < count;
       add_geometry_block(
           *B, &v[static_cast<std::size_t>(i)], 1, {true},
           {std::string(prefix) + (count == 1 ? std::string("") : "_" + std::to_string(i + 1))},
-          unit, free_i);
+          unit, free_i, range_of(i));
     }
   };
-  scalar_blocks(B->o, "o", "m", opt.estimate_length_offsets, m);
-  scalar_blocks(B->s, "s", "-", opt.estimate_length_scales, m);
+  auto relative = [](double half) { return [half](int) { return BlockRange{half}; }; };
+  scalar_blocks(B->o, "o", "m", opt.estimate_length_offsets, m, relative(bounds.length_offset_m));
+  scalar_blocks(B->s, "s", "-", opt.estimate_length_scales, m, relative(bounds.length_scale));
+  // EA = EA_model (1 + e) within [ea_factor_min, ea_factor_max] x EA_model.
   scalar_blocks(B->e, "ea_scale", "-", ea_estimated,
-                opt.estimate_stiffness == StiffnessEstimate::kShared ? 1 : m);
-  scalar_blocks(B->g, "force_gain", "-", opt.estimate_force_gains, m);
-  scalar_blocks(B->c, "force_offset", "N", opt.estimate_force_offsets, m);
+                opt.estimate_stiffness == StiffnessEstimate::kShared ? 1 : m, [&](int) {
+                  BlockRange r;
+                  r.absolute = true;
+                  r.lo = bounds.ea_factor_min - 1.0;
+                  r.hi = bounds.ea_factor_max - 1.0;
+                  return r;
+                });
+  scalar_blocks(B->g, "force_gain", "-", opt.estimate_force_gains, m, relative(bounds.force_gain));
+  // The offset is in raw units (gain x N): a fraction of the cable's largest tension, read.
+  scalar_blocks(B->c, "force_offset", "N", opt.estimate_force_offsets, m, [&](int i) {
+    const auto ui = static_cast<std::size_t>(i);
+    return BlockRange{bounds.force_offset_fraction * robot.cables[ui].f_max *
+                      std::abs(robot.force_sensors[ui].gain)};
+  });
   B->lasers.resize(static_cast<std::size_t>(nl));
   for (int l = 0; l < nl; ++l) {
     LaserBlocks& L = B->lasers[static_cast<std::size_t>(l)];
@@ -568,15 +600,15 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     const std::string p = "laser_" + std::to_string(l + 1);
     add_geometry_block(*B, L.origin.data(), 3, {true, true, true},
                        {p + ".origin.x", p + ".origin.y", p + ".origin.z"}, "m",
-                       opt.estimate_laser_origin);
+                       opt.estimate_laser_origin, {bounds.laser_origin_m});
     add_geometry_block(*B, L.direction.data(), 2, {true, true},
                        {p + ".direction.u", p + ".direction.v"}, "rad",
-                       opt.estimate_laser_direction);
+                       opt.estimate_laser_direction, {bounds.laser_direction_rad});
     add_geometry_block(*B, L.normal.data(), 2, {true, true},
                        {p + ".plane.normal.u", p + ".plane.normal.v"}, "rad",
-                       opt.estimate_laser_plane && !fix_plane);
+                       opt.estimate_laser_plane && !fix_plane, {bounds.plane_normal_rad});
     add_geometry_block(*B, &L.c, 1, {true}, {p + ".plane.c"}, "m",
-                       opt.estimate_laser_plane && !fix_plane);
+                       opt.estimate_laser_plane && !fix_plane, {bounds.plane_offset_m});
   }
   // Issue 18 channels: free only when estimated and measured somewhere.
   {
@@ -1368,6 +1400,10 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
       pe.value = *B.value_ptr[static_cast<std::size_t>(q)];
       pe.initial = b0 ? *(*b0)->value_ptr[static_cast<std::size_t>(q)] : kNaN;
       pe.std_dev = std::numeric_limits<double>::infinity();
+      pe.lower = B.lower[static_cast<std::size_t>(q)];
+      pe.upper = B.upper[static_cast<std::size_t>(q)];
+      const double tol = 1e-7 * (pe.upper - pe.lower);
+      pe.at_bound = pe.value <= pe.lower + tol || pe.value >= pe.upper - tol;
     }
   }
   rep.pose_std.assign(B.poses.size(), Eigen::Matrix<double, 6, 1>::Zero());
@@ -1399,10 +1435,19 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   }
 
   // Warnings.
-  char buf[256];
+  char buf[512];
   for (const std::string& n : B.notes) rep.warnings.push_back(n);
   if (!rep.converged) {
     rep.warnings.push_back("the solver did not converge: " + summary.message);
+  }
+  for (const ParameterEstimate& pe : rep.parameters) {
+    if (!pe.at_bound) continue;
+    std::snprintf(buf, sizeof(buf),
+                  "%s = %.6g %s ended on the %s bound of its physical range [%.6g, %.6g]: the data "
+                  "push it outside what the robot can be (a missing effect or a bad recording)",
+                  pe.name.c_str(), pe.value, pe.unit.c_str(),
+                  pe.value <= 0.5 * (pe.lower + pe.upper) ? "lower" : "upper", pe.lower, pe.upper);
+    rep.warnings.emplace_back(buf);
   }
   if (rep.dof > 0) {
     const double z = (rep.chi2 - rep.dof) / std::sqrt(2.0 * rep.dof);
@@ -1432,6 +1477,13 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   }
   rep.total_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return rep;
+}
+
+std::vector<std::string> IdentificationReport::parameters_at_bound() const {
+  std::vector<std::string> v;
+  for (const ParameterEstimate& pe : parameters)
+    if (pe.at_bound) v.push_back(pe.name);
+  return v;
 }
 
 std::string IdentificationReport::brief_report() const {

@@ -442,8 +442,12 @@ TEST_F(CdprFit, PaperMethodRunsAndReportsItsIterations) {
   const ProcessResult r =
       fit({"calibrate", "--method", "paper", "--config", kNominal, "--recording", rec,
            "--max-iterations", "20", "--out", out, "--json"});
-  ASSERT_EQ(r.status, 0) << r.err;
+  // 20 iterations do not reach the paper's stopping rule: the result is written but does not
+  // pass (exit status 4, a notice on stderr).
+  ASSERT_EQ(r.status, 4) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("did not converge (exit status 4)"));
   const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j.at("exit_status").get<int>(), 4);
   EXPECT_EQ(j.at("method"), "paper");
   EXPECT_GT(j.at("iterations").get<int>(), 0);
   EXPECT_GT(j.at("fk_solves").get<long>(), 0);
@@ -496,3 +500,59 @@ TEST_F(CdprFit, LargeRobotCalibratesThroughTheCli) {
 }
 
 }  // namespace
+
+// calibrate's verdict in its exit status (docs/cdpr-fit.md "Verdict and exit status"): the
+// measured MINI recorded through the nominal model passes (0); the same recording with a 0.3 %
+// drum scale error per winch (alternating signs, on the length paid out from the home pose, row 0)
+// fails the fit test (3), still writes --out as asked, and says so with the next step.
+TEST_F(CdprFit, CalibrateExitStatusSaysWhetherTheModelPassed) {
+  const std::string rec = path("elastic.csv");
+  ProcessResult r = fit({"simulate", "--config", kTruth, "--nominal", kNominal, "--physics",
+                         "elastic", "--design", "25", "--seed", "3", "--out", rec});
+  ASSERT_EQ(r.status, 0) << r.err;
+  const std::string cal = path("calibrated.yaml"), report = path("report.json");
+  r = fit(
+      {"calibrate", "--config", kNominal, "--recording", rec, "--out", cal, "--report", report});
+  ASSERT_EQ(r.status, 0) << r.err << r.out;
+  EXPECT_THAT(r.out, HasSubstr("verdict: PASSED"));
+  EXPECT_THAT(r.err, Not(HasSubstr("did not pass")));
+  nlohmann::json j = nlohmann::json::parse(slurp(report));
+  EXPECT_EQ(j.at("exit_status").get<int>(), 0);
+  EXPECT_EQ(j.at("fit_test").at("verdict"), "passed");
+  const double p_null = j.at("fit_test").at("p_value").get<double>();
+  EXPECT_GE(p_null, 0.01);
+  EXPECT_GT(j.at("fit_test").at("dof").get<int>(), 100);
+
+  auto recording = cdpr::recording::read_recording(rec);
+  ASSERT_TRUE(recording.ok()) << recording.status().to_string();
+  const Eigen::VectorXd home = recording->poses.front().lengths;
+  const double signs[8] = {1, -1, 1, -1, -1, 1, -1, 1};
+  for (auto& p : recording->poses) {
+    for (int i = 0; i < p.lengths.size(); ++i) {
+      p.lengths(i) = home(i) + (1.0 + 0.003 * signs[i % 8]) * (p.lengths(i) - home(i));
+    }
+  }
+  const std::string drum = path("drum.csv");
+  ASSERT_TRUE(cdpr::recording::write_recording(*recording, drum).ok());
+  const std::string cal2 = path("calibrated-drum.yaml"), report2 = path("report-drum.json");
+  r = fit(
+      {"calibrate", "--config", kNominal, "--recording", drum, "--out", cal2, "--report", report2});
+  EXPECT_EQ(r.status, 3) << r.err << r.out;
+  EXPECT_THAT(r.out, HasSubstr("verdict: FIT REJECTED"));
+  EXPECT_THAT(r.out, HasSubstr("next step: cdpr-fit diagnose --config " + kNominal));
+  EXPECT_THAT(r.err, HasSubstr("the calibrated model did not pass (fit_rejected, exit status 3)"));
+  EXPECT_THAT(r.err, HasSubstr(cal2 + " was written anyway"));
+  ASSERT_TRUE(fs::exists(cal2));
+  EXPECT_THAT(slurp(cal2), HasSubstr("# Verdict: fit_rejected: this model DID NOT PASS"));
+  j = nlohmann::json::parse(slurp(report2));
+  EXPECT_EQ(j.at("exit_status").get<int>(), 3);
+  EXPECT_EQ(j.at("fit_test").at("verdict"), "fit_rejected");
+  EXPECT_LT(j.at("fit_test").at("p_value").get<double>(), 0.01);
+  EXPECT_FALSE(j.at("fit_test").at("reasons").empty());
+
+  // The same with --json: stdout is the document, the notice is on stderr.
+  r = fit({"calibrate", "--config", kNominal, "--recording", drum, "--json"});
+  EXPECT_EQ(r.status, 3);
+  EXPECT_EQ(nlohmann::json::parse(r.out).at("fit_test").at("verdict"), "fit_rejected");
+  EXPECT_THAT(r.err, HasSubstr("did not pass"));
+}

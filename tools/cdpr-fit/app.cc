@@ -163,7 +163,9 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
       "each channel the recording has: laser-plane, swivel-zeros, inclinometer-mounting, "
       "imu-yaw-zero); any of:";
   for (const std::string& n : estimate_names()) estimate_help += " " + n;
-  auto* c = app.add_subcommand("calibrate", "identify the robot from a recording");
+  auto* c = app.add_subcommand("calibrate",
+                               "identify the robot from a recording (exit status: 0 passed, 3 fit "
+                               "test failed, 4 not trustworthy)");
   c->add_option("--config", cal.config, "nominal robot (YAML): the starting point")
       ->required()
       ->check(CLI::ExistingFile);
@@ -184,6 +186,10 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
       ->check(CLI::PositiveNumber);
   c->add_option("--out", cal.out, "calibrated robot config to write (YAML)");
   c->add_option("--report", cal.report, "JSON report to write");
+  c->add_option("--fit-alpha", cal.fit_alpha,
+                "significance level of the chi-square fit test (reject when p is below it)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   c->add_option("--truth", cal.truth,
                 "true robot (simulation studies): report the frame anchor errors before and after")
       ->check(CLI::ExistingFile);
@@ -394,6 +400,7 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
     return kExitFailed;
   }
   log.info("{} done in {:.3f} s", command, seconds);
+  if (!result->notice.empty()) err << result->notice;
   if (json) {
     result->json["ok"] = true;
     out << report::json_text(result->json) << "\n";

@@ -2,6 +2,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "cdpr/calibration/calibration_verdict.hpp"
 #include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/paper_method.hpp"
@@ -141,12 +142,12 @@ constexpr int kManyPoses = 20000;
 // Writes the calibrated config (with a comment header) and the JSON report together: both or,
 // when one cannot be written, neither (io::AtomicFileSet).
 Status write_outputs(const CalibrateArgs& args, const RobotModel& calibrated,
-                     const nlohmann::json& j) {
+                     const nlohmann::json& j, const std::string& verdict_line = "") {
   io::AtomicFileSet outputs;
   if (!args.out.empty()) {
     const std::string yaml = "# Calibrated by cdpr-fit calibrate --method " + args.method +
                              " from " + args.config + " and " + args.recording + " (" +
-                             recording::utc_timestamp() + ").\n" +
+                             recording::utc_timestamp() + ").\n" + verdict_line +
                              "# Winch length_offset and drum size include the identified encoder "
                              "offsets and scales.\n" +
                              config::save_robot_config(calibrated);
@@ -196,6 +197,79 @@ std::string wrote_text(const CalibrateArgs& args) {
   if (!args.out.empty()) h += "\nwrote " + args.out + "\n";
   if (!args.report.empty()) h += "wrote " + args.report + "\n";
   return h;
+}
+
+// The verdict as the exit status says it (docs/cdpr-fit.md): 0 passed, 3 fit test failed,
+// 4 not trustworthy.
+int exit_status_of(const CalibrationVerdict& v) {
+  switch (v.kind) {
+    case CalibrationVerdict::Kind::kPassed:
+      return 0;
+    case CalibrationVerdict::Kind::kFitRejected:
+      return 3;
+    case CalibrationVerdict::Kind::kNotTrustworthy:
+      return 4;
+  }
+  return 4;
+}
+
+std::string diagnose_command(const CalibrateArgs& args) {
+  return "cdpr-fit diagnose --config " + args.config + " --recording " + args.recording;
+}
+
+// The next step for a calibration that did not pass.
+std::string next_step(const CalibrationVerdict& v, const CalibrateArgs& args) {
+  if (v.kind == CalibrationVerdict::Kind::kFitRejected) {
+    return diagnose_command(args) +
+           "  (finds which effect the model misses; its --out writes a model that carries it)";
+  }
+  if (!v.at_bound.empty()) {
+    return diagnose_command(args) +
+           "  (a parameter ran to its physical limit: a missing effect or a bad recording; "
+           "estimate fewer parameters with --estimate if the data cannot determine it)";
+  }
+  if (!v.converged) {
+    return "check the recording and the starting config; " + diagnose_command(args);
+  }
+  return "measure more or better-spread poses (cdpr-fit design-poses), or estimate fewer "
+         "parameters; " +
+         diagnose_command(args);
+}
+
+nlohmann::json verdict_json(const CalibrationVerdict& v, const std::string& next, int status) {
+  nlohmann::json j;
+  j["verdict"] = to_string(v.kind);
+  j["passed"] = v.passed();
+  j["exit_status"] = status;
+  j["chi2"] = v.chi2;
+  j["dof"] = v.dof;
+  j["p_value"] = v.p_value;
+  j["alpha"] = v.alpha;
+  j["converged"] = v.converged;
+  j["at_bound"] = v.at_bound;
+  j["reasons"] = v.reasons;
+  j["next_step"] = v.passed() ? nlohmann::json(nullptr) : nlohmann::json(next);
+  return j;
+}
+
+std::string verdict_text(const CalibrationVerdict& v, const std::string& next, int status) {
+  std::ostringstream h;
+  char buf[256];
+  std::snprintf(buf, sizeof(buf),
+                "\nfit test: chi-square %.1f for %d degrees of freedom (chi2/dof %.2f), p = %.3g "
+                "(the fit is rejected below %.3g)\n",
+                v.chi2, v.dof, v.dof > 0 ? v.chi2 / v.dof : 0.0, v.p_value, v.alpha);
+  h << buf;
+  if (v.passed()) {
+    h << "verdict: PASSED (exit status 0)\n";
+    return h.str();
+  }
+  h << "verdict: "
+    << (v.kind == CalibrationVerdict::Kind::kFitRejected ? "FIT REJECTED" : "NOT TRUSTWORTHY")
+    << " (exit status " << status << "): the calibrated model did not pass\n";
+  for (const std::string& r : v.reasons) h << "  - " << r << "\n";
+  h << "next step: " << next << "\n";
+  return h.str();
 }
 
 // The paper's method (paper_method.hpp): anchors only, no covariance.
@@ -250,6 +324,13 @@ Result<Output> calibrate_paper(const CalibrateArgs& args, const RobotModel& nomi
   Output out;
   out.json = std::move(j);
   out.human = report::paper_method_text(in) + wrote_text(args);
+  if (!r.converged) {
+    // No covariance and no chi-square here: only convergence can be judged.
+    out.exit_status = 4;
+    out.json["exit_status"] = 4;
+    out.notice = "cdpr-fit calibrate: the paper's iteration did not converge (exit status 4): " +
+                 r.termination + "\n";
+  }
   return out;
 }
 
@@ -372,10 +453,41 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   in.context = context_of(args, *rec, warnings);
   in.context.estimated = estimated_items(options);
   nlohmann::json j = report::identification_json(in);
-  CDPR_RETURN_IF_ERROR(write_outputs(args, calibrated, j));
+
+  // The verdict: fit test, convergence, physical ranges, the identification's own checks.
+  CalibrationVerdictOptions vo;
+  vo.alpha = args.fit_alpha;
+  const CalibrationVerdict verdict = judge_calibration(r, vo);
+  const int status = exit_status_of(verdict);
+  const std::string next = next_step(verdict, args);
+  j["fit_test"] = verdict_json(verdict, next, status);
+  j["exit_status"] = status;
+  const std::string verdict_line = verdict.passed()
+                                       ? std::string("# Verdict: passed.\n")
+                                       : "# Verdict: " + std::string(to_string(verdict.kind)) +
+                                             ": this model DID NOT PASS the calibration checks (" +
+                                             verdict.reasons.front() + ").\n";
+  CDPR_RETURN_IF_ERROR(write_outputs(args, calibrated, j, verdict_line));
   Output out;
+  out.exit_status = status;
   out.json = std::move(j);
-  out.human = report::identification_text(in) + wrote_text(args);
+  out.human =
+      report::identification_text(in) + verdict_text(verdict, next, status) + wrote_text(args);
+  if (!verdict.passed()) {
+    std::string n = "cdpr-fit calibrate: the calibrated model did not pass (" +
+                    std::string(to_string(verdict.kind)) + ", exit status " +
+                    std::to_string(status) + "): " + verdict.reasons.front() + "\n";
+    if (!args.out.empty()) {
+      n += "cdpr-fit calibrate: " + args.out +
+           " was written anyway, as asked; do not use it on the robot before the cause is "
+           "found\n";
+    }
+    n += "cdpr-fit calibrate: next step: " + next + "\n";
+    out.notice = n;
+    if (!args.out.empty()) {
+      out.human += "NOTE: " + args.out + " holds a model that did not pass (see the verdict)\n";
+    }
+  }
   return out;
 }
 

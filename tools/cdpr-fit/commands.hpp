@@ -22,8 +22,12 @@ struct Output {
   nlohmann::json json;
   std::string human;
   // The process exit status when the command succeeded: 0, or a finding the command reports
-  // through it (diagnose: 3 mismatch found, 4 inconclusive). 1 and 2 are kept for errors.
+  // through it (diagnose: 3 mismatch found, 4 inconclusive; calibrate: 3 fit test failed, 4 not
+  // trustworthy). 1 and 2 are kept for errors.
   int exit_status = 0;
+  // Printed on stderr whatever the output format (e.g. calibrate's "did not pass" line, so that
+  // --json on stdout never hides it). Empty: nothing.
+  std::string notice;
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -58,10 +62,15 @@ struct CalibrateArgs {
   std::string loss = "none";          // none | huber | cauchy
   int home_pose = 0;
   int max_iterations = 100;
-  std::string out;     // calibrated config YAML to write (optional)
-  std::string report;  // JSON report to write (optional)
-  std::string truth;   // optional true robot (simulation studies): anchor errors in the report
+  std::string out;          // calibrated config YAML to write (optional)
+  std::string report;       // JSON report to write (optional)
+  std::string truth;        // optional true robot (simulation studies): anchor errors in the report
+  double fit_alpha = 0.01;  // significance level of the chi^2 fit test (calibration_verdict.hpp)
 };
+// Exit status: 0 the calibration passed; 3 the fit test failed (the residuals are larger than the
+// noise explains: a missing effect); 4 not trustworthy (not converged, a parameter on the bound of
+// its physical range, or an identification warning). --out and --report are written for 0, 3 and
+// 4; for 3 and 4 a notice on stderr says so.
 Result<Output> calibrate(const CalibrateArgs& args);
 
 // The names --estimate accepts, in the order of the help text.

@@ -129,7 +129,10 @@ nlohmann::json identification_json(const CalibrationReportInput& in) {
                       {"unit", p.unit},
                       {"initial", p.initial},
                       {"value", p.value},
-                      {"std_dev", number_or_null(p.std_dev)}});
+                      {"std_dev", number_or_null(p.std_dev)},
+                      {"lower", number_or_null(p.lower)},
+                      {"upper", number_or_null(p.upper)},
+                      {"at_bound", p.at_bound}});
   }
   nlohmann::json residuals = nlohmann::json::array();
   for (std::size_t j = 0; j < r.residuals.size(); ++j) {

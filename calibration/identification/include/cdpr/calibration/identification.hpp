@@ -39,6 +39,9 @@
 // Whatever the choice, the geometry information (poses profiled out) is checked for rank before
 // solving; a rank-deficient choice is refused with the unidentifiable directions in words.
 //
+// Every estimated coordinate is bounded to a physical range (ParameterBounds, Ceres box
+// constraints); an estimate on its bound is flagged (ParameterEstimate::at_bound) and warned about.
+//
 // Parameterisation (tangent coordinates, each named in IdentificationReport::parameters):
 // a_i.x/y/z (m), b_i.x/y/z (m), o_i (m), s_i (-), EA scale e_i (EA = EA_nominal (1 + e)),
 // force sensor gain error g_i (gain = nominal (1 + g)) and offset c_i (raw units), laser origin
@@ -76,6 +79,26 @@ using AnchorMask = Eigen::Array<bool, 3, Eigen::Dynamic>;
 
 // The paper's V = [x2..x7, y2..y7, z5..z8] for an 8-cable robot (1-based cable numbers).
 AnchorMask paper_anchor_mask();
+
+// The physical range of every estimated parameter kind, enforced in the solver as bounds (Ceres
+// box constraints on the tangent coordinates). Ranges are relative to the starting model (the
+// nominal config) unless stated. A parameter that ends on its bound is reported
+// (ParameterEstimate::at_bound, a warning): the data pushed it outside what the robot can be,
+// which is a sign of a missing effect or a bad recording, not a calibration.
+struct ParameterBounds {
+  double frame_anchor_m = 0.25;     // a_i: +- per coordinate around the nominal anchor
+  double platform_anchor_m = 0.05;  // b_i: +- per coordinate
+  double length_offset_m = 0.25;    // o_i: encoder zero correction, +-
+  double length_scale = 0.05;       // s_i: transmission (drum) scale error, +- (5 %)
+  double ea_factor_min = 0.1;       // EA within [min, max] x the config's EA
+  double ea_factor_max = 10.0;
+  double force_gain = 0.3;             // g_i: relative force sensor gain error, +- (30 %)
+  double force_offset_fraction = 0.1;  // c_i: +- this fraction of f_max, in raw units (gain x N)
+  double laser_origin_m = 0.1;         // laser origin on the platform, +- per coordinate
+  double laser_direction_rad = 0.2;    // beam direction, +- per tangent angle (11.5 deg)
+  double plane_normal_rad = 0.2;       // target plane normal, +- per tangent angle
+  double plane_offset_m = 0.25;        // target plane offset c, +-
+};
 
 struct IdentificationOptions {
   // --- What is estimated -------------------------------------------------------------------
@@ -136,6 +159,9 @@ struct IdentificationOptions {
   double condition_warning = 1e4;    // warn above this condition number (column-normalised)
   double huge_std_anchor = 0.01;     // m: warn when a length-like parameter's std exceeds it
   double chi2_warning_sigmas = 4.0;  // warn when |chi2 - dof| > this * sqrt(2 dof)
+
+  // --- Physical ranges ---------------------------------------------------------------------------
+  ParameterBounds bounds;
 };
 
 // The tension (N) below which a cable counts as slack: the larger of the two thresholds above.
@@ -148,6 +174,9 @@ struct ParameterEstimate {
   double initial = 0.0;
   double value = 0.0;
   double std_dev = 0.0;  // from the covariance; infinity if not computed / in the null space
+  double lower = -std::numeric_limits<double>::infinity();  // physical range (ParameterBounds)
+  double upper = std::numeric_limits<double>::infinity();
+  bool at_bound = false;  // the estimate ended on lower or upper
 };
 
 // Residuals of one pose, in SI units and normalised by their sigma (NaN where not measured).
@@ -204,6 +233,8 @@ struct IdentificationReport {
   double condition_number = 0.0;  // sigma_max / sigma_min of the column-normalised Jacobian
   std::vector<std::string> warnings;
 
+  // Names of the parameters that ended on a bound of their physical range.
+  std::vector<std::string> parameters_at_bound() const;
   bool trustworthy() const { return converged && warnings.empty(); }
   std::string brief_report() const;
   std::string full_report() const;

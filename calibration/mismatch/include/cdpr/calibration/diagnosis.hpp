@@ -75,9 +75,11 @@
 //    it; greedy (separating: lowest canonical correlation of the pair; follow-up: largest log det
 //    of the suspect's projected information). Near the edge of the model's workspace the real
 //    robot may not hold the platform, so no pose goes beyond where the recording already went.
-//  - Follow-up: with no effect named, the screen candidate with the lowest p-value before Holm's
-//    correction is a suspect when below suspect_p; the follow_up_poses grid poses that most
-//    increase the log det of its projected information are proposed (Diagnosis::follow_up).
+//  - Follow-up: with no effect named, the screen candidate with the lowest p-value is a suspect
+//    when its p-value after Holm's correction over the library is below suspect_p (so at most
+//    about suspect_p of the recordings of a correct model get one); the follow_up_poses grid
+//    poses that most increase the log det of its projected information are proposed
+//    (Diagnosis::follow_up).
 //  - model_after: identify()'s estimate with the effects it can estimate; Gauss-Newton effects
 //    written where the config has a field (encoder offsets, common drum scale, mass per length,
 //    EA or a polynomial surface when the cables were rigid); otherwise modelled_in_config = false
@@ -112,9 +114,15 @@ struct DiagnosisOptions {
   double decisive_bic = 10.0;
   int separating_poses = 6;                   // extra poses proposed for each confounded pair
   double separating_half_extent_scale = 1.0;  // of the extra-pose grid (the visited region)
-  // With no effect named, the candidate with the lowest screen p-value (before Holm's
-  // correction) is a suspect when that p-value is below suspect_p; follow_up_poses extra poses
-  // that add the most information on it are then proposed (Diagnosis::follow_up). 0: never.
+  // With no effect named, the candidate with the lowest screen p-value is a suspect when its
+  // p-value AFTER Holm's correction over the library (CandidateScreen::p_adjusted) is below
+  // suspect_p; follow_up_poses extra poses that add the most information on it are then proposed
+  // (Diagnosis::follow_up). The corrected p-value is a family-wise error rate, so suspect_p is
+  // about the fraction of recordings of a correct model that get a suspect (and cost
+  // follow_up_poses poses of robot time); docs/mismatch-benchmark.md measures the trade against
+  // detection. 0: never; above 1: always (the lowest p-value). When the screen's overall misfit
+  // test fails and nothing is named (verdict "mismatch unexplained"), the candidate with the lowest
+  // p-value is a suspect whatever this threshold (more poses are the next step there anyway).
   double suspect_p = 0.2;
   int follow_up_poses = 20;
   // The first accepted effect must also be seen by the linear screen: its screen p-value

@@ -1,0 +1,71 @@
+#include "cdpr/calibration/calibration_verdict.hpp"
+
+#include <cstdio>
+
+#include "cdpr/calibration/mismatch.hpp"
+
+namespace cdpr {
+
+const char* to_string(CalibrationVerdict::Kind kind) {
+  switch (kind) {
+    case CalibrationVerdict::Kind::kPassed:
+      return "passed";
+    case CalibrationVerdict::Kind::kFitRejected:
+      return "fit_rejected";
+    case CalibrationVerdict::Kind::kNotTrustworthy:
+      return "not_trustworthy";
+  }
+  return "unknown";
+}
+
+CalibrationVerdict judge_calibration(const IdentificationReport& report,
+                                     const CalibrationVerdictOptions& options) {
+  CalibrationVerdict v;
+  v.chi2 = report.chi2;
+  v.dof = report.dof;
+  v.alpha = options.alpha;
+  v.converged = report.converged;
+  v.at_bound = report.parameters_at_bound();
+  v.p_value = report.dof > 0 ? chi2_upper_tail(report.chi2, report.dof) : 0.0;
+  char buf[256];
+
+  bool solution = true;
+  if (!report.converged) {
+    solution = false;
+    v.reasons.push_back("the solver did not converge (" + report.termination + ")");
+  }
+  if (!v.at_bound.empty()) {
+    solution = false;
+    std::string names;
+    for (const std::string& n : v.at_bound) names += (names.empty() ? "" : ", ") + n;
+    v.reasons.push_back("parameters ended on the bound of their physical range: " + names);
+  }
+  const bool rejected = !(v.p_value >= options.alpha);
+  if (rejected) {
+    std::snprintf(buf, sizeof(buf),
+                  "the fit test failed: chi-square %.1f for %d degrees of freedom (chi2/dof %.2f), "
+                  "p = %.2g < %.2g: the residuals are larger than the stated noise explains",
+                  report.chi2, report.dof, report.dof > 0 ? report.chi2 / report.dof : 0.0,
+                  v.p_value, options.alpha);
+    v.reasons.emplace_back(buf);
+  }
+  // The identification's own checks; the convergence and bound warnings are stated above.
+  bool other_warning = false;
+  for (const std::string& w : report.warnings) {
+    const bool stated = w.rfind("the solver did not converge", 0) == 0 ||
+                        w.find("ended on the") != std::string::npos;
+    if (stated) continue;
+    other_warning = true;
+    v.reasons.push_back(w);
+  }
+  if (!solution) {
+    v.kind = CalibrationVerdict::Kind::kNotTrustworthy;
+  } else if (rejected) {
+    v.kind = CalibrationVerdict::Kind::kFitRejected;
+  } else if (other_warning) {
+    v.kind = CalibrationVerdict::Kind::kNotTrustworthy;
+  }
+  return v;
+}
+
+}  // namespace cdpr
