@@ -630,18 +630,19 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       const bool free_i = opt.estimate_swivel_zeros && opt.use_swivel && swivel_seen[ui];
       B->swivel_zero_free = B->swivel_zero_free || free_i;
       add_geometry_block(*B, &B->swivel_zero[ui], 1, {true},
-                         {"swivel_zero_" + std::to_string(i + 1)}, "rad", free_i);
+                         {"swivel_zero_" + std::to_string(i + 1)}, "rad", free_i,
+                         {bounds.swivel_zero_rad});
     }
     B->incl_mount0 = rotation_from_rpy<double>(robot.inclinometer.mounting_rpy);
     B->incl_mount_free = opt.estimate_inclinometer_mounting &&
                          ((opt.use_inclinometer && incl_seen) || (opt.use_imu_yaw && yaw_seen));
     add_geometry_block(*B, B->incl_mount.data(), 2, {true, true},
                        {"inclinometer.mount.roll", "inclinometer.mount.pitch"}, "rad",
-                       B->incl_mount_free);
+                       B->incl_mount_free, {bounds.inclinometer_mount_rad});
     B->imu_yaw_zero = robot.inclinometer.yaw_zero;
     B->imu_yaw_zero_free = opt.estimate_imu_yaw_zero && opt.use_imu_yaw && yaw_seen;
     add_geometry_block(*B, &B->imu_yaw_zero, 1, {true}, {"imu.yaw_zero"}, "rad",
-                       B->imu_yaw_zero_free);
+                       B->imu_yaw_zero_free, {bounds.imu_yaw_zero_rad});
   }
   B->num_geometry = static_cast<int>(B->names.size());
 

@@ -98,6 +98,9 @@ struct ParameterBounds {
   double laser_direction_rad = 0.2;    // beam direction, +- per tangent angle (11.5 deg)
   double plane_normal_rad = 0.2;       // target plane normal, +- per tangent angle
   double plane_offset_m = 0.25;        // target plane offset c, +-
+  double swivel_zero_rad = 0.5;        // swivel encoder zero, +- around the config's
+  double inclinometer_mount_rad = 0.2;  // inclinometer mounting roll and pitch, +-
+  double imu_yaw_zero_rad = 3.2;        // IMU heading zero, +- (about half a turn: any heading)
 };
 
 struct IdentificationOptions {
