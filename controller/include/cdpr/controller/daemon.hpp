@@ -46,7 +46,7 @@ inline constexpr const char* kDaemonVersion = "cdprd 0.1.0";
 struct DaemonIo {
   can::CanBus* bus = nullptr;            // the master's endpoint
   modbus::LaserSensor* laser = nullptr;  // nullptr: no laser (calibration refused)
-  const cdpr::Clock* clock = nullptr;     // CLOCK_MONOTONIC in cdprd, a ManualClock in tests
+  const cdpr::Clock* clock = nullptr;    // CLOCK_MONOTONIC in cdprd, a ManualClock in tests
   std::function<void()> idle;            // while a blocking master call waits (tests step sims)
   // Wall-clock sleep of the supervisor's and the sequence's polling (tests may shorten it).
   std::chrono::microseconds poll{1000};
