@@ -521,6 +521,23 @@ EffectParameter describe_coefficient(const std::string& id, int q, int k, double
                           v, s)
                     : format("nonlinear cable elongation (a F + k2 F^2) L: k2 = %.3g +- %.2g 1/N^2",
                              v, s);
+  } else if (starts_with(id, "hysteresis")) {
+    // Length rows ~d: the true length is longer by v when last paid out, shorter when reeled in.
+    e.name = "h_" + cable;
+    e.unit = "m";
+    const int dg = digits_for(1e3 * s);
+    e.text = "cable hysteresis" + of + ": " + signed_number(1e3 * v, dg) +
+             format(
+                 " +- %.*f mm (the length after paying out minus the reading; the opposite "
+                 "after reeling in)",
+                 dg, 1e3 * s);
+  } else if (starts_with(id, "pulley_friction")) {
+    // The tension reading is off by v when last paid out and by -v when reeled in.
+    e.name = "f_" + cable;
+    e.unit = "N";
+    const int dg = digits_for(s);
+    e.text = "pulley friction" + of + ": tension reading " + signed_number(v, dg) +
+             format(" +- %.*f N after paying out, the opposite after reeling in", dg, s);
   } else if (starts_with(id, "drum_scale")) {
     // Jacobian columns: the parameter change is -v.
     e.name = k > 1 ? "s_" + cable : "s";
@@ -1572,6 +1589,38 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       names += f.name;
     }
     d.headline = "Missing physics found: " + names + ".";
+  } else if (!d.screen.unexplained.empty()) {
+    // Structure that no candidate of the library explains: say what it follows.
+    d.verdict = Diagnosis::Verdict::kMismatchUnexplained;
+    std::vector<std::string> variables;
+    for (const auto& u : d.screen.unexplained) {
+      if (std::find(variables.begin(), variables.end(), u.variable) == variables.end()) {
+        variables.push_back(u.variable);
+      }
+    }
+    std::string what;
+    for (const std::string& v : variables) {
+      std::vector<int> cables;
+      std::string where;
+      for (const auto& u : d.screen.unexplained) {
+        if (u.variable != v) continue;
+        for (int c : u.cables) {
+          if (std::find(cables.begin(), cables.end(), c) == cables.end()) cables.push_back(c);
+        }
+        where += (where.empty() ? "" : ", ") + u.channel;
+      }
+      std::sort(cables.begin(), cables.end());
+      std::string list;
+      for (std::size_t q = 0; q < cables.size(); ++q) {
+        if (q > 0) list += q + 1 == cables.size() ? " and " : ", ";
+        list += std::to_string(cables[q] + 1);
+      }
+      if (!what.empty()) what += "; ";
+      what +=
+          "the " + v + " of cable" + (cables.size() > 1 ? "s " : " ") + list + " (" + where + ")";
+    }
+    d.headline = "Unexplained structure following " + what +
+                 ": no candidate effect of the library explains it (details below).";
   } else if (misfit) {
     d.verdict = Diagnosis::Verdict::kMismatchUnexplained;
     d.headline = format(

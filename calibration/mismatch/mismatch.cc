@@ -19,15 +19,19 @@ namespace {
 // A pose's effect on the net wrench, `delta` (SI), into column `col` of the candidate: whitened
 // with the equilibrium rows' covariance `cov` in X, as is in si, rows kw..kw+5. False when the
 // covariance is not positive definite.
+// `si_delta` (optional): what goes into si instead of `delta` (an effect whose correction of the
+// data differs from its effect on the residual, e.g. pulley friction, whose length-row correction
+// also removes the equilibrium rows' conditional correction).
 bool put_wrench_effect(Eigen::Matrix<double, 6, 6> cov, const Eigen::Matrix<double, 6, 1>& delta,
-                       int kw, int col, CandidateColumns& c) {
+                       int kw, int col, CandidateColumns& c,
+                       const Eigen::Matrix<double, 6, 1>* si_delta = nullptr) {
   cov.diagonal().array() += 1e-12 * cov.trace();
   const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cov);
   if (llt.info() != Eigen::Success) return false;
   const Eigen::Matrix<double, 6, 1> w = llt.matrixL().solve(delta);
   for (int q = 0; q < 6; ++q) {
     c.X(kw + q, col) = w(q);
-    c.si(kw + q, col) = delta(q);
+    c.si(kw + q, col) = si_delta != nullptr ? (*si_delta)(q) : delta(q);
   }
   return true;
 }
@@ -224,6 +228,15 @@ struct DesignData {
   Eigen::MatrixXd direction;
   GeometryInformation base;
   std::vector<Candidate> lib;
+  // Per (pose, cable), poses x cables: the direction of the last move and the measured variables
+  // of the structure scan (NaN where unknown).
+  Eigen::MatrixXd move, pc_length, pc_tension, pc_time, pc_tilt, pc_temperature;
+  // Per pose (its rows x cables): the whitened residual change for a 1 N error of each cable's
+  // tension reading (equilibrium rows and, through the elongation, the cable's length row), and
+  // the SI correction of the equilibrium rows that removes it (see put_wrench_effect).
+  std::vector<Eigen::MatrixXd> tension_white, tension_si;
+  // The same for a 1 m length error of each cable (the true length longer than the reading).
+  std::vector<Eigen::MatrixXd> length_white;
 };
 
 Result<DesignData> build_design(const CalibratedModel& model, const MeasurementSet& set,
@@ -421,6 +434,74 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
       horizontal(k) = kin.free_lengths(i) * std::hypot(u.x(), u.y());
     }
   }
+  // --- Per (pose, cable): direction of the last move, the structure scan's variables, and the
+  // effect of a tension-reading error on the residual rows.
+  const Eigen::MatrixXd move = last_move_directions(set);
+  Eigen::MatrixXd pc_length = Eigen::MatrixXd::Constant(np, m, kNaN), pc_tension = pc_length,
+                  pc_time = pc_length, pc_tilt = pc_length, pc_temperature = pc_length;
+  std::vector<Eigen::MatrixXd> tension_white(static_cast<std::size_t>(np)),
+      tension_si(static_cast<std::size_t>(np)), length_white(static_cast<std::size_t>(np));
+  {
+    const double sf2 = set.noise.sigma_force * set.noise.sigma_force;
+    const double sl2 = set.noise.sigma_length * set.noise.sigma_length;
+    for (int j = 0; j < np; ++j) {
+      const auto uj = static_cast<std::size_t>(j);
+      const PoseMeasurement& pm = set.poses[uj];
+      const int r0 = pose_start[uj], nr = pose_start[uj + 1] - r0;
+      tension_white[uj] = Eigen::MatrixXd::Zero(nr, m);
+      tension_si[uj] = Eigen::MatrixXd::Zero(nr, m);
+      length_white[uj] = Eigen::MatrixXd::Zero(nr, m);
+      if (!inverse_kinematics(robot, poses[uj], kin)) continue;  // refused above
+      const double tilt_j = std::acos(std::clamp(kin.rotation(2, 2), -1.0, 1.0));
+      int kw = -1;
+      for (int k = r0; k < r0 + nr; ++k) {
+        if (rows[static_cast<std::size_t>(k)].kind == RowKind::kWrench) {
+          kw = k;
+          break;
+        }
+      }
+      Eigen::Matrix<double, 6, 6> cov = Eigen::Matrix<double, 6, 6>::Zero();
+      Eigen::Matrix<double, 6, Eigen::Dynamic> a(6, m), aw(6, m), leak(6, m);
+      for (int i = 0; i < m; ++i) {
+        const auto ui = static_cast<std::size_t>(i);
+        pc_length(j, i) = kin.lengths(i);
+        if (pm.tensions.size() == m) pc_tension(j, i) = pm.tensions(i);
+        pc_time(j, i) = pm.time;
+        pc_tilt(j, i) = tilt_j;
+        pc_temperature(j, i) = pm.temperature;
+        const Eigen::Vector3d u = kin.unit_vectors.col(i);
+        const Eigen::Vector3d rb = kin.rotation * robot.platform_anchors.col(i);
+        a.col(i) << u, rb.cross(u);
+        // The length row's sigma holds the cable compliance c (sigma^2 = sl2 + c^2 sf2); the
+        // equilibrium rows are whitened conditionally on it (weight sl2 / sigma^2), as identify()
+        // does, so a tension-reading error e moves them by weight * e * a and the length row by
+        // -c e / sigma.
+        const int kl = length_row[uj][ui];
+        // A length error (the true length longer than the reading) moves the length row by
+        // 1 / sigma and, through that conditioning, the equilibrium rows by c sf2 / sigma^2 a.
+        double weight = 1.0;
+        leak.col(i).setZero();
+        if (kl >= 0) {
+          const double s2 = sigma_len(kl) * sigma_len(kl);
+          weight = sl2 / s2;
+          const double c = std::sqrt(std::max(s2 - sl2, 0.0) / sf2);
+          tension_white[uj](kl - r0, i) = -c / sigma_len(kl);
+          length_white[uj](kl - r0, i) = 1.0 / sigma_len(kl);
+          leak.col(i) = (c * sf2 / s2) * a.col(i);
+        }
+        aw.col(i) = weight * a.col(i);
+        cov += sf2 * weight * a.col(i) * a.col(i).transpose();
+      }
+      if (kw < 0) continue;
+      cov.diagonal().array() += 1e-12 * cov.trace();
+      const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(cov);
+      if (llt.info() != Eigen::Success) continue;
+      tension_white[uj].middleRows(kw - r0, 6) = llt.matrixL().solve(aw);
+      length_white[uj].middleRows(kw - r0, 6) = llt.matrixL().solve(leak);
+      tension_si[uj].middleRows(kw - r0, 6) = a;
+    }
+  }
+
   // --- NAME: the candidate library.
   std::vector<Candidate> lib;
   auto per_length_row = [&](const std::string& id, const std::string& name,
@@ -597,6 +678,37 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
     }
   }
 
+  // Direction-dependent effects (d = +-1: the cable was last paid out / reeled in). Hysteresis:
+  // the true length is longer by h_i d (length rows). Pulley friction: the tension reading is off
+  // by f_i d (the tension effect above, per pose).
+  if (mopt.direction_candidates && move.cwiseAbs().sum() > 0) {
+    // The length rows and, through their conditioning, the equilibrium rows; the data are
+    // corrected on the length rows only (the equilibrium rows follow), so si is 0 there.
+    Candidate h{"hysteresis_per_cable",
+                "cable hysteresis (a length error +-h depending on whether the cable was last "
+                "paid out or reeled in), per cable",
+                "cable hysteresis", Eigen::MatrixXd::Zero(n, m), Eigen::MatrixXd::Zero(n, m)};
+    for (int j = 0; j < np; ++j) {
+      const auto uj = static_cast<std::size_t>(j);
+      const int r0 = pose_start[uj], nr = pose_start[uj + 1] - r0;
+      for (int i = 0; i < m; ++i) h.X.block(r0, i, nr, 1) = move(j, i) * length_white[uj].col(i);
+    }
+    if (h.X.norm() > 0) lib.push_back(std::move(h));
+    Candidate c{"pulley_friction_per_cable",
+                "pulley friction (a tension-reading error +-f depending on whether the cable was "
+                "last paid out or reeled in), per cable",
+                "pulley friction", Eigen::MatrixXd::Zero(n, m), Eigen::MatrixXd::Zero(n, m)};
+    for (int j = 0; j < np; ++j) {
+      const auto uj = static_cast<std::size_t>(j);
+      const int r0 = pose_start[uj], nr = pose_start[uj + 1] - r0;
+      for (int i = 0; i < m; ++i) {
+        c.X.block(r0, i, nr, 1) = move(j, i) * tension_white[uj].col(i);
+        c.si.block(r0, i, nr, 1) = move(j, i) * tension_si[uj].col(i);
+      }
+    }
+    if (c.X.norm() > 0) lib.push_back(std::move(c));
+  }
+
   DesignData D;
   D.rows = std::move(rows);
   D.si = std::move(si);
@@ -614,7 +726,221 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   D.direction = std::move(direction);
   D.base = std::move(*base);
   D.lib = std::move(lib);
+  D.move = move;
+  D.pc_length = std::move(pc_length);
+  D.pc_tension = std::move(pc_tension);
+  D.pc_time = std::move(pc_time);
+  D.pc_tilt = std::move(pc_tilt);
+  D.pc_temperature = std::move(pc_temperature);
+  D.tension_white = std::move(tension_white);
+  D.tension_si = std::move(tension_si);
+  D.length_white = std::move(length_white);
   return D;
+}
+
+// "2", "2 and 5", "1, 3 and 5" from 0-based indices (+ `base`).
+std::string index_list(const std::vector<int>& v, int base) {
+  std::string out;
+  for (std::size_t q = 0; q < v.size(); ++q) {
+    if (q > 0) out += q + 1 == v.size() ? " and " : ", ";
+    out += std::to_string(v[q] + base);
+  }
+  return out;
+}
+
+// The DESCRIBE step of locate_mismatch (mismatch.hpp): structure of the residual `D.r` that no
+// candidate explains. `Q1` is the basis of the identification's Jacobian, `bases` the screened
+// candidates' projected column bases (the library's order).
+std::vector<UnexplainedStructure> describe_structure(const DesignData& D, const Eigen::MatrixXd& Q1,
+                                                     const std::vector<Eigen::MatrixXd>& bases,
+                                                     const MismatchSummary& summary,
+                                                     const MismatchOptions& mopt) {
+  std::vector<UnexplainedStructure> out;
+  const Eigen::VectorXd& r = D.r;
+  const int n = static_cast<int>(r.size());
+  const int np = static_cast<int>(D.pose_start.size()) - 1;
+  const int m = static_cast<int>(D.move.cols());
+  const double rss = r.squaredNorm();
+  const int d2 = summary.dof - 2;
+  if (n == 0 || d2 <= 0 || rss <= 0) return out;
+  struct Variable {
+    const char* name;
+    const Eigen::MatrixXd* values;
+    const char* unit;
+  };
+  const Variable vars[] = {
+      {"direction of the last move", &D.move, ""}, {"tension", &D.pc_tension, "N"},
+      {"cable length", &D.pc_length, "m"},         {"time", &D.pc_time, "s"},
+      {"platform orientation", &D.pc_tilt, "rad"}, {"temperature", &D.pc_temperature, "K"}};
+  const char* channels[] = {"cable lengths", "cable tensions"};
+  const char* channel_unit[] = {"m", "N"};
+  struct Test {
+    int channel = 0, cable = 0, var = 0;
+    double t = 0.0, p = 1.0, slope = 0.0;
+    Eigen::VectorXd z;
+  };
+  std::vector<Test> tests;
+  for (int ch = 0; ch < 2; ++ch) {
+    for (int i = 0; i < m; ++i) {
+      for (int v = 0; v < static_cast<int>(std::size(vars)); ++v) {
+        const Eigen::MatrixXd& val = *vars[v].values;
+        Eigen::VectorXd x0 = Eigen::VectorXd::Zero(n), x = Eigen::VectorXd::Zero(n);
+        int count = 0;
+        for (int j = 0; j < np; ++j) {
+          const auto uj = static_cast<std::size_t>(j);
+          const double value = val(j, i);
+          if (!std::isfinite(value)) continue;
+          if (ch == 0 && D.length_row[uj][static_cast<std::size_t>(i)] < 0) continue;
+          const int r0 = D.pose_start[uj], nr = D.pose_start[uj + 1] - r0;
+          const Eigen::VectorXd col =
+              ch == 0 ? D.length_white[uj].col(i) : D.tension_white[uj].col(i);
+          if (col.squaredNorm() == 0.0) continue;
+          x0.segment(r0, nr) += col;
+          x.segment(r0, nr) += value * col;
+          ++count;
+        }
+        if (count < 4) continue;
+        const Eigen::VectorXd x0p = x0 - Q1 * (Q1.transpose() * x0);
+        const Eigen::VectorXd xp = x - Q1 * (Q1.transpose() * x);
+        Eigen::VectorXd z = xp;
+        if (x0p.squaredNorm() > 1e-18 * x0.squaredNorm()) {
+          z -= x0p * (x0p.dot(xp) / x0p.squaredNorm());
+        }
+        // A constant variable (given the constant per cable) or one the identification models.
+        if (!(z.norm() > 1e-6 * x.norm())) continue;
+        Test t;
+        t.channel = ch;
+        t.cable = i;
+        t.var = v;
+        t.slope = z.dot(r) / z.squaredNorm();
+        t.t = z.dot(r) * t.slope;
+        const double rest = std::max(rss - t.t, 1e-300);
+        t.p = f_upper_tail(t.t / (rest / d2), 1.0, d2);
+        t.z = std::move(z);
+        tests.push_back(std::move(t));
+      }
+    }
+  }
+  const double K = static_cast<double>(tests.size());
+  // Per channel and cable, the significant test with the largest statistic: the variable the
+  // residual follows best. It is unexplained when no candidate reproduces its column.
+  struct Pick {
+    const Test* test = nullptr;
+    std::string closest;
+    double rho = 0.0;
+  };
+  std::vector<Pick> picks;
+  for (int ch = 0; ch < 2; ++ch) {
+    for (int i = 0; i < m; ++i) {
+      const Test* best = nullptr;
+      for (const Test& t : tests) {
+        if (t.channel != ch || t.cable != i || !(std::min(1.0, K * t.p) < mopt.alpha)) continue;
+        if (best == nullptr || t.t > best->t) best = &t;
+      }
+      if (best == nullptr) continue;
+      // Explained by a candidate when, with that candidate's columns added, the structure is no
+      // longer significant (a partial test); else unexplained. A candidate with a canonical
+      // correlation below structure_coverage cannot explain it.
+      Pick pk;
+      pk.test = best;
+      const Eigen::VectorXd zn = best->z.normalized();
+      bool explained = false;
+      for (std::size_t c = 0; c < bases.size() && !explained; ++c) {
+        if (bases[c].cols() == 0) continue;
+        const Eigen::VectorXd along = bases[c].transpose() * zn;
+        const double rho = along.norm();
+        if (rho > pk.rho) {
+          pk.rho = rho;
+          pk.closest = D.lib[c].name;
+        }
+        if (rho <= mopt.structure_coverage) continue;
+        const Eigen::VectorXd zp = best->z - bases[c] * (bases[c].transpose() * best->z);
+        const Eigen::VectorXd rp = r - bases[c] * (bases[c].transpose() * r);
+        const double k = static_cast<double>(bases[c].cols());
+        const double dof_p = d2 - k;
+        if (dof_p <= 0 || !(zp.squaredNorm() > 0)) {
+          explained = true;
+          continue;
+        }
+        const double tp = std::pow(zp.dot(rp), 2) / zp.squaredNorm();
+        const double rest = std::max(rp.squaredNorm() - tp, 1e-300);
+        const double pp = f_upper_tail(tp / (rest / dof_p), 1.0, dof_p);
+        explained = !(std::min(1.0, K * pp) < mopt.alpha);
+      }
+      if (explained) continue;
+      picks.push_back(std::move(pk));
+    }
+  }
+  // Grouped by channel and variable.
+  for (int ch = 0; ch < 2; ++ch) {
+    for (int v = 0; v < static_cast<int>(std::size(vars)); ++v) {
+      UnexplainedStructure u;
+      u.channel = channels[ch];
+      u.variable = vars[v].name;
+      u.unit = vars[v].unit[0] == '\0' ? std::string(channel_unit[ch])
+                                       : std::string(channel_unit[ch]) + "/" + vars[v].unit;
+      Eigen::VectorXd per_pose = Eigen::VectorXd::Zero(np);
+      for (const Pick& pk : picks) {
+        const Test& t = *pk.test;
+        if (t.channel != ch || t.var != v) continue;
+        u.cables.push_back(t.cable);
+        u.slopes.push_back(t.slope);
+        u.p_values.push_back(std::min(1.0, K * t.p));
+        if (pk.rho > u.closest_correlation) {
+          u.closest_correlation = pk.rho;
+          u.closest_candidate = pk.closest;
+        }
+        for (int j = 0; j < np; ++j) {
+          const auto uj = static_cast<std::size_t>(j);
+          const int r0 = D.pose_start[uj], nr = D.pose_start[uj + 1] - r0;
+          per_pose(j) += t.slope * t.z.segment(r0, nr).dot(r.segment(r0, nr));
+        }
+      }
+      if (u.cables.empty()) continue;
+      std::vector<int> order(static_cast<std::size_t>(np));
+      for (int j = 0; j < np; ++j) order[static_cast<std::size_t>(j)] = j;
+      std::stable_sort(order.begin(), order.end(),
+                       [&](int a, int b) { return per_pose(a) > per_pose(b); });
+      const double top = np > 0 ? per_pose(order[0]) : 0.0;
+      for (int j : order) {
+        if (u.poses.size() >= 10 || !(per_pose(j) > 0.25 * top)) break;
+        u.poses.push_back(j);
+      }
+      std::sort(u.poses.begin(), u.poses.end());
+      std::string detail;
+      for (std::size_t q = 0; q < u.cables.size(); ++q) {
+        if (q > 0) detail += "; ";
+        const double b = u.slopes[q];
+        const bool len = ch == 0;
+        const std::string cable = "cable " + std::to_string(u.cables[q] + 1);
+        if (v == 0) {
+          detail += len ? format("%s: %+.2f mm after paying out, %+.2f mm after reeling in",
+                                 cable.c_str(), 1e3 * b, -1e3 * b)
+                        : format("%s: %+.2f N after paying out, %+.2f N after reeling in",
+                                 cable.c_str(), b, -b);
+        } else {
+          detail += format("%s: %.3g %s", cable.c_str(), b, u.unit.c_str());
+        }
+        detail += format(" (p = %.2g)", u.p_values[q]);
+      }
+      u.description = format(
+          "Unexplained structure in the %s: the %s of cable%s %s follow the %s (%s), most at "
+          "pose%s %s. No candidate effect of the library has this shape (closest: %s, canonical "
+          "correlation %.2f).",
+          u.channel.c_str(), ch == 0 ? "length readings" : "tension readings",
+          u.cables.size() > 1 ? "s" : "", index_list(u.cables, 1).c_str(), u.variable.c_str(),
+          detail.c_str(), u.poses.size() > 1 ? "s" : "", index_list(u.poses, 0).c_str(),
+          u.closest_candidate.empty() ? "none" : u.closest_candidate.c_str(),
+          u.closest_correlation);
+      out.push_back(std::move(u));
+    }
+  }
+  std::stable_sort(out.begin(), out.end(),
+                   [](const UnexplainedStructure& a, const UnexplainedStructure& b) {
+                     return *std::min_element(a.p_values.begin(), a.p_values.end()) <
+                            *std::min_element(b.p_values.begin(), b.p_values.end());
+                   });
+  return out;
 }
 
 // The catenary of a free span (platform anchor at the origin, exit point at (span, height)) whose
@@ -663,6 +989,26 @@ std::optional<SpanSolution> catenary_for_tension(double span, double height, dou
 std::string selection_group(const std::string& family) {
   if (family == "nonlinear elasticity") return "elasticity";
   return family;
+}
+
+Eigen::MatrixXd last_move_directions(const MeasurementSet& set, double deadband_sigmas) {
+  const int np = set.num_poses();
+  const int m = np > 0 ? static_cast<int>(set.poses[0].cable_lengths.size()) : 0;
+  Eigen::MatrixXd d = Eigen::MatrixXd::Zero(np, m);
+  const double deadband = deadband_sigmas * set.noise.sigma_length;
+  for (int i = 0; i < m; ++i) {
+    double previous = kNaN, direction = 0.0;
+    for (int j = 0; j < np; ++j) {
+      const Eigen::VectorXd& l = set.poses[static_cast<std::size_t>(j)].cable_lengths;
+      const double now = i < l.size() ? l(i) : kNaN;
+      if (std::isfinite(now) && std::isfinite(previous) && std::abs(now - previous) > deadband) {
+        direction = now > previous ? 1.0 : -1.0;
+      }
+      if (std::isfinite(now)) previous = now;
+      d(j, i) = direction;
+    }
+  }
+  return d;
 }
 
 double chi2_upper_tail(double x, double dof) {
@@ -1075,6 +1421,9 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
       out.confounded.push_back(std::move(p));
     }
   }
+  // --- DESCRIBE: structure that no candidate explains.
+  if (mopt.describe_structure) out.unexplained = describe_structure(D, Q1, bases, out, mopt);
+
   std::stable_sort(out.candidates.begin(), out.candidates.end(),
                    [](const CandidateScreen& a, const CandidateScreen& b) {
                      if ((a.rank == 0) != (b.rank == 0)) return b.rank == 0;
@@ -1116,6 +1465,7 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
                t.cable < 0 ? "all cables" : ("cable " + std::to_string(t.cable + 1)).c_str(),
                t.variable.c_str(), t.f_statistic, t.p_value, 100.0 * t.explained_fraction));
   }
+  for (const auto& u : out.unexplained) out.findings.push_back(u.description);
   if (const CandidateScreen* b = out.best()) {
     out.findings.push_back(
         format("Most likely missing physics: %s; it explains %.0f %% of the misfit (p = %.3g after "

@@ -283,5 +283,28 @@ TEST(Mismatch, DesignExposesTheScreensResidualsAndCandidateColumns) {
   }
 }
 
+TEST(Mismatch, LastMoveDirectionFollowsTheLengthReadingsAndIgnoresMovesWithinTheDeadband) {
+  MeasurementSet set;
+  set.noise.sigma_length = 1e-4;  // deadband 5 sigma = 0.5 mm
+  const double lengths[][2] = {{1.000, 2.0},  {1.010, 2.0},          {1.0102, 1.99},
+                               {1.005, 1.99}, {std::nan(""), 1.995}, {1.007, 1.995}};
+  for (const auto& l : lengths) {
+    PoseMeasurement p;
+    p.cable_lengths = Eigen::Vector2d(l[0], l[1]);
+    set.poses.push_back(p);
+  }
+  const Eigen::MatrixXd d = last_move_directions(set);
+  ASSERT_EQ(d.rows(), 6);
+  ASSERT_EQ(d.cols(), 2);
+  // Cable 1: not moved yet, paid out, +0.2 mm (kept), reeled in, not measured (kept), paid out.
+  const double c1[] = {0, 1, 1, -1, -1, 1};
+  // Cable 2: not moved yet, still, reeled in, still, paid out, still.
+  const double c2[] = {0, 0, -1, -1, 1, 1};
+  for (int j = 0; j < 6; ++j) {
+    EXPECT_EQ(d(j, 0), c1[j]) << "pose " << j;
+    EXPECT_EQ(d(j, 1), c2[j]) << "pose " << j;
+  }
+}
+
 }  // namespace
 }  // namespace cdpr

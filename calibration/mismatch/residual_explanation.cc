@@ -31,6 +31,9 @@ ExplainingVariable explaining_variable(const std::string& family) {
     return {"tension", "N"};
   }
   if (family == "drum scale") return {"loaded length", "m"};
+  if (family == "cable hysteresis" || family == "pulley friction") {
+    return {"direction of the last move", ""};
+  }
   if (family == "encoder drift" || family == "transmission drift" || family == "creep") {
     return {"time", "s"};
   }
@@ -51,6 +54,7 @@ std::vector<ExplainedResiduals> explained_residuals(const Diagnosis& d, const Me
 
   const RobotModel& robot = d.before.estimate.robot;
   const int m = robot.num_cables();
+  const Eigen::MatrixXd move = last_move_directions(set);
   KinematicsData kin(m);
   std::vector<ExplainedResiduals> plots;
   for (const auto& [id, name] : effects) {
@@ -83,6 +87,8 @@ std::vector<ExplainedResiduals> explained_residuals(const Diagnosis& d, const Me
           x = loaded;
         } else if (var.name == "time") {
           x = std::isfinite(meas.time) ? meas.time : kNaN;
+        } else if (var.name == "direction of the last move") {
+          x = i < move.cols() ? move(static_cast<Eigen::Index>(j), i) : kNaN;
         }
         if (!std::isfinite(x)) continue;
         p.x.push_back(x);

@@ -98,6 +98,7 @@ Physics::Physics(RobotModel truth, const Scenario& scenario, std::uint64_t seed,
   state_.force_raw = Eigen::VectorXd::Zero(m);
   state_.lasers.resize(lasers_.size());
   state_.overloaded.assign(static_cast<std::size_t>(m), false);
+  state_.last_move = Eigen::VectorXd::Zero(m);
   state_.pose = truth_.home;
   state_.rotation = rotation_from_rpy<double>(truth_.home.rpy);
 }
@@ -337,7 +338,19 @@ Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double tim
                          state_.time_s);
   }
   update_cable_laws(time_s);
-  for (int i = 0; i < m; ++i) lengths_(i) = unstretched_length(i, counts(i), time_s);
+  // Direction of the last move (hysteresis, pulley friction): kept while the counts stand still.
+  Eigen::VectorXd last_move = state_.last_move;
+  if (state_.steps > 0) {
+    for (int i = 0; i < m; ++i) {
+      const double change = winch_length_change<double>(truth_.winches[static_cast<std::size_t>(i)],
+                                                        counts(i) - state_.counts(i));
+      if (change != 0.0) last_move(i) = change > 0.0 ? 1.0 : -1.0;
+    }
+  }
+  for (int i = 0; i < m; ++i) {
+    lengths_(i) = unstretched_length(i, counts(i), time_s) +
+                  scenario_.effects.cable_hysteresis.at(i) * last_move(i);
+  }
 
   Eigen::Vector3d r = state_.pose.position;
   Eigen::Matrix3d R = state_.rotation;
@@ -406,6 +419,7 @@ Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double tim
   have_pose_ = true;
   state_.time_s = time_s;
   state_.counts = counts;
+  state_.last_move = last_move;
   state_.unstretched_lengths = lengths_;
   state_.pose = Pose{r, rpy_from_rotation(R)};
   state_.rotation = R;
@@ -421,7 +435,9 @@ Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double tim
   }
   for (int i = 0; i < m; ++i) {
     state_.force_raw(i) =
-        force_sensor_raw<double>(sensors_[static_cast<std::size_t>(i)], tensions(i)) +
+        force_sensor_raw<double>(
+            sensors_[static_cast<std::size_t>(i)],
+            tensions(i) + scenario_.effects.pulley_friction.at(i) * last_move(i)) +
         noise.force_raw * normal_(rng_);
   }
   for (std::size_t k = 0; k < lasers_.size(); ++k) {

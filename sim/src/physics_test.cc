@@ -245,6 +245,36 @@ TEST(Physics, WinchEffectsShowInTheTrueLengths) {
   EXPECT_NEAR(p.state().unstretched_lengths(2), 1.003 * 3.5e6 * mpc, 1e-12);
 }
 
+TEST(Physics, HysteresisAndPulleyFrictionFollowTheDirectionOfTheLastMove) {
+  // Cable 2 (index 1) hysteresis 0.5 mm, cable 5 (index 4) pulley friction 3 N.
+  const Scenario s = scenario(
+      "effects: {cable_hysteresis: [0, 0.0005, 0, 0, 0, 0, 0, 0], pulley_friction: [0, 0, 0, 0, "
+      "3, 0, 0, 0]}\n");
+  Physics p = make(s);
+  Physics plain = make(scenario(""));
+  const int dir = p.truth().winches[1].direction;
+  const Eigen::VectorXd c0 = Eigen::VectorXd::Constant(8, 3.5e6);
+  // Pay every cable out by 1000 counts' worth of length, hold, then reel in.
+  const Eigen::VectorXd out = c0 + Eigen::VectorXd::Constant(8, 1000.0 * dir);
+  const Eigen::VectorXd in = c0;
+  const double expected_sign[] = {0.0, 1.0, 1.0, -1.0};
+  const Eigen::VectorXd* steps[] = {&c0, &out, &out, &in};
+  for (int k = 0; k < 4; ++k) {
+    SCOPED_TRACE(k);
+    ASSERT_TRUE(p.step(*steps[k], k).ok());
+    ASSERT_TRUE(plain.step(*steps[k], k).ok());
+    for (int i = 0; i < 8; ++i) EXPECT_EQ(p.state().last_move(i), expected_sign[k]);
+    const double l0 = plain.state().unstretched_lengths(1);
+    EXPECT_NEAR(p.state().unstretched_lengths(1) - l0, 0.0005 * expected_sign[k], 1e-12);
+    EXPECT_NEAR(p.state().unstretched_lengths(4), plain.state().unstretched_lengths(4), 1e-12);
+    // The reading is the free span's tension plus the friction; the tension itself is the
+    // equilibrium's (friction acts on the reading only).
+    const ForceSensorModel& f = p.truth().force_sensors[4];
+    const double read = (p.state().force_raw(4) - f.offset) / f.gain;
+    EXPECT_NEAR(read - p.state().tensions(4), 3.0 * expected_sign[k], 1e-9);
+  }
+}
+
 TEST(Physics, ForceSensorErrorsChangeOnlyTheRawReadings) {
   const Channels base = run(scenario(""), 0.0);
   const Channels e =

@@ -104,9 +104,10 @@ Status parse_polynomial(const YamlField& n, PolynomialSurface& p) {
 }
 
 Status parse_effects(const YamlField& n, HiddenEffects& e) {
-  CDPR_RETURN_IF_ERROR(n.check_keys({"cable_law", "stiff_ea", "hooke", "polynomial", "creep", "sag",
-                                     "pulley_radius", "transmission_scale", "encoder_zero_offset",
-                                     "force_sensor", "laser", "thermal"}));
+  CDPR_RETURN_IF_ERROR(
+      n.check_keys({"cable_law", "stiff_ea", "hooke", "polynomial", "creep", "sag", "pulley_radius",
+                    "transmission_scale", "encoder_zero_offset", "force_sensor", "laser", "thermal",
+                    "cable_hysteresis", "pulley_friction"}));
   int law = e.base_law == BaseCableLaw::kStiff ? 1 : 0;
   CDPR_RETURN_IF_ERROR(n.optional_choice("cable_law", law, {"config", "stiff"}));
   e.base_law = law == 1 ? BaseCableLaw::kStiff : BaseCableLaw::kConfig;
@@ -146,6 +147,10 @@ Status parse_effects(const YamlField& n, HiddenEffects& e) {
   }
   CDPR_RETURN_IF_ERROR(
       optional_per_cable(n, "encoder_zero_offset", Sign::kAny, "m", e.encoder_zero_offset));
+  CDPR_RETURN_IF_ERROR(
+      optional_per_cable(n, "cable_hysteresis", Sign::kNonNegative, "m", e.cable_hysteresis));
+  CDPR_RETURN_IF_ERROR(
+      optional_per_cable(n, "pulley_friction", Sign::kNonNegative, "N", e.pulley_friction));
   if (const YamlField f = n["force_sensor"]; f.present()) {
     CDPR_RETURN_IF_ERROR(f.check_keys({"gain_error", "offset_error"}));
     CDPR_RETURN_IF_ERROR(optional_per_cable(f, "gain_error", Sign::kAny, "1", e.force_gain_error));
@@ -333,7 +338,9 @@ Status check_against(const Scenario& s, int m) {
                {&e.transmission_scale, "effects.transmission_scale"},
                {&e.encoder_zero_offset, "effects.encoder_zero_offset"},
                {&e.force_gain_error, "effects.force_sensor.gain_error"},
-               {&e.force_offset_error, "effects.force_sensor.offset_error"}};
+               {&e.force_offset_error, "effects.force_sensor.offset_error"},
+               {&e.cable_hysteresis, "effects.cable_hysteresis"},
+               {&e.pulley_friction, "effects.pulley_friction"}};
   for (const auto& l : lists) {
     if (!l.p->fits(m)) {
       return Status::error(ErrorCode::kInvalidArgument,

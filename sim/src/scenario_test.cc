@@ -198,3 +198,23 @@ TEST(Scenario, CableLawEffects) {
 
 }  // namespace
 }  // namespace cdpr::sim
+
+namespace cdpr::sim {
+namespace {
+
+TEST(Scenario, DirectionDependentEffectsParseAndRejectNegativeValues) {
+  Result<Scenario> s = parse_scenario(
+      "name: t\neffects: {cable_hysteresis: [0, 0.0005, 0, 0, 0.0005, 0, 0, 0], pulley_friction: "
+      "2.5}\n",
+      "t.yaml");
+  ASSERT_TRUE(s.ok()) << s.status().to_string();
+  EXPECT_EQ(s->effects.cable_hysteresis.at(1), 0.0005);
+  EXPECT_EQ(s->effects.cable_hysteresis.at(0), 0.0);
+  EXPECT_EQ(s->effects.pulley_friction.at(6), 2.5);
+  EXPECT_NE(error_of("name: t\neffects: {pulley_friction: -1}\n").find("pulley_friction"),
+            std::string::npos);
+  EXPECT_NE(check_against(*s, 6).message().find("effects.cable_hysteresis"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace cdpr::sim

@@ -7,6 +7,9 @@
 //   1. winch (TRUE model, with the hidden transmission scale s_i and encoder-zero offset o_i):
 //        l_i = length_offset_i + o_i + (1 + s_i) * direction_i * c_i * metres_per_count_i
 //      thermal drift: l_i += alpha * (routing_length_i + l_i) * dT(t)
+//      hysteresis: l_i += h_i * d_i, d_i the direction of cable i's last move (+1: its length
+//      command grew, i.e. paid out; -1: reeled in; 0 before its first move), updated at every
+//      step whose counts differ from the previous step's
 //   2. cable law (TRUE: config, stiff, Hooke EA or polynomial surface) with creep as a
 //      time-dependent extra compliance c * log(1 + t / tau) (Hooke: 1/EA_eff = 1/EA + c g(t);
 //      polynomial: dL += c g(t) F L)
@@ -14,9 +17,10 @@
 //      previous pose (a Newton on elastostatic_wrench, falling back to solve_elastostatics); with
 //      sag on, each free span is an elastic catenary (catenary.hpp) and the equilibrium is found
 //      by Newton with a finite-difference Jacobian.
-//   4. sensors: encoder = c_i + noise (rounded), force raw = true_gain * F_i + true_offset + noise
-//      (F_i at the frame-side end of the free span), laser = ray-plane distance at the true pose
-//      with the mount and plane errors, plus noise, out of range -> status kOutOfRange.
+//   4. sensors: encoder = c_i + noise (rounded), force raw = true_gain * (F_i + f_i d_i) +
+//      true_offset + noise (F_i at the frame-side end of the free span, f_i the pulley friction),
+//      laser = ray-plane distance at the true pose with the mount and plane errors, plus noise, out
+//      of range -> status kOutOfRange.
 // Noise is drawn from one std::mt19937_64 seeded explicitly, in a fixed order (encoders, force
 // sensors, lasers), so a run is reproducible from its seed.
 //
@@ -73,6 +77,8 @@ struct PhysicsState {
   Eigen::VectorXd force_raw;       // force sensor raw readings
   std::vector<LaserChannel> lasers;
   std::vector<bool> overloaded;  // latched cable_overload trips (drive should fault)
+  // Direction of each cable's last move: +1 paid out, -1 reeled in, 0 not moved yet (step 1).
+  Eigen::VectorXd last_move;
   int iterations = 0;
   bool converged = false;
   int steps = 0;  // steps taken so far

@@ -97,6 +97,14 @@ struct HiddenEffects {
   PerCable encoder_zero_offset;  // m: added to the true unstretched length at any count
   PerCable force_gain_error;     // relative: true gain = gain * (1 + e)
   PerCable force_offset_error;   // raw units: true offset = offset + e
+  // Direction-dependent effects (Physics::step tracks the direction of each cable's last move:
+  // +1 paid out, -1 reeled in, 0 before its first move).
+  // Cable hysteresis, m: the true unstretched length is longer by h_i * direction (a polymer
+  // cable that was last paid out is longer at the same count than one that was last reeled in).
+  PerCable cable_hysteresis;
+  // Pulley friction, N: the force sensor sits on the winch side of the last pulley, where the
+  // tension differs from the free span's by f_i * direction (friction opposes the cable's motion).
+  PerCable pulley_friction;
   Eigen::Vector3d laser_mount_offset = Eigen::Vector3d::Zero();  // m, platform frame
   Eigen::Vector3d laser_mount_tilt = Eigen::Vector3d::Zero();    // rad, rotation vector, platform
   Eigen::Vector3d plane_tilt = Eigen::Vector3d::Zero();          // rad, rotation vector, world

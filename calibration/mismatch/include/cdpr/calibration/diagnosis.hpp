@@ -28,7 +28,10 @@
 //     scale in the winch model, encoder zero, force sensor gain/offset, laser mount/plane, mass
 //     per length for sag); per-channel residual RMS before/after, held-out RMS before/after.
 //  6. Verdict: kNoMismatch ("no missing physics found": residuals consistent with noise),
-//     kMismatchNamed, kMismatchUnexplained (misfit, but no candidate explains it), or
+//     kMismatchNamed, kMismatchUnexplained (misfit, but no candidate explains it; or, with no
+//     effect named, structure that no candidate explains, MismatchSummary::unexplained: the
+//     headline says which variable it follows on which cables, e.g. "Unexplained structure
+//     following the direction of the last move of cables 2 and 5 (cable tensions)"), or
 //     kInconclusive (too few poses / residuals to tell the effects apart; says so, never guesses).
 //
 // How it is done (diagnosis.cc):

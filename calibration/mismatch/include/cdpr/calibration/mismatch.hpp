@@ -31,7 +31,18 @@
 //    ~F L ln(1 + t / 10 s); encoder offsets and drifts ~t; transmission drift ~t L; sag (arc
 //    length ~Lh^2 L / F^2 and the cable weight the platform carries, on the equilibrium rows);
 //    from the identification's Jacobian: drum scale (per cable, shared), platform anchors,
-//    force-sensor gain and offset, laser mounting, laser target plane.
+//    force-sensor gain and offset, laser mounting, laser target plane; direction-dependent
+//    (MismatchOptions::direction_candidates): cable hysteresis ~d (length rows) and pulley
+//    friction ~d (the tension reading: equilibrium rows and, through the elongation, length
+//    rows), d = +-1 the direction of the cable's last move (last_move_directions).
+// 3. DESCRIBE what no candidate explains (MismatchOptions::describe_structure): for each channel
+//    (cable lengths; cable tensions, seen through the equilibrium and elongation rows), cable and
+//    measured variable v (direction of the last move, tension, cable length, time, platform
+//    orientation, temperature), the column "an error of this cable's reading proportional to v"
+//    (with a constant per cable as nuisance, J projected out) is tested by an F-test (Bonferroni
+//    over all tests). A significant one is reported (MismatchSummary::unexplained) unless a
+//    library candidate explains it: canonical correlation above structure_coverage and the test,
+//    with the candidate's columns added, no longer significant.
 #pragma once
 
 #include <Eigen/Core>
@@ -63,6 +74,45 @@ struct MismatchOptions {
   // whitened conditionally on the length rows (identification.hpp): before, the gain
   // candidate's statistic on null data averaged 17.9 instead of its 8 degrees of freedom.
   bool force_sensor_candidates = true;
+  // Screen the direction-dependent candidates: cable hysteresis (a length error that depends on
+  // whether the cable was last paid out or reeled in) and pulley friction (a tension-reading error
+  // with the same dependence), both per cable, with the direction of each cable's last move from
+  // last_move_directions(). Off: these effects are outside the library, and the structure scan
+  // (MismatchSummary::unexplained) is what still describes them.
+  bool direction_candidates = true;
+  // Scan the residual for structure that no candidate explains (MismatchSummary::unexplained).
+  bool describe_structure = true;
+  // A structure whose projected column has a canonical correlation above this with a library
+  // candidate's projected columns may be that candidate's: it is unexplained only if it stays
+  // significant with the candidate's columns added (a partial F-test).
+  double structure_coverage = 0.8;
+};
+
+// The direction of each cable's last move at each pose (poses x cables): +1 when the cable was
+// last paid out (its length reading grew), -1 when last reeled in, 0 before its first move. A
+// move is a change of the length reading between consecutive poses (the recording's order: the
+// robot moved from each pose straight to the next) larger than `deadband_sigmas` x
+// set.noise.sigma_length; smaller changes keep the previous direction.
+Eigen::MatrixXd last_move_directions(const MeasurementSet& set, double deadband_sigmas = 5.0);
+
+// Structure in the residual that no candidate of the library explains, in words a robot engineer
+// can act on: which channel, which cables, which poses, and which measured variable it follows.
+struct UnexplainedStructure {
+  std::string channel;      // "cable lengths" or "cable tensions"
+  std::string variable;     // "direction of the last move", "tension", "cable length", "time",
+                            // "platform orientation" or "temperature"
+  std::vector<int> cables;  // 0-based
+  // Per listed cable: the residual's change per unit of the variable (the channel's unit, m or N,
+  // per the variable's unit; for the direction: the error when last paid out, minus when reeled
+  // in, halved), and the Bonferroni-adjusted p-value of its test.
+  std::vector<double> slopes, p_values;
+  std::string unit;        // of the slopes: "m", "m/N", "N/s", ...
+  std::vector<int> poses;  // 0-based: the poses that carry most of it (at most 10)
+  // The library candidate whose columns come closest (canonical correlation below
+  // MismatchOptions::structure_coverage), and that correlation.
+  std::string closest_candidate;
+  double closest_correlation = 0.0;
+  std::string description;  // one sentence
 };
 
 // Misfit of one group of residuals (a channel, a cable or a pose).
@@ -128,6 +178,9 @@ struct MismatchSummary {
   std::vector<StructureTest> structure;
   std::vector<CandidateScreen> candidates;  // ranked: lowest bic_delta first, modelled last
   std::vector<ConfoundedPair> confounded;
+  // Significant structure (Bonferroni over every channel x cable x variable test, at alpha) that
+  // no library candidate covers; grouped by channel and variable, strongest first.
+  std::vector<UnexplainedStructure> unexplained;
   std::vector<std::string> findings;  // plain-language sentences, most important first
 
   // The top-ranked candidate if it is significant, else nullptr.

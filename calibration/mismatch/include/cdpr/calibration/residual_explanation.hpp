@@ -16,8 +16,9 @@
 namespace cdpr {
 
 // The explaining variable of a candidate family ("elasticity", "compliance", "drum scale", ...):
-// tension x loaded length (N m), tension (N), loaded length (m), time (s); the pose index (no
-// unit) for the families without one.
+// tension x loaded length (N m), tension (N), loaded length (m), time (s), the direction of the
+// cable's last move (+1 paid out, -1 reeled in, 0 not yet moved: cable hysteresis, pulley
+// friction); the pose index (no unit) for the families without one.
 struct ExplainingVariable {
   std::string name, unit;
 };
