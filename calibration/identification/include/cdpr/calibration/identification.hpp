@@ -92,13 +92,13 @@ struct ParameterBounds {
   double length_scale = 0.05;       // s_i: transmission (drum) scale error, +- (5 %)
   double ea_factor_min = 0.1;       // EA within [min, max] x the config's EA
   double ea_factor_max = 10.0;
-  double force_gain = 0.3;             // g_i: relative force sensor gain error, +- (30 %)
-  double force_offset_fraction = 0.1;  // c_i: +- this fraction of f_max, in raw units (gain x N)
-  double laser_origin_m = 0.1;         // laser origin on the platform, +- per coordinate
-  double laser_direction_rad = 0.2;    // beam direction, +- per tangent angle (11.5 deg)
-  double plane_normal_rad = 0.2;       // target plane normal, +- per tangent angle
-  double plane_offset_m = 0.25;        // target plane offset c, +-
-  double swivel_zero_rad = 0.5;        // swivel encoder zero, +- around the config's
+  double force_gain = 0.3;              // g_i: relative force sensor gain error, +- (30 %)
+  double force_offset_fraction = 0.1;   // c_i: +- this fraction of f_max, in raw units (gain x N)
+  double laser_origin_m = 0.1;          // laser origin on the platform, +- per coordinate
+  double laser_direction_rad = 0.2;     // beam direction, +- per tangent angle (11.5 deg)
+  double plane_normal_rad = 0.2;        // target plane normal, +- per tangent angle
+  double plane_offset_m = 0.25;         // target plane offset c, +-
+  double swivel_zero_rad = 0.5;         // swivel encoder zero, +- around the config's
   double inclinometer_mount_rad = 0.2;  // inclinometer mounting roll and pitch, +-
   double imu_yaw_zero_rad = 3.2;        // IMU heading zero, +- (about half a turn: any heading)
 };
