@@ -1671,7 +1671,11 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
                                 d.held_out_source.c_str(), 1e3 * d.held_out_rms_before,
                                 1e3 * d.held_out_rms_after));
   }
-  for (const auto& f : d.screen.findings) d.findings.push_back(f);
+  for (std::size_t q = 0; q < d.screen.findings.size(); ++q) {
+    // With nothing found, the headline already is the screen's overall fit test (its first line).
+    if (q == 0 && d.verdict == Diagnosis::Verdict::kNoMismatch) continue;
+    d.findings.push_back(d.screen.findings[q]);
+  }
   return d;
 }
 

@@ -288,6 +288,21 @@ TEST_F(NewUser, TheDocumentedSessionEndsWithoutWarnings) {
   EXPECT_TRUE(j["warnings"].empty()) << j["warnings"].dump();
 }
 
+// ---- item 9: diagnose says each thing once ------------------------------------------------------
+
+TEST_F(NewUser, DiagnoseOnCleanDataStatesItsVerdictOnceAndChasesNoSuspect) {
+  const std::string rec = record(25);
+  const ProcessResult r = fit({"diagnose", "--config", kNominal, "--recording", rec});
+  EXPECT_EQ(r.status, 0) << r.err;
+  std::size_t consistent = 0;
+  for (std::size_t at = r.out.find("consistent with the"); at != std::string::npos;
+       at = r.out.find("consistent with the", at + 1)) {
+    ++consistent;
+  }
+  EXPECT_EQ(consistent, 1u) << r.out;
+  EXPECT_THAT(r.out, Not(HasSubstr("Suspected, not proven"))) << r.out;
+}
+
 // ---- item 10: the small ones -------------------------------------------------------------------
 
 TEST_F(NewUser, AByteOrderMarkIsAccepted) {

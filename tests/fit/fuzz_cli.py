@@ -8,7 +8,7 @@ insertions of any byte, 0xFF and NUL included; extreme numbers in cells; duplica
 swapped and truncated lines) and runs the three commands, with and without --json and --report.
 
 Every run must end by itself (no signal, within --per-run seconds) with a documented exit status
-(0, 1, 2; diagnose also 3, 4); with --json, stdout must be one JSON document. The run stops after
+(0, 1, 2; calibrate and diagnose also 3, 4); with --json, stdout must be one JSON document. The run stops after
 --runs mutations or --seconds, whichever comes first, and fails when fewer than --min-runs ran.
 The random generator is seeded (--seed): the same seed gives the same mutations.
 
@@ -27,7 +27,8 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 EXTREMES = ["1e300", "-1e308", "1e-320", "nan", "inf", "-inf", "", "0", "-0", "1e", "0x10",
             "99999999999999999999", "+-1", "1,2", "\xff", "\x00", "1e308", "-1e300"]
-ALLOWED = {"calibrate": {0, 1, 2}, "simulate": {0, 1, 2}, "diagnose": {0, 1, 2, 3, 4}}
+# calibrate: 3 fit test failed, 4 not trustworthy (docs/cdpr-fit.md); diagnose: 3 mismatch, 4 inconclusive.
+ALLOWED = {"calibrate": {0, 1, 2, 3, 4}, "simulate": {0, 1, 2}, "diagnose": {0, 1, 2, 3, 4}}
 
 
 def mutate(data: bytes, rng: random.Random) -> bytes:

@@ -284,7 +284,9 @@ std::string diagnosis_text(const Diagnosis& d, const RobotModel& nominal, const 
   h << "\nverdict: " << verdict_key(d.verdict) << "\n" << d.headline << "\n";
   if (!d.findings.empty()) {
     h << "\nFindings:\n";
-    for (const std::string& f : d.findings) h << "  - " << f << "\n";
+    for (const std::string& f : d.findings) {
+      if (f != d.headline) h << "  - " << f << "\n";  // the headline is printed just above
+    }
   }
   if (!d.accepted.empty()) {
     h << "\nNamed effects:\n";
