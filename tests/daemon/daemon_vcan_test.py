@@ -16,125 +16,31 @@ loopback; cdprd starts from config/mini.yaml. Checked, in this order, all throug
   5. a second calibration, rejected, keeps the accepted geometry;
   6. rollback to version 1 makes it active again (bumpless) and is in the history.
 """
-import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
 import time
 
-CDPRD, CDPRCTL, SIM, SRC, WORK = sys.argv[1:6]
-UML = os.environ.get("CDPR_VCAN_PATH", "").startswith("user-mode-linux")
-PERIOD_MS = 20 if UML else 4
-NETWORK = f"{SRC}/tests/sim/sim-master-network.yaml" if UML else f"{SRC}/config/canopen-mini.yaml"
-SOCK = f"{WORK}/cdprd.sock"
-PORT = 16020 + os.getpid() % 1000
-failures = []
+sys.dont_write_bytecode = True  # no __pycache__ in the source tree
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from vcan_harness import Cell  # noqa: E402
+
+cell = Cell(port_base=16020)
+ctl, ctl_json, check, wait_for = cell.ctl, cell.ctl_json, cell.check, cell.wait_for
+holding, WORK = cell.holding, cell.work
 
 
-def check(ok, what):
-    print(("ok    " if ok else "FAIL  ") + what, flush=True)
-    if not ok:
-        failures.append(what)
-    return ok
-
-
-def ctl(*args, timeout=60):
-    r = subprocess.run([CDPRCTL, "--socket", SOCK, *args], capture_output=True, text=True,
-                       timeout=timeout)
-    return r.returncode, r.stdout, r.stderr
-
-
-def ctl_json(*args):
-    rc, out, err = ctl("--json", *args)
-    if rc != 0:
-        raise RuntimeError(f"cdprctl {' '.join(args)} exited {rc}: {err}{out}")
-    return json.loads(out)
-
-
-def wait_for(pred, timeout, what):
-    end = time.time() + timeout
-    while time.time() < end:
-        try:
-            if pred():
-                return True
-        except (RuntimeError, json.JSONDecodeError, KeyError, TypeError):
-            pass
-        time.sleep(0.2)
-    return check(False, f"{what} within {timeout} s")
-
-
-def holding(version=None):
-    s = ctl_json("status")
-    return s["state"] == "holding" and s["rt"]["settled"] and (
-        version is None or s["geometry_version"] == version)
-
-
-def write_configs():
-    shutil.rmtree(WORK, ignore_errors=True)  # a fresh state directory every run
-    os.makedirs(WORK)
-    with open(f"{WORK}/laser.yaml", "w") as f:
-        f.write(f"name: sim-laser\ntransport: tcp\nhost: 127.0.0.1\nport: {PORT}\nslave_id: 1\n"
-                f"response_timeout: 0.2\npoll_rate: 50\n"
-                f"register_map: {SRC}/config/lasers/baumer-om20-om30.yaml\n")
-    with open(f"{WORK}/cdprd.yaml", "w") as f:
-        f.write(f"robot: {SRC}/config/mini.yaml\ncanopen: {NETWORK}\nlaser: {WORK}/laser.yaml\n"
-                f"can_interface: vcan0\nstate_directory: {WORK}/state\n"
-                f"realtime: {{priority: {0 if UML else 80}, sync_period_ms: {PERIOD_MS}}}\n"
-                "identity: {vendor_id: 0x00CD9001, drive_product_code: 0x402, "
-                "force_product_code: 0x404}\n"
-                "motion: {max_linear_velocity: 0.2, max_linear_acceleration: 0.6, "
-                "max_linear_jerk: 6, max_angular_velocity: 0.6, max_angular_acceleration: 2, "
-                "max_angular_jerk: 20}\n"
-                "measuring: {poses: 25, laser_samples: 10, average_cycles: 10, "
-                "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4}\n"
-                "identification: {bootstrap: 30}\n"
-                f"control: {{socket: {SOCK}}}\n")
-    # Eight poses from the designed set for the quick calibration that gets rejected.
-    with open(f"{WORK}/few-poses.csv", "w") as f:
-        f.write("# units: SI\npose,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n"
-                "1,0.05,0.05,0.05,0,0,0\n2,-0.05,0.05,-0.05,0,0,0\n3,0.05,-0.05,-0.05,0,0,0\n"
-                "4,-0.05,-0.05,0.05,0,0,0\n5,0.08,0,0,0.1,0,0\n6,0,0.08,0,0,0.1,0\n"
-                "7,0,0,0.08,0,0,0.1\n")
-
-
-def start_daemon(log):
-    p = subprocess.Popen([CDPRD, "--config", f"{WORK}/cdprd.yaml"], stdout=log, stderr=log)
-    for _ in range(600):
-        if os.path.exists(SOCK):
-            try:
-                ctl_json("status")
-                return p
-            except RuntimeError:
-                pass
-        if p.poll() is not None:
-            break
-        time.sleep(0.1)
-    raise RuntimeError("cdprd did not come up; see " + log.name)
-
-
-def true_pose(sim_log_path):
-    sim.send_signal(signal.SIGUSR1)
+def true_pose():
+    cell.sim.send_signal(signal.SIGUSR1)
     time.sleep(1.0)
-    lines = [l for l in open(sim_log_path) if "true platform pose" in l]
+    lines = [l for l in open(cell.sim_log.name) if "true platform pose" in l]
     return [float(x) for x in lines[-1].split("pose")[1].split()]
 
 
-write_configs()
-sim_log = open(f"{WORK}/cdpr-sim.log", "w")
-sim = subprocess.Popen([SIM, "--config", f"{SRC}/config/mini.yaml", "--scenario",
-                        f"{SRC}/config/scenarios/mini-calibration.yaml", "--can", "vcan0",
-                        "--canopen", NETWORK, "--modbus", f"tcp:{PORT}", "--home", "reference",
-                        "--seed", "3"], stdout=sim_log, stderr=sim_log)
-daemon_log = open(f"{WORK}/cdprd.log", "w")
-daemon = None
-try:
-    for _ in range(600):
-        if "CANopen on vcan0" in open(f"{WORK}/cdpr-sim.log").read():
-            break
-        time.sleep(0.1)
-    daemon = start_daemon(daemon_log)
+def scenario():
+    cell.start_sim()
+    cell.start_daemon()
     s = ctl_json("status")
     check(s["state"] == "holding" and s["geometry_version"] == 1,
           f"cdprd holds with the nominal geometry (state {s['state']}, version {s['geometry_version']})")
@@ -164,8 +70,7 @@ try:
     wait_for(lambda: holding(v2), 60, f"holding with geometry version {v2}")
     s = ctl_json("status")
     cal = ctl_json("report")["calibration"]
-    ev = subprocess.run([SIM, "--config", f"{SRC}/config/mini.yaml", "--scenario",
-                         f"{SRC}/config/scenarios/mini-calibration.yaml", "--evaluate",
+    ev = subprocess.run([cell.sim_bin, *cell.sim_args(), "--evaluate",
                          f"{WORK}/state/calibrations/{cal:06d}/model_after.yaml"],
                         capture_output=True, text=True)
     print(ev.stdout)
@@ -180,15 +85,13 @@ try:
     check(rc == 0, f"move accepted ({err.strip()})")
     wait_for(lambda: holding(v2) and abs(ctl_json("status")["rt"]["commanded_pose"][0] - target[0]) < 1e-9,
              60, "holding at the move's target")
-    p = true_pose(f"{WORK}/cdpr-sim.log")
+    p = true_pose()
     err_mm = 1e3 * sum((a - b) ** 2 for a, b in zip(p[:3], target)) ** 0.5
     check(err_mm <= 0.5, f"test move: the true platform is {err_mm:.3f} mm from the target (<= 0.5 mm)")
 
     # 4. Restart: back with the accepted geometry.
-    daemon.send_signal(signal.SIGTERM)
-    daemon.wait(timeout=30)
-    os.path.exists(SOCK) and os.unlink(SOCK)
-    daemon = start_daemon(daemon_log)
+    cell.stop_daemon()
+    cell.start_daemon()
     wait_for(lambda: holding(v2), 60, f"holding with version {v2} after the restart")
     s = ctl_json("status")
     check(s["geometry_version"] == v2, f"restart: geometry version {s['geometry_version']} active")
@@ -210,26 +113,19 @@ try:
           f"rollback is bumpless ({s['rt']['largest_reference_step_counts']:.0f} counts)")
     h = ctl_json("geometry", "history")
     check(h["activations"][-1]["version"] == 1, "the history ends with the rollback")
-except Exception as e:  # noqa: BLE001 - report any failure with the logs
-    check(False, f"exception: {e}")
-finally:
-    if daemon is not None and daemon.poll() is None:
-        daemon.send_signal(signal.SIGTERM)
-        try:
-            daemon.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            daemon.kill()
-    sim.send_signal(signal.SIGTERM)
-    try:
-        sim.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        sim.kill()
 
-if failures:
-    print("\n--- cdprd.log (tail) ---")
-    print("".join(open(f"{WORK}/cdprd.log").readlines()[-40:]))
-    print("--- cdpr-sim.log (tail) ---")
-    print("".join(open(f"{WORK}/cdpr-sim.log").readlines()[-20:]))
-    print(f"{len(failures)} check(s) failed")
-    sys.exit(1)
-print("every check passed")
+
+cell.write_configs(
+    "motion: {max_linear_velocity: 0.2, max_linear_acceleration: 0.6, "
+    "max_linear_jerk: 6, max_angular_velocity: 0.6, max_angular_acceleration: 2, "
+    "max_angular_jerk: 20}\n"
+    "measuring: {poses: 25, laser_samples: 10, average_cycles: 10, "
+    "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4}\n"
+    "identification: {bootstrap: 30}\n")
+# Eight poses from the designed set for the quick calibration that gets rejected.
+with open(f"{WORK}/few-poses.csv", "w") as f:
+    f.write("# units: SI\npose,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n"
+            "1,0.05,0.05,0.05,0,0,0\n2,-0.05,0.05,-0.05,0,0,0\n3,0.05,-0.05,-0.05,0,0,0\n"
+            "4,-0.05,-0.05,0.05,0,0,0\n5,0.08,0,0,0.1,0,0\n6,0,0.08,0,0,0.1,0\n"
+            "7,0,0,0.08,0,0,0.1\n")
+cell.run(scenario)

@@ -13,128 +13,27 @@ columns of its header); then cdpr-sim restarts, `fault-reset` is refused with it
 nodes booted and lost their configuration), cdprd restarts, and it holds again with version 1.
 """
 import hashlib
-import json
 import os
-import shutil
 import signal
-import subprocess
 import sys
-import time
 
-CDPRD, CDPRCTL, SIM, SRC, WORK = sys.argv[1:6]
-UML = os.environ.get("CDPR_VCAN_PATH", "").startswith("user-mode-linux")
-PERIOD_MS = 20 if UML else 4
-NETWORK = f"{SRC}/tests/sim/sim-master-network.yaml" if UML else f"{SRC}/config/canopen-mini.yaml"
-SOCK = f"{WORK}/cdprd.sock"
-PORT = 17020 + os.getpid() % 1000
+sys.dont_write_bytecode = True  # no __pycache__ in the source tree
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from vcan_harness import Cell  # noqa: E402
+
+cell = Cell(port_base=17020, timestamps=True)
+ctl, ctl_json, check, wait_for = cell.ctl, cell.ctl_json, cell.check, cell.wait_for
+WORK = cell.work
 GEOMETRY = f"{WORK}/state/geometry/000001.yaml"
-failures = []
-T0 = time.time()
 
 
-def check(ok, what):
-    print(f"{time.time() - T0:6.1f} s  " + ("ok    " if ok else "FAIL  ") + what, flush=True)
-    if not ok:
-        failures.append(what)
-    return ok
-
-
-def ctl(*args, timeout=60):
-    r = subprocess.run([CDPRCTL, "--socket", SOCK, *args], capture_output=True, text=True,
-                       timeout=timeout)
-    return r.returncode, r.stdout, r.stderr
-
-
-def ctl_json(*args):
-    rc, out, err = ctl("--json", *args)
-    if rc != 0:
-        raise RuntimeError(f"cdprctl {' '.join(args)} exited {rc}: {err}{out}")
-    return json.loads(out)
-
-
-def wait_for(pred, timeout, what):
-    end = time.time() + timeout
-    while time.time() < end:
-        try:
-            if pred():
-                return True
-        except (RuntimeError, json.JSONDecodeError, KeyError, TypeError):
-            pass
-        time.sleep(0.2)
-    return check(False, f"{what} within {timeout} s")
-
-
-def holding(version=1):
-    s = ctl_json("status")
-    return s["state"] == "holding" and s["rt"]["settled"] and s["geometry_version"] == version
+def holding():
+    return cell.holding(1)
 
 
 def sha(path):
     with open(path, "rb") as f:
         return hashlib.sha256(f.read()).hexdigest()
-
-
-def write_configs():
-    shutil.rmtree(WORK, ignore_errors=True)
-    os.makedirs(WORK)
-    with open(f"{WORK}/laser.yaml", "w") as f:
-        f.write(f"name: sim-laser\ntransport: tcp\nhost: 127.0.0.1\nport: {PORT}\nslave_id: 1\n"
-                f"response_timeout: 0.2\npoll_rate: 50\n"
-                f"register_map: {SRC}/config/lasers/baumer-om20-om30.yaml\n")
-    with open(f"{WORK}/cdprd.yaml", "w") as f:
-        f.write(f"robot: {SRC}/config/mini.yaml\ncanopen: {NETWORK}\nlaser: {WORK}/laser.yaml\n"
-                f"can_interface: vcan0\nstate_directory: {WORK}/state\n"
-                f"realtime: {{priority: {0 if UML else 80}, sync_period_ms: {PERIOD_MS}}}\n"
-                "identity: {vendor_id: 0x00CD9001, drive_product_code: 0x402, "
-                "force_product_code: 0x404}\n"
-                "motion: {max_linear_velocity: 0.2, max_linear_acceleration: 0.6, "
-                "max_linear_jerk: 6, max_angular_velocity: 0.6, max_angular_acceleration: 2, "
-                "max_angular_jerk: 20}\n"
-                "measuring: {poses: 12, laser_samples: 5, average_cycles: 10, "
-                "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4}\n"
-                "identification: {diagnose: false}\n"
-                f"control: {{socket: {SOCK}}}\n")
-
-
-def start_sim(log):
-    p = subprocess.Popen([SIM, "--config", f"{SRC}/config/mini.yaml", "--scenario",
-                          f"{SRC}/config/scenarios/mini-calibration.yaml", "--can", "vcan0",
-                          "--canopen", NETWORK, "--modbus", f"tcp:{PORT}", "--home", "reference",
-                          "--seed", "3"], stdout=log, stderr=log)
-    start = log.tell() if hasattr(log, "tell") else 0
-    for _ in range(600):
-        with open(log.name) as f:
-            f.seek(start)
-            if "CANopen on vcan0" in f.read():
-                return p
-        time.sleep(0.1)
-    raise RuntimeError("cdpr-sim did not come up; see " + log.name)
-
-
-def start_daemon(log):
-    if os.path.exists(SOCK):
-        os.unlink(SOCK)
-    p = subprocess.Popen([CDPRD, "--config", f"{WORK}/cdprd.yaml"], stdout=log, stderr=log)
-    for _ in range(600):
-        if os.path.exists(SOCK):
-            try:
-                ctl_json("status")
-                return p
-            except RuntimeError:
-                pass
-        if p.poll() is not None:
-            break
-        time.sleep(0.1)
-    raise RuntimeError("cdprd did not come up; see " + log.name)
-
-
-def stop_daemon(p):
-    p.send_signal(signal.SIGTERM)
-    try:
-        p.wait(timeout=30)
-    except subprocess.TimeoutExpired:
-        p.kill()
-        p.wait()
 
 
 def recording_readable(path):
@@ -159,8 +58,7 @@ def recording_readable(path):
 def restart_sim_then_daemon(what):
     """cdpr-sim restarts (its nodes boot, unconfigured): fault-reset is refused with its reason,
     then cdprd restarts and holds again."""
-    global sim, daemon
-    sim = start_sim(sim_log)
+    cell.start_sim()
     refused = []
 
     def reset_refused():
@@ -171,19 +69,20 @@ def restart_sim_then_daemon(what):
     wait_for(reset_refused, 30, f"{what}: fault-reset refused once cdpr-sim is back ({refused})")
     if refused and refused[0] != 0:
         check(True, f"{what}: fault-reset refused with its reason ({refused[1][:120]})")
-    stop_daemon(daemon)
-    daemon = start_daemon(daemon_log)
+    cell.stop_daemon()
+    cell.start_daemon()
     wait_for(holding, 60, f"{what}: cdpr-sim, then cdprd restarted: holding with version 1")
 
 
-def after_kill(what, log_path, before_sha, sequence=False):
+def after_kill(what, before_sha, sequence=False):
     """The checks after cdpr-sim was killed."""
     wait_for(lambda: ctl_json("status")["state"] == "fault", 30, f"{what}: cdprd in fault")
     s = ctl_json("status")
     fault = (s.get("fault") or {}).get("fault")
     check(fault == "node_lost",
           f"{what}: named fault in `cdprctl status`: {fault} ({(s.get('fault') or {}).get('message')})")
-    check(f"fault: {fault}" in open(log_path).read(), f"{what}: the fault is in cdprd's log")
+    check(f"fault: {fault}" in open(cell.daemon_log.name).read(),
+          f"{what}: the fault is in cdprd's log")
     check(s["geometry_version"] == 1 and sha(GEOMETRY) == before_sha,
           f"{what}: geometry version {s['geometry_version']} active, its file unchanged")
     if sequence:
@@ -198,52 +97,40 @@ def after_kill(what, log_path, before_sha, sequence=False):
         check(ok, f"{what}: the partial recording is readable ({how})")
 
 
-write_configs()
-sim_log = open(f"{WORK}/cdpr-sim.log", "w")
-daemon_log = open(f"{WORK}/cdprd.log", "w")
-sim = daemon = None
-try:
-    sim = start_sim(sim_log)
-    daemon = start_daemon(daemon_log)
+def kill_sim():
+    cell.sim.send_signal(signal.SIGKILL)
+    cell.sim.wait()
+
+
+def scenario():
+    cell.start_sim()
+    cell.start_daemon()
     wait_for(holding, 60, "cdprd holds with geometry version 1")
     geometry_sha = sha(GEOMETRY)
 
     # 1. cdpr-sim killed while cdprd holds.
-    sim.send_signal(signal.SIGKILL)
-    sim.wait()
-    after_kill("killed while holding", daemon_log.name, geometry_sha)
+    kill_sim()
+    after_kill("killed while holding", geometry_sha)
     restart_sim_then_daemon("killed while holding")
 
     # 2. cdpr-sim killed while cdprd measures.
     rc, out, err = ctl("calibrate")
     check(rc == 0, f"calibrate starts ({(out + err).strip()[:80]})")
     wait_for(lambda: ctl_json("status")["calibration"]["pose"] >= 2, 120, "two poses measured")
-    sim.send_signal(signal.SIGKILL)
-    sim.wait()
-    after_kill("killed while measuring", daemon_log.name, geometry_sha, sequence=True)
+    kill_sim()
+    after_kill("killed while measuring", geometry_sha, sequence=True)
     restart_sim_then_daemon("killed while measuring")
     rc, out, err = ctl("calibrate")
     check(rc == 0, "a new calibration starts")
     ctl("abort")
     wait_for(holding, 60, "holding after its abort")
-except Exception as e:  # noqa: BLE001 - report any failure with the logs
-    check(False, f"exception: {e}")
-finally:
-    if daemon is not None and daemon.poll() is None:
-        stop_daemon(daemon)
-    if sim is not None and sim.poll() is None:
-        sim.send_signal(signal.SIGTERM)
-        try:
-            sim.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            sim.kill()
 
-print(f"wall time {time.time() - T0:.0f} s")
-if failures:
-    print("\n--- cdprd.log (tail) ---")
-    print("".join(open(f"{WORK}/cdprd.log").readlines()[-40:]))
-    print("--- cdpr-sim.log (tail) ---")
-    print("".join(open(f"{WORK}/cdpr-sim.log").readlines()[-20:]))
-    print(f"{len(failures)} check(s) failed")
-    sys.exit(1)
-print("every check passed")
+
+cell.write_configs(
+    "motion: {max_linear_velocity: 0.2, max_linear_acceleration: 0.6, "
+    "max_linear_jerk: 6, max_angular_velocity: 0.6, max_angular_acceleration: 2, "
+    "max_angular_jerk: 20}\n"
+    "measuring: {poses: 12, laser_samples: 5, average_cycles: 10, "
+    "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4}\n"
+    "identification: {diagnose: false}\n")
+cell.run(scenario)

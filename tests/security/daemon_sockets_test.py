@@ -23,40 +23,12 @@ import subprocess
 import sys
 import time
 
-CDPRD, CDPRCTL, SIM, SRC, WORK = sys.argv[1:6]
-UML = os.environ.get("CDPR_VCAN_PATH", "").startswith("user-mode-linux")
-PERIOD_MS = 20 if UML else 4
-NETWORK = f"{SRC}/tests/sim/sim-master-network.yaml" if UML else f"{SRC}/config/canopen-mini.yaml"
-SOCK = f"{WORK}/cdprd.sock"
-PORT = 17020 + os.getpid() % 1000
-failures = []
+sys.dont_write_bytecode = True  # no __pycache__ in the source tree
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+from vcan_harness import Cell  # noqa: E402
 
-
-def check(ok, what):
-    print(("ok    " if ok else "FAIL  ") + what, flush=True)
-    if not ok:
-        failures.append(what)
-    return ok
-
-
-def ctl(*args, timeout=60):
-    return subprocess.run([CDPRCTL, "--socket", SOCK, *args], capture_output=True, text=True,
-                          timeout=timeout)
-
-
-def write_configs():
-    os.makedirs(WORK, exist_ok=True)
-    with open(f"{WORK}/laser.yaml", "w") as f:
-        f.write(f"name: sim-laser\ntransport: tcp\nhost: 127.0.0.1\nport: {PORT}\nslave_id: 1\n"
-                f"response_timeout: 0.2\npoll_rate: 50\n"
-                f"register_map: {SRC}/config/lasers/baumer-om20-om30.yaml\n")
-    with open(f"{WORK}/cdprd.yaml", "w") as f:
-        f.write(f"robot: {SRC}/config/mini.yaml\ncanopen: {NETWORK}\nlaser: {WORK}/laser.yaml\n"
-                f"can_interface: vcan0\nstate_directory: {WORK}/state\n"
-                f"realtime: {{priority: 0, sync_period_ms: {PERIOD_MS}}}\n"
-                "identity: {vendor_id: 0x00CD9001, drive_product_code: 0x402, "
-                "force_product_code: 0x404}\n"
-                f"control: {{socket: {SOCK}}}\n")
+cell = Cell(port_base=17020)
+check, CDPRCTL, SOCK, PORT = cell.check, cell.cdprctl, cell.sock, cell.port
 
 
 def hex_addr(text):
@@ -105,36 +77,17 @@ def socket_inodes(pid):
     return sorted(out)
 
 
-write_configs()
-sim_log = open(f"{WORK}/cdpr-sim.log", "w")
-sim = subprocess.Popen([SIM, "--config", f"{SRC}/config/mini.yaml", "--scenario",
-                        f"{SRC}/config/scenarios/mini-none.yaml", "--can", "vcan0",
-                        "--canopen", NETWORK, "--modbus", f"tcp:{PORT}", "--home", "reference",
-                        "--seed", "3"], stdout=sim_log, stderr=sim_log)
-daemon_log = open(f"{WORK}/cdprd.log", "w")
-daemon = None
-watcher = None
-try:
-    for _ in range(600):
-        if "CANopen on vcan0" in open(f"{WORK}/cdpr-sim.log").read():
-            break
-        time.sleep(0.1)
-    daemon = subprocess.Popen([CDPRD, "--config", f"{WORK}/cdprd.yaml"], stdout=daemon_log,
-                              stderr=daemon_log)
-    up = False
-    for _ in range(1200):
-        if daemon.poll() is not None:
-            break
-        if os.path.exists(SOCK) and '"holding"' in ctl("--json", "status").stdout:
-            up = True
-            break
-        time.sleep(0.1)
-    check(up, "cdprd comes up and holds")
+def scenario():
+    cell.start_sim("mini-none.yaml")
+    cell.start_daemon(timeout=120)
+    check(cell.poll(lambda: cell.ctl_json("status")["state"] == "holding", 120),
+          "cdprd comes up and holds")
     # A client stays connected while the sockets are listed (the accepted connection is counted).
     watcher = subprocess.Popen([CDPRCTL, "--socket", SOCK, "watch"], stdout=subprocess.DEVNULL,
                                stderr=subprocess.DEVNULL)
+    cell.others.append(watcher)
     time.sleep(2.0)
-    pid = daemon.pid
+    pid = cell.daemon.pid
     known = tables(pid)
     inodes = socket_inodes(pid)
     can_sockets = 0
@@ -165,22 +118,7 @@ try:
     ss = subprocess.run(["ss", "-H", "-ltunp"], capture_output=True, text=True)
     mine = [l for l in ss.stdout.splitlines() if f"pid={pid}," in l]
     check(ss.returncode == 0 and not mine, f"ss -ltunp lists no listener of cdprd ({mine})")
-except Exception as e:  # noqa: BLE001 - report any failure with the logs
-    check(False, f"exception: {e}")
-finally:
-    for p in (watcher, daemon, sim):
-        if p is not None and p.poll() is None:
-            p.terminate()
-            try:
-                p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
 
-if failures:
-    print("\n--- cdprd.log (tail) ---")
-    print("".join(open(f"{WORK}/cdprd.log").readlines()[-30:]))
-    print("--- cdpr-sim.log (tail) ---")
-    print("".join(open(f"{WORK}/cdpr-sim.log").readlines()[-15:]))
-    print(f"{len(failures)} check(s) failed")
-    sys.exit(1)
-print("every check passed")
+
+cell.write_configs(priority=0)
+cell.run(scenario, daemon_tail=30, sim_tail=15)
