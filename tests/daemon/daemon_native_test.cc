@@ -8,7 +8,6 @@
 // (softer cables, encoder zero offsets, noise); the daemon starts from config/mini.yaml. The drives
 // power on with the true platform at home (the reference platform).
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
@@ -29,6 +28,7 @@
 #include "cdpr/sim/laser_slave.hpp"
 #include "cdpr/sim/physics.hpp"
 #include "cdpr/sim/scenario.hpp"
+#include "cell_fixture.hpp"
 #include "virtual_cell.hpp"
 
 namespace cdpr::controller {
@@ -36,38 +36,11 @@ namespace {
 
 using namespace std::chrono_literals;
 using json = nlohmann::json;
-namespace fs = std::filesystem;
 
-const std::string kSource = CDPR_SOURCE_DIR;
-
-class DaemonNative : public ::testing::Test {
+class DaemonNative : public testing::CellTest {
  protected:
-  void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("cdprd-native-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    auto c = testing::VirtualCell::create(kSource, dir_);
-    ASSERT_TRUE(c.ok()) << c.status().to_string();
-    cell_ = std::move(*c);
-  }
-  void TearDown() override {
-    cell_.reset();
-    fs::remove_all(dir_);
-  }
+  DaemonNative() : CellTest("cdprd-native-") {}
 
-  void start_daemon(const testing::VirtualCell::Settings& settings = {}) {
-    const Status s = cell_->start_daemon(settings);
-    ASSERT_TRUE(s.ok()) << s.to_string();
-  }
-  Daemon& daemon() { return *cell_->daemon; }
-  bool run_until(const std::function<bool()>& done, double max_s) {
-    return cell_->run_until(done, max_s);
-  }
-  Reply request(const std::string& cmd, const json& args = json::object()) {
-    return cell_->request(cmd, args);
-  }
   int calibrate() {
     auto id = cell_->calibrate();
     EXPECT_TRUE(id.ok()) << id.status().to_string();
@@ -87,9 +60,6 @@ class DaemonNative : public ::testing::Test {
   double one_cycle_counts() {
     return daemon().status()["rt"]["one_cycle_motion_counts"].get<double>();
   }
-
-  fs::path dir_;
-  std::unique_ptr<testing::VirtualCell> cell_;
 };
 
 TEST_F(DaemonNative, CalibratesMiniAcceptsBumplesslyAndTheNextMoveLandsOnTarget) {

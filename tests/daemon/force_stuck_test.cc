@@ -8,54 +8,32 @@
 // CAN bus with a manual clock); the virtual robot's sensor noise is the scenario's
 // (config/scenarios/mini-calibration.yaml: 0.2 raw units, gain 2 raw/N).
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
-#include <filesystem>
 
 #include "alloc_counter.hpp"
 #include "cdpr/calibration/winch.hpp"
 #include "cdpr/controller/daemon.hpp"
 #include "cdpr/controller/path_check.hpp"
+#include "cell_fixture.hpp"
 #include "virtual_cell.hpp"
 
 namespace cdpr::controller {
 namespace {
 
 using json = nlohmann::json;
-namespace fs = std::filesystem;
 
-const std::string kSource = CDPR_SOURCE_DIR;
-
-class ForceStuck : public ::testing::Test {
+class ForceStuck : public testing::CellTest {
  protected:
+  ForceStuck() : CellTest("cdprd-stuck-") {}
+
   void SetUp() override {
-    dir_ = fs::temp_directory_path() /
-           ("cdprd-stuck-" + std::to_string(::getpid()) + "-" +
-            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-    auto c = testing::VirtualCell::create(kSource, dir_);
-    ASSERT_TRUE(c.ok()) << c.status().to_string();
-    cell_ = std::move(*c);
-    const Status s = cell_->start_daemon();
-    ASSERT_TRUE(s.ok()) << s.to_string();
+    CellTest::SetUp();
+    if (HasFatalFailure()) return;
+    start_daemon();
+    if (HasFatalFailure()) return;
     ASSERT_TRUE(holds_settled(10.0));
-  }
-  void TearDown() override {
-    cell_.reset();
-    fs::remove_all(dir_);
-  }
-  Daemon& daemon() { return *cell_->daemon; }
-  bool holds_settled(double max_s) {
-    return cell_->run_until(
-        [&] {
-          const RtSnapshot s = daemon().rt().snapshot();
-          return daemon().state() == DaemonState::kHolding && s.mode == RtMode::kHolding &&
-                 s.settled;
-        },
-        max_s);
   }
   // Raw units per N of the force channels (config/canopen-mini.yaml).
   double gain() { return daemon().master().force_sensors()[0].gain(0); }
@@ -88,8 +66,6 @@ class ForceStuck : public ::testing::Test {
   }
   double stuck_raw_units() { return daemon().config().tension_watch.stuck_raw_units; }
 
-  fs::path dir_;
-  std::unique_ptr<testing::VirtualCell> cell_;
   std::unique_ptr<MotionCommand> trim_;
 };
 
