@@ -23,39 +23,18 @@
 #include "cdpr/recording/recording.hpp"
 #include "fit_process.hpp"
 
+namespace cdpr::fit_test {
 namespace {
-
-namespace fs = std::filesystem;
-using ::testing::HasSubstr;
-using ::testing::Not;
-
-const std::string kSource = CDPR_SOURCE_DIR;
-const std::string kNominal = kSource + "/config/mini.yaml";
-const std::string kTruth = kSource + "/config/mini-measured.yaml";
 
 // A smaller bootstrap and fewer folds than the defaults (100, 5), for the runs that check the
 // options are taken; the others use the defaults, as an engineer would.
 const std::vector<std::string> kQuick = {"--bootstrap", "20", "--folds", "3", "--seed", "2"};
 
-using Process = cdpr::fit_test::ProcessResult;
-using cdpr::fit_test::slurp;
+using Process = ProcessResult;
 
-class Diagnose : public cdpr::fit_test::FitProcessTest {
+class Diagnose : public FitProcessTest {
  protected:
   Diagnose() : FitProcessTest("cdpr_fit_diagnose_test_") {}
-
-  // The measured MINI (or `truth`) commanded through the nominal model with elastic cables,
-  // `poses` designed poses, default noise (encoder 0.1 mm, laser 1 mm, force 1 N). With the
-  // measured MINI this is what the nominal model, once calibrated, explains.
-  std::string simulate(int poses, const std::string& name, int seed = 3,
-                       const std::string& truth = kTruth) const {
-    const std::string rec = path(name);
-    const Process r =
-        fit({"simulate", "--config", truth, "--nominal", kNominal, "--physics", "elastic",
-             "--design", std::to_string(poses), "--seed", std::to_string(seed), "--out", rec});
-    EXPECT_EQ(r.status, 0) << r.err;
-    return rec;
-  }
 
   // Reads `in`, lets `change` alter it and writes it to `name`.
   std::string altered(const std::string& in, const std::string& name,
@@ -77,7 +56,7 @@ class Diagnose : public cdpr::fit_test::FitProcessTest {
 };
 
 TEST_F(Diagnose, RecordingOfACorrectModelExitsZeroWithJsonAndHtmlReports) {
-  const std::string rec = simulate(25, "null.csv");
+  const std::string rec = simulate_elastic(25, "null.csv");
   const std::string json = path("report.json"), html = path("report.html");
   std::vector<std::string> args = {"--json", json, "--html", html};
   args.insert(args.end(), kQuick.begin(), kQuick.end());
@@ -137,7 +116,7 @@ TEST_F(Diagnose, ConcealedSofterCablesAreNamedAndCarriedByTheCalibratedConfig) {
     std::ofstream f(soft);
     f << cdpr::config::save_robot_config(*truth);
   }
-  const std::string rec = simulate(25, "soft.csv", 3, soft);
+  const std::string rec = simulate_elastic(25, "soft.csv", 3, soft);
   const std::string cal = path("calibrated.yaml"), html = path("report.html");
   const Process r = diagnose(rec, {"--json", "--out", cal, "--html", html});
   ASSERT_EQ(r.status, 3) << r.err << r.out;
@@ -166,7 +145,7 @@ TEST_F(Diagnose, ConcealedSofterCablesAreNamedAndCarriedByTheCalibratedConfig) {
 }
 
 TEST_F(Diagnose, RecordingsThatDoNotFitTheConfigAreRefusedWithFileAndReason) {
-  const std::string clean = simulate(20, "clean.csv");
+  const std::string clean = simulate_elastic(20, "clean.csv");
   struct Case {
     std::string name;
     std::function<void(cdpr::recording::Recording&)> change;
@@ -226,7 +205,7 @@ TEST_F(Diagnose, RecordingsThatDoNotFitTheConfigAreRefusedWithFileAndReason) {
 
 TEST_F(Diagnose, RecordingTooSmallToTellEffectsApartIsInconclusive) {
   // Enough poses to calibrate, fewer than DiagnosisOptions::min_poses (12) to compare effects.
-  const std::string rec = simulate(8, "small.csv");
+  const std::string rec = simulate_elastic(8, "small.csv");
   const Process r = diagnose(rec, {"--json"});
   ASSERT_EQ(r.status, 4) << r.err << r.out;
   const nlohmann::json j = nlohmann::json::parse(r.out);
@@ -249,7 +228,7 @@ TEST_F(Diagnose, RecordingTooSmallToTellEffectsApartIsInconclusive) {
 
 TEST_F(Diagnose, UsageErrorsExitWithTwo) {
   EXPECT_EQ(fit({"diagnose", "--config", kNominal}).status, 2);  // --recording missing
-  const std::string rec = simulate(12, "rec.csv");
+  const std::string rec = simulate_elastic(12, "rec.csv");
   EXPECT_EQ(fit({"diagnose", "--config", kNominal, "--recording", rec, "--folds", "1"}).status, 2);
   EXPECT_EQ(
       fit({"diagnose", "--config", kNominal, "--recording", rec, "--noise-length", "-1"}).status,
@@ -260,3 +239,4 @@ TEST_F(Diagnose, UsageErrorsExitWithTwo) {
 }
 
 }  // namespace
+}  // namespace cdpr::fit_test

@@ -13,18 +13,8 @@
 
 #include "fit_process.hpp"
 
+namespace cdpr::fit_test {
 namespace {
-
-namespace fs = std::filesystem;
-using ::testing::HasSubstr;
-using ::testing::Not;
-
-const std::string kSource = CDPR_SOURCE_DIR;
-const std::string kNominal = kSource + "/config/mini.yaml";
-const std::string kTruth = kSource + "/config/mini-measured.yaml";
-
-using cdpr::fit_test::ProcessResult;
-using cdpr::fit_test::slurp;
 
 void write(const std::string& path, const std::string& text) {
   std::ofstream(path, std::ios::binary) << text;
@@ -76,7 +66,7 @@ std::string with_cell(const std::string& recording, const std::string& column, i
   return join_lines(lines);
 }
 
-class NewUser : public cdpr::fit_test::FitProcessTest {
+class NewUser : public FitProcessTest {
  protected:
   NewUser() : FitProcessTest("cdpr_fit_new_user_") {}
 
@@ -332,3 +322,4 @@ TEST_F(NewUser, VersionIsPrintedAndExitsZero) {
 }
 
 }  // namespace
+}  // namespace cdpr::fit_test

@@ -14,18 +14,12 @@
 #include "cdpr/recording/recording.hpp"
 #include "fit_process.hpp"
 
+namespace cdpr::fit_test {
 namespace {
 
-using ::testing::HasSubstr;
-using ::testing::Not;
-using Process = cdpr::fit_test::ProcessResult;
-using cdpr::fit_test::slurp;
+using Process = ProcessResult;
 
-const std::string kSource = CDPR_SOURCE_DIR;
-const std::string kNominal = kSource + "/config/mini.yaml";
-const std::string kTruth = kSource + "/config/mini-measured.yaml";
-
-class FitSensors : public cdpr::fit_test::FitProcessTest {
+class FitSensors : public FitProcessTest {
  protected:
   FitSensors() : FitProcessTest("cdpr_fit_sensors_test_") {}
 
@@ -111,3 +105,4 @@ TEST_F(FitSensors, UnknownChannelIsRefused) {
 }
 
 }  // namespace
+}  // namespace cdpr::fit_test

@@ -21,21 +21,10 @@
 #include "cdpr/recording/recording.hpp"
 #include "fit_process.hpp"
 
+namespace cdpr::fit_test {
 namespace {
 
-namespace fs = std::filesystem;
-using ::testing::HasSubstr;
-using ::testing::Not;
-
-const std::string kSource = CDPR_SOURCE_DIR;
-const std::string kNominal = kSource + "/config/mini.yaml";
-const std::string kTruth = kSource + "/config/mini-measured.yaml";
-
-using cdpr::fit_test::ProcessResult;
-using cdpr::fit_test::quote;
-using cdpr::fit_test::slurp;
-
-class CdprFit : public cdpr::fit_test::FitProcessTest {
+class CdprFit : public FitProcessTest {
  protected:
   CdprFit() : FitProcessTest("cdpr_fit_test_") {}
 
@@ -344,13 +333,11 @@ TEST_F(CdprFit, DesignedPosesStartAtHomeAndMoreNoisePredictsLessAccuracy) {
 // with elastic cables and encoders homed with it, default noise (laser 1 mm, encoder 0.1 mm,
 // force 1 N), calibrated from the nominal config with the default parameter set and gauge.
 TEST_F(CdprFit, ElasticRecordingOfTheMeasuredRobotCalibratesFromTheNominalConfig) {
-  const std::string rec = path("elastic.csv");
-  ProcessResult r = fit({"simulate", "--config", kTruth, "--nominal", kNominal, "--physics",
-                         "elastic", "--design", "25", "--seed", "3", "--out", rec});
-  ASSERT_EQ(r.status, 0) << r.err;
+  const std::string rec = simulate_elastic(25, "elastic.csv");
+  ASSERT_FALSE(HasFailure());
   const std::string cal = path("calibrated.yaml"), report = path("report.json");
-  r = fit({"calibrate", "--config", kNominal, "--recording", rec, "--truth", kTruth, "--out", cal,
-           "--report", report});
+  ProcessResult r = fit({"calibrate", "--config", kNominal, "--recording", rec, "--truth", kTruth,
+                         "--out", cal, "--report", report});
   ASSERT_EQ(r.status, 0) << r.err << r.out;
 
   auto nominal = cdpr::config::load_robot_config(kNominal);
@@ -389,10 +376,8 @@ TEST_F(CdprFit, ElasticRecordingOfTheMeasuredRobotCalibratesFromTheNominalConfig
 // (the paper's set-up: measured with a Faro arm), it must improve V (squared error by >10 %; on
 // the 25 poses designed in the frame-scaled box it goes from 8.0 to 7.0 mm RMS over V).
 TEST_F(CdprFit, PaperMethodConvergesOnAnElasticRecording) {
-  const std::string rec = path("elastic.csv");
-  ProcessResult r = fit({"simulate", "--config", kTruth, "--nominal", kNominal, "--physics",
-                         "elastic", "--design", "25", "--seed", "4", "--out", rec});
-  ASSERT_EQ(r.status, 0) << r.err;
+  const std::string rec = simulate_elastic(25, "elastic.csv", 4);
+  ASSERT_FALSE(HasFailure());
   auto nominal = cdpr::config::load_robot_config(kNominal);
   auto truth = cdpr::config::load_robot_config(kTruth);
   ASSERT_TRUE(nominal.ok() && truth.ok());
@@ -412,8 +397,8 @@ TEST_F(CdprFit, PaperMethodConvergesOnAnElasticRecording) {
   for (const std::string& config : {kNominal, start}) {
     SCOPED_TRACE(config);
     const std::string cal = path("paper.yaml");
-    r = fit({"calibrate", "--method", "paper", "--config", config, "--recording", rec, "--out", cal,
-             "--json"});
+    const ProcessResult r = fit({"calibrate", "--method", "paper", "--config", config,
+                                 "--recording", rec, "--out", cal, "--json"});
     ASSERT_EQ(r.status, 0) << r.err;
     const nlohmann::json j = nlohmann::json::parse(r.out);
     EXPECT_TRUE(j.at("converged").get<bool>()) << j.at("termination");
@@ -506,12 +491,10 @@ TEST_F(CdprFit, LargeRobotCalibratesThroughTheCli) {
 // drum scale error per winch (alternating signs, on the length paid out from the home pose, row 0)
 // fails the fit test (3), still writes --out as asked, and says so with the next step.
 TEST_F(CdprFit, CalibrateExitStatusSaysWhetherTheModelPassed) {
-  const std::string rec = path("elastic.csv");
-  ProcessResult r = fit({"simulate", "--config", kTruth, "--nominal", kNominal, "--physics",
-                         "elastic", "--design", "25", "--seed", "3", "--out", rec});
-  ASSERT_EQ(r.status, 0) << r.err;
+  const std::string rec = simulate_elastic(25, "elastic.csv");
+  ASSERT_FALSE(HasFailure());
   const std::string cal = path("calibrated.yaml"), report = path("report.json");
-  r = fit(
+  ProcessResult r = fit(
       {"calibrate", "--config", kNominal, "--recording", rec, "--out", cal, "--report", report});
   ASSERT_EQ(r.status, 0) << r.err << r.out;
   EXPECT_THAT(r.out, HasSubstr("verdict: PASSED"));
@@ -556,3 +539,5 @@ TEST_F(CdprFit, CalibrateExitStatusSaysWhetherTheModelPassed) {
   EXPECT_EQ(nlohmann::json::parse(r.out).at("fit_test").at("verdict"), "fit_rejected");
   EXPECT_THAT(r.err, HasSubstr("did not pass"));
 }
+
+}  // namespace cdpr::fit_test

@@ -1,8 +1,10 @@
 // The cdpr-fit process fixture shared by the tests in tests/fit: a fresh directory per test (kept
 // when the test fails, for reading its files) and the real cdpr-fit binary (CDPR_FIT_BIN, set by
-// tests/fit/CMakeLists.txt) run in a shell with stdout and stderr captured separately.
+// tests/fit/CMakeLists.txt) run in a shell with stdout and stderr captured separately; the shipped
+// MINI configs the tests run it on (CDPR_SOURCE_DIR/config).
 #pragma once
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -18,6 +20,13 @@
 namespace cdpr::fit_test {
 
 namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+using ::testing::Not;
+
+// The project's root; the nominal MINI and the measured one (the truth of the recordings).
+inline const std::string kSource = CDPR_SOURCE_DIR;
+inline const std::string kNominal = kSource + "/config/mini.yaml";
+inline const std::string kTruth = kSource + "/config/mini-measured.yaml";
 
 struct ProcessResult {
   int status = -1;  // exit status, -1 when killed by a signal
@@ -76,6 +85,19 @@ class FitProcessTest : public ::testing::Test {
     r.out = slurp(out);
     r.err = slurp(err);
     return r;
+  }
+
+  // The measured MINI (or `truth`) commanded through the nominal model with elastic cables,
+  // `poses` designed poses, default noise (encoder 0.1 mm, laser 1 mm, force 1 N), written to
+  // `name` in the test's directory; its path.
+  std::string simulate_elastic(int poses, const std::string& name, int seed = 3,
+                               const std::string& truth = kTruth) const {
+    const std::string rec = path(name);
+    const ProcessResult r =
+        fit({"simulate", "--config", truth, "--nominal", kNominal, "--physics", "elastic",
+             "--design", std::to_string(poses), "--seed", std::to_string(seed), "--out", rec});
+    EXPECT_EQ(r.status, 0) << r.err;
+    return rec;
   }
 
   fs::path dir_;
