@@ -61,9 +61,7 @@ double g_design_angle = 0.2618;  // --design-angle rad  // --ea N: override the 
                                  // --d-optimal: the plain D-optimal design
 
 cdpr::SensorNoise bench_noise() {
-  cdpr::SensorNoise n;
-  n.sigma_laser = 1e-3;
-  n.sigma_length = 1e-4;
+  cdpr::SensorNoise n = cdpr::bench::mini_noise();
   n.sigma_force = g_sigma_force;
   return n;
 }
@@ -109,18 +107,7 @@ double crb_at_truth(const cdpr::scenario::Scenario& s, const std::vector<Pose>& 
   const cdpr::GeometryInformation gi = must(
       cdpr::geometry_information(s.truth, sim.set, sim.true_poses, cdpr::IdentificationOptions{}),
       "information at the truth");
-  const Eigen::VectorXd d = gi.information.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
-  const Eigen::MatrixXd In = d.asDiagonal() * gi.information * d.asDiagonal();
-  const Eigen::MatrixXd cov =
-      d.asDiagonal() * In.completeOrthogonalDecomposition().pseudoInverse() * d.asDiagonal();
-  double sum = 0.0;
-  int count = 0;
-  for (std::size_t q = 0; q < gi.names.size(); ++q) {
-    if (gi.names[q].rfind("a_", 0) != 0) continue;
-    sum += cov(static_cast<Eigen::Index>(q), static_cast<Eigen::Index>(q));
-    ++count;
-  }
-  return count ? std::sqrt(sum / count) : 0.0;
+  return cdpr::bench::anchor_crb_rms(gi);
 }
 
 struct RobotRun {

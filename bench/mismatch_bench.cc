@@ -64,11 +64,7 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 using cdpr::bench::must;
 
 cdpr::SensorNoise bench_noise() {
-  cdpr::SensorNoise n;
-  n.sigma_laser = 1e-3;
-  n.sigma_length = 1e-4;
-  n.sigma_force = 1.0;
-  return n;
+  return cdpr::bench::mini_noise();
 }
 
 // ------------------------------------------------------------------------------------------------
