@@ -1,6 +1,5 @@
 #include <cmath>
 #include <cstdio>
-#include <limits>
 
 #include "cdpr/report/format.hpp"
 #include "report_internal.hpp"
@@ -35,17 +34,6 @@ h2{break-after:avoid}svg,table,.verdict{break-inside:avoid}a{color:inherit;text-
 .verdict{-webkit-print-color-adjust:exact;print-color-adjust:exact}
 @page{margin:12mm}}
 )";
-
-double rms_of(const std::vector<double>& v) {
-  double s = 0.0;
-  int n = 0;
-  for (double x : v) {
-    if (!std::isfinite(x)) continue;
-    s += x * x;
-    ++n;
-  }
-  return n == 0 ? std::numeric_limits<double>::quiet_NaN() : std::sqrt(s / n);
-}
 
 }  // namespace
 
@@ -122,7 +110,7 @@ std::vector<double> cable_rms(const std::vector<PoseResiduals>& residuals, int n
     for (const PoseResiduals& r : residuals) {
       if (i < r.length_normalized.size()) v.push_back(r.length_normalized(i));
     }
-    out.push_back(rms_of(v));
+    out.push_back(svg::rms_finite(v));
   }
   return out;
 }

@@ -136,18 +136,6 @@ std::string svg_open(const Frame& f, const std::string& label, const std::string
          kSvgStyle + "<rect width=\"100%\" height=\"100%\" fill=\"#fff\"/>\n";
 }
 
-double rms_finite(const std::vector<double>& v, int* count) {
-  double s = 0.0;
-  int n = 0;
-  for (double x : v) {
-    if (!std::isfinite(x)) continue;
-    s += x * x;
-    ++n;
-  }
-  *count = n;
-  return n == 0 ? std::numeric_limits<double>::quiet_NaN() : std::sqrt(s / n);
-}
-
 // "before: 120 points, RMS 2.3; after: 120 points, RMS 0.98."
 std::string series_description(const std::vector<double>& before,
                                const std::vector<double>& after) {
@@ -163,6 +151,18 @@ std::string series_description(const std::vector<double>& before,
 }
 
 }  // namespace
+
+double rms_finite(const std::vector<double>& v, int* count) {
+  double s = 0.0;
+  int n = 0;
+  for (double x : v) {
+    if (!std::isfinite(x)) continue;
+    s += x * x;
+    ++n;
+  }
+  if (count != nullptr) *count = n;
+  return n == 0 ? std::numeric_limits<double>::quiet_NaN() : std::sqrt(s / n);
+}
 
 std::string scatter(const Scatter& p) {
   Frame f;

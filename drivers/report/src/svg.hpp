@@ -12,6 +12,9 @@
 
 namespace cdpr::report::svg {
 
+// The RMS of the finite values of `v` (NaN when none is); `count`, when given, receives how many.
+double rms_finite(const std::vector<double>& v, int* count = nullptr);
+
 // A scatter plot of one or two series over the same x (e.g. residuals before and after).
 struct Scatter {
   std::string title, xlabel, ylabel;
