@@ -13,6 +13,11 @@
 # cdpr_add_vcan_test(NAME <test> COMMAND <cmd...> [LABELS ...] [TIMEOUT s])
 #   Registers a test that needs a kernel CAN bus. It runs through tests/vcan/vcan-run, which uses
 #   native vcan where the kernel has it and boots user-mode-linux where it has not.
+#
+# cdpr_add_cell_vcan_test(NAME <test> SCRIPT <file.py> [LABELS ...] [TIMEOUT s])
+#   A vcan test of cdprd, cdprctl and cdpr-sim as separate processes: the Python SCRIPT (in the
+#   calling folder; it uses tests/support/vcan_harness.py) is given the three programs, the source
+#   tree and its work directory, <binary folder>/<script's stem without _test>_work.
 set(CDPR_VCAN_RUN ${CMAKE_SOURCE_DIR}/tests/vcan/vcan-run)
 
 function(cdpr_add_gtest)
@@ -43,4 +48,16 @@ function(cdpr_add_vcan_test)
   set_tests_properties(${T_NAME} PROPERTIES LABELS "vcan;${T_LABELS}" TIMEOUT ${T_TIMEOUT}
                                             RESOURCE_LOCK cdpr_kernel_can
                                             WORKING_DIRECTORY ${CMAKE_BINARY_DIR})
+endfunction()
+
+function(cdpr_add_cell_vcan_test)
+  cmake_parse_arguments(T "" "NAME;SCRIPT;TIMEOUT" "LABELS" ${ARGN})
+  get_filename_component(_stem ${T_SCRIPT} NAME_WE)
+  string(REGEX REPLACE "_test$" "" _stem ${_stem})
+  cdpr_add_vcan_test(NAME ${T_NAME}
+                     COMMAND /usr/bin/python3 ${CMAKE_CURRENT_SOURCE_DIR}/${T_SCRIPT}
+                             $<TARGET_FILE:cdprd> $<TARGET_FILE:cdprctl> $<TARGET_FILE:cdpr-sim>
+                             ${PROJECT_SOURCE_DIR} ${CMAKE_CURRENT_BINARY_DIR}/${_stem}_work
+                     LABELS ${T_LABELS}
+                     TIMEOUT ${T_TIMEOUT})
 endfunction()
