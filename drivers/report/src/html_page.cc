@@ -530,6 +530,27 @@ double magnification(double largest, double target) {
   return k;
 }
 
+// The two plan views of the workspace plots: the top view (x, y) and the side view (x, z).
+struct PlanAxes {
+  int ax, ay;
+  const char* name;
+};
+constexpr PlanAxes kPlanViews[2] = {{0, 1, "top view (x, y)"}, {0, 2, "side view (x, z)"}};
+
+// An empty plan view on `view`'s axes, titled `title`.
+svg::PlanView plan_on(const PlanAxes& view, const std::string& title) {
+  static const char* const kLabels[3] = {"x (m)", "y (m)", "z (m)"};
+  svg::PlanView p;
+  p.title = title;
+  p.xlabel = kLabels[view.ax];
+  p.ylabel = kLabels[view.ay];
+  return p;
+}
+
+std::string axis_name(int axis) {
+  return std::string(1, static_cast<char>('x' + axis));
+}
+
 std::string anchor_views(const PageInput& in) {
   const int m = in.before->num_cables();
   const Eigen::Matrix3Xd& a0 = in.before->frame_anchors;
@@ -552,15 +573,10 @@ std::string anchor_views(const PageInput& in) {
        "anchors; shaded: the 1-sigma uncertainty ellipse from the fit's covariance. Changes and "
        "ellipses are magnified &times;"
     << html_escape(fmt(k, 3)) << " (positions in m).</p>\n<div class=\"pair\">\n";
-  const int axes[2][2] = {{0, 1}, {0, 2}};
-  const char* names[2] = {"top view (x, y)", "side view (x, z)"};
-  const char* labels[3] = {"x (m)", "y (m)", "z (m)"};
-  for (int v = 0; v < 2; ++v) {
-    const int ax = axes[v][0], ay = axes[v][1];
-    svg::PlanView p;
-    p.title = std::string("frame anchors, ") + names[v] + ", changes ×" + fmt(k, 3);
-    p.xlabel = labels[ax];
-    p.ylabel = labels[ay];
+  for (const PlanAxes& view : kPlanViews) {
+    const int ax = view.ax, ay = view.ay;
+    svg::PlanView p =
+        plan_on(view, std::string("frame anchors, ") + view.name + ", changes ×" + fmt(k, 3));
     std::string desc;
     for (int i = 0; i < m; ++i) {
       const Eigen::Vector3d d = a1.col(i) - a0.col(i);
@@ -577,11 +593,10 @@ std::string anchor_views(const PageInput& in) {
                               who + ": 1-sigma " + mm(std::sqrt(c(ax, ax)), 2) + " x " +
                                   mm(std::sqrt(c(ay, ay)), 2) + " mm"});
       }
-      desc += (i == 0 ? "" : "; ") + who + " moved " + mm(d(ax), 3) + " mm in " +
-              std::string(1, static_cast<char>('x' + ax)) + ", " + mm(d(ay), 3) + " mm in " +
-              std::string(1, static_cast<char>('x' + ay));
+      desc += (i == 0 ? "" : "; ") + who + " moved " + mm(d(ax), 3) + " mm in " + axis_name(ax) +
+              ", " + mm(d(ay), 3) + " mm in " + axis_name(ay);
     }
-    p.description = "Frame anchors " + std::string(names[v]) + ": " + desc + ".";
+    p.description = "Frame anchors " + std::string(view.name) + ": " + desc + ".";
     p.legend = {{"nominal", "o"}, {"change ×" + fmt(k, 3), "f"}, {"1σ", "e"}};
     h << svg::plan_view(p);
   }
@@ -607,15 +622,9 @@ std::string pose_views(const PageInput& in, const Accuracy& acc) {
     << (in.fit != nullptr && !in.fit->poses.empty() ? "as estimated" : "as commanded")
     << "); squares: the frame anchors; dashed: the ISO 9283 box of the accuracy figures.</p>\n"
     << "<div class=\"pair\">\n";
-  const int axes[2][2] = {{0, 1}, {0, 2}};
-  const char* names[2] = {"top view (x, y)", "side view (x, z)"};
-  const char* labels[3] = {"x (m)", "y (m)", "z (m)"};
-  for (int v = 0; v < 2; ++v) {
-    const int ax = axes[v][0], ay = axes[v][1];
-    svg::PlanView p;
-    p.title = std::string("measured poses, ") + names[v];
-    p.xlabel = labels[ax];
-    p.ylabel = labels[ay];
+  for (const PlanAxes& view : kPlanViews) {
+    const int ax = view.ax, ay = view.ay;
+    svg::PlanView p = plan_on(view, std::string("measured poses, ") + view.name);
     for (int i = 0; i < m; ++i) {
       p.points.push_back({in.before->frame_anchors(ax, i), in.before->frame_anchors(ay, i), "o",
                           "anchor " + std::to_string(i + 1)});
@@ -635,9 +644,8 @@ std::string pose_views(const PageInput& in, const Accuracy& acc) {
                        box.center(ax) + box.half_extent(ax), box.center(ay) + box.half_extent(ay),
                        "ISO 9283 box"});
     p.description = std::to_string(poses.size()) + " poses spanning " + fmt(lo[0], 3) + " to " +
-                    fmt(hi[0], 3) + " m in " + std::string(1, static_cast<char>('x' + ax)) +
-                    " and " + fmt(lo[1], 3) + " to " + fmt(hi[1], 3) + " m in " +
-                    std::string(1, static_cast<char>('x' + ay)) + ", among " + std::to_string(m) +
+                    fmt(hi[0], 3) + " m in " + axis_name(ax) + " and " + fmt(lo[1], 3) + " to " +
+                    fmt(hi[1], 3) + " m in " + axis_name(ay) + ", among " + std::to_string(m) +
                     " frame anchors.";
     p.legend = {{"anchor", "o"}, {"pose", "p"}, {"ISO box", "bx"}};
     h << svg::plan_view(p);
