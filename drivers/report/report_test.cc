@@ -79,6 +79,21 @@ class CalibrationReport : public ::testing::Test {
     in_.context.estimated = {"anchors", "offsets"};
   }
 
+  // A diagnosis of the fixture's identification that names cable elasticity (accepted).
+  Diagnosis elasticity_named() const {
+    Diagnosis d;
+    d.verdict = Diagnosis::Verdict::kMismatchNamed;
+    d.headline = "Missing physics found: cable elasticity.";
+    d.before = id_;
+    d.model_after = id_.estimate;
+    EffectFit e;
+    e.id = "hooke_shared";
+    e.name = "cable elasticity";
+    e.accepted = true;
+    d.accepted = {e};
+    return d;
+  }
+
   scenario::Scenario s_;
   MeasurementSet set_;
   IdentificationReport id_;
@@ -235,23 +250,15 @@ TEST_F(CalibrationReport, ADiagnosisAddsItsSectionsToEveryRendering) {
 // A named effect with its value +- std and the share of the standard fit's excess chi^2 it
 // removes; the residual maps before/after; the findings folded.
 TEST_F(CalibrationReport, NamedEffectsTableShowsValueStdAndShareOfTheMisfit) {
-  Diagnosis d;
-  d.verdict = Diagnosis::Verdict::kMismatchNamed;
-  d.headline = "Missing physics found: cable elasticity.";
+  Diagnosis d = elasticity_named();
   d.findings = {d.headline, "Channel 'cable lengths' misfits."};
-  d.before = id_;
   d.before.chi2 = 2.0 * id_.dof;
   d.after = id_;
-  d.model_after = id_.estimate;
-  EffectFit e;
-  e.id = "hooke_shared";
-  e.name = "cable elasticity";
-  e.accepted = true;
+  EffectFit& e = d.accepted[0];
   e.modelled_in_config = true;
   e.chi2_before = d.before.chi2;
   e.chi2_after = 1.1 * id_.dof;
   e.parameters.push_back({"EA", "N", 21400.0, 600.0, "EA = 21.4 +- 0.6 kN"});
-  d.accepted = {e};
   d.candidates = {e};
   in_.diagnosis = &d;
   const Rendered r = render_calibration_report(in_);
@@ -269,16 +276,7 @@ TEST_F(CalibrationReport, NamedEffectsTableShowsValueStdAndShareOfTheMisfit) {
 
 // Confounded pairs: those with a named effect in a short table, the others folded.
 TEST_F(CalibrationReport, ConfoundedPairsThatBearOnTheVerdictComeFirstTheRestFolded) {
-  Diagnosis d;
-  d.verdict = Diagnosis::Verdict::kMismatchNamed;
-  d.headline = "Missing physics found: cable elasticity.";
-  d.before = id_;
-  d.model_after = id_.estimate;
-  EffectFit e;
-  e.id = "hooke_shared";
-  e.name = "cable elasticity";
-  e.accepted = true;
-  d.accepted = {e};
+  Diagnosis d = elasticity_named();
   ConfoundedFinding f;
   f.first = "hooke_shared";
   f.second = "compliance_shared";
