@@ -77,8 +77,11 @@ Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
 
 // The sensitivity of the pose the platform reaches to the geometry parameters, at each point of
 // `box` where the tensions are feasible at f_ref: G = -pinv(dL/dx) (dL/dp) (rows: position m,
-// then orientation rad; columns: the parameters `identification` estimates, whose names must be
-// `names`, else kInternal). Shared by predict_accuracy and the position-accuracy pose design.
+// then orientation rad; columns: `names`, the parameters `identification` estimates with the
+// channels recorded; kInternal when a parameter of the lengths is not among them). The mounting
+// parameters of the laser, swivel encoders, inclinometer and IMU do not enter the commanded
+// lengths: their columns are zero. Shared by predict_accuracy and the position-accuracy pose
+// design.
 Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& model,
                                                         const AccuracyBox& box, double f_ref,
                                                         const SensorNoise& noise,
