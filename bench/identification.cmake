@@ -5,8 +5,9 @@
 add_executable(identification_bench ${CMAKE_CURRENT_LIST_DIR}/identification_bench.cc)
 target_link_libraries(identification_bench PRIVATE cdpr_calibration cdpr_calibration_testing cdpr_options)
 
-# Issue 18: MINI with laser / with swivel angles + inclinometer / with nothing extra, side by side
-# (Monte Carlo, Cramer-Rao bound, coverage, box position error):
-#   build/<dir>/bench/sensors_bench [--seeds N]
+# Issue 18: MINI or LARGE with laser / with swivel angles + inclinometer / with nothing extra / all,
+# side by side (poses designed per configuration; Monte Carlo, Cramer-Rao bound, prediction,
+# coverage, box position error):
+#   build/<dir>/bench/sensors_bench [--seeds N] [--robot mini|large] [--laser-poses]
 add_executable(sensors_bench ${CMAKE_CURRENT_LIST_DIR}/sensors_bench.cc)
 target_link_libraries(sensors_bench PRIVATE cdpr_calibration cdpr_calibration_testing cdpr_options)

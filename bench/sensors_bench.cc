@@ -1,12 +1,19 @@
-// Issue 18 benchmark: what each sensor configuration buys on MINI (printed figures, not a test).
+// Issue 18 benchmark: what each sensor configuration buys (printed figures, not a test).
 //
-// Scenario: MINI as shipped with swivel encoders, an inclinometer and hidden mounting errors
-// (scenario::mini_sensor_scenario): nominal = config/mini.yaml, truth = config/mini-measured.yaml
-// plus swivel-encoder zeros and an inclinometer tilt; elastic simulation (the nominal controller
-// commands lengths, the true robot settles); encoder 0.1 mm, force 1 N, laser 1 mm, swivel 1 mrad,
-// inclinometer 0.5 mrad; 25 poses designed for position accuracy with the laser (the same poses
-// for every configuration); the same seeds, and the lengths and forces of a seed are the same in
-// every configuration (SimulationOptions: the new channels draw from their own stream).
+// Scenarios (--robot mini|large):
+// - MINI as shipped with swivel encoders, an inclinometer and hidden mounting errors
+//   (scenario::mini_sensor_scenario): nominal = config/mini.yaml, truth = config/mini-measured.yaml
+//   plus swivel-encoder zeros and an inclinometer tilt. Accuracy box: the ISO 9283 312 mm cube;
+//   candidate cube 0.2 m half side.
+// - LARGE (scenario::large_sensor_scenario, as bench/mismatch_bench.cc's large robot): the
+//   IPAnema-3-like 8-cable robot, anchors perturbed by up to 30 mm, the same sensors and mounting
+//   errors. Accuracy box 5 x 3.5 x 1.2 m (identification_bench's); candidate box 8 x 5.6 x 2 m.
+// Elastic simulation (the nominal controller commands lengths, the true robot settles); encoder
+// 0.1 mm, force 1 N, laser 1 mm, swivel 1 mrad, inclinometer 0.5 mrad; 25 poses designed for
+// position accuracy FOR EACH CONFIGURATION'S CHANNELS (design_poses with its SensorChannels; with
+// --laser-poses the poses designed with the laser are used for every configuration, as issue 18's
+// first part did); the same seeds, and the lengths and forces of a seed are the same in every
+// configuration (SimulationOptions: the new channels draw from their own stream).
 //
 // Configurations:
 //   laser                 lengths + forces + laser; anchors, offsets, laser plane
@@ -14,11 +21,14 @@
 //                         offsets, swivel zeros, inclinometer mounting (roll, pitch)
 //   nothing extra         lengths + forces only (self-calibration); anchors, offsets
 //   all                   laser + swivel + inclinometer
+// (the estimated parameters follow the channels: fit_estimates_to_channels).
 // Figures per configuration: anchor RMS error per coordinate over the seeds, the Cramer-Rao bound
-// at the truth (true parameters, settled poses and tensions of a noise-free run), the reported
-// std, the coverage of the 95 % intervals, the ISO 9283 box position error (312 mm cube, 125
-// points) and chi2/dof.
-//   build/<dir>/bench/sensors_bench [--seeds N]
+// at the truth (true parameters, settled poses and tensions of a noise-free run), the design's
+// prediction (predict_accuracy at the nominal model: anchor std and box position RMS), the
+// reported std, the coverage of the 95 % intervals, the bias (RMS over the coordinates of the mean
+// error), the box position error (RMS over the seeds of
+// each run's RMS over the 125 box points, and the largest point error) and chi2/dof.
+//   build/<dir>/bench/sensors_bench [--seeds N] [--robot mini|large] [--laser-poses]
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -49,6 +59,14 @@ cdpr::SensorNoise bench_noise() {
 struct Config {
   const char* name;
   bool laser, swivel, inclinometer;
+
+  cdpr::SensorChannels channels() const {
+    cdpr::SensorChannels c;
+    c.laser = laser;
+    c.swivel = swivel;
+    c.inclinometer = inclinometer;
+    return c;
+  }
 };
 
 cdpr::SimulationOptions sim_options(const cdpr::scenario::Scenario& s, const Config& c,
@@ -57,18 +75,50 @@ cdpr::SimulationOptions sim_options(const cdpr::scenario::Scenario& s, const Con
   so.physics = cdpr::SimulationOptions::Physics::kElastic;
   so.controller = &s.nominal;
   so.add_noise = noise;
-  so.laser = c.laser;
-  so.swivel = c.swivel;
-  so.inclinometer = c.inclinometer;
+  so.use_channels(c.channels());
   return so;
 }
 
 cdpr::IdentificationOptions ident_options(const Config& c) {
   cdpr::IdentificationOptions o;
-  o.estimate_laser_plane = c.laser;
-  o.estimate_swivel_zeros = c.swivel;
-  o.estimate_inclinometer_mounting = c.inclinometer;
+  cdpr::fit_estimates_to_channels(c.channels(), &o);
   return o;
+}
+
+// The robot of a run: scenario, design options (channels set per configuration) and test box.
+struct Robot {
+  const char* name;
+  cdpr::scenario::Scenario s;
+  cdpr::PoseDesignOptions design;
+  cdpr::AccuracyBox box;
+};
+
+Robot make_robot(const std::string& which) {
+  Robot r;
+  r.design.noise = bench_noise();
+  r.design.max_angle = 0.2618;
+  r.design.criterion = cdpr::DesignCriterion::kPositionAccuracy;
+  if (which == "large") {
+    r.name = "LARGE";
+    r.s = cdpr::scenario::large_sensor_scenario();
+    r.design.half_extent = Eigen::Vector3d(4.0, 2.8, 1.0);
+    r.design.exchange_passes = 2;
+    r.box.half_extent = Eigen::Vector3d(2.5, 1.75, 0.6);
+  } else {
+    r.name = "MINI";
+    r.s = cdpr::scenario::mini_sensor_scenario();
+    r.design.half_extent = Eigen::Vector3d::Constant(0.2);
+    r.design.exchange_passes = 4;
+  }
+  r.design.accuracy_box = r.box;
+  return r;
+}
+
+cdpr::PoseDesign design_for(const Robot& r, const Config& c) {
+  cdpr::PoseDesignOptions d = r.design;
+  d.channels = c.channels();
+  d.identification = ident_options(c);
+  return must(cdpr::design_poses(r.s.nominal, d), "design");
 }
 
 // RMS over the anchor coordinates of the Cramer-Rao std at the truth.
@@ -91,27 +141,43 @@ double crb_at_truth(const cdpr::scenario::Scenario& s, const std::vector<cdpr::P
 
 int main(int argc, char** argv) {
   int seeds = 100;
+  std::string which = "mini";
+  bool laser_poses = false;
   for (int k = 1; k < argc; ++k) {
-    if (std::strcmp(argv[k], "--seeds") == 0 && k + 1 < argc) seeds = std::atoi(argv[++k]);
+    if (std::strcmp(argv[k], "--seeds") == 0 && k + 1 < argc) {
+      seeds = std::atoi(argv[++k]);
+    } else if (std::strcmp(argv[k], "--robot") == 0 && k + 1 < argc) {
+      which = argv[++k];
+    } else if (std::strcmp(argv[k], "--laser-poses") == 0) {
+      laser_poses = true;
+    } else {
+      std::fprintf(stderr,
+                   "usage: sensors_bench [--seeds N] [--robot mini|large] [--laser-poses]\n");
+      return 2;
+    }
   }
-  const cdpr::scenario::Scenario mini = cdpr::scenario::mini_sensor_scenario();
-  cdpr::PoseDesignOptions design;
-  design.noise = bench_noise();
-  design.half_extent = Eigen::Vector3d::Constant(0.2);
-  design.max_angle = 0.2618;
-  design.exchange_passes = 4;
-  cdpr::AccuracyBox iso;
-  design.criterion = cdpr::DesignCriterion::kPositionAccuracy;
-  design.accuracy_box = iso;
-  const cdpr::PoseDesign poses = must(cdpr::design_poses(mini.nominal, design), "design");
+  if (which != "mini" && which != "large") {
+    std::fprintf(stderr, "--robot must be mini or large, got %s\n", which.c_str());
+    return 2;
+  }
+  const Robot robot = make_robot(which);
+  const cdpr::scenario::Scenario& s = robot.s;
+  const cdpr::AccuracyBox& box = robot.box;
   const double nominal_pos =
-      must(cdpr::measure_position_accuracy(mini.truth, mini.nominal, iso), "nominal accuracy")
+      must(cdpr::measure_position_accuracy(s.truth, s.nominal, box), "nominal accuracy")
           .position_rms_m;
-  std::printf("cdpr sensor-channel benchmark: MINI, %zu designed poses, %d seeds, elastic\n",
-              poses.poses.size(), seeds);
+  std::printf("cdpr sensor-channel benchmark: %s, %d poses designed %s, %d seeds, elastic\n",
+              robot.name, robot.design.num_poses,
+              laser_poses ? "with the laser (the same for every configuration)"
+                          : "for each configuration's channels",
+              seeds);
   std::printf(
       "noise: encoder 0.1 mm, force 1 N, laser 1 mm, swivel 1 mrad, inclinometer 0.5 mrad\n");
-  std::printf("nominal model: box position RMS %.3f mm\n\n", 1e3 * nominal_pos);
+  std::printf(
+      "accuracy box: +-%.3f x %.3f x %.3f m, %d points; nominal model: box position RMS "
+      "%.3f mm\n\n",
+      box.half_extent.x(), box.half_extent.y(), box.half_extent.z(),
+      box.points_per_axis * box.points_per_axis * box.points_per_axis, 1e3 * nominal_pos);
 
   const Config configs[] = {
       {"laser", true, false, false},
@@ -119,52 +185,84 @@ int main(int argc, char** argv) {
       {"nothing extra", false, false, false},
       {"all (laser+swivel+incl.)", true, true, true},
   };
-  std::printf("%-26s %9s %9s %8s %9s %9s %9s %9s %8s %6s\n", "configuration", "anchor", "CRB",
-              "err/CRB", "rep. std", "coverage", "box RMS", "box max", "chi2/dof", "runs");
-  std::printf("%-26s %9s %9s %8s %9s %9s %9s %9s %8s %6s\n", "", "RMS mm", "mm", "", "mm", "%",
-              "mm", "mm", "", "");
+  std::vector<cdpr::Pose> shared;
+  if (laser_poses) shared = design_for(robot, configs[0]).poses;
+  std::printf("%-26s %8s %8s %7s %8s %8s %8s %8s %8s %8s %8s %6s\n", "configuration", "anchor",
+              "CRB", "err/CRB", "pred.", "rep.std", "coverage", "box RMS", "pred.box", "box max",
+              "chi2/dof", "runs");
+  std::printf("%-26s %8s %8s %7s %8s %8s %8s %8s %8s %8s %8s %6s\n", "", "RMS mm", "mm", "",
+              "std mm", "mm", "%", "mm", "RMS mm", "mm", "", "");
   std::vector<std::string> summaries;
   for (const Config& c : configs) {
     const auto t0 = std::chrono::steady_clock::now();
+    const std::vector<cdpr::Pose> poses = laser_poses ? shared : design_for(robot, c).poses;
+    const double design_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    cdpr::PredictedAccuracyOptions po;
+    po.identification = ident_options(c);
+    po.box = box;
+    po.channels = c.channels();
+    const cdpr::PredictedAccuracy predicted =
+        must(cdpr::predict_accuracy(s.nominal, poses, bench_noise(), po), "prediction");
     std::string summary;
-    const double crb = crb_at_truth(mini, poses.poses, c, &summary);
+    const double crb = crb_at_truth(s, poses, c, &summary);
     summaries.push_back(std::string(c.name) + ":\n" + summary);
+    // Per anchor coordinate (3 x m): sum of the errors, for the bias.
+    Eigen::Matrix3Xd sum_err = Eigen::Matrix3Xd::Zero(3, s.truth.robot.num_cables());
+    Eigen::Array<int, 3, Eigen::Dynamic> count_err =
+        Eigen::Array<int, 3, Eigen::Dynamic>::Zero(3, s.truth.robot.num_cables());
     double sum_sq = 0.0, sum_std2 = 0.0, sum_chi2 = 0.0, sum_pos2 = 0.0, pos_max = 0.0;
     long covered = 0, total = 0;
     int ok = 0;
     for (int seed = 0; seed < seeds; ++seed) {
-      auto sim = cdpr::simulate_measurements(mini.truth, poses.poses, bench_noise(), 1000 + seed,
-                                             sim_options(mini, c, true));
+      auto sim = cdpr::simulate_measurements(s.truth, poses, bench_noise(), 1000 + seed,
+                                             sim_options(s, c, true));
       if (!sim.ok()) continue;
-      auto rep = cdpr::identify(mini.nominal, sim->set, ident_options(c));
+      auto rep = cdpr::identify(s.nominal, sim->set, ident_options(c));
       if (!rep.ok() || !rep->converged) continue;
       ++ok;
       sum_chi2 += rep->chi2 / std::max(1, rep->dof);
       const cdpr::RealizedAccuracy acc =
-          must(cdpr::measure_position_accuracy(mini.truth, rep->estimate, iso), "accuracy");
+          must(cdpr::measure_position_accuracy(s.truth, rep->estimate, box), "accuracy");
       sum_pos2 += acc.position_rms_m * acc.position_rms_m;
       pos_max = std::max(pos_max, acc.position_max_m);
       for (const cdpr::ParameterEstimate& p : rep->parameters) {
         if (p.name.rfind("a_", 0) != 0) continue;
         const int cable = std::stoi(p.name.substr(2, p.name.find('.') - 2)) - 1;
         const int axis = p.name.back() - 'x';
-        const double e = p.value - mini.truth.robot.frame_anchors(axis, cable);
+        const double e = p.value - s.truth.robot.frame_anchors(axis, cable);
         sum_sq += e * e;
+        sum_err(axis, cable) += e;
+        count_err(axis, cable) += 1;
         sum_std2 += p.std_dev * p.std_dev;
         covered += std::abs(e) <= 1.96 * p.std_dev ? 1 : 0;
         ++total;
       }
     }
     const double rms = std::sqrt(sum_sq / std::max<long>(1, total));
+    // Bias: RMS over the estimated coordinates of the mean error (its noise floor is about
+    // rms / sqrt(runs)).
+    double bias2 = 0.0;
+    int biased = 0;
+    for (Eigen::Index q = 0; q < sum_err.size(); ++q) {
+      const int n = count_err(q);
+      if (n == 0) continue;
+      bias2 += (sum_err(q) / n) * (sum_err(q) / n);
+      ++biased;
+    }
+    const double bias = std::sqrt(bias2 / std::max(1, biased));
     std::printf(
-        "%-26s %9.3f %9.3f %8.3f %9.3f %9.1f %9.3f %9.3f %8.3f %6d  (%.0f s)\n", c.name, 1e3 * rms,
-        1e3 * crb, rms / crb, 1e3 * std::sqrt(sum_std2 / std::max<long>(1, total)),
+        "%-26s %8.3f %8.3f %7.3f %8.3f %8.3f %8.1f %8.3f %8.3f %8.3f %8.3f %6d  (bias %.3f mm, "
+        "noise floor %.3f mm; design %.0f s, %.0f s)\n",
+        c.name, 1e3 * rms, 1e3 * crb, rms / crb, 1e3 * predicted.anchor_rms_std_m,
+        1e3 * std::sqrt(sum_std2 / std::max<long>(1, total)),
         100.0 * static_cast<double>(covered) / static_cast<double>(std::max<long>(1, total)),
-        1e3 * std::sqrt(sum_pos2 / std::max(1, ok)), 1e3 * pos_max, sum_chi2 / std::max(1, ok), ok,
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        1e3 * std::sqrt(sum_pos2 / std::max(1, ok)), 1e3 * predicted.position_rms_m, 1e3 * pos_max,
+        sum_chi2 / std::max(1, ok), ok, 1e3 * bias, 1e3 * rms / std::sqrt(std::max(1, ok)),
+        design_s, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     std::fflush(stdout);
   }
   std::printf("\nIdentifiability at the truth (per configuration):\n");
-  for (const std::string& s : summaries) std::printf("%s\n", s.c_str());
+  for (const std::string& line : summaries) std::printf("%s\n", line.c_str());
   return 0;
 }

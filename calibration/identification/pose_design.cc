@@ -127,6 +127,11 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
   if (options.num_poses < 2) {
     return Status(ErrorCode::kInvalidArgument, "pose design: at least 2 poses are needed");
   }
+  if (Status s =
+          check_estimates_for_channels(model.robot, options.channels, options.identification);
+      !s.ok()) {
+    return Status::error(s.code(), "pose design: %s", std::string(s.message()).c_str());
+  }
   const double f_ref = std::isnan(options.reference_tension)
                            ? default_reference_tension(model.robot)
                            : options.reference_tension;
@@ -144,6 +149,7 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
   SimulationOptions so;
   so.add_noise = false;
   so.reference_tension = f_ref;
+  so.use_channels(options.channels);
   auto sim = simulate_measurements(model, cands, options.noise, 0, so);
   if (!sim) return sim.status();
   auto gi = geometry_information(model, sim->set, cands, options.identification);
@@ -281,6 +287,7 @@ Result<std::vector<PoseSetComparison>> compare_pose_sets(const CalibratedModel& 
   po.identification = options.identification;
   po.box = box;
   po.reference_tension = f_ref;
+  po.channels = options.channels;
   std::vector<PoseSetComparison> out;
   const std::vector<std::pair<std::string, std::vector<Pose>>> sets{
       {"designed (D-optimal + exchange)", design->poses},
@@ -292,6 +299,7 @@ Result<std::vector<PoseSetComparison>> compare_pose_sets(const CalibratedModel& 
     SimulationOptions so;
     so.add_noise = false;
     so.reference_tension = f_ref;
+    so.use_channels(options.channels);
     auto sim = simulate_measurements(model, poses, options.noise, 0, so);
     if (!sim) return sim.status();
     auto ir = analyze_identifiability(model, sim->set, options.identification);

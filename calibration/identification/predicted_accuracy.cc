@@ -1,6 +1,7 @@
 #include "cdpr/calibration/predicted_accuracy.hpp"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 
 #include "cdpr/calibration/kinematics.hpp"
@@ -49,6 +50,30 @@ Eigen::MatrixXd normalized_pinv(const Eigen::MatrixXd& S, double tol, int* rank)
 
 }  // namespace
 
+void fit_estimates_to_channels(const SensorChannels& channels, IdentificationOptions* options) {
+  if (!channels.laser) {
+    options->estimate_laser_origin = false;
+    options->estimate_laser_direction = false;
+    options->estimate_laser_plane = false;
+  }
+  options->estimate_swivel_zeros = channels.swivel;
+  options->estimate_inclinometer_mounting = channels.inclinometer || channels.imu_yaw;
+  options->estimate_imu_yaw_zero = channels.imu_yaw;
+}
+
+Status check_estimates_for_channels(const RobotModel& robot, const SensorChannels& channels,
+                                    const IdentificationOptions& identification) {
+  if (!channels.laser && !robot.lasers.empty() &&
+      (identification.estimate_laser_origin || identification.estimate_laser_direction ||
+       identification.estimate_laser_plane)) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "the laser's parameters are estimated but the laser channel is not recorded "
+                  "(they would stay unobserved); estimate them only with the laser "
+                  "(fit_estimates_to_channels)");
+  }
+  return Status::success();
+}
+
 Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& model,
                                                         const AccuracyBox& box, double f_ref,
                                                         const SensorNoise& noise,
@@ -65,21 +90,41 @@ Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& m
   so.reference_tension = f_ref;
   auto gsim = simulate_measurements(model, grid, noise, 0, so);
   if (!gsim) return gsim.status();
-  // Lengths only, and no pose held by the gauge: every grid pose is free.
+  // Lengths only, and no pose held by the gauge: every grid pose is free. The mounting
+  // parameters of the issue 18 channels do not enter the lengths (their columns of G are zero);
+  // the grid records none of those channels, so they are not free there and are mapped by name.
   IdentificationOptions go = identification;
   go.use_laser = false;
   go.use_equilibrium = false;
   go.use_reference = false;
+  go.estimate_swivel_zeros = false;
+  go.estimate_inclinometer_mounting = false;
+  go.estimate_imu_yaw_zero = false;
   if (go.gauge == Gauge::kHomePose) go.gauge = Gauge::kNone;
   if (go.gauge == Gauge::kHomePoseAndLaserPlane) go.gauge = Gauge::kLaserPlane;
   auto gg = geometry_information(model, gsim->set, grid, go, /*keep_jacobians=*/true);
   if (!gg) return gg.status();
-  if (gg->names != names) {
-    return Status(ErrorCode::kInternal, "pose sensitivities: parameter lists differ");
+  // Column of each of the grid's parameters in `names`.
+  std::vector<Eigen::Index> column(gg->names.size());
+  for (std::size_t q = 0; q < gg->names.size(); ++q) {
+    const auto it = std::find(names.begin(), names.end(), gg->names[q]);
+    if (it == names.end()) {
+      return Status::error(ErrorCode::kInternal,
+                           "pose sensitivities: parameter %s is not in the list",
+                           gg->names[q].c_str());
+    }
+    column[q] = static_cast<Eigen::Index>(it - names.begin());
   }
+  const auto P = static_cast<Eigen::Index>(names.size());
   for (std::size_t k = 0; k < grid.size(); ++k) {
-    out.push_back(-gg->jacobian_pose[k].completeOrthogonalDecomposition().pseudoInverse() *
-                  gg->jacobian_geometry[k]);
+    const Eigen::MatrixXd Gk =
+        -gg->jacobian_pose[k].completeOrthogonalDecomposition().pseudoInverse() *
+        gg->jacobian_geometry[k];
+    Eigen::MatrixXd G = Eigen::MatrixXd::Zero(Gk.rows(), P);
+    for (std::size_t q = 0; q < column.size(); ++q) {
+      G.col(column[q]) = Gk.col(static_cast<Eigen::Index>(q));
+    }
+    out.push_back(std::move(G));
   }
   return out;
 }
@@ -87,9 +132,12 @@ Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& m
 Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
                                            const std::vector<Pose>& poses, const SensorNoise& noise,
                                            const PredictedAccuracyOptions& options) {
+  CDPR_RETURN_IF_ERROR(
+      check_estimates_for_channels(model.robot, options.channels, options.identification));
   SimulationOptions so;
   so.add_noise = false;
   so.reference_tension = options.reference_tension;
+  so.use_channels(options.channels);
   auto sim = simulate_measurements(model, poses, noise, 0, so);
   if (!sim) return sim.status();
   auto gi = geometry_information(model, sim->set, poses, options.identification);

@@ -98,13 +98,12 @@ inline Scenario mini_config_scenario() {
   return s;
 }
 
-// MINI as shipped (mini_config_scenario) with the issue 18 sensors and hidden mounting errors in
-// the truth: swivel encoder zeros of up to 0.05 rad (encoders 3 and 6 count the other way), an
-// inclinometer tilted by about a degree on its mount (rotated 0.3 rad about its z, which the
-// nominal model knows) and an IMU heading zero of 0.4 rad. The nominal model knows the encoder
-// directions and the mounting's rotation about the sensor z, not the zeros and the tilt.
-inline Scenario mini_sensor_scenario() {
-  Scenario s = mini_config_scenario();
+// The issue 18 sensors with hidden mounting errors in the truth: swivel encoder zeros of up to
+// 0.05 rad (encoders 3 and 6 count the other way), an inclinometer tilted by about a degree on
+// its mount (rotated 0.3 rad about its z, which the nominal model knows) and an IMU heading zero
+// of 0.4 rad. The nominal model knows the encoder directions and the mounting's rotation about
+// the sensor z, not the zeros and the tilt.
+inline void add_sensor_mounting_errors(Scenario& s) {
   RobotModel& truth = s.truth.robot;
   RobotModel& nominal = s.nominal.robot;
   const int m = truth.num_cables();
@@ -119,6 +118,13 @@ inline Scenario mini_sensor_scenario() {
   truth.inclinometer.mounting_rpy = Eigen::Vector3d(0.012, -0.017, 0.3);
   truth.inclinometer.yaw_zero = 0.4;
   nominal.inclinometer.mounting_rpy = Eigen::Vector3d(0.0, 0.0, 0.3);
+}
+
+// MINI as shipped (mini_config_scenario) with the issue 18 sensors and hidden mounting errors
+// (add_sensor_mounting_errors).
+inline Scenario mini_sensor_scenario() {
+  Scenario s = mini_config_scenario();
+  add_sensor_mounting_errors(s);
   return s;
 }
 
@@ -139,6 +145,15 @@ inline Scenario large_scenario(double perturbation = 0.03, unsigned seed = 7) {
   auto off = homing_offsets(truth, nominal, default_reference_tension(nominal));
   if (off) s.truth.readings.length_offsets = *off;
   s.box = testing::large_workspace();
+  return s;
+}
+
+// The large robot (large_scenario) with the same issue 18 sensors and hidden mounting errors as
+// mini_sensor_scenario (add_sensor_mounting_errors); its swivel pulleys are those of
+// testing::large_robot, the same in the nominal model and the truth.
+inline Scenario large_sensor_scenario() {
+  Scenario s = large_scenario();
+  add_sensor_mounting_errors(s);
   return s;
 }
 

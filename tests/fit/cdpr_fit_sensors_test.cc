@@ -68,6 +68,37 @@ TEST_F(FitSensors, SwivelAndInclinometerRecordingIsCalibratedAndDiagnosedWithout
   EXPECT_THAT(estimated, HasSubstr("inclinometer-mounting"));
   EXPECT_THAT(estimated, Not(HasSubstr("laser-plane")));
 
+  // The JSON report carries the channel analysis the text report prints: what fixes the world
+  // frame, and what each channel makes identifiable.
+  const nlohmann::json& ident = j.at("identifiability");
+  EXPECT_THAT(ident.at("gauge").dump(), HasSubstr("fixed by the home pose and gravity only"));
+  const auto channel = [&](const std::string& name) {
+    for (const nlohmann::json& ch : ident.at("channels")) {
+      if (ch.at("channel") == name) return ch;
+    }
+    return nlohmann::json();
+  };
+  const nlohmann::json swivel = channel("swivel angles");
+  ASSERT_FALSE(swivel.is_null()) << ident.at("channels").dump();
+  EXPECT_EQ(swivel.at("rows").get<std::size_t>(), 8 * parsed->poses.size());
+  std::vector<std::string> made = swivel.at("makes_identifiable");
+  for (int i = 1; i <= 8; ++i) {
+    EXPECT_THAT(made, ::testing::Contains("swivel_zero_" + std::to_string(i)));
+  }
+  EXPECT_EQ(ident.at("rank").get<int>() - swivel.at("rank_without").get<int>(),
+            static_cast<int>(made.size()));
+  EXPECT_THAT(swivel.at("description").get<std::string>(), HasSubstr("makes 8 parameters"));
+  const nlohmann::json incl = channel("inclinometer");
+  ASSERT_FALSE(incl.is_null());
+  made = incl.at("makes_identifiable").get<std::vector<std::string>>();
+  EXPECT_THAT(
+      made, ::testing::UnorderedElementsAre("inclinometer.mount.roll", "inclinometer.mount.pitch"));
+  EXPECT_TRUE(channel("laser").is_null());
+  // Every channel's description is the line the text report prints.
+  for (const nlohmann::json& ch : ident.at("channels")) {
+    EXPECT_THAT(c.out, HasSubstr("channel " + ch.at("description").get<std::string>()));
+  }
+
   auto nominal = cdpr::config::load_robot_config(kNominal);
   auto real = cdpr::config::load_robot_config(truth);
   auto calibrated = cdpr::config::load_robot_config(cal);
@@ -95,6 +126,46 @@ TEST_F(FitSensors, SwivelAndInclinometerRecordingIsCalibratedAndDiagnosedWithout
     swivel_channel = swivel_channel || ch.dump().find("swivel angles") != std::string::npos;
   }
   EXPECT_TRUE(swivel_channel) << dj.at("channels").dump();
+}
+
+// Planning for the channels: design-poses and predict-accuracy --channels (issue 18).
+TEST_F(FitSensors, PosesAreDesignedAndPredictedForTheChannelsGiven) {
+  const std::string poses = path("poses.csv");
+  const Process d =
+      fit({"--json", "design-poses", "--config", kNominal, "--count", "10", "--points-per-axis",
+           "3", "--channels", "swivel,inclinometer", "--out", poses});
+  ASSERT_EQ(d.status, 0) << d.err << d.out;
+  const nlohmann::json dj = nlohmann::json::parse(d.out);
+  EXPECT_EQ(dj.at("channels"), nlohmann::json({"swivel", "inclinometer"}));
+  const std::string estimated = dj.at("estimate").dump();
+  EXPECT_THAT(estimated, HasSubstr("swivel-zeros"));
+  EXPECT_THAT(estimated, HasSubstr("inclinometer-mounting"));
+  EXPECT_THAT(estimated, Not(HasSubstr("laser-plane")));
+  EXPECT_TRUE(dj.at("noise").contains("swivel_rad"));
+  EXPECT_FALSE(dj.at("noise").contains("laser_m"));
+
+  const Process p = fit({"--json", "predict-accuracy", "--config", kNominal, "--poses", poses,
+                         "--points-per-axis", "3", "--channels", "swivel,inclinometer"});
+  ASSERT_EQ(p.status, 0) << p.err << p.out;
+  const nlohmann::json pj = nlohmann::json::parse(p.out);
+  EXPECT_EQ(pj.at("rank").get<std::size_t>(), pj.at("parameters").size());
+  bool has_swivel_zero = false;
+  for (const nlohmann::json& q : pj.at("parameters")) {
+    has_swivel_zero = has_swivel_zero || q.at("name") == "swivel_zero_1";
+  }
+  EXPECT_TRUE(has_swivel_zero);
+  // The same poses predicted for the laser configuration: the swivel encoders sharpen the anchors.
+  const Process l = fit({"--json", "predict-accuracy", "--config", kNominal, "--poses", poses,
+                         "--points-per-axis", "3"});
+  ASSERT_EQ(l.status, 0) << l.err;
+  EXPECT_LT(pj.at("anchor_rms_std_m").get<double>(),
+            nlohmann::json::parse(l.out).at("anchor_rms_std_m").get<double>());
+
+  // Laser parameters without the laser would stay unobserved: refused.
+  const Process bad = fit({"design-poses", "--config", kNominal, "--count", "5", "--channels",
+                           "swivel", "--estimate", "anchors,laser-plane", "--out", path("b.csv")});
+  EXPECT_NE(bad.status, 0);
+  EXPECT_THAT(bad.err, HasSubstr("no laser"));
 }
 
 TEST_F(FitSensors, UnknownChannelIsRefused) {

@@ -236,6 +236,21 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
       ->capture_default_str();
   dp->add_option("--noise-force", design.noise.sigma_force, "tension noise std dev, N")
       ->capture_default_str();
+  dp->add_option("--noise-swivel", design.noise.sigma_swivel, "swivel angle noise std dev, rad")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  dp->add_option("--noise-inclination", design.noise.sigma_inclination,
+                 "inclinometer roll/pitch noise std dev, rad")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  dp->add_option("--noise-imu-yaw", design.noise.sigma_imu_yaw, "IMU heading noise std dev, rad")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  dp->add_option("--channels", design.channels,
+                 "channels the calibration records besides lengths and tensions, "
+                 "comma-separated: laser, swivel, inclinometer, imu-yaw, or none (default: laser "
+                 "when the config has one)")
+      ->delimiter(',');
   dp->add_flag("--compare", design.compare,
                "also predict the accuracy of random and box-corner sets of the same size");
   dp->add_option("--seed", design.seed, "seed of the random comparison set")->capture_default_str();
@@ -258,6 +273,21 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
       ->capture_default_str();
   pa->add_option("--noise-force", predict.noise.sigma_force, "tension noise std dev, N")
       ->capture_default_str();
+  pa->add_option("--noise-swivel", predict.noise.sigma_swivel, "swivel angle noise std dev, rad")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  pa->add_option("--noise-inclination", predict.noise.sigma_inclination,
+                 "inclinometer roll/pitch noise std dev, rad")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  pa->add_option("--noise-imu-yaw", predict.noise.sigma_imu_yaw, "IMU heading noise std dev, rad")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  pa->add_option("--channels", predict.channels,
+                 "channels the calibration records besides lengths and tensions, "
+                 "comma-separated: laser, swivel, inclinometer, imu-yaw, or none (default: laser "
+                 "when the config has one)")
+      ->delimiter(',');
   pa->add_option("--half-extent", predict.half_extent, "half side of the test cube, m")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);

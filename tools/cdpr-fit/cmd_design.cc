@@ -21,6 +21,50 @@ nlohmann::json poses_json(const std::vector<Pose>& poses) {
   return a;
 }
 
+// The channels of a plan (--channels; none given: the laser when the config has one) and the
+// parameters it is for: without --estimate the defaults fitted to the channels (as calibrate
+// fits them to a recording's columns), with --estimate checked against the channels.
+Status plan_channels(const std::vector<std::string>& words,
+                     const std::vector<std::string>& estimate, const RobotModel& robot,
+                     const std::string& config, SensorChannels* channels,
+                     IdentificationOptions* identification) {
+  if (words.empty()) {
+    *channels = SensorChannels{};
+    channels->laser = !robot.lasers.empty();
+  } else {
+    auto c = parse_channels(words, robot, config);
+    if (!c.ok()) return c.status();
+    *channels = *c;
+  }
+  CDPR_RETURN_IF_ERROR(apply_estimate(estimate, robot.num_cables(), identification));
+  if (estimate.empty()) fit_estimates_to_channels(*channels, identification);
+  if (Status s = check_estimates_for_channels(robot, *channels, *identification); !s.ok()) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "--estimate names laser parameters but --channels has no laser: they would "
+                  "stay unobserved");
+  }
+  return Status::success();
+}
+
+// The channels as JSON words and their noise (only the channels used).
+nlohmann::json channel_words(const SensorChannels& c) {
+  nlohmann::json a = nlohmann::json::array();
+  if (c.laser) a.push_back("laser");
+  if (c.swivel) a.push_back("swivel");
+  if (c.inclinometer) a.push_back("inclinometer");
+  if (c.imu_yaw) a.push_back("imu-yaw");
+  return a;
+}
+
+nlohmann::json noise_json(const SensorNoise& n, const SensorChannels& c) {
+  nlohmann::json j = {{"length_m", n.sigma_length}, {"force_n", n.sigma_force}};
+  if (c.laser) j["laser_m"] = n.sigma_laser;
+  if (c.swivel) j["swivel_rad"] = n.sigma_swivel;
+  if (c.inclinometer) j["inclination_rad"] = n.sigma_inclination;
+  if (c.imu_yaw) j["imu_yaw_rad"] = n.sigma_imu_yaw;
+  return j;
+}
+
 }  // namespace
 
 Result<Output> design_poses(const DesignArgs& args) {
@@ -49,7 +93,8 @@ Result<Output> design_poses(const DesignArgs& args) {
   }
   options.max_angle = args.max_angle;
   options.noise = args.noise;
-  CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, model->num_cables(), &options.identification));
+  CDPR_RETURN_IF_ERROR(plan_channels(args.channels, args.estimate, *model, args.config,
+                                     &options.channels, &options.identification));
   const CalibratedModel cm = CalibratedModel::from_robot(*model);
   auto design = cdpr::design_poses(cm, options);
   if (!design.ok()) return with_context(design.status(), "designing poses for " + args.config);
@@ -72,6 +117,8 @@ Result<Output> design_poses(const DesignArgs& args) {
               {"out", args.out},
               {"count", design->poses.size()},
               {"estimate", estimated_items(options.identification)},
+              {"channels", channel_words(options.channels)},
+              {"noise", noise_json(options.noise, options.channels)},
               {"candidates", design->candidates},
               {"exchanges", design->exchanges},
               {"criterion", args.criterion},
@@ -84,6 +131,8 @@ Result<Output> design_poses(const DesignArgs& args) {
     << design->candidates << " feasible candidates, " << design->exchanges << " exchanges, log det "
     << fmt(design->log_det, 6) << ", path " << fmt(design->path_length, 4) << " m)\nestimating:";
   for (const std::string& e : estimated_items(options.identification)) h << " " << e;
+  h << "\nchannels: lengths, tensions"
+    << (options.channels.words() == "none" ? "" : ", " + options.channels.words());
   h << "\ncandidate box: +-" << fmt(options.half_extent.x(), 3) << " x "
     << fmt(options.half_extent.y(), 3) << " x " << fmt(options.half_extent.z(), 3)
     << " m around home; criterion " << args.criterion;
@@ -123,7 +172,8 @@ Result<Output> predict_accuracy(const PredictArgs& args) {
   auto list = recording::read_pose_list(args.poses);
   if (!list.ok()) return list.status();
   PredictedAccuracyOptions options;
-  CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, model->num_cables(), &options.identification));
+  CDPR_RETURN_IF_ERROR(plan_channels(args.channels, args.estimate, *model, args.config,
+                                     &options.channels, &options.identification));
   options.box.center = model->home.position;
   options.box.half_extent = Eigen::Vector3d::Constant(args.half_extent);
   options.box.points_per_axis = args.points_per_axis;
@@ -135,9 +185,17 @@ Result<Output> predict_accuracy(const PredictArgs& args) {
   nlohmann::json params = nlohmann::json::array();
   std::ostringstream h;
   h << "predicted accuracy of calibrating " << model->name << " at the " << list->poses.size()
-    << " poses of " << args.poses << "\n(noise: length " << args.noise.sigma_length << " m, laser "
-    << args.noise.sigma_laser << " m, force " << args.noise.sigma_force
-    << " N)\n\n  parameter                  CRB std\n";
+    << " poses of " << args.poses << "\n(channels: lengths, tensions"
+    << (options.channels.words() == "none" ? "" : ", " + options.channels.words())
+    << "; noise: length " << args.noise.sigma_length << " m, force " << args.noise.sigma_force
+    << " N";
+  if (options.channels.laser) h << ", laser " << args.noise.sigma_laser << " m";
+  if (options.channels.swivel) h << ", swivel " << args.noise.sigma_swivel << " rad";
+  if (options.channels.inclinometer) {
+    h << ", inclinometer " << args.noise.sigma_inclination << " rad";
+  }
+  if (options.channels.imu_yaw) h << ", IMU yaw " << args.noise.sigma_imu_yaw << " rad";
+  h << ")\n\n  parameter                  CRB std\n";
   for (std::size_t i = 0; i < p->names.size(); ++i) {
     const double sd = i < static_cast<std::size_t>(p->crb_std.size())
                           ? p->crb_std(static_cast<Eigen::Index>(i))
@@ -157,10 +215,8 @@ Result<Output> predict_accuracy(const PredictArgs& args) {
               {"poses", args.poses},
               {"pose_count", list->poses.size()},
               {"estimate", estimated_items(options.identification)},
-              {"noise",
-               {{"length_m", args.noise.sigma_length},
-                {"laser_m", args.noise.sigma_laser},
-                {"force_n", args.noise.sigma_force}}},
+              {"channels", channel_words(options.channels)},
+              {"noise", noise_json(args.noise, options.channels)},
               {"parameters", params},
               {"rank", p->rank},
               {"anchor_rms_std_m", p->anchor_rms_std_m},

@@ -24,38 +24,10 @@ Result<Output> simulate(const SimulateArgs& args) {
     }
     nominal = CalibratedModel::from_robot(*n);
   }
-  bool want_laser = false, want_swivel = false, want_incl = false, want_yaw = false;
-  for (const std::string& c : args.channels) {
-    if (c == "laser") {
-      want_laser = true;
-    } else if (c == "swivel") {
-      want_swivel = true;
-    } else if (c == "inclinometer") {
-      want_incl = true;
-    } else if (c == "imu-yaw") {
-      want_yaw = true;
-    } else {
-      return Status::error(ErrorCode::kInvalidArgument,
-                           "--channels: unknown channel '%s' (one of laser, swivel, inclinometer, "
-                           "imu-yaw)",
-                           c.c_str());
-    }
-  }
-  if (want_laser && truth->lasers.empty()) {
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "%s has no laser; leave 'laser' out of --channels for a recording "
-                         "without laser columns",
-                         args.config.c_str());
-  }
-  if (want_swivel) {
-    for (int i = 0; i < truth->num_cables(); ++i) {
-      if (!truth->pulleys[static_cast<std::size_t>(i)].enabled()) {
-        return Status::error(ErrorCode::kInvalidArgument,
-                             "--channels swivel: cable %d of %s has no swivel pulley", i + 1,
-                             args.config.c_str());
-      }
-    }
-  }
+  auto channels = parse_channels(args.channels, *truth, args.config);
+  if (!channels.ok()) return channels.status();
+  const bool want_laser = channels->laser, want_swivel = channels->swivel,
+             want_incl = channels->inclinometer, want_yaw = channels->imu_yaw;
   if (args.elastic && !nominal) {
     return Status(ErrorCode::kInvalidArgument,
                   "--physics elastic needs --nominal (the "
@@ -67,6 +39,8 @@ Result<Output> simulate(const SimulateArgs& args) {
     PoseDesignOptions design;
     design.num_poses = args.design;
     design.noise = args.noise;
+    design.channels = *channels;  // designed for the channels recorded
+    fit_estimates_to_channels(design.channels, &design.identification);
     design.progress = console().progress;
     const CalibratedModel planner = nominal ? *nominal : CalibratedModel::from_robot(*truth);
     fit_design_box_to_robot(planner.robot, design);
@@ -86,10 +60,7 @@ Result<Output> simulate(const SimulateArgs& args) {
   options.controller = nominal ? &*nominal : nullptr;
   options.add_noise = args.add_noise;
   options.reference_tension = args.reference_tension;
-  options.laser = want_laser;
-  options.swivel = want_swivel;
-  options.inclinometer = want_incl;
-  options.imu_yaw = want_yaw;
+  options.use_channels(*channels);
   for (const int j : args.reference_poses) {
     if (j < 0 || j >= static_cast<int>(list->poses.size())) {
       return Status::error(ErrorCode::kInvalidArgument,

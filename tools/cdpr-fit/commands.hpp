@@ -97,6 +97,9 @@ struct DesignArgs {
   int points_per_axis = 5;
   double max_angle = 0.2618;  // rad
   SensorNoise noise;
+  // The channels the calibration will record besides lengths and tensions (issue 18): laser,
+  // swivel, inclinometer, imu-yaw, or {"none"}. Empty: the laser when the config has one.
+  std::vector<std::string> channels;
   bool compare = false;  // also compare with random and box-corner sets of the same size
   std::uint64_t seed = 1;
 };
@@ -107,7 +110,8 @@ struct PredictArgs {
   std::string poses;
   std::vector<std::string> estimate;
   SensorNoise noise;
-  double half_extent = 0.156;  // m, test cube (ISO 9283 style) for the position error
+  std::vector<std::string> channels;  // as DesignArgs::channels
+  double half_extent = 0.156;         // m, test cube (ISO 9283 style) for the position error
   int points_per_axis = 5;
 };
 Result<Output> predict_accuracy(const PredictArgs& args);

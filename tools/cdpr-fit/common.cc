@@ -21,6 +21,45 @@ std::string hash_or_unknown(const std::string& path) {
   return h.ok() ? *h : std::string("unknown");
 }
 
+Result<SensorChannels> parse_channels(const std::vector<std::string>& words,
+                                      const RobotModel& robot, const std::string& config) {
+  SensorChannels c;
+  c.laser = false;
+  if (words.size() == 1 && words[0] == "none") return c;
+  for (const std::string& w : words) {
+    if (w == "laser") {
+      c.laser = true;
+    } else if (w == "swivel") {
+      c.swivel = true;
+    } else if (w == "inclinometer") {
+      c.inclinometer = true;
+    } else if (w == "imu-yaw") {
+      c.imu_yaw = true;
+    } else {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--channels: unknown channel '%s' (one of laser, swivel, inclinometer, "
+                           "imu-yaw, or none)",
+                           w.c_str());
+    }
+  }
+  if (c.laser && robot.lasers.empty()) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "%s has no laser; leave 'laser' out of --channels (no laser columns, "
+                         "no laser readings)",
+                         config.c_str());
+  }
+  if (c.swivel) {
+    for (int i = 0; i < robot.num_cables(); ++i) {
+      if (!robot.pulleys[static_cast<std::size_t>(i)].enabled()) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             "--channels swivel: cable %d of %s has no swivel pulley", i + 1,
+                             config.c_str());
+      }
+    }
+  }
+  return c;
+}
+
 Status with_context(const Status& s, const std::string& context) {
   Status out = s;
   out.prepend(context + ": ");

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/measurement.hpp"
 #include "cdpr/calibration/robot_model.hpp"
 #include "cdpr/report/format.hpp"
 #include "cdpr/status.hpp"
@@ -45,6 +46,11 @@ Status apply_estimate(const std::vector<std::string>& names, int num_cables,
 // those channels are present (issue 18). With items, leaves `options` as they set it.
 void adapt_to_channels(const MeasurementSet& set, const std::vector<std::string>& names,
                        IdentificationOptions* options);
+// --channels words (laser, swivel, inclinometer, imu-yaw; "none" alone or no word: none of them)
+// checked against `robot` (loaded from `config`): the laser needs a laser in the config, swivel
+// a swivel pulley on every cable. kInvalidArgument names the word and the config.
+Result<SensorChannels> parse_channels(const std::vector<std::string>& words,
+                                      const RobotModel& robot, const std::string& config);
 // The estimated items of `options`, for reports.
 std::vector<std::string> estimated_items(const IdentificationOptions& options);
 

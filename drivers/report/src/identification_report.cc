@@ -38,7 +38,32 @@ nlohmann::json identifiability_json(const IdentifiabilityReport& r) {
                     {"description", d.description},
                     {"components", comps}});
   }
+  // What fixes the world frame (the gauge) and what each channel makes observable, as the text
+  // report's summary() states them (issue 18).
+  nlohmann::json channels = nlohmann::json::array();
+  for (const ChannelContribution& c : r.channels) {
+    nlohmann::json made = nlohmann::json::array();
+    nlohmann::json sharper = nlohmann::json::array();
+    for (const auto& [name, ratio] : c.gains) {
+      if (std::isinf(ratio)) {
+        made.push_back(name);
+      } else {
+        sharper.push_back({{"parameter", name}, {"std_ratio", ratio}});
+      }
+    }
+    channels.push_back({{"channel", c.channel},
+                        {"rows", c.rows},
+                        {"rank_without", c.rank_without},
+                        {"makes_identifiable", made},
+                        {"sharpens", sharper},
+                        {"description", c.description}});
+  }
+  nlohmann::json unobserved = nlohmann::json::array();
+  for (int q : r.unobserved) unobserved.push_back(r.parameter_names[static_cast<std::size_t>(q)]);
   return {{"identifiable", r.identifiable()},
+          {"gauge", r.notes},
+          {"channels", channels},
+          {"not_observed", unobserved},
           {"rank", r.rank},
           {"parameters", r.num_parameters},
           {"residuals", r.num_residuals},

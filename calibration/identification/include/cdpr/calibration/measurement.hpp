@@ -33,6 +33,7 @@
 #include <cmath>
 #include <limits>
 #include <optional>
+#include <string>
 #include <vector>
 
 #include "cdpr/calibration/robot_model.hpp"
@@ -52,6 +53,31 @@ struct SensorNoise {
   double sigma_swivel = 1.0e-3;       // rad, swivel angle
   double sigma_inclination = 5.0e-4;  // rad, inclinometer roll and pitch
   double sigma_imu_yaw = 1.0e-2;      // rad, IMU heading
+};
+
+// The measurement channels a robot carries besides its winch encoders and force sensors (issue
+// 18), for planning: pose design and predicted accuracy simulate these channels (with the noise
+// of SensorNoise) and nothing else. The laser is used only when the model has one.
+struct SensorChannels {
+  bool laser = true;
+  bool swivel = false;        // swivel_1..m (every cable with a swivel pulley)
+  bool inclinometer = false;  // incl_roll, incl_pitch
+  bool imu_yaw = false;
+
+  // "laser, swivel, inclinometer" (the words of cdpr-fit --channels; "none" when empty).
+  std::string words() const {
+    std::string out;
+    auto add = [&out](bool on, const char* w) {
+      if (!on) return;
+      if (!out.empty()) out += ", ";
+      out += w;
+    };
+    add(laser, "laser");
+    add(swivel, "swivel");
+    add(inclinometer, "inclinometer");
+    add(imu_yaw, "imu-yaw");
+    return out.empty() ? std::string("none") : out;
+  }
 };
 
 // How readings relate to physics beyond RobotModel: per-cable encoder-zero offset o_i (m) and

@@ -1,7 +1,8 @@
 // Design of the calibration poses: N poses (default 25, the home pose first) inside the
 // wrench-feasible workspace, maximising the information about the chosen parameters
-// (D-optimality on the Fisher information with the poses profiled out, GeometryInformation),
-// then ordered for a short path.
+// (D-optimality on the Fisher information with the poses profiled out, GeometryInformation) that
+// the channels the robot records give (PoseDesignOptions::channels: lengths and forces, and the
+// laser, swivel encoders, inclinometer, IMU heading as chosen), then ordered for a short path.
 //
 // Algorithm: candidate grid (positions on a grid over the box x a set of orientations: zero and
 // +-max_angle about each axis), filtered by the tension distribution (simulate.hpp
@@ -46,6 +47,10 @@ struct PoseDesignOptions {
   double max_angle = 0.2618;                                            // rad (15 deg)
   double reference_tension = std::numeric_limits<double>::quiet_NaN();  // N; NaN: default
   SensorNoise noise;
+  // The channels the calibration will record (issue 18): the design maximises the information of
+  // these (lengths and forces always) with `noise`. `identification` must not estimate the
+  // laser's parameters without the laser (kInvalidArgument; fit_estimates_to_channels).
+  SensorChannels channels;
   IdentificationOptions identification;
   int exchange_passes = 4;
   double angle_weight = 0.1;  // m per rad in the path length

@@ -2,10 +2,13 @@
 //
 // predict_accuracy: from a model, a pose set and the sensor noise, the Cramer-Rao bound of every
 // parameter (the inverse Fisher information with the poses profiled out; pseudo-inverse with the
-// null space removed) and the platform position error it causes over a test box (ISO 9283: MINI's
-// 312 mm cube centred at the origin by default), by propagating the parameter covariance through
-// the forward-kinematics sensitivity: the controller commands the lengths of its calibrated model,
-// the true robot reaches the pose whose lengths match them (least squares over the m cables),
+// null space removed) for the channels the calibration records (PredictedAccuracyOptions::channels:
+// lengths and forces always; laser, swivel encoders, inclinometer, IMU heading as chosen), and the
+// platform position error it causes over a test box (ISO 9283: MINI's 312 mm cube centred at the
+// origin by default), by propagating the parameter covariance through the forward-kinematics
+// sensitivity (the same for every channel: the controller uses lengths only): the controller
+// commands the lengths of its calibrated model, the true robot reaches the pose whose lengths
+// match them (least squares over the m cables),
 //   dx = -pinv(dL/dx) (dL/dp) dp,   Cov(x) = G Cov(p) G^T.
 //
 // measure_position_accuracy: the realised error of a calibrated controller on a true robot: at a
@@ -36,6 +39,10 @@ struct AccuracyBox {
 
 struct PredictedAccuracyOptions {
   IdentificationOptions identification;
+  // The channels the calibration will record (issue 18), with the noise given to
+  // predict_accuracy. Its identification options must not estimate the laser's parameters
+  // without the laser channel (kInvalidArgument): fit_estimates_to_channels sets them.
+  SensorChannels channels;
   AccuracyBox box;
   double reference_tension = std::numeric_limits<double>::quiet_NaN();  // N; NaN: default
   double rank_tolerance = 1e-7;
@@ -52,14 +59,29 @@ struct PredictedAccuracy {
   int grid_points = 0;            // feasible grid points used
 };
 
+// Fits the estimated parameters to `channels`, as cdpr-fit calibrate does for a recording: the
+// laser's parameters (origin, direction, plane) are not estimated without the laser; the
+// mounting parameters of each issue 18 channel (swivel zeros, inclinometer mounting roll and
+// pitch, IMU yaw zero) are estimated exactly when the channel is recorded (a new sensor's
+// mounting is not known before it is calibrated). Everything else is left as it is.
+void fit_estimates_to_channels(const SensorChannels& channels, IdentificationOptions* options);
+
+// kInvalidArgument when `identification` estimates parameters of a channel that `channels` does
+// not record on `robot` (they would stay unobserved): the laser's without the laser.
+Status check_estimates_for_channels(const RobotModel& robot, const SensorChannels& channels,
+                                    const IdentificationOptions& identification);
+
 Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
                                            const std::vector<Pose>& poses, const SensorNoise& noise,
                                            const PredictedAccuracyOptions& options = {});
 
 // The sensitivity of the pose the platform reaches to the geometry parameters, at each point of
 // `box` where the tensions are feasible at f_ref: G = -pinv(dL/dx) (dL/dp) (rows: position m,
-// then orientation rad; columns: the parameters `identification` estimates, whose names must be
-// `names`, else kInternal). Shared by predict_accuracy and the position-accuracy pose design.
+// then orientation rad; columns: `names`, the parameters `identification` estimates with the
+// channels recorded; kInternal when a parameter of the lengths is not among them). The mounting
+// parameters of the laser, swivel encoders, inclinometer and IMU do not enter the commanded
+// lengths: their columns are zero. Shared by predict_accuracy and the position-accuracy pose
+// design.
 Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& model,
                                                         const AccuracyBox& box, double f_ref,
                                                         const SensorNoise& noise,

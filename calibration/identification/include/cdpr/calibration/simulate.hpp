@@ -106,6 +106,14 @@ struct SimulationOptions {
   bool swivel = false;
   bool inclinometer = false;
   bool imu_yaw = false;
+
+  // Sets the four channel switches above from `channels`.
+  void use_channels(const SensorChannels& channels) {
+    laser = channels.laser;
+    swivel = channels.swivel;
+    inclinometer = channels.inclinometer;
+    imu_yaw = channels.imu_yaw;
+  }
 };
 
 struct SimulatedMeasurements {
