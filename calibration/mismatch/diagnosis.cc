@@ -15,6 +15,7 @@
 #include <string>
 #include <utility>
 
+#include "cdpr/calibration/effect_library.hpp"
 #include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/simulate.hpp"
 
@@ -372,42 +373,6 @@ bool corrected_set(const MeasurementSet& set, const MismatchDesign& d, const Can
   return true;
 }
 
-// The identification option that estimates a candidate's parameters, if it has one.
-bool option_for(const std::string& id, IdentificationOptions& o) {
-  if (id == "hooke_shared") {
-    o.estimate_stiffness = StiffnessEstimate::kShared;
-  } else if (id == "hooke_per_cable") {
-    o.estimate_stiffness = StiffnessEstimate::kPerCable;
-  } else if (id == "drum_scale_per_cable") {
-    o.estimate_length_scales = true;
-  } else if (id == "platform_anchors") {
-    o.estimate_platform_anchors = true;
-    o.platform_anchor_mask = AnchorMask();
-  } else if (id == "force_gain_per_cable") {
-    o.estimate_force_gains = true;
-  } else if (id == "force_offset_per_cable") {
-    o.estimate_force_offsets = true;
-  } else if (id == "laser_mounting") {
-    o.estimate_laser_origin = true;
-    o.estimate_laser_direction = true;
-  } else if (id == "laser_plane") {
-    o.estimate_laser_plane = true;
-  } else {
-    return false;
-  }
-  return true;
-}
-
-std::string signed_number(double v, int digits) {
-  return format("%+.*f", digits, v);
-}
-
-// Digits so that the std shows one or two significant figures.
-int digits_for(double std_dev) {
-  if (!(std_dev > 0) || !std::isfinite(std_dev)) return 3;
-  return std::clamp(1 - static_cast<int>(std::floor(std::log10(std_dev))), 0, 6);
-}
-
 // The 1-based cable number at the end of a parameter name ("s_3" -> "3", "ea_scale" -> "").
 std::string cable_suffix(const std::string& name) {
   std::size_t p = name.size();
@@ -461,155 +426,6 @@ EffectParameter describe_parameter(const ParameterEstimate& p, const CalibratedM
     e.text = p.name + " = " + format("%.*f +- %.*f %s", dg, p.value, dg, p.std_dev, p.unit.c_str());
   }
   return e;
-}
-
-// A Gauss-Newton coefficient of a library candidate in engineer words.
-EffectParameter describe_coefficient(const std::string& id, int q, int k, double v, double s) {
-  EffectParameter e;
-  const std::string cable = k > 1 ? std::to_string(q + 1) : std::string();
-  const std::string of = k > 1 ? " of cable " + cable : std::string();
-  e.value = v;
-  e.std_dev = s;
-  if (starts_with(id, "hooke")) {
-    e.name = k > 1 ? "EA_" + cable : "EA";
-    e.unit = "N";
-    e.value = 1.0 / v;
-    e.std_dev = s / (v * v);
-    const int dg = digits_for(e.std_dev / 1e3);
-    e.text = "cable elasticity" + of +
-             format(": EA = %.*f +- %.*f kN", dg, e.value / 1e3, dg, e.std_dev / 1e3);
-  } else if (starts_with(id, "compliance")) {
-    e.name = k > 1 ? "c_" + cable : "c";
-    e.unit = "m/N";
-    const int dg = digits_for(1e6 * s);
-    e.text = (k > 1 ? "winch/sensor compliance of winch " + cable
-                    : std::string("winch/sensor compliance")) +
-             ": " + format("%.*f +- %.*f um/N", dg, 1e6 * v, dg, 1e6 * s);
-  } else if (starts_with(id, "encoder_offset")) {
-    e.name = "o_" + cable;
-    e.unit = "m";
-    const int dg = digits_for(1e3 * s);
-    e.text = "encoder zero offset" + of + ": " + signed_number(1e3 * v, dg) +
-             format(" +- %.*f mm", dg, 1e3 * s);
-  } else if (starts_with(id, "encoder_drift")) {
-    e.name = "drift_" + cable;
-    e.unit = "m/s";
-    const int dg = digits_for(6e7 * s);
-    e.text = "encoder drift" + of + ": " + signed_number(6e7 * v, dg) +
-             format(" +- %.*f um/min", dg, 6e7 * s);
-  } else if (starts_with(id, "transmission_drift")) {
-    e.name = "transmission_drift";
-    e.unit = "1/s";
-    const int dg = digits_for(6e7 * s);
-    e.text = "transmission drift: " + signed_number(6e7 * v, dg) +
-             format(" +- %.*f ppm/min", dg, 6e7 * s);
-  } else if (starts_with(id, "creep")) {
-    // dL = v F L ln(1 + t / 10 s): v is the compliance added per e-fold of time.
-    e.name = "creep";
-    e.unit = "1/N";
-    e.text = format(
-        "cable creep: compliance +%.3g +- %.2g 1/N per e-fold of time (dL = c F L ln(1 + t / 10 "
-        "s))",
-        v, s);
-  } else if (starts_with(id, "nonlinear_elasticity")) {
-    // dL = (a F + k2 F^2) L added to the model's elongation.
-    e.name = q == 0 ? "a" : "k2";
-    e.unit = q == 0 ? "1/N" : "1/N^2";
-    e.text = q == 0 ? format(
-                          "nonlinear cable elongation (a F + k2 F^2) L: linear part a = %.3g +- "
-                          "%.2g 1/N",
-                          v, s)
-                    : format("nonlinear cable elongation (a F + k2 F^2) L: k2 = %.3g +- %.2g 1/N^2",
-                             v, s);
-  } else if (starts_with(id, "hysteresis")) {
-    // Length rows ~d: the true length is longer by v when last paid out, shorter when reeled in.
-    e.name = "h_" + cable;
-    e.unit = "m";
-    const int dg = digits_for(1e3 * s);
-    e.text = "cable hysteresis" + of + ": " + signed_number(1e3 * v, dg) +
-             format(
-                 " +- %.*f mm (the length after paying out minus the reading; the opposite "
-                 "after reeling in)",
-                 dg, 1e3 * s);
-  } else if (starts_with(id, "pulley_friction")) {
-    // The tension reading is off by v when last paid out and by -v when reeled in.
-    e.name = "f_" + cable;
-    e.unit = "N";
-    const int dg = digits_for(s);
-    e.text = "pulley friction" + of + ": tension reading " + signed_number(v, dg) +
-             format(" +- %.*f N after paying out, the opposite after reeling in", dg, s);
-  } else if (starts_with(id, "drum_scale")) {
-    // Jacobian columns: the parameter change is -v.
-    e.name = k > 1 ? "s_" + cable : "s";
-    e.unit = "-";
-    e.value = -v;
-    const int dg = digits_for(100 * s);
-    e.text = (k > 1 ? "drum scale error of winch " + cable
-                    : std::string("drum scale error of every winch")) +
-             ": " + signed_number(-100 * v, dg) + format(" +- %.*f %%", dg, 100 * s);
-  } else {
-    e.name = id + "_" + std::to_string(q + 1);
-    e.unit = "";
-    e.text = format("%s coefficient %d: %.4g +- %.2g", id.c_str(), q + 1, v, s);
-  }
-  return e;
-}
-
-// Carries a Gauss-Newton effect into the calibrated model where the config can hold it.
-bool model_effect(const std::string& id, const Eigen::VectorXd& theta, CalibratedModel& model) {
-  const int m = model.robot.num_cables();
-  if (id == "encoder_offset_per_cable" && theta.size() == m) {
-    model.readings.length_offsets += theta;
-    return true;
-  }
-  if (id == "drum_scale_shared" && theta.size() == 1) {
-    for (int i = 0; i < m; ++i) {
-      model.readings.length_scales(i) -= theta(0);
-      model.robot.winches[static_cast<std::size_t>(i)].drum_diameter *= 1.0 - theta(0);
-      model.robot.winches[static_cast<std::size_t>(i)].drum_pitch *= 1.0 - theta(0);
-    }
-    return true;
-  }
-  if (id == "sag_shared" && theta.size() == 1 && theta(0) > 0) {
-    for (auto& c : model.robot.cables) c.mass_per_length = theta(0);
-    return true;
-  }
-  const bool rigid =
-      std::all_of(model.robot.cables.begin(), model.robot.cables.end(),
-                  [](const CableModel& c) { return c.elongation == ElongationKind::kRigid; });
-  if (starts_with(id, "hooke") && rigid && (theta.array() > 0).all()) {
-    for (int i = 0; i < m; ++i) {
-      auto& c = model.robot.cables[static_cast<std::size_t>(i)];
-      c.ea = 1.0 / theta(theta.size() == 1 ? 0 : i);
-      c.elongation = ElongationKind::kHooke;
-    }
-    return true;
-  }
-  if (starts_with(id, "compliance") && rigid) {
-    // dL = c F as a first-order polynomial surface in the plain variables.
-    for (int i = 0; i < m; ++i) {
-      auto& c = model.robot.cables[static_cast<std::size_t>(i)];
-      c.elongation = ElongationKind::kPolynomial;
-      c.polynomial = PolynomialSurface{};
-      c.polynomial.order = 1;
-      c.polynomial.coefficients = {0.0, 0.0, theta(theta.size() == 1 ? 0 : i)};
-    }
-    return true;
-  }
-  if (id == "nonlinear_elasticity_shared" && rigid && theta.size() == 2) {
-    // dL = (a F + k2 F^2) L: the L F and L F^2 terms of a third-order surface (coefficients by
-    // total degree d, then by the power of F: L^(d-j) F^j is at d (d + 1) / 2 + j).
-    for (auto& c : model.robot.cables) {
-      c.elongation = ElongationKind::kPolynomial;
-      c.polynomial = PolynomialSurface{};
-      c.polynomial.order = 3;
-      c.polynomial.coefficients.assign(10, 0.0);
-      c.polynomial.coefficients[4] = theta(0);  // L F   (d = 2, j = 1)
-      c.polynomial.coefficients[8] = theta(1);  // L F^2 (d = 3, j = 2)
-    }
-    return true;
-  }
-  return false;
 }
 
 }  // namespace
@@ -859,16 +675,15 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     State next;
     bool done = false;
     IdentificationOptions opt = cur.opt;
-    if (option_for(id, opt)) {
+    const EffectDescriptor* effect = find_effect(id);
+    if (effect != nullptr && effect->refit == EffectRefit::kIdentification) {
+      effect->estimate(opt);
       auto rep = identify(cur.report.estimate, cur.set, opt);
-      if (id == "laser_mounting") {
-        // The origin's component along the target plane's normal trades against the plane
-        // offset (both estimated): the beam direction alone is then the identifiable mounting
-        // error (identify() refuses the full set). When both can be fitted, the one with the
-        // lower BIC is kept: a tilted beam without an offset origin should not pay for three
-        // origin coordinates.
+      if (effect->alternative != nullptr) {
+        // A reduced set of the effect's parameters (the laser mounting: the beam direction
+        // alone), kept when it fits with the lower BIC or the full set cannot be fitted.
         IdentificationOptions dir = opt;
-        dir.estimate_laser_origin = false;
+        effect->alternative(dir);
         auto rep_dir = identify(cur.report.estimate, cur.set, dir);
         auto bic = [&](const IdentificationReport& r) {
           return r.chi2 + r.log_det_covariance + static_cast<double>(r.parameters.size()) * logn;
@@ -924,7 +739,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       }
       return settled;
     };
-    if (!done && id == "sag_shared") {
+    if (!done && effect != nullptr && effect->refit == EffectRefit::kCatenary) {
       // Sag, one parameter: the cables' mass per length mu, fitted by Gauss-Newton on the exact
       // catenary effect (sag_effect, mismatch.hpp) rather than on the first-order columns: the
       // small-sag arc is wrong by its square for a heavy cable at low tension (100 g/m at 50 N
@@ -985,17 +800,9 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
           std::sqrt(std::max(1.0, next.report.chi2 / std::max(1, d.screen.dof - 1)));
       const double mu_fit = next.gn_theta.back()(0);
       const double sd = info > 0 ? scale / std::sqrt(info) : kNaN;
-      EffectParameter ep;
-      ep.name = "mass_per_length";
-      ep.unit = "kg/m";
-      ep.value = mu_fit;
-      ep.std_dev = sd;
-      const int dg = digits_for(1e3 * sd);
-      ep.text = format("cable sag: mass per length %.*f +- %.*f g/m (catenary)", dg, 1e3 * mu_fit,
-                       dg, 1e3 * sd);
-      fit.parameters.push_back(ep);
+      fit.parameters.push_back(describe_coefficient(id, 0, 1, mu_fit, sd));
       CalibratedModel probe = next.report.estimate;
-      fit.modelled_in_config = model_effect(id, next.gn_theta.back(), probe);
+      fit.modelled_in_config = write_effect(id, next.gn_theta.back(), probe);
       done = true;
     }
     if (!done) {
@@ -1045,7 +852,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
             describe_coefficient(id, q, k, theta(q), std::sqrt(Ai(q, q)) * scale));
       }
       CalibratedModel probe = next.report.estimate;
-      fit.modelled_in_config = model_effect(id, theta, probe);
+      fit.modelled_in_config = write_effect(id, theta, probe);
     }
     next.cv = state_cv(next);
     fit.chi2_after = next.report.chi2;
@@ -1513,7 +1320,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     d.after = current.report;
     d.model_after = current.report.estimate;
     for (std::size_t q = 0; q < current.gn_ids.size(); ++q) {
-      model_effect(current.gn_ids[q], current.gn_theta[q], d.model_after);
+      write_effect(current.gn_ids[q], current.gn_theta[q], d.model_after);
     }
     d.held_out_rms_after = current.cv.length_m;
   }

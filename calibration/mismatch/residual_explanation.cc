@@ -23,23 +23,6 @@ std::string family_of(const Diagnosis& d, const std::string& id) {
 
 }  // namespace
 
-ExplainingVariable explaining_variable(const std::string& family) {
-  if (family == "elasticity" || family == "nonlinear elasticity") {
-    return {"tension x loaded length", "N m"};
-  }
-  if (family == "compliance" || family == "force sensor gain" || family == "force sensor offset") {
-    return {"tension", "N"};
-  }
-  if (family == "drum scale") return {"loaded length", "m"};
-  if (family == "cable hysteresis" || family == "pulley friction") {
-    return {"direction of the last move", ""};
-  }
-  if (family == "encoder drift" || family == "transmission drift" || family == "creep") {
-    return {"time", "s"};
-  }
-  return {"pose index", ""};
-}
-
 std::vector<ExplainedResiduals> explained_residuals(const Diagnosis& d, const MeasurementSet& set) {
   // The effects to plot: accepted ones, else the top refitted candidate, else the top screened.
   std::vector<std::pair<std::string, std::string>> effects;  // id, name
