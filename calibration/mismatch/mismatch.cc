@@ -12,6 +12,7 @@
 
 #include "cdpr/calibration/catenary.hpp"
 #include "cdpr/calibration/effect_library.hpp"
+#include "cdpr/calibration/elongation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 
 namespace cdpr {
@@ -426,7 +427,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
       // correction is second order for a regressor.
       if (pm.tensions.size() == m) tension(k) = pm.tensions(i);
       kin_len(k) = kin.lengths(i);
-      loaded(k) = robot.cables[ui].routing_length + kin.lengths(i);
+      loaded(k) = loaded_length(robot.cables[ui], kin.lengths(i));
       reading(k) = pm.cable_lengths(i);
       time(k) = pm.time;
       tilt(k) = std::acos(std::clamp(kin.rotation(2, 2), -1.0, 1.0));

@@ -5,6 +5,7 @@
 #include <limits>
 #include <utility>
 
+#include "cdpr/calibration/elongation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 
 namespace cdpr {
@@ -59,8 +60,7 @@ std::vector<ExplainedResiduals> explained_residuals(const Diagnosis& d, const Me
         if (!std::isfinite(rb(i))) continue;
         const double tension = meas.tensions.size() > i ? meas.tensions(i) : kNaN;
         const double loaded =
-            ik_ok ? robot.cables[static_cast<std::size_t>(i)].routing_length + kin.lengths(i)
-                  : kNaN;
+            ik_ok ? loaded_length(robot.cables[static_cast<std::size_t>(i)], kin.lengths(i)) : kNaN;
         double x = static_cast<double>(j);
         if (var.name == "tension x loaded length") {
           x = tension * loaded;
