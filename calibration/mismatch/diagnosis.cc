@@ -2,10 +2,8 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <cctype>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <functional>
 #include <limits>
 #include <map>
@@ -31,10 +29,6 @@ std::string format(const char* fmt, auto... args) {
   std::snprintf(out.data(), out.size(), fmt, args...);
   out.resize(static_cast<std::size_t>(len));
   return out;
-}
-
-bool starts_with(const std::string& s, const char* p) {
-  return s.rfind(p, 0) == 0;
 }
 
 // Symmetric pseudo-inverse with the eigenvalue threshold relative to the largest one (after a
@@ -373,14 +367,6 @@ bool corrected_set(const MeasurementSet& set, const MismatchDesign& d, const Can
   return true;
 }
 
-// The 1-based cable number at the end of a parameter name ("s_3" -> "3", "ea_scale" -> "").
-std::string cable_suffix(const std::string& name) {
-  std::size_t p = name.size();
-  while (p > 0 && std::isdigit(static_cast<unsigned char>(name[p - 1]))) --p;
-  if (p == name.size() || p == 0 || name[p - 1] != '_') return std::string();
-  return name.substr(p);
-}
-
 // An identification parameter as an effect parameter in engineer words.
 EffectParameter describe_parameter(const ParameterEstimate& p, const CalibratedModel& initial) {
   EffectParameter e;
@@ -388,9 +374,10 @@ EffectParameter describe_parameter(const ParameterEstimate& p, const CalibratedM
   e.unit = p.unit;
   e.value = p.value;
   e.std_dev = p.std_dev;
-  const std::string cable = cable_suffix(p.name);
-  if (starts_with(p.name, "ea_scale")) {
-    const int i = cable.empty() ? 0 : std::atoi(cable.c_str()) - 1;
+  // The 1-based cable number ("" for one shared by every cable).
+  const std::string cable = p.id.index >= 0 ? std::to_string(p.id.index + 1) : std::string();
+  if (p.id.kind == ParameterKind::kStiffness) {
+    const int i = std::max(p.id.index, 0);
     const double ea0 = initial.robot.cables[static_cast<std::size_t>(i)].ea;
     e.name = cable.empty() ? "EA" : "EA_" + cable;
     e.unit = "N";
@@ -400,15 +387,15 @@ EffectParameter describe_parameter(const ParameterEstimate& p, const CalibratedM
     e.text = (cable.empty() ? std::string("cable elasticity: EA = ")
                             : "cable elasticity of cable " + cable + ": EA = ") +
              format("%.*f +- %.*f kN", dg, e.value / 1e3, dg, e.std_dev / 1e3);
-  } else if (starts_with(p.name, "s_")) {
+  } else if (p.id.kind == ParameterKind::kLengthScale) {
     const int dg = digits_for(100 * p.std_dev);
     e.text = "drum scale error of winch " + cable + ": " + signed_number(100 * p.value, dg) +
              format(" +- %.*f %%", dg, 100 * p.std_dev);
-  } else if (starts_with(p.name, "force_gain")) {
+  } else if (p.id.kind == ParameterKind::kForceGain) {
     const int dg = digits_for(100 * p.std_dev);
     e.text = "force sensor gain error of cable " + cable + ": " + signed_number(100 * p.value, dg) +
              format(" +- %.*f %%", dg, 100 * p.std_dev);
-  } else if (starts_with(p.name, "force_offset")) {
+  } else if (p.id.kind == ParameterKind::kForceOffset) {
     const int dg = digits_for(p.std_dev);
     e.text = "force sensor offset of cable " + cable + ": " + signed_number(p.value, dg) +
              format(" +- %.*f N", dg, p.std_dev);

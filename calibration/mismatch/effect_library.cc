@@ -295,27 +295,33 @@ std::vector<EffectDescriptor> make_library() {
                  "drum scale", "drum scale", C::kUnestimatedParameters, R::kIdentification,
                  estimate_length_scales, nullptr, "ParameterBounds::length_scale",
                  describe_drum_scale, nullptr, kLoadedLength});
+  lib.back().parameters = {ParameterKind::kLengthScale};
   lib.push_back({"platform_anchors", "platform anchor positions (b_i)", "platform anchors",
                  "platform anchors", C::kUnestimatedParameters, R::kIdentification,
                  estimate_platform_anchors, nullptr, "ParameterBounds::platform_anchor_m", nullptr,
                  nullptr, kPoseIndex});
+  lib.back().parameters = {ParameterKind::kPlatformAnchor};
   lib.push_back(
       {"force_gain_per_cable", "force sensor gain error (~F in the equilibrium), per cable",
        "force sensor gain", "force sensor gain", C::kUnestimatedParameters, R::kIdentification,
        estimate_force_gains, nullptr, "ParameterBounds::force_gain", nullptr, nullptr, kTension});
+  lib.back().parameters = {ParameterKind::kForceGain};
   lib.push_back({"force_offset_per_cable", "force sensor offset (~1 in the equilibrium), per cable",
                  "force sensor offset", "force sensor offset", C::kUnestimatedParameters,
                  R::kIdentification, estimate_force_offsets, nullptr,
                  "ParameterBounds::force_offset_fraction", nullptr, nullptr, kTension});
+  lib.back().parameters = {ParameterKind::kForceOffset};
   lib.push_back({"laser_mounting", "laser mounting (origin and beam direction on the platform)",
                  "laser mounting", "laser mounting", C::kUnestimatedParameters, R::kIdentification,
                  estimate_laser_mounting, laser_direction_only,
                  "ParameterBounds::laser_origin_m, laser_direction_rad", nullptr, nullptr,
                  kPoseIndex});
+  lib.back().parameters = {ParameterKind::kLaserOrigin, ParameterKind::kLaserDirection};
   lib.push_back({"laser_plane", "laser target plane (offset and tilt)", "laser plane",
                  "laser plane", C::kUnestimatedParameters, R::kIdentification, estimate_laser_plane,
                  nullptr, "ParameterBounds::plane_normal_rad, plane_offset_m", nullptr, nullptr,
                  kPoseIndex});
+  lib.back().parameters = {ParameterKind::kLaserPlaneNormal, ParameterKind::kLaserPlaneOffset};
   lib.push_back({"drum_scale_shared", "drum/transmission scale error (~L), all drums alike",
                  "drum scale", "drum scale", C::kSumOfPerCable, R::kGaussNewton, nullptr, nullptr,
                  "none (linear)", describe_drum_scale, write_shared_drum_scale, kLoadedLength});

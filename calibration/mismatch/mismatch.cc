@@ -621,11 +621,17 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
       Jx.middleRows(pose_start[uj], pose_start[uj + 1] - pose_start[uj]) =
           ext->jacobian_geometry[uj];
     }
-    auto group = [&](const char* id, auto select) {
+    // The descriptor's parameter kinds (EffectDescriptor::parameters) that the standard
+    // identification left fixed.
+    auto group = [&](const char* id) {
+      const std::vector<ParameterKind>& kinds = find_effect(id)->parameters;
       std::vector<int> picked;
       for (int q = 0; q < static_cast<int>(ext->names.size()); ++q) {
         const std::string& nm = ext->names[static_cast<std::size_t>(q)];
-        if (base_cols.count(nm) || !select(nm)) continue;
+        const ParameterKind kind = ext->ids[static_cast<std::size_t>(q)].kind;
+        if (base_cols.count(nm) || std::find(kinds.begin(), kinds.end(), kind) == kinds.end()) {
+          continue;
+        }
         picked.push_back(q);
       }
       if (picked.empty()) return;
@@ -635,19 +641,10 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
       }
       if (c.X.norm() > 0) lib.push_back(std::move(c));
     };
-    auto starts = [](const std::string& s, const char* p) { return s.rfind(p, 0) == 0; };
-    group("drum_scale_per_cable", [&](const std::string& s) { return starts(s, "s_"); });
-    group("platform_anchors", [&](const std::string& s) { return starts(s, "b_"); });
-    group("force_gain_per_cable", [&](const std::string& s) { return starts(s, "force_gain"); });
-    group("force_offset_per_cable",
-          [&](const std::string& s) { return starts(s, "force_offset"); });
-    group("laser_mounting", [&](const std::string& s) {
-      return starts(s, "laser_") && (s.find(".origin.") != std::string::npos ||
-                                     s.find(".direction.") != std::string::npos);
-    });
-    group("laser_plane", [&](const std::string& s) {
-      return starts(s, "laser_") && s.find(".plane.") != std::string::npos;
-    });
+    for (const char* id : {"drum_scale_per_cable", "platform_anchors", "force_gain_per_cable",
+                           "force_offset_per_cable", "laser_mounting", "laser_plane"}) {
+      group(id);
+    }
     // The shared drum scale: the sum of the per-cable columns.
     for (const Candidate& c : lib) {
       if (c.id == "drum_scale_per_cable") {

@@ -68,6 +68,9 @@ struct EffectDescriptor {
   // only). kIdentification effects are in identify()'s estimate already.
   bool (*write)(const Eigen::VectorXd& theta, CalibratedModel& model) = nullptr;
   ExplainingVariable plotted_against;
+  // kUnestimatedParameters: the identification parameters whose Jacobian columns are the
+  // candidate's (those the standard identification left fixed).
+  std::vector<ParameterKind> parameters = {};
 };
 
 // The library, in the order mismatch_design builds (and the screen ranks ties of) the candidates.
