@@ -1081,6 +1081,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> only;
   int workers = 2;
   bool verbose = false;
+  bool verdicts = false;  // one deterministic line per case and seed at the end of each robot
   bool force_candidates = cdpr::MismatchOptions{}.force_sensor_candidates;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -1090,6 +1091,8 @@ int main(int argc, char** argv) {
       quick = true;
     } else if (a == "--verbose") {
       verbose = true;
+    } else if (a == "--verdicts") {
+      verdicts = true;
     } else if (a == "--force-sensor-candidates" && i + 1 < argc) {
       force_candidates = std::strcmp(argv[++i], "on") == 0;
     } else if (a == "--robot" && i + 1 < argc) {
@@ -1099,11 +1102,11 @@ int main(int argc, char** argv) {
     } else if (a == "--workers" && i + 1 < argc) {
       workers = std::max(1, std::atoi(argv[++i]));
     } else {
-      std::fprintf(
-          stderr,
-          "usage: mismatch_bench [--seeds N] [--quick] [--robot mini|large|both] "
-          "[--effects a,b,...] [--workers N] [--verbose] [--force-sensor-candidates on|off]\n"
-          "  effects:");
+      std::fprintf(stderr,
+                   "usage: mismatch_bench [--seeds N] [--quick] [--robot mini|large|both] "
+                   "[--effects a,b,...] [--workers N] [--verbose] [--verdicts] "
+                   "[--force-sensor-candidates on|off]\n"
+                   "  effects:");
       for (const Effect& e : effects()) std::fprintf(stderr, " %s", e.key.c_str());
       std::fprintf(stderr,
                    " null hooke+drum encoder+force_gain sag+hooke force_gain+creep sag+laser_tilt "
@@ -1296,6 +1299,30 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
       stats[static_cast<std::size_t>(j.c)].runs[static_cast<std::size_t>(j.seed)] = std::move(res);
     });
+    if (verdicts) {
+      // Every seed's verdict in case order, free of timings and worker order: two runs of the
+      // same build (or of a behaviour-preserving change) print the same lines.
+      std::printf("\n== %s: verdict of every seed ==\n", r.name.c_str());
+      for (const CaseStats& s : stats) {
+        for (std::size_t seed = 0; seed < s.runs.size(); ++seed) {
+          const RunResult& res = s.runs[seed];
+          std::string named;
+          for (const auto& f : res.named_families) named += (named.empty() ? "" : ", ") + f;
+          std::printf(
+              "verdict [%s] %s seed %zu: %s | named %s | all %d any %d extra %d | conf %d sep "
+              "%d/%d | follow-up %d named %d%s | first named %d | top %s p %.6g Holm %.6g | "
+              "held %.6g -> %.6g | %s\n",
+              r.name.c_str(), s.c->label.c_str(), seed,
+              res.ok ? cdpr::to_string(res.verdict) : ("failed: " + res.error).c_str(),
+              named.empty() ? "-" : named.c_str(), res.all_true_named, res.any_true_named,
+              res.extra_named, res.confounded, res.separated, res.separation_tried, res.follow_up,
+              res.follow_up_named,
+              res.follow_up_error.empty() ? "" : (" error " + res.follow_up_error).c_str(),
+              res.first_named, res.top_id.empty() ? "-" : res.top_id.c_str(), res.top_p,
+              res.top_p_adjusted, res.held_before, res.held_after, res.screen_channels.c_str());
+        }
+      }
+    }
     print_robot(r, baseline, mags, stats, seconds_since(t_robot), seeds);
     std::fflush(stdout);
   }

@@ -395,8 +395,9 @@ struct Built {
 
   std::vector<double*> geometry_blocks;  // free geometry blocks, column order
   std::vector<int> geometry_sizes;       // tangent size of each
-  std::vector<std::string> names, units;
-  std::vector<double*> value_ptr;    // ambient value of each geometry column
+  std::vector<ParameterId> ids;
+  std::vector<std::string> names, units;  // names: parameter_name(ids[q])
+  std::vector<double*> value_ptr;         // ambient value of each geometry column
   std::vector<double> lower, upper;  // physical range of each geometry column (ParameterBounds)
   Eigen::Matrix3Xi anchor_columns;
   int num_geometry = 0;
@@ -422,8 +423,8 @@ struct BlockRange {
 };
 
 void add_geometry_block(Built& B, double* ptr, int size, const std::vector<bool>& estimated,
-                        const std::vector<std::string>& names, const std::string& unit,
-                        bool any_free, const BlockRange& range) {
+                        const std::vector<ParameterId>& ids, const std::string& unit, bool any_free,
+                        const BlockRange& range) {
   B.problem.AddParameterBlock(ptr, size);
   std::vector<int> fixed;
   for (int q = 0; q < size; ++q) {
@@ -438,7 +439,8 @@ void add_geometry_block(Built& B, double* ptr, int size, const std::vector<bool>
   B.geometry_sizes.push_back(size - static_cast<int>(fixed.size()));
   for (int q = 0; q < size; ++q) {
     if (std::find(fixed.begin(), fixed.end(), q) != fixed.end()) continue;
-    B.names.push_back(names[static_cast<std::size_t>(q)]);
+    B.ids.push_back(ids[static_cast<std::size_t>(q)]);
+    B.names.push_back(parameter_name(ids[static_cast<std::size_t>(q)]));
     B.units.push_back(unit);
     B.value_ptr.push_back(ptr + q);
     const double lo = range.absolute ? range.lo : ptr[q] - range.half_range;
@@ -526,14 +528,13 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
   // Geometry blocks in a fixed order: a, b, o, s, e, g, c, lasers, each free coordinate bounded
   // to its physical range (ParameterBounds).
   const ParameterBounds& bounds = opt.bounds;
-  const char* axis = "xyz";
   for (int i = 0; i < m; ++i) {
     std::vector<bool> est(3);
-    std::vector<std::string> nm(3);
+    std::vector<ParameterId> nm(3);
     for (int q = 0; q < 3; ++q) {
       est[static_cast<std::size_t>(q)] =
           opt.frame_anchor_mask.size() == 0 ? true : opt.frame_anchor_mask(q, i);
-      nm[static_cast<std::size_t>(q)] = "a_" + std::to_string(i + 1) + "." + axis[q];
+      nm[static_cast<std::size_t>(q)] = {ParameterKind::kFrameAnchor, i, q};
     }
     const int before = static_cast<int>(B->names.size());
     add_geometry_block(*B, B->a[static_cast<std::size_t>(i)].data(), 3, est, nm, "m",
@@ -549,30 +550,30 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
   }
   for (int i = 0; i < m; ++i) {
     std::vector<bool> est(3);
-    std::vector<std::string> nm(3);
+    std::vector<ParameterId> nm(3);
     for (int q = 0; q < 3; ++q) {
       est[static_cast<std::size_t>(q)] =
           opt.platform_anchor_mask.size() == 0 ? true : opt.platform_anchor_mask(q, i);
-      nm[static_cast<std::size_t>(q)] = "b_" + std::to_string(i + 1) + "." + axis[q];
+      nm[static_cast<std::size_t>(q)] = {ParameterKind::kPlatformAnchor, i, q};
     }
     add_geometry_block(*B, B->b[static_cast<std::size_t>(i)].data(), 3, est, nm, "m",
                        opt.estimate_platform_anchors, {bounds.platform_anchor_m});
   }
-  auto scalar_blocks = [&](std::vector<double>& v, const char* prefix, const char* unit, bool on,
+  auto scalar_blocks = [&](std::vector<double>& v, ParameterKind kind, const char* unit, bool on,
                            int count, const auto& range_of) {
     for (int i = 0; i < m; ++i) {
       const bool free_i = on && i < count;
-      add_geometry_block(
-          *B, &v[static_cast<std::size_t>(i)], 1, {true},
-          {std::string(prefix) + (count == 1 ? std::string("") : "_" + std::to_string(i + 1))},
-          unit, free_i, range_of(i));
+      add_geometry_block(*B, &v[static_cast<std::size_t>(i)], 1, {true},
+                         {ParameterId{kind, count == 1 ? -1 : i, -1}}, unit, free_i, range_of(i));
     }
   };
   auto relative = [](double half) { return [half](int) { return BlockRange{half}; }; };
-  scalar_blocks(B->o, "o", "m", opt.estimate_length_offsets, m, relative(bounds.length_offset_m));
-  scalar_blocks(B->s, "s", "-", opt.estimate_length_scales, m, relative(bounds.length_scale));
+  scalar_blocks(B->o, ParameterKind::kLengthOffset, "m", opt.estimate_length_offsets, m,
+                relative(bounds.length_offset_m));
+  scalar_blocks(B->s, ParameterKind::kLengthScale, "-", opt.estimate_length_scales, m,
+                relative(bounds.length_scale));
   // EA = EA_model (1 + e) within [ea_factor_min, ea_factor_max] x EA_model.
-  scalar_blocks(B->e, "ea_scale", "-", ea_estimated,
+  scalar_blocks(B->e, ParameterKind::kStiffness, "-", ea_estimated,
                 opt.estimate_stiffness == StiffnessEstimate::kShared ? 1 : m, [&](int) {
                   BlockRange r;
                   r.absolute = true;
@@ -580,9 +581,10 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
                   r.hi = bounds.ea_factor_max - 1.0;
                   return r;
                 });
-  scalar_blocks(B->g, "force_gain", "-", opt.estimate_force_gains, m, relative(bounds.force_gain));
+  scalar_blocks(B->g, ParameterKind::kForceGain, "-", opt.estimate_force_gains, m,
+                relative(bounds.force_gain));
   // The offset is in raw units (gain x N): a fraction of the cable's largest tension, read.
-  scalar_blocks(B->c, "force_offset", "N", opt.estimate_force_offsets, m, [&](int i) {
+  scalar_blocks(B->c, ParameterKind::kForceOffset, "N", opt.estimate_force_offsets, m, [&](int i) {
     const auto ui = static_cast<std::size_t>(i);
     return BlockRange{bounds.force_offset_fraction * robot.cables[ui].f_max *
                       std::abs(robot.force_sensors[ui].gain)};
@@ -597,17 +599,17 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     L.n0 = lm.plane_normal.normalized();
     tangent_basis(L.n0, L.ne1, L.ne2);
     L.c = L.n0.dot(lm.plane_point);
-    const std::string p = "laser_" + std::to_string(l + 1);
+    using K = ParameterKind;
     add_geometry_block(*B, L.origin.data(), 3, {true, true, true},
-                       {p + ".origin.x", p + ".origin.y", p + ".origin.z"}, "m",
-                       opt.estimate_laser_origin, {bounds.laser_origin_m});
+                       {{K::kLaserOrigin, l, 0}, {K::kLaserOrigin, l, 1}, {K::kLaserOrigin, l, 2}},
+                       "m", opt.estimate_laser_origin, {bounds.laser_origin_m});
     add_geometry_block(*B, L.direction.data(), 2, {true, true},
-                       {p + ".direction.u", p + ".direction.v"}, "rad",
+                       {{K::kLaserDirection, l, 0}, {K::kLaserDirection, l, 1}}, "rad",
                        opt.estimate_laser_direction, {bounds.laser_direction_rad});
     add_geometry_block(*B, L.normal.data(), 2, {true, true},
-                       {p + ".plane.normal.u", p + ".plane.normal.v"}, "rad",
+                       {{K::kLaserPlaneNormal, l, 0}, {K::kLaserPlaneNormal, l, 1}}, "rad",
                        opt.estimate_laser_plane && !fix_plane, {bounds.plane_normal_rad});
-    add_geometry_block(*B, &L.c, 1, {true}, {p + ".plane.c"}, "m",
+    add_geometry_block(*B, &L.c, 1, {true}, {{K::kLaserPlaneOffset, l, -1}}, "m",
                        opt.estimate_laser_plane && !fix_plane, {bounds.plane_offset_m});
   }
   // Issue 18 channels: free only when estimated and measured somewhere.
@@ -630,18 +632,20 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       const bool free_i = opt.estimate_swivel_zeros && opt.use_swivel && swivel_seen[ui];
       B->swivel_zero_free = B->swivel_zero_free || free_i;
       add_geometry_block(*B, &B->swivel_zero[ui], 1, {true},
-                         {"swivel_zero_" + std::to_string(i + 1)}, "rad", free_i,
+                         {ParameterId{ParameterKind::kSwivelZero, i, -1}}, "rad", free_i,
                          {bounds.swivel_zero_rad});
     }
     B->incl_mount0 = rotation_from_rpy<double>(robot.inclinometer.mounting_rpy);
     B->incl_mount_free = opt.estimate_inclinometer_mounting &&
                          ((opt.use_inclinometer && incl_seen) || (opt.use_imu_yaw && yaw_seen));
     add_geometry_block(*B, B->incl_mount.data(), 2, {true, true},
-                       {"inclinometer.mount.roll", "inclinometer.mount.pitch"}, "rad",
-                       B->incl_mount_free, {bounds.inclinometer_mount_rad});
+                       {ParameterId{ParameterKind::kInclinometerMount, -1, 0},
+                        ParameterId{ParameterKind::kInclinometerMount, -1, 1}},
+                       "rad", B->incl_mount_free, {bounds.inclinometer_mount_rad});
     B->imu_yaw_zero = robot.inclinometer.yaw_zero;
     B->imu_yaw_zero_free = opt.estimate_imu_yaw_zero && opt.use_imu_yaw && yaw_seen;
-    add_geometry_block(*B, &B->imu_yaw_zero, 1, {true}, {"imu.yaw_zero"}, "rad",
+    add_geometry_block(*B, &B->imu_yaw_zero, 1, {true},
+                       {ParameterId{ParameterKind::kImuYawZero, -1, -1}}, "rad",
                        B->imu_yaw_zero_free, {bounds.imu_yaw_zero_rad});
   }
   B->num_geometry = static_cast<int>(B->names.size());
@@ -957,6 +961,7 @@ Result<Information> information(Built& B, bool apply_loss, bool keep = false,
 // Moves the per-pose information out of `info`.
 GeometryInformation to_public(const Built& B, Information& info, const CalibratedModel& model) {
   GeometryInformation gi;
+  gi.ids = B.ids;
   gi.names = B.names;
   gi.units = B.units;
   gi.values.resize(B.num_geometry);
@@ -1183,6 +1188,11 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   if (P == 0) {
     return Status(ErrorCode::kInvalidArgument, "identification: no parameter is estimated");
   }
+  // The initial values, before the solver moves them (the problem is built once).
+  std::vector<double> initial_values(static_cast<std::size_t>(P));
+  for (int q = 0; q < P; ++q) {
+    initial_values[static_cast<std::size_t>(q)] = *B.value_ptr[static_cast<std::size_t>(q)];
+  }
   int free_pose_params = 0;
   for (bool f : B.pose_free) free_pose_params += f ? 6 : 0;
   const int num_params = P + free_pose_params;
@@ -1392,14 +1402,13 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   // the poses.
   rep.parameters.resize(static_cast<std::size_t>(P));
   {
-    // Initial values: rebuild is not needed; recompute from the initial model.
-    auto b0 = build(initial, set, initial_poses(set), options);
     for (int q = 0; q < P; ++q) {
       ParameterEstimate& pe = rep.parameters[static_cast<std::size_t>(q)];
+      pe.id = B.ids[static_cast<std::size_t>(q)];
       pe.name = B.names[static_cast<std::size_t>(q)];
       pe.unit = B.units[static_cast<std::size_t>(q)];
       pe.value = *B.value_ptr[static_cast<std::size_t>(q)];
-      pe.initial = b0 ? *(*b0)->value_ptr[static_cast<std::size_t>(q)] : kNaN;
+      pe.initial = initial_values[static_cast<std::size_t>(q)];
       pe.std_dev = std::numeric_limits<double>::infinity();
       pe.lower = B.lower[static_cast<std::size_t>(q)];
       pe.upper = B.upper[static_cast<std::size_t>(q)];

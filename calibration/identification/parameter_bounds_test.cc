@@ -2,11 +2,13 @@
 // parameter kind, and an estimate on a bound is flagged and warned about.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <functional>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/simulate.hpp"
@@ -224,6 +226,128 @@ TEST(ParameterBounds, StiffnessOnASuspendedFrameNoLongerRunsAway) {
   EXPECT_NEAR(ea_bounded, 10.0 * nominal.cables[0].ea, 1e-6 * ea_bounded);
   ASSERT_EQ(bounded->parameters_at_bound(), std::vector<std::string>{"ea_scale"});
   EXPECT_FALSE(bounded->trustworthy());
+}
+
+}  // namespace
+}  // namespace cdpr
+
+namespace cdpr {
+namespace {
+
+// The sensor channels' parameter kinds (issue 18): swivel encoder zeros, inclinometer mounting
+// roll and pitch, IMU heading zero. MINI with swivel encoders, inclinometer and IMU; the truth
+// hides zeros of up to 0.05 rad, a mounting of (0.012, -0.017) rad and a heading zero of 0.4 rad.
+struct SensorKindCase {
+  std::string name;        // parameter name prefix in IdentificationReport::parameters
+  double default_half;     // ParameterBounds' default half range
+  double narrow_half;      // a range the truth lies outside of
+  double truth_magnitude;  // the largest true deviation of the kind from the config, rad
+  std::function<void(IdentificationOptions&, double)> narrow;
+};
+
+const MeasurementSet& sensor_set(const scenario::Scenario& s) {
+  static const MeasurementSet set = [&s] {
+    const std::vector<Pose> poses =
+        scenario::random_feasible_poses(s.nominal.robot, s.box, 25, 11, &s.truth.robot);
+    SimulationOptions so;
+    so.controller = &s.nominal;
+    so.laser = false;
+    so.swivel = true;
+    so.inclinometer = true;
+    so.imu_yaw = true;
+    auto sim = simulate_measurements(s.truth, poses, SensorNoise{}, 3, so);
+    EXPECT_TRUE(sim.ok()) << sim.status().to_string();
+    return sim.ok() ? sim->set : MeasurementSet{};
+  }();
+  return set;
+}
+
+IdentificationOptions sensor_kind_options() {
+  IdentificationOptions o;
+  o.estimate_laser_plane = false;
+  o.estimate_swivel_zeros = true;
+  o.estimate_inclinometer_mounting = true;
+  o.estimate_imu_yaw_zero = true;
+  return o;
+}
+
+std::vector<SensorKindCase> sensor_kinds(const scenario::Scenario& s) {
+  const RobotModel& t = s.truth.robot;
+  const RobotModel& n = s.nominal.robot;
+  double swivel = 0.0;
+  for (int i = 0; i < t.num_cables(); ++i)
+    swivel = std::max(swivel, std::abs(t.swivel_encoder(i).zero - n.swivel_encoder(i).zero));
+  const double mount =
+      std::max(std::abs(t.inclinometer.mounting_rpy(0) - n.inclinometer.mounting_rpy(0)),
+               std::abs(t.inclinometer.mounting_rpy(1) - n.inclinometer.mounting_rpy(1)));
+  const double yaw = std::abs(t.inclinometer.yaw_zero - n.inclinometer.yaw_zero);
+  const ParameterBounds defaults;
+  return {
+      {"swivel_zero_", defaults.swivel_zero_rad, 0.2 * swivel, swivel,
+       [](IdentificationOptions& o, double h) { o.bounds.swivel_zero_rad = h; }},
+      {"inclinometer.mount.", defaults.inclinometer_mount_rad, 0.2 * mount, mount,
+       [](IdentificationOptions& o, double h) { o.bounds.inclinometer_mount_rad = h; }},
+      {"imu.yaw_zero", defaults.imu_yaw_zero_rad, 0.2 * yaw, yaw,
+       [](IdentificationOptions& o, double h) { o.bounds.imu_yaw_zero_rad = h; }},
+  };
+}
+
+// With the default ranges (0.5, 0.2 and 3.2 rad) the true values lie well inside: every estimate
+// of the three kinds has the documented range and none ends on a bound.
+TEST(ParameterBounds, SensorKindsHaveTheirDefaultRangesAndFitInside) {
+  const scenario::Scenario s = scenario::mini_sensor_scenario();
+  const MeasurementSet& set = sensor_set(s);
+  auto rep = identify(s.nominal, set, sensor_kind_options());
+  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+  for (const SensorKindCase& k : sensor_kinds(s)) {
+    SCOPED_TRACE(k.name);
+    ASSERT_GT(k.truth_magnitude, 0.0);
+    ASSERT_LT(k.truth_magnitude, k.default_half);
+    int of_kind = 0;
+    for (const ParameterEstimate& p : rep->parameters) {
+      if (!starts_with(p.name, k.name)) continue;
+      ++of_kind;
+      EXPECT_NEAR(p.upper - p.lower, 2.0 * k.default_half, 1e-9 * k.default_half) << p.name;
+      EXPECT_FALSE(p.at_bound) << p.name;
+    }
+    EXPECT_GT(of_kind, 0);
+  }
+  EXPECT_TRUE(rep->parameters_at_bound().empty()) << rep->full_report();
+}
+
+// Narrowed to a fifth of the true deviation, each kind would run outside its range: every
+// estimate stays inside, at least one is held on the bound, and the report flags and warns.
+TEST(ParameterBounds, SensorKindsAreHeldAtTheirBoundAndReported) {
+  const scenario::Scenario s = scenario::mini_sensor_scenario();
+  const MeasurementSet& set = sensor_set(s);
+  for (const SensorKindCase& k : sensor_kinds(s)) {
+    SCOPED_TRACE(k.name);
+    IdentificationOptions opt = sensor_kind_options();
+    k.narrow(opt, k.narrow_half);
+    auto rep = identify(s.nominal, set, opt);
+    ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+    int of_kind = 0, at_bound = 0;
+    for (const ParameterEstimate& p : rep->parameters) {
+      if (!starts_with(p.name, k.name)) continue;
+      ++of_kind;
+      const double tol = 1e-9 * std::max(1.0, std::abs(p.initial));
+      EXPECT_NEAR(p.upper - p.lower, 2.0 * k.narrow_half, 1e-9 * k.narrow_half) << p.name;
+      EXPECT_GE(p.value, p.lower - tol) << p.name;
+      EXPECT_LE(p.value, p.upper + tol) << p.name;
+      if (p.at_bound) {
+        ++at_bound;
+        const std::vector<std::string> flagged = rep->parameters_at_bound();
+        EXPECT_NE(std::find(flagged.begin(), flagged.end(), p.name), flagged.end()) << p.name;
+      }
+    }
+    EXPECT_GT(of_kind, 0);
+    EXPECT_GT(at_bound, 0) << rep->full_report();
+    bool warned = false;
+    for (const std::string& w : rep->warnings)
+      warned = warned || w.find("bound") != std::string::npos;
+    EXPECT_TRUE(warned);
+    EXPECT_FALSE(rep->trustworthy());
+  }
 }
 
 }  // namespace

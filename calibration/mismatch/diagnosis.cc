@@ -2,10 +2,8 @@
 
 #include <Eigen/Dense>
 #include <algorithm>
-#include <cctype>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <functional>
 #include <limits>
 #include <map>
@@ -15,6 +13,7 @@
 #include <string>
 #include <utility>
 
+#include "cdpr/calibration/effect_library.hpp"
 #include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/simulate.hpp"
 
@@ -30,10 +29,6 @@ std::string format(const char* fmt, auto... args) {
   std::snprintf(out.data(), out.size(), fmt, args...);
   out.resize(static_cast<std::size_t>(len));
   return out;
-}
-
-bool starts_with(const std::string& s, const char* p) {
-  return s.rfind(p, 0) == 0;
 }
 
 // Symmetric pseudo-inverse with the eigenvalue threshold relative to the largest one (after a
@@ -372,50 +367,6 @@ bool corrected_set(const MeasurementSet& set, const MismatchDesign& d, const Can
   return true;
 }
 
-// The identification option that estimates a candidate's parameters, if it has one.
-bool option_for(const std::string& id, IdentificationOptions& o) {
-  if (id == "hooke_shared") {
-    o.estimate_stiffness = StiffnessEstimate::kShared;
-  } else if (id == "hooke_per_cable") {
-    o.estimate_stiffness = StiffnessEstimate::kPerCable;
-  } else if (id == "drum_scale_per_cable") {
-    o.estimate_length_scales = true;
-  } else if (id == "platform_anchors") {
-    o.estimate_platform_anchors = true;
-    o.platform_anchor_mask = AnchorMask();
-  } else if (id == "force_gain_per_cable") {
-    o.estimate_force_gains = true;
-  } else if (id == "force_offset_per_cable") {
-    o.estimate_force_offsets = true;
-  } else if (id == "laser_mounting") {
-    o.estimate_laser_origin = true;
-    o.estimate_laser_direction = true;
-  } else if (id == "laser_plane") {
-    o.estimate_laser_plane = true;
-  } else {
-    return false;
-  }
-  return true;
-}
-
-std::string signed_number(double v, int digits) {
-  return format("%+.*f", digits, v);
-}
-
-// Digits so that the std shows one or two significant figures.
-int digits_for(double std_dev) {
-  if (!(std_dev > 0) || !std::isfinite(std_dev)) return 3;
-  return std::clamp(1 - static_cast<int>(std::floor(std::log10(std_dev))), 0, 6);
-}
-
-// The 1-based cable number at the end of a parameter name ("s_3" -> "3", "ea_scale" -> "").
-std::string cable_suffix(const std::string& name) {
-  std::size_t p = name.size();
-  while (p > 0 && std::isdigit(static_cast<unsigned char>(name[p - 1]))) --p;
-  if (p == name.size() || p == 0 || name[p - 1] != '_') return std::string();
-  return name.substr(p);
-}
-
 // An identification parameter as an effect parameter in engineer words.
 EffectParameter describe_parameter(const ParameterEstimate& p, const CalibratedModel& initial) {
   EffectParameter e;
@@ -423,9 +374,10 @@ EffectParameter describe_parameter(const ParameterEstimate& p, const CalibratedM
   e.unit = p.unit;
   e.value = p.value;
   e.std_dev = p.std_dev;
-  const std::string cable = cable_suffix(p.name);
-  if (starts_with(p.name, "ea_scale")) {
-    const int i = cable.empty() ? 0 : std::atoi(cable.c_str()) - 1;
+  // The 1-based cable number ("" for one shared by every cable).
+  const std::string cable = p.id.index >= 0 ? std::to_string(p.id.index + 1) : std::string();
+  if (p.id.kind == ParameterKind::kStiffness) {
+    const int i = std::max(p.id.index, 0);
     const double ea0 = initial.robot.cables[static_cast<std::size_t>(i)].ea;
     e.name = cable.empty() ? "EA" : "EA_" + cable;
     e.unit = "N";
@@ -435,15 +387,15 @@ EffectParameter describe_parameter(const ParameterEstimate& p, const CalibratedM
     e.text = (cable.empty() ? std::string("cable elasticity: EA = ")
                             : "cable elasticity of cable " + cable + ": EA = ") +
              format("%.*f +- %.*f kN", dg, e.value / 1e3, dg, e.std_dev / 1e3);
-  } else if (starts_with(p.name, "s_")) {
+  } else if (p.id.kind == ParameterKind::kLengthScale) {
     const int dg = digits_for(100 * p.std_dev);
     e.text = "drum scale error of winch " + cable + ": " + signed_number(100 * p.value, dg) +
              format(" +- %.*f %%", dg, 100 * p.std_dev);
-  } else if (starts_with(p.name, "force_gain")) {
+  } else if (p.id.kind == ParameterKind::kForceGain) {
     const int dg = digits_for(100 * p.std_dev);
     e.text = "force sensor gain error of cable " + cable + ": " + signed_number(100 * p.value, dg) +
              format(" +- %.*f %%", dg, 100 * p.std_dev);
-  } else if (starts_with(p.name, "force_offset")) {
+  } else if (p.id.kind == ParameterKind::kForceOffset) {
     const int dg = digits_for(p.std_dev);
     e.text = "force sensor offset of cable " + cable + ": " + signed_number(p.value, dg) +
              format(" +- %.*f N", dg, p.std_dev);
@@ -463,250 +415,31 @@ EffectParameter describe_parameter(const ParameterEstimate& p, const CalibratedM
   return e;
 }
 
-// A Gauss-Newton coefficient of a library candidate in engineer words.
-EffectParameter describe_coefficient(const std::string& id, int q, int k, double v, double s) {
-  EffectParameter e;
-  const std::string cable = k > 1 ? std::to_string(q + 1) : std::string();
-  const std::string of = k > 1 ? " of cable " + cable : std::string();
-  e.value = v;
-  e.std_dev = s;
-  if (starts_with(id, "hooke")) {
-    e.name = k > 1 ? "EA_" + cable : "EA";
-    e.unit = "N";
-    e.value = 1.0 / v;
-    e.std_dev = s / (v * v);
-    const int dg = digits_for(e.std_dev / 1e3);
-    e.text = "cable elasticity" + of +
-             format(": EA = %.*f +- %.*f kN", dg, e.value / 1e3, dg, e.std_dev / 1e3);
-  } else if (starts_with(id, "compliance")) {
-    e.name = k > 1 ? "c_" + cable : "c";
-    e.unit = "m/N";
-    const int dg = digits_for(1e6 * s);
-    e.text = (k > 1 ? "winch/sensor compliance of winch " + cable
-                    : std::string("winch/sensor compliance")) +
-             ": " + format("%.*f +- %.*f um/N", dg, 1e6 * v, dg, 1e6 * s);
-  } else if (starts_with(id, "encoder_offset")) {
-    e.name = "o_" + cable;
-    e.unit = "m";
-    const int dg = digits_for(1e3 * s);
-    e.text = "encoder zero offset" + of + ": " + signed_number(1e3 * v, dg) +
-             format(" +- %.*f mm", dg, 1e3 * s);
-  } else if (starts_with(id, "encoder_drift")) {
-    e.name = "drift_" + cable;
-    e.unit = "m/s";
-    const int dg = digits_for(6e7 * s);
-    e.text = "encoder drift" + of + ": " + signed_number(6e7 * v, dg) +
-             format(" +- %.*f um/min", dg, 6e7 * s);
-  } else if (starts_with(id, "transmission_drift")) {
-    e.name = "transmission_drift";
-    e.unit = "1/s";
-    const int dg = digits_for(6e7 * s);
-    e.text = "transmission drift: " + signed_number(6e7 * v, dg) +
-             format(" +- %.*f ppm/min", dg, 6e7 * s);
-  } else if (starts_with(id, "creep")) {
-    // dL = v F L ln(1 + t / 10 s): v is the compliance added per e-fold of time.
-    e.name = "creep";
-    e.unit = "1/N";
-    e.text = format(
-        "cable creep: compliance +%.3g +- %.2g 1/N per e-fold of time (dL = c F L ln(1 + t / 10 "
-        "s))",
-        v, s);
-  } else if (starts_with(id, "nonlinear_elasticity")) {
-    // dL = (a F + k2 F^2) L added to the model's elongation.
-    e.name = q == 0 ? "a" : "k2";
-    e.unit = q == 0 ? "1/N" : "1/N^2";
-    e.text = q == 0 ? format(
-                          "nonlinear cable elongation (a F + k2 F^2) L: linear part a = %.3g +- "
-                          "%.2g 1/N",
-                          v, s)
-                    : format("nonlinear cable elongation (a F + k2 F^2) L: k2 = %.3g +- %.2g 1/N^2",
-                             v, s);
-  } else if (starts_with(id, "hysteresis")) {
-    // Length rows ~d: the true length is longer by v when last paid out, shorter when reeled in.
-    e.name = "h_" + cable;
-    e.unit = "m";
-    const int dg = digits_for(1e3 * s);
-    e.text = "cable hysteresis" + of + ": " + signed_number(1e3 * v, dg) +
-             format(
-                 " +- %.*f mm (the length after paying out minus the reading; the opposite "
-                 "after reeling in)",
-                 dg, 1e3 * s);
-  } else if (starts_with(id, "pulley_friction")) {
-    // The tension reading is off by v when last paid out and by -v when reeled in.
-    e.name = "f_" + cable;
-    e.unit = "N";
-    const int dg = digits_for(s);
-    e.text = "pulley friction" + of + ": tension reading " + signed_number(v, dg) +
-             format(" +- %.*f N after paying out, the opposite after reeling in", dg, s);
-  } else if (starts_with(id, "drum_scale")) {
-    // Jacobian columns: the parameter change is -v.
-    e.name = k > 1 ? "s_" + cable : "s";
-    e.unit = "-";
-    e.value = -v;
-    const int dg = digits_for(100 * s);
-    e.text = (k > 1 ? "drum scale error of winch " + cable
-                    : std::string("drum scale error of every winch")) +
-             ": " + signed_number(-100 * v, dg) + format(" +- %.*f %%", dg, 100 * s);
-  } else {
-    e.name = id + "_" + std::to_string(q + 1);
-    e.unit = "";
-    e.text = format("%s coefficient %d: %.4g +- %.2g", id.c_str(), q + 1, v, s);
-  }
-  return e;
-}
+// ---- Stage 1, selection: the bootstrap over poses with forward selection on the projected
+// columns (the inclusion probability of every candidate), and the candidates kept for the full
+// refits.
+struct Selection {
+  std::vector<double> inclusion;                   // per candidate of the standard design
+  std::map<std::string, double> family_inclusion;  // per selection group
+  std::set<std::string> kept;                      // the kept candidates' ids
+  std::vector<std::string> to_refit;               // the same, in the design's order
 
-// Carries a Gauss-Newton effect into the calibrated model where the config can hold it.
-bool model_effect(const std::string& id, const Eigen::VectorXd& theta, CalibratedModel& model) {
-  const int m = model.robot.num_cables();
-  if (id == "encoder_offset_per_cable" && theta.size() == m) {
-    model.readings.length_offsets += theta;
-    return true;
+  double family_probability(const std::string& family) const {
+    const auto it = family_inclusion.find(selection_group(family));
+    return it == family_inclusion.end() ? 0.0 : it->second;
   }
-  if (id == "drum_scale_shared" && theta.size() == 1) {
-    for (int i = 0; i < m; ++i) {
-      model.readings.length_scales(i) -= theta(0);
-      model.robot.winches[static_cast<std::size_t>(i)].drum_diameter *= 1.0 - theta(0);
-      model.robot.winches[static_cast<std::size_t>(i)].drum_pitch *= 1.0 - theta(0);
-    }
-    return true;
-  }
-  if (id == "sag_shared" && theta.size() == 1 && theta(0) > 0) {
-    for (auto& c : model.robot.cables) c.mass_per_length = theta(0);
-    return true;
-  }
-  const bool rigid =
-      std::all_of(model.robot.cables.begin(), model.robot.cables.end(),
-                  [](const CableModel& c) { return c.elongation == ElongationKind::kRigid; });
-  if (starts_with(id, "hooke") && rigid && (theta.array() > 0).all()) {
-    for (int i = 0; i < m; ++i) {
-      auto& c = model.robot.cables[static_cast<std::size_t>(i)];
-      c.ea = 1.0 / theta(theta.size() == 1 ? 0 : i);
-      c.elongation = ElongationKind::kHooke;
-    }
-    return true;
-  }
-  if (starts_with(id, "compliance") && rigid) {
-    // dL = c F as a first-order polynomial surface in the plain variables.
-    for (int i = 0; i < m; ++i) {
-      auto& c = model.robot.cables[static_cast<std::size_t>(i)];
-      c.elongation = ElongationKind::kPolynomial;
-      c.polynomial = PolynomialSurface{};
-      c.polynomial.order = 1;
-      c.polynomial.coefficients = {0.0, 0.0, theta(theta.size() == 1 ? 0 : i)};
-    }
-    return true;
-  }
-  if (id == "nonlinear_elasticity_shared" && rigid && theta.size() == 2) {
-    // dL = (a F + k2 F^2) L: the L F and L F^2 terms of a third-order surface (coefficients by
-    // total degree d, then by the power of F: L^(d-j) F^j is at d (d + 1) / 2 + j).
-    for (auto& c : model.robot.cables) {
-      c.elongation = ElongationKind::kPolynomial;
-      c.polynomial = PolynomialSurface{};
-      c.polynomial.order = 3;
-      c.polynomial.coefficients.assign(10, 0.0);
-      c.polynomial.coefficients[4] = theta(0);  // L F   (d = 2, j = 1)
-      c.polynomial.coefficients[8] = theta(1);  // L F^2 (d = 3, j = 2)
-    }
-    return true;
-  }
-  return false;
-}
+};
 
-}  // namespace
-
-const char* to_string(Diagnosis::Verdict v) {
-  switch (v) {
-    case Diagnosis::Verdict::kNoMismatch:
-      return "no mismatch";
-    case Diagnosis::Verdict::kMismatchNamed:
-      return "mismatch named";
-    case Diagnosis::Verdict::kMismatchUnexplained:
-      return "mismatch unexplained";
-    case Diagnosis::Verdict::kInconclusive:
-      return "inconclusive";
-  }
-  return "unknown";
-}
-
-Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet& set,
-                           const MeasurementSet* validation,
-                           const IdentificationOptions& identification,
-                           const DiagnosisOptions& options) {
-  const RobotModel& robot = nominal.robot;
-  const int m = robot.num_cables();
-  const int nl = static_cast<int>(robot.lasers.size());
-  // --- 1. Refuse what does not match.
-  auto check_set = [&](const MeasurementSet& s, const char* what) -> Status {
-    for (int j = 0; j < s.num_poses(); ++j) {
-      const PoseMeasurement& p = s.poses[static_cast<std::size_t>(j)];
-      if (p.cable_lengths.size() != m) {
-        return Status::error(ErrorCode::kInvalidArgument,
-                             "diagnose: the %s has %d cable lengths per pose (pose %d), the model "
-                             "has %d cables",
-                             what, static_cast<int>(p.cable_lengths.size()), j, m);
-      }
-      if (p.laser_distances.size() != 0 && p.laser_distances.size() != nl) {
-        return Status::error(ErrorCode::kInvalidArgument,
-                             "diagnose: the %s has %d laser distances per pose (pose %d), the "
-                             "model has %d lasers",
-                             what, static_cast<int>(p.laser_distances.size()), j, nl);
-      }
-    }
-    Status st = validate(s, robot);
-    if (!st.ok()) st.prepend(std::string("diagnose: ") + what + ": ");
-    return st;
-  };
-  CDPR_RETURN_IF_ERROR(check_set(set, "recording"));
-  if (validation != nullptr) {
-    CDPR_RETURN_IF_ERROR(check_set(*validation, "validation recording"));
-  }
-  if (options.bootstrap_samples < 0 || options.cv_folds < 2 || options.max_effects < 0 ||
-      !(options.inclusion_threshold >= 0 && options.inclusion_threshold <= 1)) {
-    return Status(ErrorCode::kInvalidArgument,
-                  "diagnose: options need bootstrap_samples >= 0, cv_folds >= 2, max_effects >= 0 "
-                  "and 0 <= inclusion_threshold <= 1");
-  }
-
-  Diagnosis d;
-  d.model_after = nominal;
-  const int np = set.num_poses();
-  if (np < options.min_poses || np < options.cv_folds) {
-    d.verdict = Diagnosis::Verdict::kInconclusive;
-    d.headline = format(
-        "Inconclusive: %d poses are too few to tell the candidate effects apart (at least %d are "
-        "needed); record more poses.",
-        np, std::max(options.min_poses, options.cv_folds));
-    d.findings.push_back(d.headline);
-    auto rep = identify(nominal, set, identification);
-    if (rep) {
-      d.before = std::move(*rep);
-      d.model_after = d.before.estimate;
-    }
-    return d;
-  }
-
-  // --- 2. Standard identification and screen.
-  auto before = identify(nominal, set, identification);
-  if (!before) return before.status();
-  d.before = std::move(*before);
-  auto screen = locate_mismatch(d.before, set, identification, options.screen);
-  if (!screen) return screen.status();
-  d.screen = std::move(*screen);
-  d.model_after = d.before.estimate;
-  auto design0 = mismatch_design(d.before.estimate, set, d.before.poses, &d.before.residuals,
-                                 identification, options.screen);
-  if (!design0) return design0.status();
-  const MismatchDesign& D0 = *design0;
+Selection select_candidates(const MismatchDesign& D0, const MismatchSummary& screen, int np,
+                            const DiagnosisOptions& options) {
   const int n = D0.num_rows();
   const double alpha = options.screen.alpha;
-
-  // --- 3. Bootstrap over poses with forward selection on the projected columns.
   std::vector<const Eigen::MatrixXd*> blocks;
   for (const auto& c : D0.candidates) blocks.push_back(&c.X);
   const PoseGrams G0 = pose_grams(D0, blocks, true, false);
   SelectionInput sel;
   sel.n = n;
-  sel.dof = d.screen.dof;
+  sel.dof = screen.dof;
   sel.alpha = alpha;
   sel.max_effects = options.max_effects;
   Eigen::MatrixXd Mfull = Eigen::MatrixXd::Zero(G0.total, G0.total);
@@ -769,7 +502,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   for (const auto& c : D0.candidates) {
     allied[selection_group(c.family)].insert(selection_group(c.family));
   }
-  for (const auto& p : d.screen.confounded) {
+  for (const auto& p : screen.confounded) {
     const CandidateColumns* a = find_columns(D0, p.first);
     const CandidateColumns* b = find_columns(D0, p.second);
     if (a == nullptr || b == nullptr) continue;
@@ -792,11 +525,21 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       to_refit.push_back(c.id);
     }
   }
-  const std::vector<ConfoundedPair>& pairs = d.screen.confounded;
+  return Selection{std::move(inclusion), std::move(family_inclusion), std::move(kept),
+                   std::move(to_refit)};
+}
 
-  // Fold assignment (deterministic, balanced).
-  const int K = std::min(options.cv_folds, np);
-  std::vector<int> fold(static_cast<std::size_t>(np));
+// Fold assignment of the cross-validation (deterministic, balanced).
+struct Folds {
+  int K = 0;              // folds
+  std::vector<int> fold;  // per pose; -1: always in the training folds
+};
+
+Folds assign_folds(const MismatchDesign& D0, int np, const DiagnosisOptions& options) {
+  Folds out;
+  out.K = std::min(options.cv_folds, np);
+  std::vector<int>& fold = out.fold;
+  fold.resize(static_cast<std::size_t>(np));
   {
     std::vector<int> perm(static_cast<std::size_t>(np));
     for (int j = 0; j < np; ++j) perm[static_cast<std::size_t>(j)] = j;
@@ -807,266 +550,317 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
                   [&](int j) { return D0.jacobian_pose[static_cast<std::size_t>(j)].norm() == 0; });
     for (int j = 0; j < np; ++j) fold[static_cast<std::size_t>(j)] = -1;
     for (std::size_t q = 0; q < perm.size(); ++q) {
-      fold[static_cast<std::size_t>(perm[q])] = static_cast<int>(q) % K;
+      fold[static_cast<std::size_t>(perm[q])] = static_cast<int>(q) % out.K;
     }
   }
-  const CvRms cv_before = cv_rms(D0, nullptr, fold, K);
-  const double logn = std::log(static_cast<double>(n));
-  const double log_det0 = d.before.log_det_covariance;  // deviances relative to the standard fit
+  return out;
+}
 
-  // --- 4. Full refits, 5. acceptance. A state is a model (identification options, readings with
-  // the Gauss-Newton effects moved to them) and its fit; refit() adds one candidate to a state.
-  struct State {
-    IdentificationOptions opt;
-    MeasurementSet set;
-    IdentificationReport report;
-    MismatchDesign design;
-    std::vector<std::string> gn_ids;  // Gauss-Newton effects (columns in `design`)
-    std::vector<Eigen::VectorXd> gn_theta;
-    CvRms cv;
-  };
-  auto state_cv = [&](const State& st) {
-    Eigen::MatrixXd extra(st.design.num_rows(), 0);
-    for (const std::string& id : st.gn_ids) {
-      const CandidateColumns* cc = find_columns(st.design, id);
-      if (cc == nullptr) continue;
-      Eigen::MatrixXd e2(extra.rows(), extra.cols() + cc->X.cols());
-      e2 << extra, cc->X;
-      extra = std::move(e2);
-    }
-    return cv_rms(st.design, &extra, fold, K);
-  };
-  State standard{identification, set, d.before, D0, {}, {}, cv_before};
-  auto refit = [&](const State& cur, const std::string& id,
-                   EffectFit& fit) -> std::optional<State> {
-    const CandidateColumns* cc = find_columns(cur.design, id);
-    if (cc == nullptr) return std::nullopt;
-    fit = EffectFit{};
-    fit.id = id;
-    fit.name = cc->name;
-    fit.family = cc->family;
-    for (std::size_t c = 0; c < D0.candidates.size(); ++c) {
-      if (D0.candidates[c].id == id) {
-        fit.inclusion_probability = inclusion[c];
-        fit.family_inclusion_probability =
-            family_inclusion[selection_group(D0.candidates[c].family)];
-      }
-    }
-    fit.chi2_before = cur.report.chi2;
-    fit.deviance_before = cur.report.chi2 + cur.report.log_det_covariance - log_det0;
-    fit.cv_rms_before = cur.cv.length_m;
-    fit.cv_normalized_before = cur.cv.normalized;
-    State next;
-    bool done = false;
-    IdentificationOptions opt = cur.opt;
-    if (option_for(id, opt)) {
-      auto rep = identify(cur.report.estimate, cur.set, opt);
-      if (id == "laser_mounting") {
-        // The origin's component along the target plane's normal trades against the plane
-        // offset (both estimated): the beam direction alone is then the identifiable mounting
-        // error (identify() refuses the full set). When both can be fitted, the one with the
-        // lower BIC is kept: a tilted beam without an offset origin should not pay for three
-        // origin coordinates.
-        IdentificationOptions dir = opt;
-        dir.estimate_laser_origin = false;
-        auto rep_dir = identify(cur.report.estimate, cur.set, dir);
-        auto bic = [&](const IdentificationReport& r) {
-          return r.chi2 + r.log_det_covariance + static_cast<double>(r.parameters.size()) * logn;
-        };
-        if (rep_dir && rep_dir->converged &&
-            (!rep || !rep->converged || bic(*rep_dir) < bic(*rep))) {
-          rep = std::move(rep_dir);
-          opt = dir;
-        }
-      }
-      if (rep && rep->converged) {
-        auto des = mismatch_design(rep->estimate, cur.set, rep->poses, &rep->residuals, opt,
-                                   options.screen);
-        if (des) {
-          next =
-              State{opt, cur.set, std::move(*rep), std::move(*des), cur.gn_ids, cur.gn_theta, {}};
-          fit.extra_parameters =
-              static_cast<int>(next.report.parameters.size() - cur.report.parameters.size());
-          std::set<std::string> old;
-          for (const auto& p : cur.report.parameters) old.insert(p.name);
-          for (const auto& p : next.report.parameters) {
-            if (!old.count(p.name))
-              fit.parameters.push_back(describe_parameter(p, cur.report.estimate));
-          }
-          fit.modelled_in_config = true;
-          done = true;
-        }
-      }
-    }
-    // A Gauss-Newton step's corrected readings, re-identified from the best state so far (or
-    // `cur`); kept as the best when the deviance fell. nullopt: the identification or the design
-    // failed; else whether the deviance has settled.
-    auto gn_keep = [&](MeasurementSet&& corrected, const Eigen::VectorXd& theta,
-                       std::optional<State>& best, double& best_dev) -> std::optional<bool> {
-      auto rep = identify(best ? best->report.estimate : cur.report.estimate, corrected, cur.opt);
-      if (!rep) return std::nullopt;
-      auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, cur.opt,
-                                 options.screen);
-      if (!des) return std::nullopt;
-      const double dev = rep->chi2 + rep->log_det_covariance;
-      const bool settled = best && best_dev - dev < 1e-3 * std::max(1.0, std::abs(dev));
-      if (dev < best_dev) {
-        best = State{cur.opt,
-                     std::move(corrected),
-                     std::move(*rep),
-                     std::move(*des),
-                     cur.gn_ids,
-                     cur.gn_theta,
-                     {}};
-        best->gn_ids.push_back(id);
-        best->gn_theta.push_back(theta);
-        best_dev = dev;
-      }
-      return settled;
+// A state is a model (identification options, readings with the Gauss-Newton effects moved to
+// them) and its fit; refit() adds one candidate to a state.
+struct State {
+  IdentificationOptions opt;
+  MeasurementSet set;
+  IdentificationReport report;
+  MismatchDesign design;
+  std::vector<std::string> gn_ids;  // Gauss-Newton effects (columns in `design`)
+  std::vector<Eigen::VectorXd> gn_theta;
+  CvRms cv;
+};
+
+// What the refits of one diagnosis share.
+struct RefitContext {
+  const DiagnosisOptions& options;
+  const MismatchDesign& design0;  // the standard identification's design
+  const Selection& selection;
+  const Folds& folds;
+  int dof = 0;            // of the screen
+  int m = 0;              // cables
+  double logn = 0.0;      // log of the number of residuals
+  double log_det0 = 0.0;  // the standard fit's log det: deviances are relative to it
+};
+
+CvRms state_cv(const RefitContext& ctx, const State& st) {
+  Eigen::MatrixXd extra(st.design.num_rows(), 0);
+  for (const std::string& id : st.gn_ids) {
+    const CandidateColumns* cc = find_columns(st.design, id);
+    if (cc == nullptr) continue;
+    Eigen::MatrixXd e2(extra.rows(), extra.cols() + cc->X.cols());
+    e2 << extra, cc->X;
+    extra = std::move(e2);
+  }
+  return cv_rms(st.design, &extra, ctx.folds.fold, ctx.folds.K);
+}
+
+// A Gauss-Newton step's corrected readings, re-identified from the best state so far (or
+// `cur`); kept as the best when the deviance fell. nullopt: the identification or the design
+// failed; else whether the deviance has settled.
+std::optional<bool> keep_gauss_newton_step(const RefitContext& ctx, const State& cur,
+                                           const std::string& id, MeasurementSet&& corrected,
+                                           const Eigen::VectorXd& theta, std::optional<State>& best,
+                                           double& best_dev) {
+  auto rep = identify(best ? best->report.estimate : cur.report.estimate, corrected, cur.opt);
+  if (!rep) return std::nullopt;
+  auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, cur.opt,
+                             ctx.options.screen);
+  if (!des) return std::nullopt;
+  const double dev = rep->chi2 + rep->log_det_covariance;
+  const bool settled = best && best_dev - dev < 1e-3 * std::max(1.0, std::abs(dev));
+  if (dev < best_dev) {
+    best = State{
+        cur.opt, std::move(corrected), std::move(*rep), std::move(*des), cur.gn_ids, cur.gn_theta,
+        {}};
+    best->gn_ids.push_back(id);
+    best->gn_theta.push_back(theta);
+    best_dev = dev;
+  }
+  return settled;
+}
+
+// The refit hooks of the descriptors' refit kinds (EffectRefit, effect_library.hpp).
+
+// kIdentification: identify() with the effect's switch on (and its alternative, the lower BIC
+// kept). nullopt when it does not converge (the caller falls back to Gauss-Newton).
+std::optional<State> refit_by_identification(const RefitContext& ctx, const State& cur,
+                                             const EffectDescriptor& effect, EffectFit& fit) {
+  IdentificationOptions opt = cur.opt;
+  effect.estimate(opt);
+  auto rep = identify(cur.report.estimate, cur.set, opt);
+  if (effect.alternative != nullptr) {
+    // A reduced set of the effect's parameters (the laser mounting: the beam direction
+    // alone), kept when it fits with the lower BIC or the full set cannot be fitted.
+    IdentificationOptions dir = opt;
+    effect.alternative(dir);
+    auto rep_dir = identify(cur.report.estimate, cur.set, dir);
+    auto bic = [&](const IdentificationReport& r) {
+      return r.chi2 + r.log_det_covariance + static_cast<double>(r.parameters.size()) * ctx.logn;
     };
-    if (!done && id == "sag_shared") {
-      // Sag, one parameter: the cables' mass per length mu, fitted by Gauss-Newton on the exact
-      // catenary effect (sag_effect, mismatch.hpp) rather than on the first-order columns: the
-      // small-sag arc is wrong by its square for a heavy cable at low tension (100 g/m at 50 N
-      // over 8 m: ~0.2 mm), and the linear columns left a structured remainder that other
-      // candidates took. mu >= 0; the derivative by a forward difference.
-      double mu = 0.0, info = 0.0;
-      std::optional<State> best;
-      double best_dev = std::numeric_limits<double>::infinity();
-      const State* base = &cur;
-      for (int it = 0; it < 6; ++it) {
-        const double h = std::max(1e-4, 0.02 * mu);
-        auto e0 = sag_effect(base->report.estimate, cur.set, base->report.poses, base->design,
-                             cur.opt, mu);
-        auto e1 = sag_effect(base->report.estimate, cur.set, base->report.poses, base->design,
-                             cur.opt, mu + h);
-        if (!e0 || !e1) break;
-        // The residuals of `base` have the effect at mu (at the previous estimate) moved out:
-        // the step fits what is left with the derivative of the effect.
-        const Eigen::MatrixXd J = (e1->X - e0->X) / h;
-        const PoseGrams g = pose_grams(base->design, {&J}, true, false);
-        Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
-        for (const auto& Mj : g.M) M += Mj;
-        const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
-        if (!(S(0, 0) > 0)) break;
-        info = S(0, 0);
-        const double next_mu = std::max(0.0, mu + S(0, 1) / S(0, 0));
-        if (!(next_mu > 0.0)) break;
-        Eigen::VectorXd comp;
-        auto e = sag_effect(base->report.estimate, cur.set, base->report.poses, base->design,
-                            cur.opt, next_mu, &comp);
-        if (!e) break;
-        CandidateColumns per_unit = *e;
-        per_unit.X /= next_mu;
-        per_unit.si /= next_mu;
-        const Eigen::VectorXd theta = Eigen::VectorXd::Constant(1, next_mu);
-        MeasurementSet corrected;
-        if (!corrected_set(cur.set, base->design, per_unit, theta, corrected)) break;
-        // The corrected lengths depend on the tension readings through the sag: their sigma
-        // carries that part of the force noise too (else chi^2 grows with the sag's steepness
-        // at low tension, ~0.5 mm per N at 40 N on LARGE).
-        for (int k = 0; k < base->design.num_rows(); ++k) {
-          const auto uk = static_cast<std::size_t>(k);
-          if (base->design.kind[uk] != ResidualKind::kLength) continue;
-          PoseMeasurement& pm = corrected.poses[static_cast<std::size_t>(base->design.pose[uk])];
-          if (pm.extra_compliance.size() != m) pm.extra_compliance = Eigen::VectorXd::Zero(m);
-          pm.extra_compliance(base->design.index[uk]) = comp(k);
-        }
-        const std::optional<bool> settled = gn_keep(std::move(corrected), theta, best, best_dev);
-        if (!settled) break;
-        mu = next_mu;
-        if (*settled) break;
-        base = &*best;
-      }
-      if (!best) return std::nullopt;
-      next = std::move(*best);
-      fit.extra_parameters = 1;
-      const double scale =
-          std::sqrt(std::max(1.0, next.report.chi2 / std::max(1, d.screen.dof - 1)));
-      const double mu_fit = next.gn_theta.back()(0);
-      const double sd = info > 0 ? scale / std::sqrt(info) : kNaN;
-      EffectParameter ep;
-      ep.name = "mass_per_length";
-      ep.unit = "kg/m";
-      ep.value = mu_fit;
-      ep.std_dev = sd;
-      const int dg = digits_for(1e3 * sd);
-      ep.text = format("cable sag: mass per length %.*f +- %.*f g/m (catenary)", dg, 1e3 * mu_fit,
-                       dg, 1e3 * sd);
-      fit.parameters.push_back(ep);
-      CalibratedModel probe = next.report.estimate;
-      fit.modelled_in_config = model_effect(id, next.gn_theta.back(), probe);
-      done = true;
+    if (rep_dir && rep_dir->converged && (!rep || !rep->converged || bic(*rep_dir) < bic(*rep))) {
+      rep = std::move(rep_dir);
+      opt = dir;
     }
-    if (!done) {
-      // Gauss-Newton augmented fit: the coefficients from the columns with the identification's
-      // Jacobian projected out, the effect moved to the readings, the identification redone
-      // from its solution; repeated (the columns re-evaluated at the new estimate) until the
-      // deviance settles, so that a strong effect is fitted to its optimum, not to first order.
-      const int k = static_cast<int>(cc->X.cols());
-      Eigen::VectorXd theta = Eigen::VectorXd::Zero(k);
-      Eigen::MatrixXd Ai;
-      int rank = 0;
-      const MismatchDesign* at = &cur.design;
-      const CandidateColumns* cols = cc;
-      std::optional<State> best;
-      double best_dev = std::numeric_limits<double>::infinity();
-      for (int it = 0; it < 4; ++it) {
-        std::vector<const Eigen::MatrixXd*> bl{&cols->X};
-        const PoseGrams g = pose_grams(*at, bl, true, false);
-        Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
-        for (const auto& Mj : g.M) M += Mj;
-        const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
-        const int r = projected_rank(S.topLeftCorner(k, k), M.diagonal().segment(g.geometry, k),
-                                     options.screen.rank_tolerance);
-        if (r == 0) break;
-        if (it == 0) rank = r;
-        Ai = pinv_sym(S.topLeftCorner(k, k), 1e-9);
-        Eigen::VectorXd step = Ai * S.block(0, k, k, 1);
-        theta += step;
-        MeasurementSet corrected;
-        if (!corrected_set(cur.set, *at, *cols, theta, corrected)) break;
-        const std::optional<bool> settled = gn_keep(std::move(corrected), theta, best, best_dev);
-        if (!settled) break;
-        if (*settled) break;
-        at = &best->design;
-        cols = find_columns(*at, id);
-        if (cols == nullptr || cols->X.cols() != k) break;
+  }
+  if (rep && rep->converged) {
+    auto des = mismatch_design(rep->estimate, cur.set, rep->poses, &rep->residuals, opt,
+                               ctx.options.screen);
+    if (des) {
+      State next{opt, cur.set, std::move(*rep), std::move(*des), cur.gn_ids, cur.gn_theta, {}};
+      fit.extra_parameters =
+          static_cast<int>(next.report.parameters.size() - cur.report.parameters.size());
+      std::set<std::string> old;
+      for (const auto& p : cur.report.parameters) old.insert(p.name);
+      for (const auto& p : next.report.parameters) {
+        if (!old.count(p.name))
+          fit.parameters.push_back(describe_parameter(p, cur.report.estimate));
       }
-      if (!best || rank == 0) return std::nullopt;
-      next = std::move(*best);
-      theta = next.gn_theta.back();
-      fit.extra_parameters = rank;
-      const double scale =
-          std::sqrt(std::max(1.0, next.report.chi2 / std::max(1, d.screen.dof - rank)));
-      for (int q = 0; q < k; ++q) {
-        if (Ai(q, q) <= 0) continue;  // a column the data do not fix
-        fit.parameters.push_back(
-            describe_coefficient(id, q, k, theta(q), std::sqrt(Ai(q, q)) * scale));
-      }
-      CalibratedModel probe = next.report.estimate;
-      fit.modelled_in_config = model_effect(id, theta, probe);
+      fit.modelled_in_config = true;
+      return next;
     }
-    next.cv = state_cv(next);
-    fit.chi2_after = next.report.chi2;
-    fit.cv_rms_after = next.cv.length_m;
-    fit.cv_normalized_after = next.cv.normalized;
-    fit.deviance_after = next.report.chi2 + next.report.log_det_covariance - log_det0;
-    fit.lrt_statistic = fit.deviance_before - fit.deviance_after;
-    fit.lrt_p_value =
-        fit.extra_parameters > 0 ? chi2_upper_tail(fit.lrt_statistic, fit.extra_parameters) : 1.0;
-    fit.bic_delta = -fit.lrt_statistic + fit.extra_parameters * logn;
-    return next;
-  };
+  }
+  return std::nullopt;
+}
 
-  struct Trial {
+// kCatenary: sag.
+std::optional<State> refit_catenary(const RefitContext& ctx, const State& cur,
+                                    const std::string& id, EffectFit& fit) {
+  const int m = ctx.m;
+  // Sag, one parameter: the cables' mass per length mu, fitted by Gauss-Newton on the exact
+  // catenary effect (sag_effect, mismatch.hpp) rather than on the first-order columns: the
+  // small-sag arc is wrong by its square for a heavy cable at low tension (100 g/m at 50 N
+  // over 8 m: ~0.2 mm), and the linear columns left a structured remainder that other
+  // candidates took. mu >= 0; the derivative by a forward difference.
+  double mu = 0.0, info = 0.0;
+  std::optional<State> best;
+  double best_dev = std::numeric_limits<double>::infinity();
+  const State* base = &cur;
+  for (int it = 0; it < 6; ++it) {
+    const double h = std::max(1e-4, 0.02 * mu);
+    auto e0 =
+        sag_effect(base->report.estimate, cur.set, base->report.poses, base->design, cur.opt, mu);
+    auto e1 = sag_effect(base->report.estimate, cur.set, base->report.poses, base->design, cur.opt,
+                         mu + h);
+    if (!e0 || !e1) break;
+    // The residuals of `base` have the effect at mu (at the previous estimate) moved out:
+    // the step fits what is left with the derivative of the effect.
+    const Eigen::MatrixXd J = (e1->X - e0->X) / h;
+    const PoseGrams g = pose_grams(base->design, {&J}, true, false);
+    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
+    for (const auto& Mj : g.M) M += Mj;
+    const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
+    if (!(S(0, 0) > 0)) break;
+    info = S(0, 0);
+    const double next_mu = std::max(0.0, mu + S(0, 1) / S(0, 0));
+    if (!(next_mu > 0.0)) break;
+    Eigen::VectorXd comp;
+    auto e = sag_effect(base->report.estimate, cur.set, base->report.poses, base->design, cur.opt,
+                        next_mu, &comp);
+    if (!e) break;
+    CandidateColumns per_unit = *e;
+    per_unit.X /= next_mu;
+    per_unit.si /= next_mu;
+    const Eigen::VectorXd theta = Eigen::VectorXd::Constant(1, next_mu);
+    MeasurementSet corrected;
+    if (!corrected_set(cur.set, base->design, per_unit, theta, corrected)) break;
+    // The corrected lengths depend on the tension readings through the sag: their sigma
+    // carries that part of the force noise too (else chi^2 grows with the sag's steepness
+    // at low tension, ~0.5 mm per N at 40 N on LARGE).
+    for (int k = 0; k < base->design.num_rows(); ++k) {
+      const auto uk = static_cast<std::size_t>(k);
+      if (base->design.kind[uk] != ResidualKind::kLength) continue;
+      PoseMeasurement& pm = corrected.poses[static_cast<std::size_t>(base->design.pose[uk])];
+      if (pm.extra_compliance.size() != m) pm.extra_compliance = Eigen::VectorXd::Zero(m);
+      pm.extra_compliance(base->design.index[uk]) = comp(k);
+    }
+    const std::optional<bool> settled =
+        keep_gauss_newton_step(ctx, cur, id, std::move(corrected), theta, best, best_dev);
+    if (!settled) break;
+    mu = next_mu;
+    if (*settled) break;
+    base = &*best;
+  }
+  if (!best) return std::nullopt;
+  State next = std::move(*best);
+  fit.extra_parameters = 1;
+  const double scale = std::sqrt(std::max(1.0, next.report.chi2 / std::max(1, ctx.dof - 1)));
+  const double mu_fit = next.gn_theta.back()(0);
+  const double sd = info > 0 ? scale / std::sqrt(info) : kNaN;
+  fit.parameters.push_back(describe_coefficient(id, 0, 1, mu_fit, sd));
+  CalibratedModel probe = next.report.estimate;
+  fit.modelled_in_config = write_effect(id, next.gn_theta.back(), probe);
+  return next;
+}
+
+// kGaussNewton (and the fallback of a failed identification refit).
+std::optional<State> refit_gauss_newton(const RefitContext& ctx, const State& cur,
+                                        const std::string& id, const CandidateColumns* cc,
+                                        EffectFit& fit) {
+  // Gauss-Newton augmented fit: the coefficients from the columns with the identification's
+  // Jacobian projected out, the effect moved to the readings, the identification redone
+  // from its solution; repeated (the columns re-evaluated at the new estimate) until the
+  // deviance settles, so that a strong effect is fitted to its optimum, not to first order.
+  const int k = static_cast<int>(cc->X.cols());
+  Eigen::VectorXd theta = Eigen::VectorXd::Zero(k);
+  Eigen::MatrixXd Ai;
+  int rank = 0;
+  const MismatchDesign* at = &cur.design;
+  const CandidateColumns* cols = cc;
+  std::optional<State> best;
+  double best_dev = std::numeric_limits<double>::infinity();
+  for (int it = 0; it < 4; ++it) {
+    std::vector<const Eigen::MatrixXd*> bl{&cols->X};
+    const PoseGrams g = pose_grams(*at, bl, true, false);
+    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
+    for (const auto& Mj : g.M) M += Mj;
+    const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
+    const int r = projected_rank(S.topLeftCorner(k, k), M.diagonal().segment(g.geometry, k),
+                                 ctx.options.screen.rank_tolerance);
+    if (r == 0) break;
+    if (it == 0) rank = r;
+    Ai = pinv_sym(S.topLeftCorner(k, k), 1e-9);
+    Eigen::VectorXd step = Ai * S.block(0, k, k, 1);
+    theta += step;
+    MeasurementSet corrected;
+    if (!corrected_set(cur.set, *at, *cols, theta, corrected)) break;
+    const std::optional<bool> settled =
+        keep_gauss_newton_step(ctx, cur, id, std::move(corrected), theta, best, best_dev);
+    if (!settled) break;
+    if (*settled) break;
+    at = &best->design;
+    cols = find_columns(*at, id);
+    if (cols == nullptr || cols->X.cols() != k) break;
+  }
+  if (!best || rank == 0) return std::nullopt;
+  State next = std::move(*best);
+  theta = next.gn_theta.back();
+  fit.extra_parameters = rank;
+  const double scale = std::sqrt(std::max(1.0, next.report.chi2 / std::max(1, ctx.dof - rank)));
+  for (int q = 0; q < k; ++q) {
+    if (Ai(q, q) <= 0) continue;  // a column the data do not fix
+    fit.parameters.push_back(describe_coefficient(id, q, k, theta(q), std::sqrt(Ai(q, q)) * scale));
+  }
+  CalibratedModel probe = next.report.estimate;
+  fit.modelled_in_config = write_effect(id, theta, probe);
+  return next;
+}
+
+// Stage 2, refit: the model of `cur` with candidate `id` added, fitted in full by the refit hook
+// of the candidate's descriptor (effect_library.hpp); `fit` says how much better it is. nullopt:
+// the candidate cannot be fitted on this state.
+std::optional<State> refit(const RefitContext& ctx, const State& cur, const std::string& id,
+                           EffectFit& fit) {
+  const CandidateColumns* cc = find_columns(cur.design, id);
+  if (cc == nullptr) return std::nullopt;
+  fit = EffectFit{};
+  fit.id = id;
+  fit.name = cc->name;
+  fit.family = cc->family;
+  for (std::size_t c = 0; c < ctx.design0.candidates.size(); ++c) {
+    if (ctx.design0.candidates[c].id == id) {
+      fit.inclusion_probability = ctx.selection.inclusion[c];
+      fit.family_inclusion_probability =
+          ctx.selection.family_probability(ctx.design0.candidates[c].family);
+    }
+  }
+  fit.chi2_before = cur.report.chi2;
+  fit.deviance_before = cur.report.chi2 + cur.report.log_det_covariance - ctx.log_det0;
+  fit.cv_rms_before = cur.cv.length_m;
+  fit.cv_normalized_before = cur.cv.normalized;
+  const EffectDescriptor* effect = find_effect(id);
+  std::optional<State> next;
+  if (effect != nullptr && effect->refit == EffectRefit::kIdentification) {
+    next = refit_by_identification(ctx, cur, *effect, fit);
+  }
+  if (!next && effect != nullptr && effect->refit == EffectRefit::kCatenary) {
+    next = refit_catenary(ctx, cur, id, fit);
+    if (!next) return std::nullopt;
+  }
+  // An identification refit that fails falls back to the Gauss-Newton augmented fit.
+  if (!next) next = refit_gauss_newton(ctx, cur, id, cc, fit);
+  if (!next) return std::nullopt;
+  next->cv = state_cv(ctx, *next);
+  fit.chi2_after = next->report.chi2;
+  fit.cv_rms_after = next->cv.length_m;
+  fit.cv_normalized_after = next->cv.normalized;
+  fit.deviance_after = next->report.chi2 + next->report.log_det_covariance - ctx.log_det0;
+  fit.lrt_statistic = fit.deviance_before - fit.deviance_after;
+  fit.lrt_p_value =
+      fit.extra_parameters > 0 ? chi2_upper_tail(fit.lrt_statistic, fit.extra_parameters) : 1.0;
+  fit.bic_delta = -fit.lrt_statistic + fit.extra_parameters * ctx.logn;
+  return next;
+}
+
+struct Trial {
+  EffectFit fit;
+  State state;
+};
+
+const EffectFit* trial_fit(const std::vector<Trial>& trials, const std::string& id) {
+  for (const auto& t : trials) {
+    if (t.fit.id == id) return &t.fit;
+  }
+  return nullptr;
+}
+
+// ---- Stage 3, acceptance: every kept candidate refitted from the standard model (the trials),
+// forward selection from each of the best passing first effects, then swaps.
+struct Acceptance {
+  std::vector<Trial> trials;          // the kept candidates, each added to the standard model
+  std::vector<EffectFit> candidates;  // refitted candidates, accepted first, then by BIC
+  std::vector<EffectFit> accepted;
+  State current;                    // the model with the accepted effects
+  std::set<std::string> ids_taken;  // the accepted effects' ids
+};
+
+Acceptance accept_effects(const RefitContext& ctx, const State& standard,
+                          const MismatchSummary& screen) {
+  const DiagnosisOptions& options = ctx.options;
+  const double alpha = options.screen.alpha;
+  const std::vector<ConfoundedPair>& pairs = screen.confounded;
+  Acceptance out;
+  std::vector<Trial>& trials = out.trials;
+  for (const std::string& id : ctx.selection.to_refit) {
     EffectFit fit;
-    State state;
-  };
-  std::vector<Trial> trials;
-  for (const std::string& id : to_refit) {
-    EffectFit fit;
-    auto st = refit(standard, id, fit);
+    auto st = refit(ctx, standard, id, fit);
     if (st) trials.push_back({std::move(fit), std::move(*st)});
   }
   auto holm = [](const std::vector<double>& p) {
@@ -1119,7 +913,8 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     return best;
   };
   State current = standard;
-  std::set<std::string> families_taken, ids_taken;
+  std::set<std::string> families_taken;
+  std::set<std::string>& ids_taken = out.ids_taken;
   auto is_confounded = [&](const std::string& a, const std::string& b) {
     for (const auto& p : pairs) {
       if ((p.first == a && p.second == b) || (p.first == b && p.second == a)) return true;
@@ -1127,7 +922,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     return false;
   };
   auto joint_bic = [&](const State& st, int k) {
-    return st.report.chi2 + st.report.log_det_covariance - log_det0 + k * logn;
+    return st.report.chi2 + st.report.log_det_covariance - ctx.log_det0 + k * ctx.logn;
   };
   // Forward selection, started from each of the (up to four) best first effects that pass: the
   // greedy path from the single best may begin with a per-cable effect that also absorbs part of
@@ -1143,7 +938,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       // on noise, a nonlinear refit can reach a far minimum (a beam tilt of 8 degrees on MINI's
       // null data, LRT 20 on 2 parameters) whose likelihood ratio overstates its significance.
       // An effect the screen sees only before the correction is a suspect (follow-up poses).
-      const CandidateScreen* cs = d.screen.find(t.fit.id);
+      const CandidateScreen* cs = screen.find(t.fit.id);
       if (cs != nullptr && !(cs->p_adjusted < options.screen_gate_p)) continue;
       pool.push_back(&t);
       p.push_back(t.fit.lrt_p_value);
@@ -1162,7 +957,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         firsts.push_back(pool[q]);
       }
     }
-    for (const auto& t : trials) d.candidates.push_back(t.fit);
+    for (const auto& t : trials) out.candidates.push_back(t.fit);
   }
   struct Path {
     std::vector<EffectFit> accepted;
@@ -1176,14 +971,16 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     std::set<std::string> ids{first.fit.id};
     while (static_cast<int>(path.accepted.size()) < options.max_effects) {
       std::vector<Trial> more;
-      for (const std::string& id : to_refit) {
-        const CandidateColumns* cc = find_columns(D0, id);
-        if (cc == nullptr || !kept.count(id) || groups.count(selection_group(cc->family))) continue;
+      for (const std::string& id : ctx.selection.to_refit) {
+        const CandidateColumns* cc = find_columns(ctx.design0, id);
+        if (cc == nullptr || !ctx.selection.kept.count(id) ||
+            groups.count(selection_group(cc->family)))
+          continue;
         bool clash = false;
         for (const std::string& t : ids) clash = clash || is_confounded(t, id);
         if (clash) continue;
         EffectFit fit;
-        auto st = refit(path.state, id, fit);
+        auto st = refit(ctx, path.state, id, fit);
         if (st) more.push_back({std::move(fit), std::move(*st)});
       }
       std::vector<const Trial*> pool;
@@ -1212,9 +1009,9 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       Path path = forward_from(*t);
       if (!best_path || path.bic < best_path->bic) best_path = std::move(path);
     }
-    d.accepted = std::move(best_path->accepted);
+    out.accepted = std::move(best_path->accepted);
     current = std::move(best_path->state);
-    for (const auto& f : d.accepted) {
+    for (const auto& f : out.accepted) {
       ids_taken.insert(f.id);
       families_taken.insert(selection_group(f.family));
     }
@@ -1224,27 +1021,27 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   // With two or more accepted effects, each one is replaced in turn by every other kept
   // candidate, the set refitted jointly from the standard model, and the best swap that lowers
   // the joint BIC is made (repeated while one helps).
-  for (int pass = 0; pass < 3 && d.accepted.size() >= 2; ++pass) {
+  for (int pass = 0; pass < 3 && out.accepted.size() >= 2; ++pass) {
     int k_now = 0;
-    for (const auto& f : d.accepted) k_now += f.extra_parameters;
+    for (const auto& f : out.accepted) k_now += f.extra_parameters;
     const double bic_now = joint_bic(current, k_now);
     double best_bic = bic_now - 2.0;  // a swap must gain clearly
     std::optional<State> best_state;
     std::vector<EffectFit> best_set;
-    for (std::size_t pos = 0; pos < d.accepted.size(); ++pos) {
-      for (const std::string& id : to_refit) {
-        const CandidateColumns* cc = find_columns(D0, id);
+    for (std::size_t pos = 0; pos < out.accepted.size(); ++pos) {
+      for (const std::string& id : ctx.selection.to_refit) {
+        const CandidateColumns* cc = find_columns(ctx.design0, id);
         if (cc == nullptr || ids_taken.count(id)) continue;
         bool clash = false;
-        for (std::size_t q = 0; q < d.accepted.size(); ++q) {
+        for (std::size_t q = 0; q < out.accepted.size(); ++q) {
           if (q == pos) continue;
-          clash = clash || selection_group(d.accepted[q].family) == selection_group(cc->family) ||
-                  is_confounded(d.accepted[q].id, id);
+          clash = clash || selection_group(out.accepted[q].family) == selection_group(cc->family) ||
+                  is_confounded(out.accepted[q].id, id);
         }
         if (clash) continue;
         std::vector<std::string> ids;
-        for (std::size_t q = 0; q < d.accepted.size(); ++q) {
-          ids.push_back(q == pos ? id : d.accepted[q].id);
+        for (std::size_t q = 0; q < out.accepted.size(); ++q) {
+          ids.push_back(q == pos ? id : out.accepted[q].id);
         }
         State st = standard;
         std::vector<EffectFit> fits;
@@ -1252,7 +1049,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         bool ok = true;
         for (const std::string& e : ids) {
           EffectFit f;
-          auto nx = refit(st, e, f);
+          auto nx = refit(ctx, st, e, f);
           if (!nx) {
             ok = false;
             break;
@@ -1273,76 +1070,89 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     }
     if (!best_state) break;
     current = std::move(*best_state);
-    d.accepted = std::move(best_set);
+    out.accepted = std::move(best_set);
     ids_taken.clear();
     families_taken.clear();
-    for (const auto& f : d.accepted) {
+    for (const auto& f : out.accepted) {
       ids_taken.insert(f.id);
       families_taken.insert(selection_group(f.family));
     }
   }
-  for (auto& c : d.candidates) {
+  for (auto& c : out.candidates) {
     c.accepted = false;
-    for (const auto& f : d.accepted) {
+    for (const auto& f : out.accepted) {
       if (c.id == f.id) c = f;
     }
   }
-  for (const auto& f : d.accepted) {
-    const bool listed = std::any_of(d.candidates.begin(), d.candidates.end(),
+  for (const auto& f : out.accepted) {
+    const bool listed = std::any_of(out.candidates.begin(), out.candidates.end(),
                                     [&](const EffectFit& c) { return c.id == f.id; });
-    if (!listed) d.candidates.push_back(f);
+    if (!listed) out.candidates.push_back(f);
   }
-  std::stable_sort(d.candidates.begin(), d.candidates.end(),
+  std::stable_sort(out.candidates.begin(), out.candidates.end(),
                    [](const EffectFit& a, const EffectFit& b) {
                      if (a.accepted != b.accepted) return a.accepted;
                      return a.bic_delta < b.bic_delta;
                    });
-  auto trial_fit = [&](const std::string& id) -> const EffectFit* {
-    for (const auto& t : trials) {
-      if (t.fit.id == id) return &t.fit;
-    }
-    return nullptr;
-  };
+  out.current = std::move(current);
+  return out;
+}
 
-  // --- 6. Confounded pairs: both fits and separating poses.
+// ---- Stage 4, naming: the screen's confounded pairs that this recording cannot tell apart (both
+// fitted from the standard model; the fits not yet tried are added to the trials and candidates).
+std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const State& standard,
+                                             const MismatchSummary& screen, Acceptance& acc) {
   // A pair of the screen (canonical correlation above the threshold) is reported as confounded
   // only when this recording cannot tell its two fits apart: a BIC difference of more than
   // DiagnosisOptions::decisive_bic between them (both fitted from the standard model) is very
   // strong evidence for the better one (Kass and Raftery), and then it is named alone.
   std::vector<ConfoundedPair> found;
-  for (const auto& p : pairs) {
-    const bool taken_a = ids_taken.count(p.first) > 0, taken_b = ids_taken.count(p.second) > 0;
+  for (const auto& p : screen.confounded) {
+    const bool taken_a = acc.ids_taken.count(p.first) > 0,
+               taken_b = acc.ids_taken.count(p.second) > 0;
     if (!taken_a && !taken_b) continue;
     for (const std::string& id : {p.first, p.second}) {
-      if (trial_fit(id) != nullptr) continue;
+      if (trial_fit(acc.trials, id) != nullptr) continue;
       EffectFit fit;
-      auto st = refit(standard, id, fit);
+      auto st = refit(ctx, standard, id, fit);
       if (!st) continue;
-      trials.push_back({fit, std::move(*st)});
-      d.candidates.push_back(std::move(fit));
+      acc.trials.push_back({fit, std::move(*st)});
+      acc.candidates.push_back(std::move(fit));
     }
-    const EffectFit* fa = trial_fit(p.first);
-    const EffectFit* fb = trial_fit(p.second);
+    const EffectFit* fa = trial_fit(acc.trials, p.first);
+    const EffectFit* fb = trial_fit(acc.trials, p.second);
     if (taken_a != taken_b) {
       const EffectFit* taken = taken_a ? fa : fb;
       const EffectFit* other = taken_a ? fb : fa;
       if (other == nullptr) continue;  // the other cannot be fitted at all: nothing to confuse
-      if (taken != nullptr && other->bic_delta - taken->bic_delta > options.decisive_bic) continue;
+      if (taken != nullptr && other->bic_delta - taken->bic_delta > ctx.options.decisive_bic)
+        continue;
     }
     found.push_back(p);
   }
-  // Extra poses (separating and follow-up) come from a feasible candidate grid: 4 x 4 x 4
-  // positions over the pose-design box of this robot x {level, +-0.2 rad roll, +-0.2 rad pitch},
-  // each at the planned pretension and at twice it (equal tensions at different free lengths
-  // tell a ~F*L effect from a ~F one), simulated noise-free with the standard estimate and
-  // appended to the recording as one augmented design.
-  std::vector<Pose> cand;
-  std::vector<double> cand_pretension;
-  std::optional<MismatchDesign> aug;
-  bool grid_built = false;
-  auto build_grid = [&]() {
-    if (grid_built) return;
-    grid_built = true;
+  return found;
+}
+
+// ---- Stage 5, extra-pose design. Extra poses (separating and follow-up) come from a feasible
+// candidate grid: 4 x 4 x 4 positions over the region the recording visited x {level, +-tilt roll,
+// +-tilt pitch}, each at the planned pretension and at twice it (equal tensions at different free
+// lengths tell a ~F*L effect from a ~F one), simulated noise-free with the standard estimate and
+// appended to the recording as one augmented design.
+struct ExtraPoseGrid {
+  std::vector<Pose> poses;
+  std::vector<double> pretensions;       // N, per pose
+  std::optional<MismatchDesign> design;  // the recording with the grid appended
+};
+
+ExtraPoseGrid extra_pose_grid(const RobotModel& robot, const IdentificationReport& before,
+                              const MeasurementSet& set,
+                              const IdentificationOptions& identification,
+                              const DiagnosisOptions& options) {
+  ExtraPoseGrid out;
+  std::vector<Pose>& cand = out.poses;
+  std::vector<double>& cand_pretension = out.pretensions;
+  std::optional<MismatchDesign>& aug = out.design;
+  {
     // The region the recording has already visited (the robot held the platform there with
     // this model's commands), capped by the pose-design box of the robot: near the edge of the
     // model's wrench-feasible workspace the real robot may not hold the platform (cables go
@@ -1351,14 +1161,14 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     fit_design_box_to_robot(robot, box);
     Eigen::Vector3d he = Eigen::Vector3d::Zero();
     double tilt = 0.0;
-    for (const Pose& p : d.before.poses) {
+    for (const Pose& p : before.poses) {
       he = he.cwiseMax((p.position - robot.home.position).cwiseAbs());
       tilt = std::max(
           {tilt, std::abs(p.rpy(0) - robot.home.rpy(0)), std::abs(p.rpy(1) - robot.home.rpy(1))});
     }
     he = options.separating_half_extent_scale * he.cwiseMin(box.half_extent);
     tilt = std::min(tilt, 0.2);
-    const double f_ref = default_reference_tension(d.before.estimate.robot);
+    const double f_ref = default_reference_tension(before.estimate.robot);
     std::vector<Pose> grid;
     const int ppa = 4;
     const std::vector<Eigen::Vector3d> rpys = {
@@ -1375,7 +1185,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
                                                                       -1.0 + 2.0 * iz / (ppa - 1)));
             p.rpy = robot.home.rpy + rpy;
             // Feasible for the estimate and for the model the recording was commanded with.
-            if (simple_tension_distribution(d.before.estimate.robot, p, f_ref) &&
+            if (simple_tension_distribution(before.estimate.robot, p, f_ref) &&
                 simple_tension_distribution(robot, p, f_ref)) {
               grid.push_back(p);
             }
@@ -1384,11 +1194,11 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       }
     }
     MeasurementSet all = set;
-    std::vector<Pose> all_poses = d.before.poses;
+    std::vector<Pose> all_poses = before.poses;
     for (const double level : {f_ref, 2.0 * f_ref}) {
       std::vector<Pose> ok;
       for (const Pose& p : grid) {
-        if (level == f_ref || (simple_tension_distribution(d.before.estimate.robot, p, level) &&
+        if (level == f_ref || (simple_tension_distribution(before.estimate.robot, p, level) &&
                                simple_tension_distribution(robot, p, level))) {
           ok.push_back(p);
         }
@@ -1396,7 +1206,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       SimulationOptions so;
       so.add_noise = false;
       so.reference_tension = level;
-      auto sim = simulate_measurements(d.before.estimate, ok, set.noise, 1, so);
+      auto sim = simulate_measurements(before.estimate, ok, set.noise, 1, so);
       if (!sim) continue;
       for (std::size_t g = 0; g < ok.size(); ++g) {
         all.poses.push_back(sim->set.poses[g]);
@@ -1406,13 +1216,21 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       }
     }
     if (!cand.empty()) {
-      auto des = mismatch_design(d.before.estimate, all, all_poses, nullptr, identification,
-                                 options.screen);
+      auto des =
+          mismatch_design(before.estimate, all, all_poses, nullptr, identification, options.screen);
       if (des) aug = std::move(*des);
     }
-  };
-  if (!found.empty()) {
-    build_grid();
+  }
+  return out;
+}
+
+// The separating poses of each confounded pair: greedy over the grid, lowest canonical
+// correlation of the pair.
+std::vector<ConfoundedFinding> separate(const std::vector<ConfoundedPair>& found,
+                                        const std::vector<Trial>& trials, const ExtraPoseGrid& grid,
+                                        int np, const DiagnosisOptions& options) {
+  std::vector<ConfoundedFinding> out;
+  {
     for (const auto& p : found) {
       ConfoundedFinding cf;
       cf.first = p.first;
@@ -1420,12 +1238,12 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       cf.correlation = p.correlation;
       cf.correlation_with_extra = p.correlation;
       cf.description = p.description;
-      if (const EffectFit* f = trial_fit(p.first)) cf.first_fit = *f;
-      if (const EffectFit* f = trial_fit(p.second)) cf.second_fit = *f;
-      const CandidateColumns* ca = aug ? find_columns(*aug, p.first) : nullptr;
-      const CandidateColumns* cb = aug ? find_columns(*aug, p.second) : nullptr;
+      if (const EffectFit* f = trial_fit(trials, p.first)) cf.first_fit = *f;
+      if (const EffectFit* f = trial_fit(trials, p.second)) cf.second_fit = *f;
+      const CandidateColumns* ca = grid.design ? find_columns(*grid.design, p.first) : nullptr;
+      const CandidateColumns* cb = grid.design ? find_columns(*grid.design, p.second) : nullptr;
       if (ca != nullptr && cb != nullptr) {
-        const PoseGrams g = pose_grams(*aug, {&ca->X, &cb->X}, true, false);
+        const PoseGrams g = pose_grams(*grid.design, {&ca->X, &cb->X}, true, false);
         const int ka = g.block_size[0], kb = g.block_size[1];
         auto corr = [&](const Eigen::MatrixXd& M) {
           const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
@@ -1439,40 +1257,46 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
             g, np, options.separating_poses, [](int) { return true; },
             [&](const Eigen::MatrixXd& Mq) { return -corr(Mq); }, -corr(M), M);
         for (int q : chosen) {
-          cf.separating_poses.push_back(cand[static_cast<std::size_t>(q)]);
-          cf.separating_pretensions.push_back(cand_pretension[static_cast<std::size_t>(q)]);
+          cf.separating_poses.push_back(grid.poses[static_cast<std::size_t>(q)]);
+          cf.separating_pretensions.push_back(grid.pretensions[static_cast<std::size_t>(q)]);
         }
         const double rho = corr(M);
         cf.correlation_with_extra = rho;
       }
-      d.confounded.push_back(std::move(cf));
+      out.push_back(std::move(cf));
     }
   }
+  return out;
+}
 
-  // --- 6b. Follow-up poses for a suspect. With no effect named, the candidate with the lowest
-  // screen p-value is a suspect when that p-value after Holm's correction is below
-  // options.suspect_p: an effect near the noise (a laser tilt of half a degree leaves 0.6 sigma
-  // on 25 laser rows) is often visible there but not named. (Before Holm's correction the
-  // smallest of the library's p-values was below 0.2 on 17 of 20 null recordings.) The
-  // poses that add the most information on its parameters (log det of its projected
-  // information, the identification profiled out; greedy over the grid at the planned
-  // pretension) are proposed; measured and appended, they decide it.
-  // When the screen's overall test already fails (the verdict will be "mismatch unexplained"),
-  // more poses are the next step anyway: the candidate with the lowest p-value is then the suspect
-  // whatever its corrected p-value.
-  if (d.accepted.empty() && options.follow_up_poses > 0) {
-    const bool unexplained_misfit = d.screen.p_value < alpha;
+// Follow-up poses for a suspect. With no effect named, the candidate with the lowest
+// screen p-value is a suspect when that p-value after Holm's correction is below
+// options.suspect_p: an effect near the noise (a laser tilt of half a degree leaves 0.6 sigma
+// on 25 laser rows) is often visible there but not named. (Before Holm's correction the
+// smallest of the library's p-values was below 0.2 on 17 of 20 null recordings.) The
+// poses that add the most information on its parameters (log det of its projected
+// information, the identification profiled out; greedy over the grid at the planned
+// pretension) are proposed; measured and appended, they decide it.
+// When the screen's overall test already fails (the verdict will be "mismatch unexplained"),
+// more poses are the next step anyway: the candidate with the lowest p-value is then the suspect
+// whatever its corrected p-value.
+std::optional<FollowUp> follow_up(const MismatchSummary& screen, const RobotModel& estimate,
+                                  const std::function<const ExtraPoseGrid&()>& grid_of, int np,
+                                  const DiagnosisOptions& options) {
+  const double alpha = options.screen.alpha;
+  {
+    const bool unexplained_misfit = screen.p_value < alpha;
     const CandidateScreen* suspect = nullptr;
-    for (const auto& cs : d.screen.candidates) {
+    for (const auto& cs : screen.candidates) {
       if (cs.modelled || cs.rank == 0) continue;
       if (!(cs.p_adjusted < options.suspect_p) && !unexplained_misfit) continue;
       if (suspect == nullptr || cs.p_value < suspect->p_value) suspect = &cs;
     }
     if (suspect != nullptr) {
-      build_grid();
-      const CandidateColumns* cs = aug ? find_columns(*aug, suspect->id) : nullptr;
+      const ExtraPoseGrid& grid = grid_of();
+      const CandidateColumns* cs = grid.design ? find_columns(*grid.design, suspect->id) : nullptr;
       if (cs != nullptr) {
-        const PoseGrams g = pose_grams(*aug, {&cs->X}, true, false);
+        const PoseGrams g = pose_grams(*grid.design, {&cs->X}, true, false);
         const int k = g.block_size[0];
         auto logdet = [&](const Eigen::MatrixXd& M) {
           const Eigen::MatrixXd S = reduce_geometry(M, g.geometry).topLeftCorner(k, k);
@@ -1482,7 +1306,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         };
         Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
         for (int j = 0; j < np; ++j) M += g.M[static_cast<std::size_t>(j)];
-        const double f_ref = default_reference_tension(d.before.estimate.robot);
+        const double f_ref = default_reference_tension(estimate);
         FollowUp fu;
         fu.suspect = suspect->id;
         fu.name = suspect->name;
@@ -1492,19 +1316,26 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         fu.information_before = logdet(M);
         const std::vector<int> chosen = greedy_extra_poses(
             g, np, options.follow_up_poses,
-            [&](int q) { return cand_pretension[static_cast<std::size_t>(q)] == f_ref; }, logdet,
+            [&](int q) { return grid.pretensions[static_cast<std::size_t>(q)] == f_ref; }, logdet,
             -std::numeric_limits<double>::infinity(), M);
         for (int q : chosen) {
-          fu.poses.push_back(cand[static_cast<std::size_t>(q)]);
-          fu.pretensions.push_back(cand_pretension[static_cast<std::size_t>(q)]);
+          fu.poses.push_back(grid.poses[static_cast<std::size_t>(q)]);
+          fu.pretensions.push_back(grid.pretensions[static_cast<std::size_t>(q)]);
         }
         fu.information_after = logdet(M);
-        if (!fu.poses.empty()) d.follow_up = std::move(fu);
+        if (!fu.poses.empty()) return fu;
       }
     }
   }
+  return std::nullopt;
+}
 
-  // --- 7. The model with the accepted effects, `after`, channels, held-out RMS.
+// ---- Stage 6, the model with the accepted effects: `after`, model_after (the Gauss-Newton effects
+// written where the config can hold them), the held-out RMS (cross-validation or the validation
+// recording) and the per-channel RMS.
+Status model_the_effects(Diagnosis& d, const State& current, const CvRms& cv_before, int K,
+                         const MeasurementSet* validation,
+                         const IdentificationOptions& identification, int nl) {
   d.held_out_source =
       validation != nullptr ? "validation recording" : format("%d-fold cross-validation", K);
   d.held_out_rms_before = cv_before.length_m;
@@ -1513,7 +1344,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     d.after = current.report;
     d.model_after = current.report.estimate;
     for (std::size_t q = 0; q < current.gn_ids.size(); ++q) {
-      model_effect(current.gn_ids[q], current.gn_theta[q], d.model_after);
+      write_effect(current.gn_ids[q], current.gn_theta[q], d.model_after);
     }
     d.held_out_rms_after = current.cv.length_m;
   }
@@ -1578,8 +1409,11 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       measured([](const PoseResiduals& pr) { return !std::isnan(pr.imu_yaw_normalized); })) {
     d.channels.push_back({"IMU yaw", "rad", d.before.rms_imu_yaw_rad, aft.rms_imu_yaw_rad});
   }
+  return Status::success();
+}
 
-  // --- 8. Verdict and findings.
+// ---- Stage 7, verdict and findings.
+void state_verdict(Diagnosis& d, double alpha) {
   const bool misfit = d.screen.p_value < alpha;
   if (!d.accepted.empty()) {
     d.verdict = Diagnosis::Verdict::kMismatchNamed;
@@ -1676,6 +1510,134 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     if (q == 0 && d.verdict == Diagnosis::Verdict::kNoMismatch) continue;
     d.findings.push_back(d.screen.findings[q]);
   }
+}
+
+}  // namespace
+
+const char* to_string(Diagnosis::Verdict v) {
+  switch (v) {
+    case Diagnosis::Verdict::kNoMismatch:
+      return "no mismatch";
+    case Diagnosis::Verdict::kMismatchNamed:
+      return "mismatch named";
+    case Diagnosis::Verdict::kMismatchUnexplained:
+      return "mismatch unexplained";
+    case Diagnosis::Verdict::kInconclusive:
+      return "inconclusive";
+  }
+  return "unknown";
+}
+
+Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet& set,
+                           const MeasurementSet* validation,
+                           const IdentificationOptions& identification,
+                           const DiagnosisOptions& options) {
+  const RobotModel& robot = nominal.robot;
+  const int m = robot.num_cables();
+  const int nl = static_cast<int>(robot.lasers.size());
+  // Refuse what does not match.
+  auto check_set = [&](const MeasurementSet& s, const char* what) -> Status {
+    for (int j = 0; j < s.num_poses(); ++j) {
+      const PoseMeasurement& p = s.poses[static_cast<std::size_t>(j)];
+      if (p.cable_lengths.size() != m) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             "diagnose: the %s has %d cable lengths per pose (pose %d), the model "
+                             "has %d cables",
+                             what, static_cast<int>(p.cable_lengths.size()), j, m);
+      }
+      if (p.laser_distances.size() != 0 && p.laser_distances.size() != nl) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             "diagnose: the %s has %d laser distances per pose (pose %d), the "
+                             "model has %d lasers",
+                             what, static_cast<int>(p.laser_distances.size()), j, nl);
+      }
+    }
+    Status st = validate(s, robot);
+    if (!st.ok()) st.prepend(std::string("diagnose: ") + what + ": ");
+    return st;
+  };
+  CDPR_RETURN_IF_ERROR(check_set(set, "recording"));
+  if (validation != nullptr) {
+    CDPR_RETURN_IF_ERROR(check_set(*validation, "validation recording"));
+  }
+  if (options.bootstrap_samples < 0 || options.cv_folds < 2 || options.max_effects < 0 ||
+      !(options.inclusion_threshold >= 0 && options.inclusion_threshold <= 1)) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "diagnose: options need bootstrap_samples >= 0, cv_folds >= 2, max_effects >= 0 "
+                  "and 0 <= inclusion_threshold <= 1");
+  }
+
+  Diagnosis d;
+  d.model_after = nominal;
+  const int np = set.num_poses();
+  if (np < options.min_poses || np < options.cv_folds) {
+    d.verdict = Diagnosis::Verdict::kInconclusive;
+    d.headline = format(
+        "Inconclusive: %d poses are too few to tell the candidate effects apart (at least %d are "
+        "needed); record more poses.",
+        np, std::max(options.min_poses, options.cv_folds));
+    d.findings.push_back(d.headline);
+    auto rep = identify(nominal, set, identification);
+    if (rep) {
+      d.before = std::move(*rep);
+      d.model_after = d.before.estimate;
+    }
+    return d;
+  }
+
+  // The standard identification (the "before" model) and the screen of locate_mismatch.
+  auto before = identify(nominal, set, identification);
+  if (!before) return before.status();
+  d.before = std::move(*before);
+  auto screen = locate_mismatch(d.before, set, identification, options.screen);
+  if (!screen) return screen.status();
+  d.screen = std::move(*screen);
+  d.model_after = d.before.estimate;
+  auto design0 = mismatch_design(d.before.estimate, set, d.before.poses, &d.before.residuals,
+                                 identification, options.screen);
+  if (!design0) return design0.status();
+  const MismatchDesign& D0 = *design0;
+  const int n = D0.num_rows();
+  const double alpha = options.screen.alpha;
+
+  // Stage 1, selection.
+  const Selection selection = select_candidates(D0, d.screen, np, options);
+  const Folds folds = assign_folds(D0, np, options);
+  const int K = folds.K;
+  const CvRms cv_before = cv_rms(D0, nullptr, folds.fold, K);
+  const RefitContext ctx{options,
+                         D0,
+                         selection,
+                         folds,
+                         d.screen.dof,
+                         m,
+                         std::log(static_cast<double>(n)),
+                         d.before.log_det_covariance};
+  const State standard{identification, set, d.before, D0, {}, {}, cv_before};
+
+  // Stages 2 and 3, refits and acceptance.
+  Acceptance acc = accept_effects(ctx, standard, d.screen);
+  // Stage 4, naming: the pairs this recording cannot tell apart.
+  const std::vector<ConfoundedPair> found = confounded_pairs(ctx, standard, d.screen, acc);
+  d.accepted = std::move(acc.accepted);
+  d.candidates = std::move(acc.candidates);
+
+  // Stage 5, extra-pose design: separating poses for the confounded pairs, follow-up poses for a
+  // suspect (the grid is built only when one of them needs it).
+  std::optional<ExtraPoseGrid> grid;
+  auto grid_of = [&]() -> const ExtraPoseGrid& {
+    if (!grid) grid = extra_pose_grid(robot, d.before, set, identification, options);
+    return *grid;
+  };
+  if (!found.empty()) d.confounded = separate(found, acc.trials, grid_of(), np, options);
+  if (d.accepted.empty() && options.follow_up_poses > 0) {
+    d.follow_up = follow_up(d.screen, d.before.estimate.robot, grid_of, np, options);
+  }
+
+  // Stage 6, the model with the accepted effects; stage 7, the verdict.
+  CDPR_RETURN_IF_ERROR(
+      model_the_effects(d, acc.current, cv_before, K, validation, identification, nl));
+  state_verdict(d, alpha);
   return d;
 }
 

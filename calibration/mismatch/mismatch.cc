@@ -11,6 +11,8 @@
 #include <utility>
 
 #include "cdpr/calibration/catenary.hpp"
+#include "cdpr/calibration/effect_library.hpp"
+#include "cdpr/calibration/elongation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 
 namespace cdpr {
@@ -425,7 +427,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
       // correction is second order for a regressor.
       if (pm.tensions.size() == m) tension(k) = pm.tensions(i);
       kin_len(k) = kin.lengths(i);
-      loaded(k) = robot.cables[ui].routing_length + kin.lengths(i);
+      loaded(k) = loaded_length(robot.cables[ui], kin.lengths(i));
       reading(k) = pm.cable_lengths(i);
       time(k) = pm.time;
       tilt(k) = std::acos(std::clamp(kin.rotation(2, 2), -1.0, 1.0));
@@ -503,10 +505,16 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   }
 
   // --- NAME: the candidate library.
+  // The ids, names and families are the effect library's (effect_library.hpp); the columns are
+  // built here, in the library's order.
   std::vector<Candidate> lib;
-  auto per_length_row = [&](const std::string& id, const std::string& name,
-                            const std::string& family, bool per_cable, auto value) {
-    Candidate c{id, name, family, Eigen::MatrixXd::Zero(n, per_cable ? m : 1), {}};
+  auto candidate = [](const char* id, Eigen::MatrixXd X, Eigen::MatrixXd x_si) {
+    const EffectDescriptor* e = find_effect(id);
+    return Candidate{id, std::string(e->name), std::string(e->family), std::move(X),
+                     std::move(x_si)};
+  };
+  auto per_length_row = [&](const char* id, bool per_cable, auto value) {
+    Candidate c = candidate(id, Eigen::MatrixXd::Zero(n, per_cable ? m : 1), {});
     bool any = false;
     for (int k = 0; k < n; ++k) {
       const Row& row = rows[static_cast<std::size_t>(k)];
@@ -521,31 +529,21 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   const bool have_time = time.array().isFinite().count() > 0;
   auto fl = [&](int k) { return tension(k) * loaded(k); };
   auto f = [&](int k) { return tension(k); };
-  per_length_row("hooke_shared", "cable elasticity (Hooke, ~F*L), one EA for all cables",
-                 "elasticity", false, fl);
-  per_length_row("hooke_per_cable", "cable elasticity (Hooke, ~F*L), EA per cable", "elasticity",
-                 true, fl);
-  per_length_row("compliance_shared", "winch/sensor compliance (~F), the same for all winches",
-                 "compliance", false, f);
-  per_length_row("compliance_per_cable", "winch/sensor compliance (~F), per winch", "compliance",
-                 true, f);
-  per_length_row("encoder_offset_per_cable", "encoder zero offset (~1), per cable",
-                 "encoder offset", true, [](int) { return 1.0; });
+  per_length_row("hooke_shared", false, fl);
+  per_length_row("hooke_per_cable", true, fl);
+  per_length_row("compliance_shared", false, f);
+  per_length_row("compliance_per_cable", true, f);
+  per_length_row("encoder_offset_per_cable", true, [](int) { return 1.0; });
   if (have_time) {
-    per_length_row("encoder_drift_per_cable", "encoder drift over time (~t), per cable",
-                   "encoder drift", true, [&](int k) { return time(k); });
+    per_length_row("encoder_drift_per_cable", true, [&](int k) { return time(k); });
     // Creep of a polymer cable under load, time-hardening logarithmic law: the compliance grows
     // by c ln(1 + t / tau) with t the time since the recording (and the load) started. Once t is
     // several tau the shape is ln(t) whatever tau is, and a constant part is elasticity's, so one
     // tau (typical of primary creep of polymer fibre ropes) serves as the regressor.
-    per_length_row("creep_shared",
-                   "cable creep (~F*L*ln(1 + t/10 s): compliance growing with time under load)",
-                   "creep", false, [&](int k) {
-                     return fl(k) * std::log1p(std::max(time(k), 0.0) / kCreepTimeConstant);
-                   });
-    per_length_row("transmission_drift_shared",
-                   "transmission drift over time (~t*L, e.g. drum heating), all cables",
-                   "transmission drift", false, [&](int k) { return time(k) * reading(k); });
+    per_length_row("creep_shared", false, [&](int k) {
+      return fl(k) * std::log1p(std::max(time(k), 0.0) / kCreepTimeConstant);
+    });
+    per_length_row("transmission_drift_shared", false, [&](int k) { return time(k) * reading(k); });
   }
   // Sag of a heavy cable (mass per length mu), to first order in the sag. The encoder pays out
   // the arc, longer than the chord by (mu g)^2 Lh^2 L / (24 F^2) (column 0; its coefficient in
@@ -555,10 +553,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   // sum_i (W_i / 2)(e_z + (e_z . u_i) u_i) and its moment (column 1, coefficient mu), whitened
   // with the equilibrium rows' covariance (conditional on the length rows, as identify() has it).
   {
-    Candidate c{"sag_shared",
-                "cable sag (catenary: the arc is longer than the chord, ~Lh^2 L / F^2, and the "
-                "platform carries part of each cable's weight)",
-                "sag", Eigen::MatrixXd::Zero(n, 2), Eigen::MatrixXd::Zero(n, 2)};
+    Candidate c = candidate("sag_shared", Eigen::MatrixXd::Zero(n, 2), Eigen::MatrixXd::Zero(n, 2));
     bool any = false;
     for (int k = 0; k < n; ++k) {
       if (rows[static_cast<std::size_t>(k)].kind != RowKind::kLength) continue;
@@ -603,11 +598,7 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   // Nonlinear elongation (a F + k2 F^2) L: a refinement of elasticity (selection_group), so its
   // linear part moves with the curvature instead of being a second effect.
   {
-    Candidate c{"nonlinear_elasticity_shared",
-                "nonlinear cable elasticity ((a F + k2 F^2) L, a polynomial elongation)",
-                "nonlinear elasticity",
-                Eigen::MatrixXd::Zero(n, 2),
-                {}};
+    Candidate c = candidate("nonlinear_elasticity_shared", Eigen::MatrixXd::Zero(n, 2), {});
     bool any = false;
     for (int k = 0; k < n; ++k) {
       if (rows[static_cast<std::size_t>(k)].kind != RowKind::kLength) continue;
@@ -630,48 +621,34 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
       Jx.middleRows(pose_start[uj], pose_start[uj + 1] - pose_start[uj]) =
           ext->jacobian_geometry[uj];
     }
-    auto group = [&](const std::string& id, const std::string& name, const std::string& family,
-                     auto select) {
+    // The descriptor's parameter kinds (EffectDescriptor::parameters) that the standard
+    // identification left fixed.
+    auto group = [&](const char* id) {
+      const std::vector<ParameterKind>& kinds = find_effect(id)->parameters;
       std::vector<int> picked;
       for (int q = 0; q < static_cast<int>(ext->names.size()); ++q) {
         const std::string& nm = ext->names[static_cast<std::size_t>(q)];
-        if (base_cols.count(nm) || !select(nm)) continue;
+        const ParameterKind kind = ext->ids[static_cast<std::size_t>(q)].kind;
+        if (base_cols.count(nm) || std::find(kinds.begin(), kinds.end(), kind) == kinds.end()) {
+          continue;
+        }
         picked.push_back(q);
       }
       if (picked.empty()) return;
-      Candidate c{
-          id, name, family, Eigen::MatrixXd(n, static_cast<Eigen::Index>(picked.size())), {}};
+      Candidate c = candidate(id, Eigen::MatrixXd(n, static_cast<Eigen::Index>(picked.size())), {});
       for (std::size_t q = 0; q < picked.size(); ++q) {
         c.X.col(static_cast<Eigen::Index>(q)) = Jx.col(picked[q]);
       }
       if (c.X.norm() > 0) lib.push_back(std::move(c));
     };
-    auto starts = [](const std::string& s, const char* p) { return s.rfind(p, 0) == 0; };
-    group("drum_scale_per_cable", "drum/transmission scale error (~L), per cable", "drum scale",
-          [&](const std::string& s) { return starts(s, "s_"); });
-    group("platform_anchors", "platform anchor positions (b_i)", "platform anchors",
-          [&](const std::string& s) { return starts(s, "b_"); });
-    group("force_gain_per_cable", "force sensor gain error (~F in the equilibrium), per cable",
-          "force sensor gain", [&](const std::string& s) { return starts(s, "force_gain"); });
-    group("force_offset_per_cable", "force sensor offset (~1 in the equilibrium), per cable",
-          "force sensor offset", [&](const std::string& s) { return starts(s, "force_offset"); });
-    group("laser_mounting", "laser mounting (origin and beam direction on the platform)",
-          "laser mounting", [&](const std::string& s) {
-            return starts(s, "laser_") && (s.find(".origin.") != std::string::npos ||
-                                           s.find(".direction.") != std::string::npos);
-          });
-    group("laser_plane", "laser target plane (offset and tilt)", "laser plane",
-          [&](const std::string& s) {
-            return starts(s, "laser_") && s.find(".plane.") != std::string::npos;
-          });
+    for (const char* id : {"drum_scale_per_cable", "platform_anchors", "force_gain_per_cable",
+                           "force_offset_per_cable", "laser_mounting", "laser_plane"}) {
+      group(id);
+    }
     // The shared drum scale: the sum of the per-cable columns.
     for (const Candidate& c : lib) {
       if (c.id == "drum_scale_per_cable") {
-        Candidate s{"drum_scale_shared",
-                    "drum/transmission scale error (~L), all drums alike",
-                    "drum scale",
-                    c.X.rowwise().sum(),
-                    {}};
+        Candidate s = candidate("drum_scale_shared", c.X.rowwise().sum(), {});
         lib.push_back(std::move(s));
         break;
       }
@@ -684,20 +661,16 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   if (mopt.direction_candidates && move.cwiseAbs().sum() > 0) {
     // The length rows and, through their conditioning, the equilibrium rows; the data are
     // corrected on the length rows only (the equilibrium rows follow), so si is 0 there.
-    Candidate h{"hysteresis_per_cable",
-                "cable hysteresis (a length error +-h depending on whether the cable was last "
-                "paid out or reeled in), per cable",
-                "cable hysteresis", Eigen::MatrixXd::Zero(n, m), Eigen::MatrixXd::Zero(n, m)};
+    Candidate h =
+        candidate("hysteresis_per_cable", Eigen::MatrixXd::Zero(n, m), Eigen::MatrixXd::Zero(n, m));
     for (int j = 0; j < np; ++j) {
       const auto uj = static_cast<std::size_t>(j);
       const int r0 = pose_start[uj], nr = pose_start[uj + 1] - r0;
       for (int i = 0; i < m; ++i) h.X.block(r0, i, nr, 1) = move(j, i) * length_white[uj].col(i);
     }
     if (h.X.norm() > 0) lib.push_back(std::move(h));
-    Candidate c{"pulley_friction_per_cable",
-                "pulley friction (a tension-reading error +-f depending on whether the cable was "
-                "last paid out or reeled in), per cable",
-                "pulley friction", Eigen::MatrixXd::Zero(n, m), Eigen::MatrixXd::Zero(n, m)};
+    Candidate c = candidate("pulley_friction_per_cable", Eigen::MatrixXd::Zero(n, m),
+                            Eigen::MatrixXd::Zero(n, m));
     for (int j = 0; j < np; ++j) {
       const auto uj = static_cast<std::size_t>(j);
       const int r0 = pose_start[uj], nr = pose_start[uj + 1] - r0;
@@ -986,11 +959,6 @@ std::optional<SpanSolution> catenary_for_tension(double span, double height, dou
 
 }  // namespace
 
-std::string selection_group(const std::string& family) {
-  if (family == "nonlinear elasticity") return "elasticity";
-  return family;
-}
-
 Eigen::MatrixXd last_move_directions(const MeasurementSet& set, double deadband_sigmas) {
   const int np = set.num_poses();
   const int m = np > 0 ? static_cast<int>(set.poses[0].cable_lengths.size()) : 0;
@@ -1094,7 +1062,7 @@ Result<CandidateColumns> sag_effect(const CalibratedModel& model, const Measurem
   }
   CandidateColumns out;
   out.id = "sag_shared";
-  out.family = "sag";
+  out.family = std::string(find_effect(out.id)->family);
   out.X = Eigen::MatrixXd::Zero(d.num_rows(), 1);
   out.si = Eigen::MatrixXd::Zero(d.num_rows(), 1);
   if (compliance != nullptr) *compliance = Eigen::VectorXd::Zero(d.num_rows());

@@ -5,6 +5,7 @@
 #include <limits>
 #include <utility>
 
+#include "cdpr/calibration/elongation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 
 namespace cdpr {
@@ -22,23 +23,6 @@ std::string family_of(const Diagnosis& d, const std::string& id) {
 }
 
 }  // namespace
-
-ExplainingVariable explaining_variable(const std::string& family) {
-  if (family == "elasticity" || family == "nonlinear elasticity") {
-    return {"tension x loaded length", "N m"};
-  }
-  if (family == "compliance" || family == "force sensor gain" || family == "force sensor offset") {
-    return {"tension", "N"};
-  }
-  if (family == "drum scale") return {"loaded length", "m"};
-  if (family == "cable hysteresis" || family == "pulley friction") {
-    return {"direction of the last move", ""};
-  }
-  if (family == "encoder drift" || family == "transmission drift" || family == "creep") {
-    return {"time", "s"};
-  }
-  return {"pose index", ""};
-}
 
 std::vector<ExplainedResiduals> explained_residuals(const Diagnosis& d, const MeasurementSet& set) {
   // The effects to plot: accepted ones, else the top refitted candidate, else the top screened.
@@ -76,8 +60,7 @@ std::vector<ExplainedResiduals> explained_residuals(const Diagnosis& d, const Me
         if (!std::isfinite(rb(i))) continue;
         const double tension = meas.tensions.size() > i ? meas.tensions(i) : kNaN;
         const double loaded =
-            ik_ok ? robot.cables[static_cast<std::size_t>(i)].routing_length + kin.lengths(i)
-                  : kNaN;
+            ik_ok ? loaded_length(robot.cables[static_cast<std::size_t>(i)], kin.lengths(i)) : kNaN;
         double x = static_cast<double>(j);
         if (var.name == "tension x loaded length") {
           x = tension * loaded;

@@ -241,7 +241,7 @@ CableTension cable_tension(const CableModel& cable, double kinematic_length,
       return t;
     }
     case ElongationKind::kPolynomial: {
-      const double L = cable.routing_length + kinematic_length;
+      const double L = loaded_length(cable, kinematic_length);
       const ElongationDerivatives d0 = cable_elongation_derivatives(cable, L, 0.0);
       if (!(stretch > d0.elongation)) return t;  // slack
       // g(F) = dL(L, F) - stretch is increasing in F where the surface is valid: Newton, kept

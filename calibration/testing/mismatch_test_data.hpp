@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "cdpr/calibration/elongation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "testing/identification_scenario.hpp"
@@ -51,7 +52,7 @@ inline void conceal_hooke(const RigidMini& d, SimulatedMeasurements& sim, double
     for (int i = 0; i < d.s.truth.robot.num_cables(); ++i) {
       const double f = sim.true_tensions[j](i);
       const double loaded =
-          d.s.truth.robot.cables[static_cast<std::size_t>(i)].routing_length + kin.lengths(i);
+          loaded_length(d.s.truth.robot.cables[static_cast<std::size_t>(i)], kin.lengths(i));
       sim.set.poses[j].cable_lengths(i) -= f * loaded / (ea + f);
     }
   }

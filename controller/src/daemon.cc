@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <thread>
 
+#include "cdpr/calibration/elongation.hpp"
 #include "cdpr/calibration/forward_kinematics.hpp"
 #include "cdpr/calibration/mismatch.hpp"
 #include "cdpr/calibration/pose_design.hpp"
@@ -812,10 +813,10 @@ Status Daemon::regulate_tensions(int pose_index) {
           "counts",
           pose_index, iteration, i + 1, f, lo, hi, trim[k]);
       const double ea = c.ea > 0.0 ? c.ea : 1e9;
-      const double length =
-          c.routing_length +
-          std::max(0.05, winch_counts_to_length<double>(
-                             g->model.winches[k], r.average_counts[k] - rt_->encoder_offsets()[k]));
+      const double length = loaded_length(
+          c, std::max(0.05,
+                      winch_counts_to_length<double>(
+                          g->model.winches[k], r.average_counts[k] - rt_->encoder_offsets()[k])));
       // A slack cable (no tension) has an unknown slack length to take up: the step grows with
       // each iteration.
       const double dl =

@@ -16,21 +16,11 @@
 namespace cdpr::fit {
 
 const std::vector<std::string>& estimate_names() {
-  static const std::vector<std::string> names = {"anchors",
-                                                 "paper-anchors",
-                                                 "platform-anchors",
-                                                 "offsets",
-                                                 "scales",
-                                                 "stiffness",
-                                                 "stiffness-per-cable",
-                                                 "force-gains",
-                                                 "force-offsets",
-                                                 "laser-origin",
-                                                 "laser-direction",
-                                                 "laser-plane",
-                                                 "swivel-zeros",
-                                                 "inclinometer-mounting",
-                                                 "imu-yaw-zero"};
+  static const std::vector<std::string> names = [] {
+    std::vector<std::string> v;
+    for (const EstimateItem& item : estimate_items()) v.emplace_back(item.word);
+    return v;
+  }();
   return names;
 }
 
@@ -53,84 +43,36 @@ void adapt_to_channels(const MeasurementSet& set, const std::vector<std::string>
 Status apply_estimate(const std::vector<std::string>& names, int num_cables,
                       IdentificationOptions* o) {
   if (names.empty()) return Status::success();  // the defaults of IdentificationOptions
-  o->estimate_frame_anchors = false;
-  o->estimate_platform_anchors = false;
-  o->estimate_length_offsets = false;
-  o->estimate_length_scales = false;
-  o->estimate_stiffness = StiffnessEstimate::kFixed;
-  o->estimate_force_gains = false;
-  o->estimate_force_offsets = false;
-  o->estimate_laser_origin = false;
-  o->estimate_laser_direction = false;
-  o->estimate_laser_plane = false;
-  o->estimate_swivel_zeros = false;
-  o->estimate_inclinometer_mounting = false;
-  o->estimate_imu_yaw_zero = false;
+  for (const EstimateItem& item : estimate_items()) item.set(*o, false);
   for (const std::string& n : names) {
-    if (n == "anchors") {
-      o->estimate_frame_anchors = true;
-    } else if (n == "paper-anchors") {
-      if (num_cables != 8) {
-        return Status::error(ErrorCode::kInvalidArgument,
-                             "--estimate paper-anchors is the paper's 16-coordinate subset of an "
-                             "8-cable robot; this config has %d cables",
-                             num_cables);
-      }
-      o->estimate_frame_anchors = true;
-      o->frame_anchor_mask = paper_anchor_mask();
-    } else if (n == "platform-anchors") {
-      o->estimate_platform_anchors = true;
-    } else if (n == "offsets") {
-      o->estimate_length_offsets = true;
-    } else if (n == "scales") {
-      o->estimate_length_scales = true;
-    } else if (n == "stiffness") {
-      o->estimate_stiffness = StiffnessEstimate::kShared;
-    } else if (n == "stiffness-per-cable") {
-      o->estimate_stiffness = StiffnessEstimate::kPerCable;
-    } else if (n == "force-gains") {
-      o->estimate_force_gains = true;
-    } else if (n == "force-offsets") {
-      o->estimate_force_offsets = true;
-    } else if (n == "laser-origin") {
-      o->estimate_laser_origin = true;
-    } else if (n == "laser-direction") {
-      o->estimate_laser_direction = true;
-    } else if (n == "laser-plane") {
-      o->estimate_laser_plane = true;
-    } else if (n == "swivel-zeros") {
-      o->estimate_swivel_zeros = true;
-    } else if (n == "inclinometer-mounting") {
-      o->estimate_inclinometer_mounting = true;
-    } else if (n == "imu-yaw-zero") {
-      o->estimate_imu_yaw_zero = true;
-    } else {
+    const EstimateItem* item = find_estimate_item(n);
+    if (item == nullptr) {
       std::string all;
       for (const std::string& k : estimate_names()) all += (all.empty() ? "" : ", ") + k;
       return Status::error(ErrorCode::kInvalidArgument, "--estimate: unknown item '%s' (one of %s)",
                            n.c_str(), all.c_str());
     }
+    if (item->required_cables > 0 && num_cables != item->required_cables) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "--estimate paper-anchors is the paper's 16-coordinate subset of an "
+                           "8-cable robot; this config has %d cables",
+                           num_cables);
+    }
+    item->set(*o, true);
   }
   return Status::success();
 }
 
 std::vector<std::string> estimated_items(const IdentificationOptions& o) {
   std::vector<std::string> v;
-  if (o.estimate_frame_anchors)
-    v.push_back(o.frame_anchor_mask.size() ? "anchors (masked)" : "anchors");
-  if (o.estimate_platform_anchors) v.push_back("platform-anchors");
-  if (o.estimate_length_offsets) v.push_back("offsets");
-  if (o.estimate_length_scales) v.push_back("scales");
-  if (o.estimate_stiffness == StiffnessEstimate::kShared) v.push_back("stiffness");
-  if (o.estimate_stiffness == StiffnessEstimate::kPerCable) v.push_back("stiffness-per-cable");
-  if (o.estimate_force_gains) v.push_back("force-gains");
-  if (o.estimate_force_offsets) v.push_back("force-offsets");
-  if (o.estimate_laser_origin) v.push_back("laser-origin");
-  if (o.estimate_laser_direction) v.push_back("laser-direction");
-  if (o.estimate_laser_plane) v.push_back("laser-plane");
-  if (o.estimate_swivel_zeros) v.push_back("swivel-zeros");
-  if (o.estimate_inclinometer_mounting) v.push_back("inclinometer-mounting");
-  if (o.estimate_imu_yaw_zero) v.push_back("imu-yaw-zero");
+  for (const EstimateItem& item : estimate_items()) {
+    if (item.word == "paper-anchors" || !item.is_set(o)) continue;  // listed as masked anchors
+    if (item.word == "anchors" && o.frame_anchor_mask.size()) {
+      v.push_back("anchors (masked)");
+    } else {
+      v.emplace_back(item.word);
+    }
+  }
   return v;
 }
 

@@ -171,8 +171,51 @@ struct IdentificationOptions {
 double slack_threshold(const IdentificationOptions& options, const SensorNoise& noise);
 
 // One estimated scalar (a tangent coordinate).
+// What an estimated parameter is: its kind, the cable or laser it belongs to and its component.
+// The name for people (ParameterEstimate::name, GeometryInformation::names) is derived from it
+// (parameter_name); code reads the id, never the name.
+enum class ParameterKind {
+  kFrameAnchor,        // a_i.x/y/z, m
+  kPlatformAnchor,     // b_i.x/y/z, m
+  kLengthOffset,       // o_i, m
+  kLengthScale,        // s_i, -
+  kStiffness,          // ea_scale (shared) or ea_scale_i: EA = EA_config (1 + e), -
+  kForceGain,          // force_gain_i, -
+  kForceOffset,        // force_offset_i, N (raw)
+  kLaserOrigin,        // laser_l.origin.x/y/z, m
+  kLaserDirection,     // laser_l.direction.u/v, rad
+  kLaserPlaneNormal,   // laser_l.plane.normal.u/v, rad
+  kLaserPlaneOffset,   // laser_l.plane.c, m
+  kSwivelZero,         // swivel_zero_i, rad
+  kInclinometerMount,  // inclinometer.mount.roll/pitch, rad
+  kImuYawZero,         // imu.yaw_zero, rad
+};
+
+struct ParameterId {
+  ParameterKind kind = ParameterKind::kFrameAnchor;
+  int index = -1;      // 0-based cable or laser; -1: one for all (shared stiffness, IMU, ...)
+  int component = -1;  // 0..2 for x/y/z, 0..1 for u/v and roll/pitch; -1: a scalar
+  bool operator==(const ParameterId&) const = default;
+};
+
+// "a_3.x", "o_5", "ea_scale", "laser_1.plane.c", "inclinometer.mount.pitch", ...
+std::string parameter_name(const ParameterId& id);
+
+// The words of `cdpr-fit ... --estimate` and the parameter kinds each switches on: one table
+// (estimate_items(), in the order the tools list them).
+struct EstimateItem {
+  std::string_view word;             // "anchors", "stiffness-per-cable", "laser-plane", ...
+  std::vector<ParameterKind> kinds;  // the kinds it estimates
+  void (*set)(IdentificationOptions&, bool on) = nullptr;  // switches it on or off
+  bool (*is_set)(const IdentificationOptions&) = nullptr;
+  int required_cables = 0;  // > 0: only for a robot with that many cables (the paper's subset)
+};
+const std::vector<EstimateItem>& estimate_items();
+const EstimateItem* find_estimate_item(std::string_view word);  // nullptr: not a word of the table
+
 struct ParameterEstimate {
-  std::string name;  // "a_3.x", "o_5", "laser_1.plane.c", ...
+  ParameterId id;
+  std::string name;  // parameter_name(id): "a_3.x", "o_5", "laser_1.plane.c", ...
   std::string unit;  // "m", "-", "rad", "N"
   double initial = 0.0;
   double value = 0.0;
@@ -253,7 +296,8 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
 // per pose, evaluated at `model` and the poses `poses` (the measured readings enter only the
 // elongation and force terms; residual values are not used). `information` = sum of per_pose.
 struct GeometryInformation {
-  std::vector<std::string> names;
+  std::vector<ParameterId> ids;
+  std::vector<std::string> names;  // parameter_name of each id
   std::vector<std::string> units;
   Eigen::VectorXd values;                  // current tangent values (for naming)
   std::vector<Eigen::MatrixXd> per_pose;   // P x P each (already Schur-reduced)

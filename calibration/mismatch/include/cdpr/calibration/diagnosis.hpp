@@ -1,92 +1,9 @@
 // The mismatch locator, complete: from a nominal model and a recording to a verdict on the missing
 // physics, the model with it, and the proof that the fit improves (also on held-out data).
-// Pure statistics on top of identification.hpp and mismatch.hpp (no I/O, no logging).
-//
-// diagnose(nominal, set, validation?, ...):
-//  1. Standard identification (IdentificationOptions as given: the "before" model) and the screen
-//     of locate_mismatch (where the misfit is, with what structure, which candidates score).
-//  2. Selection. Bootstrap over poses (resample the N poses with replacement B times, redo the
-//     projected screen on each resample, forward-select candidates by BIC with a family-wise
-//     significance gate): the inclusion probability of every candidate. Candidates whose
-//     inclusion probability exceeds DiagnosisOptions::inclusion_threshold are kept.
-//  3. Refits. For each kept candidate (and each confounded alternative), the model with the effect
-//     added is refitted in full (nonlinear identification with the effect's parameters estimated
-//     where identification.hpp has them, else the Gauss-Newton augmented fit). Ranked by
-//     likelihood-ratio test against the standard model (the drop of the deviance chi^2 + log det
-//     of the residual covariance, chi^2-distributed with the extra parameters as degrees of
-//     freedom: the length and equilibrium sigmas depend on the compliance), BIC change counting
-//     only the parameters that differ between the candidates, and K-fold cross-validation over
-//     poses (the geometry from K-1 folds, the held-out
-//     poses re-located from their own readings with the geometry fixed, the RMS of their
-//     residuals in sigmas over every channel).
-//  4. Naming. The accepted effects in words with their fitted parameters and standard deviations
-//     ("cable elasticity: EA = 21.4 +- 0.6 kN"). Two candidates that this pose set cannot tell
-//     apart (highly correlated projected columns AND full fits within
-//     DiagnosisOptions::decisive_bic of each other) are reported as confounded, with both fits
-//     and a set of extra poses (from the feasible candidate grid) that would separate them.
-//  5. Model it: the calibrated model carries the accepted effects (EA, polynomial surface, drum
-//     scale in the winch model, encoder zero, force sensor gain/offset, laser mount/plane, mass
-//     per length for sag); per-channel residual RMS before/after, held-out RMS before/after.
-//  6. Verdict: kNoMismatch ("no missing physics found": residuals consistent with noise),
-//     kMismatchNamed, kMismatchUnexplained (misfit, but no candidate explains it; or, with no
-//     effect named, structure that no candidate explains, MismatchSummary::unexplained: the
-//     headline says which variable it follows on which cables, e.g. "Unexplained structure
-//     following the direction of the last move of cables 2 and 5 (cable tensions)"), or
-//     kInconclusive (too few poses / residuals to tell the effects apart; says so, never guesses).
-//
-// How it is done (diagnosis.cc):
-//  - Bootstrap: per-pose cross products of [geometry Jacobian | candidate columns | residual] with
-//    the pose's own Jacobian projected out (mismatch_design); a resample is a weighted sum of
-//    them (a pose drawn twice counts twice), so no refit per resample. Poses fixed by the gauge
-//    (the home pose) are always kept. Forward selection: F-test p-values, Holm over the
-//    contenders of each step, lowest BIC first, one candidate per family, and within a family the
-//    simplest member (shared before per cable) unless the richer one is significantly better.
-//    A candidate is kept when its family, or a family confounded with it on this pose set, was
-//    selected in at least inclusion_threshold of the resamples (confounded families split the
-//    resamples between them; a strong effect makes the first-order screen pick the richer family
-//    member by its nonlinearity). Every member of a kept family is refitted.
-//  - Refits: identify() with the effect's option on (from the standard estimate; the laser
-//    mounting falls back to the beam direction alone when the origin trades against the target
-//    plane), else Gauss-Newton: the effect's coefficients from the projected columns, the effect
-//    moved into the data (length and laser readings; on the equilibrium rows through
-//    PoseMeasurement::external_wrench and the SI columns), identify() redone, repeated until the
-//    deviance settles. Families that refine each other share a selection group
-//    (mismatch.hpp: nonlinear elasticity refines elasticity) and are compared by nested tests.
-//  - Sag is refitted on the exact elastic catenary (sag_effect, mismatch.hpp) as one parameter,
-//    the mass per length, by Gauss-Newton; the corrected lengths carry the sag's dependence on
-//    the tension reading in their sigma (PoseMeasurement::extra_compliance).
-//  - Acceptance: forward selection started from each of the (up to four) best passing first
-//    effects (Holm-adjusted LRT p < alpha, BIC decrease, held-out RMS in sigmas decrease; a first
-//    effect must also be significant in the screen after Holm, screen_gate_p); each
-//    path adds further kept candidates refitted jointly with the accepted ones and tested
-//    against them (their EffectFit is then relative to the model with the earlier effects); the
-//    path with the lowest joint BIC wins. Then swaps: with two or more effects, each is replaced
-//    in turn by every other kept candidate and the set refitted from the standard model; a swap
-//    that lowers the joint BIC by more than 2 is made. Two candidates confounded on this pose
-//    set are never accepted together.
-//  - Cross-validation is linearised about each fit: the geometry (and Gauss-Newton effect
-//    coefficients) from one Gauss-Newton step on K-1 folds, held-out poses re-located to first
-//    order; the home pose always stays in the training folds.
-//  - Validation recording: its poses are re-located by identify() with the encoder zeros
-//    re-estimated and everything else fixed (identify() refuses a problem without parameters;
-//    a new recording is homed again anyway).
-//  - Separating and follow-up poses: a 4 x 4 x 4 grid over the region the recording visited
-//    (its estimated poses' extent around home, capped by fit_design_box_to_robot's box, scaled by
-//    separating_half_extent_scale) x {level, +-tilt roll, +-tilt pitch} (tilt: the largest the
-//    recording used, at most 0.2 rad), kept where simple_tension_distribution finds feasible
-//    tensions for the estimate and the nominal model, each at the planned pretension and at twice
-//    it; greedy (separating: lowest canonical correlation of the pair; follow-up: largest log det
-//    of the suspect's projected information). Near the edge of the model's workspace the real
-//    robot may not hold the platform, so no pose goes beyond where the recording already went.
-//  - Follow-up: with no effect named, the screen candidate with the lowest p-value is a suspect
-//    when its p-value after Holm's correction over the library is below suspect_p (so at most
-//    about suspect_p of the recordings of a correct model get one); the follow_up_poses grid
-//    poses that most increase the log det of its projected information are proposed
-//    (Diagnosis::follow_up).
-//  - model_after: identify()'s estimate with the effects it can estimate; Gauss-Newton effects
-//    written where the config has a field (encoder offsets, common drum scale, mass per length,
-//    EA or a polynomial surface when the cables were rigid); otherwise modelled_in_config = false
-//    (creep, drifts: report only).
+// Pure statistics on top of identification.hpp and mismatch.hpp (no I/O, no logging). The
+// candidate effects are the entries of effect_library.hpp; how diagnose() decides (selection,
+// refit, acceptance, naming, extra-pose design, the model with the effects, the verdict) is
+// described in docs/mismatch-locator.md, and diagnosis.cc follows the same named stages.
 #pragma once
 
 #include <Eigen/Core>

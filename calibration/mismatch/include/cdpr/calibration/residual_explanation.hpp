@@ -11,18 +11,13 @@
 #include <vector>
 
 #include "cdpr/calibration/diagnosis.hpp"
+#include "cdpr/calibration/effect_library.hpp"
 #include "cdpr/calibration/measurement.hpp"
 
 namespace cdpr {
 
-// The explaining variable of a candidate family ("elasticity", "compliance", "drum scale", ...):
-// tension x loaded length (N m), tension (N), loaded length (m), time (s), the direction of the
-// cable's last move (+1 paid out, -1 reeled in, 0 not yet moved: cable hysteresis, pulley
-// friction); the pose index (no unit) for the families without one.
-struct ExplainingVariable {
-  std::string name, unit;
-};
-ExplainingVariable explaining_variable(const std::string& family);
+// The explaining variable of each candidate family (ExplainingVariable, explaining_variable) is
+// the effect library's (effect_library.hpp).
 
 // Normalised cable-length residuals (residual / sigma) against an explaining variable.
 struct ExplainedResiduals {

@@ -69,6 +69,14 @@ T polynomial_surface_value(const PolynomialSurface& surface, const T& loaded_len
   return value;
 }
 
+// The loaded length L (m) whose stretch the elongation model describes: the whole cable between
+// the winch drum and the platform, routing_length + the kinematic length L_k. The one definition
+// (the identification, the statics, the mismatch locator and the daemon use it).
+template <typename T>
+T loaded_length(const CableModel& cable, const T& kinematic_length) {
+  return kinematic_length + T(cable.routing_length);
+}
+
 // Elongation dL (m) of the whole loaded cable of length `loaded_length` (m, routing_length +
 // kinematic length) under `tension` (N). Template: double or ceres::Jet. Allocates nothing.
 template <typename T>

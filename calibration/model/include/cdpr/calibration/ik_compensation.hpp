@@ -29,7 +29,7 @@ namespace cdpr {
 template <typename T>
 T cable_length_command(const CableModel& cable, const T& kinematic_length, const T& tension) {
   return kinematic_length -
-         cable_elongation<T>(cable, kinematic_length + cable.routing_length, tension);
+         cable_elongation<T>(cable, loaded_length<T>(cable, kinematic_length), tension);
 }
 
 // Scratch and results, sized once for a model.
@@ -62,7 +62,7 @@ inline bool inverse_kinematics_compensated(const RobotModel& model, const Pose& 
     const auto k = static_cast<std::size_t>(i);
     const CableModel& cable = model.cables[k];
     const double lk = data.kinematics.lengths(i);
-    const double loaded = cable.routing_length + lk;
+    const double loaded = loaded_length(cable, lk);
     const double dl = cable_elongation<double>(cable, loaded, tensions(i));
     const double command = lk - dl;
     const double counts = winch_length_to_counts<double>(model.winches[k], command);

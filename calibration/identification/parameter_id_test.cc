@@ -1,0 +1,104 @@
+// Typed parameter ids: the names for people are derived from them, and the identification reports
+// the id of every estimated parameter.
+#include <gtest/gtest.h>
+
+#include <set>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/simulate.hpp"
+#include "testing/identification_scenario.hpp"
+
+namespace cdpr {
+namespace {
+
+TEST(ParameterId, NamesForPeopleAreDerivedFromTheId) {
+  using K = ParameterKind;
+  EXPECT_EQ(parameter_name({K::kFrameAnchor, 2, 0}), "a_3.x");
+  EXPECT_EQ(parameter_name({K::kPlatformAnchor, 0, 2}), "b_1.z");
+  EXPECT_EQ(parameter_name({K::kLengthOffset, 4, -1}), "o_5");
+  EXPECT_EQ(parameter_name({K::kLengthScale, 7, -1}), "s_8");
+  EXPECT_EQ(parameter_name({K::kStiffness, -1, -1}), "ea_scale");
+  EXPECT_EQ(parameter_name({K::kStiffness, 1, -1}), "ea_scale_2");
+  EXPECT_EQ(parameter_name({K::kForceGain, 0, -1}), "force_gain_1");
+  EXPECT_EQ(parameter_name({K::kForceOffset, 5, -1}), "force_offset_6");
+  EXPECT_EQ(parameter_name({K::kLaserOrigin, 0, 1}), "laser_1.origin.y");
+  EXPECT_EQ(parameter_name({K::kLaserDirection, 1, 1}), "laser_2.direction.v");
+  EXPECT_EQ(parameter_name({K::kLaserPlaneNormal, 0, 0}), "laser_1.plane.normal.u");
+  EXPECT_EQ(parameter_name({K::kLaserPlaneOffset, 0, -1}), "laser_1.plane.c");
+  EXPECT_EQ(parameter_name({K::kSwivelZero, 3, -1}), "swivel_zero_4");
+  EXPECT_EQ(parameter_name({K::kInclinometerMount, -1, 1}), "inclinometer.mount.pitch");
+  EXPECT_EQ(parameter_name({K::kImuYawZero, -1, -1}), "imu.yaw_zero");
+}
+
+// Every estimate carries its id, its name is the id's, and no two estimates share an id.
+TEST(ParameterId, EveryEstimateCarriesItsId) {
+  const scenario::Scenario s = scenario::mini_scenario();
+  const std::vector<Pose> poses =
+      scenario::random_feasible_poses(s.nominal.robot, s.box, 20, 11, &s.truth.robot);
+  SimulationOptions so;
+  so.controller = &s.nominal;
+  auto sim = simulate_measurements(s.truth, poses, SensorNoise{}, 5, so);
+  ASSERT_TRUE(sim.ok()) << sim.status().to_string();
+  IdentificationOptions opt;
+  opt.estimate_stiffness = StiffnessEstimate::kPerCable;
+  opt.estimate_force_gains = true;
+  auto rep = identify(s.nominal, sim->set, opt);
+  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+  std::set<std::string> names;
+  int anchors = 0, stiffness = 0;
+  for (const ParameterEstimate& p : rep->parameters) {
+    EXPECT_EQ(p.name, parameter_name(p.id));
+    EXPECT_TRUE(names.insert(p.name).second) << p.name;
+    anchors += p.id.kind == ParameterKind::kFrameAnchor ? 1 : 0;
+    stiffness += p.id.kind == ParameterKind::kStiffness ? 1 : 0;
+  }
+  const int m = s.nominal.robot.num_cables();
+  EXPECT_EQ(anchors, 3 * m);
+  EXPECT_EQ(stiffness, m);
+}
+
+// The --estimate words: each switches its kinds on from nothing estimated, and off again; the
+// estimates of an identification with it on include its kinds.
+TEST(ParameterId, EachEstimateWordSwitchesOnItsKinds) {
+  std::set<std::string_view> words;
+  for (const EstimateItem& item : estimate_items()) {
+    SCOPED_TRACE(std::string(item.word));
+    EXPECT_TRUE(words.insert(item.word).second);
+    EXPECT_FALSE(item.kinds.empty());
+    EXPECT_EQ(find_estimate_item(item.word), &item);
+    IdentificationOptions o;
+    for (const EstimateItem& other : estimate_items()) other.set(o, false);
+    EXPECT_FALSE(item.is_set(o));
+    item.set(o, true);
+    EXPECT_TRUE(item.is_set(o));
+    item.set(o, false);
+    EXPECT_FALSE(item.is_set(o));
+  }
+  EXPECT_EQ(find_estimate_item("no-such-item"), nullptr);
+  // Switched on in an identification, a word's kinds are among the estimates.
+  const scenario::Scenario s = scenario::mini_scenario();
+  const std::vector<Pose> poses =
+      scenario::random_feasible_poses(s.nominal.robot, s.box, 20, 11, &s.truth.robot);
+  SimulationOptions so;
+  so.controller = &s.nominal;
+  auto sim = simulate_measurements(s.truth, poses, SensorNoise{}, 5, so);
+  ASSERT_TRUE(sim.ok()) << sim.status().to_string();
+  for (const char* word : {"scales", "force-offsets", "stiffness"}) {
+    SCOPED_TRACE(word);
+    IdentificationOptions o;
+    find_estimate_item(word)->set(o, true);
+    auto rep = identify(s.nominal, sim->set, o);
+    ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+    int of_word = 0;
+    for (const ParameterEstimate& p : rep->parameters) {
+      for (ParameterKind k : find_estimate_item(word)->kinds) of_word += p.id.kind == k ? 1 : 0;
+    }
+    EXPECT_GT(of_word, 0);
+  }
+}
+
+}  // namespace
+}  // namespace cdpr
