@@ -148,6 +148,15 @@ TEST_F(Diagnose, ConcealedSofterCablesAreNamedAndCarriedByTheCalibratedConfig) {
   ASSERT_FALSE(j.at("accepted").empty());
   EXPECT_EQ(j.at("accepted")[0].at("family"), "elasticity") << j.at("named_effects").dump();
   EXPECT_EQ(j.at("named_effects")[0], j.at("accepted")[0].at("id"));
+  // Issue 16 item 9: every number means what its label says. The named effect is the one the
+  // bootstrap selects most often ("selected in N % of the bootstrap resamples"): no candidate
+  // that was not accepted shows a higher inclusion probability than it.
+  const double named_inclusion = j.at("accepted")[0].at("inclusion_probability").get<double>();
+  EXPECT_GE(named_inclusion, 0.5);
+  for (const auto& c : j.at("candidates")) {
+    if (c.at("accepted").get<bool>() || !c.at("inclusion_probability").is_number()) continue;
+    EXPECT_LE(c.at("inclusion_probability").get<double>(), named_inclusion) << c.at("id");
+  }
   // The held-out prediction improves when the effect is modelled.
   const auto& held = j.at("held_out");
   EXPECT_LT(held.at("rms_after_m").get<double>(), 0.5 * held.at("rms_before_m").get<double>());

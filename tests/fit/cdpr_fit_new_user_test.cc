@@ -317,6 +317,21 @@ TEST_F(NewUser, SimulateElasticSettlesEveryPoseTheVirtualRobotSettles) {
   }
 }
 
+// The default rigid physics puts the platform exactly at each pose: a designed pose outside the
+// measured robot's wrench-feasible workspace is refused, and the message says what to use.
+TEST_F(NewUser, RigidSimulateOutsideTheWorkspaceNamesThePoseAndSuggestsElasticPhysics) {
+  ProcessResult r =
+      fit({"design-poses", "--config", kNominal, "--count", "25", "--out", path("poses.csv")});
+  ASSERT_EQ(r.status, 0) << r.err;
+  r = fit(
+      {"simulate", "--config", kTruth, "--poses", path("poses.csv"), "--out", path("rigid.csv")});
+  if (r.status == 0) GTEST_SKIP() << "every designed pose is inside the measured robot's workspace";
+  EXPECT_EQ(r.status, 1) << r.err;
+  EXPECT_THAT(r.err, HasSubstr("outside the wrench-feasible workspace"));
+  EXPECT_THAT(r.err, HasSubstr("with --physics elastic --nominal"));
+  EXPECT_FALSE(fs::exists(path("rigid.csv")));
+}
+
 // ---- item 9: diagnose says each thing once ------------------------------------------------------
 
 TEST_F(NewUser, DiagnoseOnCleanDataStatesItsVerdictOnceAndChasesNoSuspect) {
