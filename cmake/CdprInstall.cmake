@@ -23,8 +23,9 @@ set(CDPR_INSTALL_SYSTEMD_UNITDIR "lib/systemd/system" CACHE STRING
 set(CDPR_INSTALL_SYSUSERSDIR "lib/sysusers.d" CACHE STRING
     "Where the sysusers.d entry goes (relative to the prefix, or absolute)")
 
-# Programs. cdprd and cdprctl appear when the daemon (controller/daemon.cmake) is merged; until
-# then only the programs that are targets are installed.
+# Programs: every program the project ships. systemd/tests/install-layout.sh (CTest
+# install_layout) fails when a program defined in controller/, sim/ or tools/ is missing here, and
+# runs each installed one's --version.
 set(CDPR_INSTALLED_PROGRAMS "")
 foreach(_prog IN ITEMS cdprd cdprctl cdpr-fit cdpr-sim)
   if(TARGET ${_prog})

@@ -307,7 +307,7 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
     if (v.rows == 0 || P == 0) continue;
     IdentificationOptions without = identification;
     without.*(v.use) = false;
-    auto g2 = geometry_information(model, set, poses, without);
+    auto g2 = ident_detail::total_geometry_information(model, set, poses, without);
     if (!g2) continue;
     ChannelContribution cc;
     cc.channel = v.name;

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <memory>
 #include <set>
+#include <span>
 #include <sstream>
 
 #include "cdpr/calibration/elongation.hpp"
@@ -129,7 +130,7 @@ bool unstretched_length(const CableConstants& k, const T* a, const T* b, const T
 // CURRENT geometry and tension, sqrt(sigma_length^2 + (d(dL)/dF sigma_force)^2), so that, like the
 // equilibrium residual, the objective does not depend on where the solver started.
 struct LengthCost {
-  CableConstants k;
+  const CableConstants* k = nullptr;  // Built::constants (shared: 100,000 poses, 8 cables each)
   double reading = 0.0;
   double tension = kNaN;
   double sigma_length = 1.0;
@@ -140,7 +141,7 @@ struct LengthCost {
                   const T* g, const T* c, T* residual) const {
     T U;
     T compliance;
-    if (!unstretched_length<T>(k, a, b, pose, tension, e[0], g[0], c[0], U, nullptr, nullptr,
+    if (!unstretched_length<T>(*k, a, b, pose, tension, e[0], g[0], c[0], U, nullptr, nullptr,
                                nullptr, &compliance)) {
       return false;
     }
@@ -195,7 +196,7 @@ struct LaserCost {
 // anchors were biased (about 1.7 standard errors of the mean at 1 N on MINI); without the
 // conditioning chi^2/dof was about 1.12 at 1 N on MINI.
 struct EquilibriumCost {
-  std::vector<CableConstants> k;
+  std::span<const CableConstants> k;  // Built::constants (shared, not a copy per pose)
   Eigen::VectorXd tensions;
   double sigma_force = 1.0;
   double sigma_length = 1.0;
@@ -707,7 +708,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
           continue;
         }
         auto* f = new LengthCost;
-        f->k = B->constants[ui];
+        f->k = &B->constants[ui];
         f->reading = pm.cable_lengths(i);
         f->tension = have_tensions ? pm.tensions(i) : kNaN;
         if (std::isnan(f->tension) && !missing_tension_warned &&
@@ -880,80 +881,94 @@ Result<Information> information(Built& B, bool apply_loss, bool keep = false,
                                 bool with_per_pose = false) {
   const int P = B.num_geometry;
   const int n = static_cast<int>(B.poses.size());
-  ceres::Problem::EvaluateOptions eo;
-  eo.apply_loss_function = apply_loss;
-  eo.parameter_blocks = B.geometry_blocks;
-  std::vector<int> pose_col(static_cast<std::size_t>(n), -1);
-  int col = P;
-  for (int j = 0; j < n; ++j) {
-    if (!B.pose_free[static_cast<std::size_t>(j)]) continue;
-    eo.parameter_blocks.push_back(B.poses[static_cast<std::size_t>(j)].data());
-    pose_col[static_cast<std::size_t>(j)] = col;
-    col += 6;
-  }
-  for (const auto& v : B.blocks_per_pose) {
-    eo.residual_blocks.insert(eo.residual_blocks.end(), v.begin(), v.end());
-  }
   Information info;
   if (with_per_pose) info.per_pose.assign(static_cast<std::size_t>(n), Eigen::MatrixXd::Zero(P, P));
   info.total = Eigen::MatrixXd::Zero(P, P);
   info.hpp_inv.assign(static_cast<std::size_t>(n), Eigen::Matrix<double, 6, 6>::Zero());
   info.hpg.assign(static_cast<std::size_t>(n), Eigen::MatrixXd::Zero(6, P));
-  if (eo.residual_blocks.empty()) return info;
-  ceres::CRSMatrix J;
-  double cost = 0.0;
-  if (!B.problem.Evaluate(eo, &cost, &info.residuals, nullptr, &J)) {
-    return Status(
-        ErrorCode::kNumericalFailure,
-        "identification: the model cannot be evaluated (a cable is degenerate at a pose)");
-  }
-  if (J.num_cols != col) {
-    return Status::error(ErrorCode::kInternal,
-                         "identification: Jacobian has %d columns, expected %d", J.num_cols, col);
-  }
-  int row = 0;
-  for (int j = 0; j < n; ++j) {
-    const int rows = static_cast<int>(B.rows_per_pose[static_cast<std::size_t>(j)].size());
-    Eigen::MatrixXd Jg = Eigen::MatrixXd::Zero(rows, P);
-    Eigen::MatrixXd Jp = Eigen::MatrixXd::Zero(rows, 6);
-    const int pc = pose_col[static_cast<std::size_t>(j)];
-    for (int r = 0; r < rows; ++r) {
-      const int R = row + r;
-      for (int idx = J.rows[static_cast<std::size_t>(R)];
-           idx < J.rows[static_cast<std::size_t>(R) + 1]; ++idx) {
-        const int cidx = J.cols[static_cast<std::size_t>(idx)];
-        const double v = J.values[static_cast<std::size_t>(idx)];
-        if (cidx < P) {
-          Jg(r, cidx) = v;
-        } else if (pc >= 0 && cidx >= pc && cidx < pc + 6) {
-          Jp(r, cidx - pc) = v;
+  std::size_t total_rows = 0;
+  for (const auto& rows : B.rows_per_pose) total_rows += rows.size();
+  info.residuals.reserve(total_rows);
+  // The Jacobian is evaluated a chunk of poses at a time: the whole one as a CRS matrix is about
+  // 4 kB per MINI pose (400 MB for 100,000 poses). Each pose's rows and columns, and so every sum
+  // below, are the same as in one evaluation.
+  constexpr int kChunk = 1024;
+  ceres::Problem::EvaluateOptions eo;
+  eo.apply_loss_function = apply_loss;
+  std::vector<double> chunk_residuals;
+  for (int j0 = 0; j0 < n; j0 += kChunk) {
+    const int j1 = std::min(n, j0 + kChunk);
+    eo.parameter_blocks = B.geometry_blocks;
+    eo.residual_blocks.clear();
+    std::vector<int> pose_col(static_cast<std::size_t>(j1 - j0), -1);
+    int col = P;
+    for (int j = j0; j < j1; ++j) {
+      const auto uj = static_cast<std::size_t>(j);
+      eo.residual_blocks.insert(eo.residual_blocks.end(), B.blocks_per_pose[uj].begin(),
+                                B.blocks_per_pose[uj].end());
+      if (!B.pose_free[uj]) continue;
+      eo.parameter_blocks.push_back(B.poses[uj].data());
+      pose_col[static_cast<std::size_t>(j - j0)] = col;
+      col += 6;
+    }
+    if (eo.residual_blocks.empty()) continue;
+    ceres::CRSMatrix J;
+    double cost = 0.0;
+    chunk_residuals.clear();
+    if (!B.problem.Evaluate(eo, &cost, &chunk_residuals, nullptr, &J)) {
+      return Status(
+          ErrorCode::kNumericalFailure,
+          "identification: the model cannot be evaluated (a cable is degenerate at a pose)");
+    }
+    if (J.num_cols != col) {
+      return Status::error(ErrorCode::kInternal,
+                           "identification: Jacobian has %d columns, expected %d", J.num_cols, col);
+    }
+    info.residuals.insert(info.residuals.end(), chunk_residuals.begin(), chunk_residuals.end());
+    int row = 0;
+    for (int j = j0; j < j1; ++j) {
+      const int rows = static_cast<int>(B.rows_per_pose[static_cast<std::size_t>(j)].size());
+      Eigen::MatrixXd Jg = Eigen::MatrixXd::Zero(rows, P);
+      Eigen::MatrixXd Jp = Eigen::MatrixXd::Zero(rows, 6);
+      const int pc = pose_col[static_cast<std::size_t>(j - j0)];
+      for (int r = 0; r < rows; ++r) {
+        const int R = row + r;
+        for (int idx = J.rows[static_cast<std::size_t>(R)];
+             idx < J.rows[static_cast<std::size_t>(R) + 1]; ++idx) {
+          const int cidx = J.cols[static_cast<std::size_t>(idx)];
+          const double v = J.values[static_cast<std::size_t>(idx)];
+          if (cidx < P) {
+            Jg(r, cidx) = v;
+          } else if (pc >= 0 && cidx >= pc && cidx < pc + 6) {
+            Jp(r, cidx - pc) = v;
+          }
         }
       }
-    }
-    row += rows;
-    Eigen::MatrixXd S = Jg.transpose() * Jg;
-    if (keep) {
-      info.jg.push_back(Jg);
-      info.jp.push_back(Jp);
-    }
-    if (pc >= 0) {
-      const Eigen::Matrix<double, 6, 6> Hpp = Jp.transpose() * Jp;
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(Hpp);
-      Eigen::Matrix<double, 6, 1> inv = Eigen::Matrix<double, 6, 1>::Zero();
-      const double lmax = es.eigenvalues().maxCoeff();
-      for (int q = 0; q < 6; ++q) {
-        if (es.eigenvalues()(q) > 1e-12 * lmax && lmax > 0) inv(q) = 1.0 / es.eigenvalues()(q);
+      row += rows;
+      Eigen::MatrixXd S = Jg.transpose() * Jg;
+      if (keep) {
+        info.jg.push_back(Jg);
+        info.jp.push_back(Jp);
       }
-      const Eigen::Matrix<double, 6, 6> Hinv =
-          es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose();
-      const Eigen::MatrixXd Hpg = Jp.transpose() * Jg;
-      S -= Hpg.transpose() * Hinv * Hpg;
-      info.hpp_inv[static_cast<std::size_t>(j)] = Hinv;
-      info.hpg[static_cast<std::size_t>(j)] = Hpg;
+      if (pc >= 0) {
+        const Eigen::Matrix<double, 6, 6> Hpp = Jp.transpose() * Jp;
+        const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>> es(Hpp);
+        Eigen::Matrix<double, 6, 1> inv = Eigen::Matrix<double, 6, 1>::Zero();
+        const double lmax = es.eigenvalues().maxCoeff();
+        for (int q = 0; q < 6; ++q) {
+          if (es.eigenvalues()(q) > 1e-12 * lmax && lmax > 0) inv(q) = 1.0 / es.eigenvalues()(q);
+        }
+        const Eigen::Matrix<double, 6, 6> Hinv =
+            es.eigenvectors() * inv.asDiagonal() * es.eigenvectors().transpose();
+        const Eigen::MatrixXd Hpg = Jp.transpose() * Jg;
+        S -= Hpg.transpose() * Hinv * Hpg;
+        info.hpp_inv[static_cast<std::size_t>(j)] = Hinv;
+        info.hpg[static_cast<std::size_t>(j)] = Hpg;
+      }
+      S = 0.5 * (S + S.transpose());
+      info.total += S;
+      if (with_per_pose) info.per_pose[static_cast<std::size_t>(j)] = std::move(S);
     }
-    S = 0.5 * (S + S.transpose());
-    info.total += S;
-    if (with_per_pose) info.per_pose[static_cast<std::size_t>(j)] = std::move(S);
   }
   return info;
 }

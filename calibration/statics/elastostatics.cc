@@ -192,6 +192,109 @@ CoreResult newton(const RobotModel& model, const Eigen::Ref<const Eigen::VectorX
   return out;
 }
 
+// Descent on the potential energy V (cables' elastic energy plus the platform's weight): the
+// equilibria are the stationary points of V and the stable ones its minima, with dV = -W . dx.
+// Levenberg-Marquardt on |W|^2 (newton above) can stall where |W| has a local minimum that is
+// not an equilibrium, typically with most cables slack: the platform "hangs" in a position where
+// the few taut cables cannot cancel gravity and K is nearly singular. Descent on V moves the
+// platform the way the net wrench pushes it, as the physical platform would, until the cables
+// catch it. Direction: modified Newton, H d = W (scaled), H = -sym(K) shifted to be positive
+// definite (so d is a descent direction of V); step along d to the minimum of V on that line,
+// located from the sign of the directional derivative phi'(a) = -W(x + a d) . d alone (V itself
+// is not needed, so polynomial cables need no energy integral). On return (r, R) is the last
+// pose and data holds its state; converged when every scaled wrench component is below the
+// tolerance.
+CoreResult energy_descent(const RobotModel& model,
+                          const Eigen::Ref<const Eigen::VectorXd>& commands,
+                          const ElastostaticOptions& options, double rho, Eigen::Vector3d& r,
+                          Eigen::Matrix3d& R, ElastostaticData& data) {
+  CoreResult out;
+  Eigen::Matrix<double, 6, 1> D;
+  D << 1.0, 1.0, 1.0, 1.0 / rho, 1.0 / rho, 1.0 / rho;
+  Matrix6d K;
+  Wrench w;
+  if (!evaluate(model, r, R, commands, options.external_wrench, data.kinematics, data.tensions,
+                data.stiffnesses, w, &K, &out.bad_cable)) {
+    out.termination = ElastostaticTermination::kDegenerateGeometry;
+    return out;
+  }
+  Wrench ws = scaled(w, rho);
+  // Largest move per line search step (m, rotations times rho): keeps a step of a nearly
+  // unsupported platform from jumping through the frame.
+  const double max_step = 0.25 * std::max(rho, 0.1);
+  for (out.iterations = 0; out.iterations < options.max_iterations; ++out.iterations) {
+    const double tolerance =
+        std::max(options.wrench_tolerance,
+                 wrench_noise_floor(data.kinematics, data.tensions, data.stiffnesses));
+    out.max_residual = ws.cwiseAbs().maxCoeff();
+    if (out.max_residual <= tolerance) {
+      out.termination = ElastostaticTermination::kConverged;
+      return out;
+    }
+    const Matrix6d Ks = D.asDiagonal() * K * D.asDiagonal();
+    const Matrix6d H = -0.5 * (Ks + Ks.transpose());
+    const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(H);
+    // H = Q diag(lambda) Q^T with every eigenvalue raised to at least `floor`: a small share of
+    // the largest, and at least the stiffness that moves an unsupported direction (all cables
+    // slack: H = 0) by max_step under the present wrench.
+    const double floor =
+        std::max(1e-6 * eig.eigenvalues().cwiseAbs().maxCoeff(), ws.norm() / max_step);
+    Wrench d = Wrench::Zero();
+    for (int k = 0; k < 6; ++k) {
+      const double lambda = std::max(eig.eigenvalues()(k), floor);
+      d += (eig.eigenvectors().col(k).dot(ws) / lambda) * eig.eigenvectors().col(k);
+    }
+    if (!d.allFinite() || !(d.norm() > 0.0)) break;
+    if (d.norm() > max_step) d *= max_step / d.norm();
+    const double slope0 = -ws.dot(d);  // phi'(0) < 0
+    // phi'(a) at a trial step; false when the pose is degenerate there.
+    auto slope_at = [&](double a, double& slope) {
+      const Wrench step = D.asDiagonal() * (a * d);
+      Wrench w_trial;
+      if (!evaluate(model, r + step.head<3>(), rotation_exp(step.tail<3>()) * R, commands,
+                    options.external_wrench, data.trial, data.trial_tensions,
+                    data.trial_stiffnesses, w_trial, nullptr, nullptr)) {
+        return false;
+      }
+      slope = -scaled(w_trial, rho).dot(d);
+      return std::isfinite(slope);
+    };
+    // Bracket the minimum of V along d: lo descends, hi ascends (or is degenerate).
+    double lo = 0.0;
+    double hi = std::numeric_limits<double>::infinity();
+    double a = 1.0;
+    double slope = 0.0;
+    for (int k = 0; k < 60; ++k) {
+      if (!slope_at(a, slope) || slope > 0.0) {
+        hi = a;
+      } else {
+        lo = a;
+      }
+      if (std::abs(slope) <= 0.5 * std::abs(slope0) && lo == a) break;  // curvature condition
+      if (!std::isfinite(hi)) {
+        if (a * d.norm() >= 4.0 * max_step) break;  // still descending: take the long step
+        a *= 2.0;
+      } else {
+        if (hi - lo <= 1e-12 * hi) break;
+        a = 0.5 * (lo + hi);
+      }
+    }
+    if (!(lo > 0.0)) break;  // no descent possible along d
+    const Wrench step = D.asDiagonal() * (lo * d);
+    r += step.head<3>();
+    R = rotation_exp(step.tail<3>()) * R;
+    if (!evaluate(model, r, R, commands, options.external_wrench, data.kinematics, data.tensions,
+                  data.stiffnesses, w, &K, &out.bad_cable)) {
+      out.termination = ElastostaticTermination::kDegenerateGeometry;
+      return out;
+    }
+    ws = scaled(w, rho);
+  }
+  out.max_residual = ws.cwiseAbs().maxCoeff();
+  out.termination = ElastostaticTermination::kNoConvergence;
+  return out;
+}
+
 double pose_distance(const Eigen::Vector3d& r1, const Eigen::Matrix3d& R1,
                      const Eigen::Vector3d& r2, const Eigen::Matrix3d& R2, double rho) {
   // Rotation angle of R1 R2^T by atan2(sin, cos): accurate for small angles (acos is not).
@@ -353,7 +456,35 @@ ElastostaticSummary solve_elastostatics(const RobotModel& model,
   }
   Eigen::Vector3d r = start.position;
   Eigen::Matrix3d R = rotation_from_rpy<double>(start.rpy);
-  const CoreResult core = newton(model, length_commands, options, rho, r, R, data);
+  CoreResult core = newton(model, length_commands, options, rho, r, R, data);
+  if (core.termination == ElastostaticTermination::kNoConvergence) {
+    // Stalled off an equilibrium: descend the potential energy from the start pose, then
+    // polish with Newton from where the descent ended.
+    Eigen::Vector3d r_d = start.position;
+    Eigen::Matrix3d R_d = rotation_from_rpy<double>(start.rpy);
+    const CoreResult descent = energy_descent(model, length_commands, options, rho, r_d, R_d, data);
+    if (descent.termination == ElastostaticTermination::kConverged ||
+        descent.termination == ElastostaticTermination::kNoConvergence) {
+      Eigen::Vector3d r_n = r_d;
+      Eigen::Matrix3d R_n = R_d;
+      const CoreResult polished = newton(model, length_commands, options, rho, r_n, R_n, data);
+      if (polished.termination == ElastostaticTermination::kConverged) {
+        core = polished;
+        core.iterations += descent.iterations;
+        r = r_n;
+        R = R_n;
+      }
+    }
+    if (core.termination != ElastostaticTermination::kConverged) {
+      // Leave the data describing the best pose of the first attempt.
+      Wrench w_best;
+      Matrix6d K_best;
+      evaluate(model, r, R, length_commands, options.external_wrench, data.kinematics,
+               data.tensions, data.stiffnesses, w_best, &K_best, nullptr);
+      data.wrench = w_best;
+      data.stiffness = K_best;
+    }
+  }
   summary.iterations = core.iterations;
   summary.termination = core.termination;
   summary.max_wrench_residual = core.max_residual;

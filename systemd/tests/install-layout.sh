@@ -2,8 +2,9 @@
 # install-layout.sh CMAKE BUILD_DIR SOURCE_DIR "PROGRAMS"
 #
 # `cmake --install` into temporary prefixes and checks the layout that cmake/CdprInstall.cmake
-# promises (docs/deployment.md): programs, units, sysusers entry, configuration, docs, examples;
-# nothing written outside the prefix; an existing configuration file is not replaced; with the
+# promises (docs/deployment.md): programs (every shipped one, each answering --version from the
+# installed tree), units, sysusers entry, configuration, docs, examples; nothing written outside
+# the prefix; an existing configuration file is not replaced; with the
 # prefix /usr the configuration goes to /etc/cdpr (under DESTDIR).
 set -euo pipefail
 cmake_bin=$1 build=$2 src=$3
@@ -51,10 +52,31 @@ check_tree() {  # check_tree ROOT_OF_PREFIX ETC_DIR
   done
 }
 
+# Every program the project ships: the executables defined outside the tests, benchmarks and
+# fuzz targets (controller/, sim/, tools/). Each must be built and installed.
+shipped=$(grep -ho 'add_executable([A-Za-z0-9_-]*' "$src"/controller/*.cmake "$src"/controller/CMakeLists.txt \
+            "$src"/sim/CMakeLists.txt "$src"/tools/CMakeLists.txt "$src"/tools/*.cmake 2>/dev/null |
+          sed 's/add_executable(//' | sort -u)
+[[ -n $shipped ]] || fail "no shipped program found in $src"
+for prog in $shipped; do
+  [[ " ${programs[*]} " == *" $prog "* ]] || fail "shipped program $prog is not in the install rules"
+done
+
 # 1. A plain prefix: everything under it.
 prefix=$tmp/prefix
 "$cmake_bin" --install "$build" --prefix "$prefix" >"$tmp/install1.log"
 check_tree "$prefix" "$prefix/etc/cdpr"
+# Each installed program runs from where it was installed: --version exits 0 and names it.
+for prog in "${programs[@]}"; do
+  [[ -x $prefix/bin/$prog ]] || continue
+  if ! out=$("$prefix/bin/$prog" --version 2>&1); then
+    fail "$prefix/bin/$prog --version exited with an error: $out"
+  elif [[ $out != "$prog "* ]]; then
+    fail "$prefix/bin/$prog --version printed '$out', expected '$prog <version>'"
+  else
+    echo "$out"
+  fi
+done
 while read -r f; do
   [[ $f == "$prefix"/* ]] || fail "installed outside the prefix: $f"
 done <"$build/install_manifest.txt"

@@ -20,6 +20,15 @@
 // reported stiffness is then taken by central differences of W). Rotations are updated
 // multiplicatively, R <- exp([dtheta]x) R.
 //
+// When Levenberg-Marquardt stalls off an equilibrium (a local minimum of |W| that is not a zero,
+// typically with most cables slack at the start: the platform hangs in cables that cannot hold
+// it and K is singular), the solver descends the potential energy V from the start instead
+// (dV = -W . dx: modified Newton with -sym(K) made positive definite, each step to the minimum of
+// V along its direction, found from the sign of W . step alone) and polishes the result with
+// Newton. That is what the platform itself does: it moves where the net wrench pushes it until
+// the cables catch it, so it settles commands whose cables are all slack at the start pose (a
+// true frame a few millimetres smaller than the commanding model's).
+//
 // Stability: the equilibrium is stable when the symmetric part of K is negative definite (the
 // potential energy has a strict local minimum). Uniqueness cannot be proven cheaply; on request
 // (ElastostaticOptions::uniqueness_starts) the solver restarts from poses spread around the
@@ -60,7 +69,7 @@ struct CableTension {
 CableTension cable_tension(const CableModel& cable, double kinematic_length, double length_command);
 
 struct ElastostaticOptions {
-  int max_iterations = 100;
+  int max_iterations = 100;  // each of Newton and the energy descent (above)
   // Converged when every component of the net wrench is below this: forces in N, moments
   // divided by the platform radius rho (largest |b_i|), so also in N. Very stiff cables raise it
   // to the rounding floor, 64 eps sum_i (F_i + k_i L_k,i).
