@@ -10,6 +10,7 @@
 #include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/calibration/suspended_statics.hpp"
 #include "testing/identification_scenario.hpp"
@@ -211,6 +212,55 @@ TEST(SuspendedIdentification, IdentifiabilityNamesWhatStaysInTheGauge) {
   auto gi = geometry_information(c.s.nominal, sim.set, sim.true_poses, no_eq);
   ASSERT_TRUE(gi.ok());
   EXPECT_FALSE(gi->home_tilt_free);
+}
+
+// Pose design puts a suspended robot only where it hangs: every designed pose is an equilibrium
+// of the model with its tensions within limits, and the design identifies the crane.
+TEST(SuspendedIdentification, DesignedPosesAreEquilibriaWithTensionsWithinLimits) {
+  const scenario::Scenario s = scenario::crane_scenario();
+  PoseDesignOptions design;
+  design.num_poses = 15;
+  design.center = s.nominal.robot.home.position;
+  design.half_extent = Eigen::Vector3d(0.4, 0.5, 0.25);
+  design.max_angle = 0.02;
+  design.identification = crane_options();
+  auto d = design_poses(s.nominal, design);
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  ASSERT_EQ(d->poses.size(), 15u);
+  const RobotModel& robot = s.nominal.robot;
+  for (std::size_t j = 0; j < d->poses.size(); ++j) {
+    auto t = suspended_tensions(robot, d->poses[j]);
+    ASSERT_TRUE(t.ok());
+    EXPECT_LT(t->wrench_residual, 1e-6 * robot.platform.mass * robot.gravity) << "pose " << j;
+    for (int i = 0; i < 4; ++i) {
+      EXPECT_GE(t->tensions(i), robot.cables[static_cast<std::size_t>(i)].f_min) << j;
+      EXPECT_LE(t->tensions(i), robot.cables[static_cast<std::size_t>(i)].f_max) << j;
+    }
+  }
+  // A tilted candidate of a fully constrained robot passes unchanged; the crane's is levelled
+  // by the statics.
+  Pose tilted = robot.home;
+  tilted.rpy.x() = 0.1;
+  const std::optional<Pose> p = feasible_design_pose(robot, tilted, 0.0);
+  ASSERT_TRUE(p.has_value());
+  EXPECT_LT(std::abs(p->rpy.x()), 1e-9);
+  Pose outside = robot.home;
+  outside.position.x() = 1.5;
+  EXPECT_FALSE(feasible_design_pose(robot, outside, 0.0).has_value());
+  // The designed poses calibrate the crane (noise-free: the truth).
+  SimulationOptions so;
+  so.physics = SimulationOptions::Physics::kElastic;
+  so.controller = &s.nominal;
+  so.add_noise = false;
+  so.laser = false;
+  so.swivel = true;
+  so.inclinometer = true;
+  auto sim = simulate_measurements(s.truth, d->poses, SensorNoise{}, 1, so);
+  ASSERT_TRUE(sim.ok()) << sim.status().to_string();
+  auto rep = identify(s.nominal, sim->set, crane_options());
+  ASSERT_TRUE(rep.ok()) << rep.status().to_string();
+  EXPECT_LT((rep->estimate.robot.frame_anchors - s.truth.robot.frame_anchors).cwiseAbs().maxCoeff(),
+            1e-6);
 }
 
 }  // namespace
