@@ -173,7 +173,7 @@ inline RobotModel large_robot(bool with_pulleys = true) {
 // it (a tool or load hanging under the attachment plate). Stability needs the centre of mass
 // below the point where the cable lines converge (about 0.18 m under the plate at home): with the
 // mass at 0.1 m the platform would balance upside-down-like and tilt far off centre. Home (0, 0,
-// 0.8) m level: an equilibrium by symmetry, every cable at about 33 N. Pulley radius 0.03 m; drum
+// 0.8) m level: an equilibrium by symmetry, every cable at about 53 N. Pulley radius 0.03 m; drum
 // 0.05 m, pitch 0.002 m, gear ratio 10; cable EA 4.0e4 N (2 mm Dyneema-like), 0.002 kg/m, 1.0 m
 // routing, Hooke, tensions 5..300 N; force sensors gain 1.
 inline RobotModel crane_robot(bool with_pulleys = true) {
