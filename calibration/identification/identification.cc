@@ -17,6 +17,7 @@
 #include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "cdpr/calibration/suspended_statics.hpp"
 #include "identification_internal.hpp"
 
 namespace cdpr {
@@ -1129,6 +1130,17 @@ CalibratedModel extract(const Built& B, const CalibratedModel& initial) {
         B.incl_mount0 * rotation_from_rpy<double>(B.incl_mount[0], B.incl_mount[1], 0.0));
   }
   if (B.imu_yaw_zero_free) out.robot.inclinometer.yaw_zero = B.imu_yaw_zero;
+  if (B.home_tilt_free) {
+    // A suspended robot's home is where the calibrated model hangs at the home position and
+    // heading (the estimated tilt, made an exact equilibrium so that the model check accepts it).
+    for (std::size_t j = 0; j < B.poses.size(); ++j) {
+      if (B.pose_free[j]) continue;
+      const Pose estimated =
+          Pose::from_vector(Eigen::Map<const Eigen::Matrix<double, 6, 1>>(B.poses[j].data()));
+      const Result<SuspendedState> hang = suspended_equilibrium_pose(out.robot, estimated);
+      out.robot.home = hang.ok() ? hang->pose : estimated;
+    }
+  }
   for (std::size_t l = 0; l < B.lasers.size(); ++l) {
     const LaserBlocks& L = B.lasers[l];
     LaserModel& lm = out.robot.lasers[l];
