@@ -11,3 +11,8 @@ target_link_libraries(identification_bench PRIVATE cdpr_calibration cdpr_calibra
 #   build/<dir>/bench/sensors_bench [--seeds N] [--robot mini|large] [--laser-poses]
 add_executable(sensors_bench ${CMAKE_CURRENT_LIST_DIR}/sensors_bench.cc)
 target_link_libraries(sensors_bench PRIVATE cdpr_calibration cdpr_calibration_testing cdpr_options)
+# Issue 18, second part: the 4-cable suspended crane (config/crane4.yaml) with swivel angles,
+# inclinometer and load cells (Monte Carlo, Cramer-Rao bound, coverage, box position error):
+#   build/<dir>/bench/crane_bench [--seeds N]
+add_executable(crane_bench ${CMAKE_CURRENT_LIST_DIR}/crane_bench.cc)
+target_link_libraries(crane_bench PRIVATE cdpr_calibration cdpr_calibration_testing cdpr_options)

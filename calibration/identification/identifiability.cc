@@ -193,6 +193,9 @@ IdentifiabilityReport analyze_identifiability(const GeometryInformation& gi,
     const bool gravity = c.wrench > 0 || c.inclination > 0;
     std::string what;
     if (gi.home_pose_fixed) what = "the home pose (held fixed)";
+    if (gi.home_tilt_free) {
+      what = "the home pose's position and heading (held fixed; its roll and pitch estimated)";
+    }
     if (c.laser > 0) what += std::string(what.empty() ? "" : ", ") + "the laser target plane";
     if (c.reference > 0) what += std::string(what.empty() ? "" : ", ") + "reference poses";
     if (c.imu_yaw > 0) what += std::string(what.empty() ? "" : ", ") + "the IMU heading (yaw)";
@@ -204,6 +207,13 @@ IdentifiabilityReport analyze_identifiability(const GeometryInformation& gi,
               ": the frame's tilt)";
     }
     r.notes.push_back("world frame fixed by " + (what.empty() ? std::string("nothing") : what));
+    if (gi.home_tilt_free) {
+      r.notes.push_back(
+          "suspended robot with fewer than six cables: the equilibrium residuals fix the pose "
+          "coordinates the lengths leave free and, with gravity, the world frame's tilt; what "
+          "stays in the gauge is the frame's translation (x, y, z) and heading (rotation about "
+          "gravity), held by the home pose's position and yaw");
+    }
     if (c.laser == 0 && c.reference == 0) {
       r.notes.push_back(
           "no laser or tracker: the world frame is fixed by the home pose and gravity only; the "

@@ -18,6 +18,7 @@
 #include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "cdpr/calibration/suspended_statics.hpp"
 #include "identification_internal.hpp"
 
 namespace cdpr {
@@ -207,11 +208,25 @@ struct EquilibriumCost {
   double gravity = 9.81;
   Eigen::Vector3d com = Eigen::Vector3d::Zero();
   Eigen::Matrix<double, 6, 1> external = Eigen::Matrix<double, 6, 1>::Zero();  // world, N, N m
+  // Suspended robots with m < 6 cables (issue 18): cov is singular (rank m), so w|l is split into
+  // the m tension errors eps = (A^T A)^-1 A^T (w|l) (A = the cable wrench columns a_i), each
+  // whitened by its own sigma_F sqrt(sigma_L^2 / S_i), and the 6 - m components of w that no
+  // tension can balance, N^T (w - A eps), which carry no sensor noise: the equilibrium condition
+  // on the pose, divided by sigma_null (a small model sigma). N is the orthonormal basis of the
+  // complement of the current cable wrenches nearest (Cholesky) to 6 - m fixed unit wrench axes
+  // E (`null_basis`, chosen once at the initial pose: the axes the cables balance least), so that
+  // the rows are one smooth function of the parameters. Empty: the Cholesky whitening below
+  // (m >= 6).
+  Eigen::MatrixXd null_basis;
+  double sigma_null = 1e-3;  // N
 
   // Net wrench, the whitening covariance of w|l and the correction term at the parameters.
+  // `columns` and `weights` (optional) receive the a_i and sigma_L^2 / S_i.
   template <typename T>
   bool wrench(T const* const* p, Eigen::Matrix<T, 6, 1>& w, Eigen::Matrix<T, 6, 6>& cov,
-              Eigen::Matrix<T, 6, 1>* correction = nullptr) const {
+              Eigen::Matrix<T, 6, 1>* correction = nullptr,
+              Eigen::Matrix<T, 6, Eigen::Dynamic>* columns = nullptr,
+              Eigen::Matrix<T, Eigen::Dynamic, 1>* weights = nullptr) const {
     const int m = static_cast<int>(k.size());
     const T* pose = p[0];
     Vec3<T> r;
@@ -223,6 +238,8 @@ struct EquilibriumCost {
     w += external.cast<T>();
     cov.setZero();
     if (correction) correction->setZero();
+    if (columns) columns->resize(6, m);
+    if (weights) weights->resize(m);
     const double sf2 = sigma_force * sigma_force;
     const double sl2 = sigma_length * sigma_length;
     for (int i = 0; i < m; ++i) {
@@ -255,12 +272,49 @@ struct EquilibriumCost {
         if (correction) *correction += col * (compliance * T(sf2) * rl / S);
       }
       cov += (T(sf2) * weight_i) * (col * col.transpose());
+      if (columns) columns->col(i) = col;
+      if (weights) (*weights)(i) = weight_i;
     }
+    return true;
+  }
+
+  // The suspended (m < 6) whitening of the file comment above.
+  template <typename T>
+  bool suspended_residual(T const* const* p, T* residual) const {
+    using std::sqrt;
+    const int m = static_cast<int>(k.size());
+    Eigen::Matrix<T, 6, 1> w;
+    Eigen::Matrix<T, 6, 6> cov;
+    Eigen::Matrix<T, 6, 1> correction;
+    Eigen::Matrix<T, 6, Eigen::Dynamic> A;
+    Eigen::Matrix<T, Eigen::Dynamic, 1> weight;
+    if (!wrench(p, w, cov, &correction, &A, &weight)) return false;
+    const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> AtA = A.transpose() * A;
+    const Eigen::LLT<Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>> llt(AtA);
+    if (llt.info() != Eigen::Success) return false;
+    const Eigen::Matrix<T, 6, 1> wl = w + correction;
+    const Eigen::Matrix<T, Eigen::Dynamic, 1> eps =
+        llt.solve(Eigen::Matrix<T, Eigen::Dynamic, 1>(A.transpose() * wl));
+    for (int i = 0; i < m; ++i) residual[i] = eps(i) / (T(sigma_force) * sqrt(weight(i)));
+    const Eigen::Matrix<T, 6, 1> rest = wl - A * eps;
+    // Coordinates of `rest` in the orthonormal basis N = P E (E^T P E)^-1/2 (Cholesky) of the
+    // current complement, P = I - A (A^T A)^-1 A^T: N^T rest = L^-1 E^T rest, L L^T = E^T P E.
+    const int nn = 6 - m;
+    const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> E = null_basis.cast<T>();
+    const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> AtE = A.transpose() * E;
+    const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> S =
+        E.transpose() * E - AtE.transpose() * llt.solve(AtE);
+    const Eigen::LLT<Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>> lls(S);
+    if (lls.info() != Eigen::Success) return false;
+    const Eigen::Matrix<T, Eigen::Dynamic, 1> c =
+        lls.matrixL().solve(Eigen::Matrix<T, Eigen::Dynamic, 1>(E.transpose() * rest));
+    for (int q = 0; q < nn; ++q) residual[m + q] = c(q) / T(sigma_null);
     return true;
   }
 
   template <typename T>
   bool operator()(T const* const* p, T* residual) const {
+    if (null_basis.cols() > 0) return suspended_residual(p, residual);
     Eigen::Matrix<T, 6, 1> w;
     Eigen::Matrix<T, 6, 6> cov;
     Eigen::Matrix<T, 6, 1> correction;
@@ -411,6 +465,7 @@ struct Built {
   std::vector<std::string> notes;                        // warnings found while building
   int num_residuals = 0;
   bool shared_stiffness = false;
+  bool home_tilt_free = false;  // suspended gauge: home roll and pitch are geometry columns
 };
 
 // A geometry block of `size` coordinates; `half_range` bounds each free coordinate to its
@@ -652,6 +707,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
   B->num_geometry = static_cast<int>(B->names.size());
 
   // Poses.
+  const bool suspended_gauge = fix_home && robot.suspended && m < 6 && opt.use_equilibrium;
   B->poses.resize(static_cast<std::size_t>(n));
   B->pose_free.assign(static_cast<std::size_t>(n), true);
   for (int j = 0; j < n; ++j) {
@@ -665,9 +721,20 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     for (int q = 0; q < 6; ++q)
       B->poses[static_cast<std::size_t>(j)][static_cast<std::size_t>(q)] = v(q);
     B->problem.AddParameterBlock(B->poses[static_cast<std::size_t>(j)].data(), 6);
-    if (!B->pose_free[static_cast<std::size_t>(j)]) {
+    if (!B->pose_free[static_cast<std::size_t>(j)] && !suspended_gauge) {
       B->problem.SetParameterBlockConstant(B->poses[static_cast<std::size_t>(j)].data());
     }
+  }
+  if (suspended_gauge) {
+    // Suspended robot with m < 6 cables: gravity fixes the world frame's tilt (the equilibrium
+    // residuals), so the home pose holds only its position and heading; its roll and pitch are
+    // estimated with the geometry (two more columns, "home.roll", "home.pitch").
+    add_geometry_block(*B, B->poses[static_cast<std::size_t>(opt.home_pose_index)].data(), 6,
+                       {false, false, false, true, true, false},
+                       {"home.x", "home.y", "home.z", "home.roll", "home.pitch", "home.yaw"}, "rad",
+                       true, {bounds.home_tilt_rad});
+    B->home_tilt_free = true;
+    B->num_geometry = static_cast<int>(B->names.size());
   }
 
   // Residuals, pose by pose.
@@ -760,6 +827,20 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       f->sigma_force = noise.sigma_force;
       f->sigma_length = noise.sigma_length;
       f->shared_stiffness = opt.estimate_stiffness == StiffnessEstimate::kShared;
+      if (robot.suspended && m < 6) {
+        const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Eigen::MatrixXd(kin.structure_matrix),
+                                                    Eigen::ComputeFullU);
+        // The 6 - m unit wrench axes with the largest share in the complement (distinct).
+        const Eigen::MatrixXd N0 = svd.matrixU().rightCols(6 - m);
+        const Eigen::VectorXd share = N0.rowwise().squaredNorm();
+        std::vector<int> order(6);
+        for (int q = 0; q < 6; ++q) order[static_cast<std::size_t>(q)] = q;
+        std::stable_sort(order.begin(), order.end(),
+                         [&](int x, int y) { return share(x) > share(y); });
+        f->null_basis = Eigen::MatrixXd::Zero(6, 6 - m);
+        for (int q = 0; q < 6 - m; ++q) f->null_basis(order[static_cast<std::size_t>(q)], q) = 1.0;
+        f->sigma_null = opt.suspended_equilibrium_sigma;
+      }
       if (pm.extra_compliance.size() == m) {
         f->extra_compliance.assign(pm.extra_compliance.data(), pm.extra_compliance.data() + m);
       }
@@ -1021,6 +1102,7 @@ GeometryInformation to_public(const Built& B, Information& info, const Calibrate
     }
   }
   for (bool f : B.pose_free) gi.home_pose_fixed = gi.home_pose_fixed || !f;
+  gi.home_tilt_free = B.home_tilt_free;
   int free_poses = 0;
   for (bool f : B.pose_free) free_poses += f ? 1 : 0;
   gi.num_pose_parameters = 6 * free_poses;
@@ -1068,6 +1150,17 @@ CalibratedModel extract(const Built& B, const CalibratedModel& initial) {
         B.incl_mount0 * rotation_from_rpy<double>(B.incl_mount[0], B.incl_mount[1], 0.0));
   }
   if (B.imu_yaw_zero_free) out.robot.inclinometer.yaw_zero = B.imu_yaw_zero;
+  if (B.home_tilt_free) {
+    // A suspended robot's home is where the calibrated model hangs at the home position and
+    // heading (the estimated tilt, made an exact equilibrium so that the model check accepts it).
+    for (std::size_t j = 0; j < B.poses.size(); ++j) {
+      if (B.pose_free[j]) continue;
+      const Pose estimated =
+          Pose::from_vector(Eigen::Map<const Eigen::Matrix<double, 6, 1>>(B.poses[j].data()));
+      const Result<SuspendedState> hang = suspended_equilibrium_pose(out.robot, estimated);
+      out.robot.home = hang.ok() ? hang->pose : estimated;
+    }
+  }
   for (std::size_t l = 0; l < B.lasers.size(); ++l) {
     const LaserBlocks& L = B.lasers[l];
     LaserModel& lm = out.robot.lasers[l];

@@ -3,11 +3,13 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <random>
 
 #include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "cdpr/calibration/suspended_statics.hpp"
 
 namespace cdpr {
 
@@ -121,6 +123,26 @@ void fit_design_box_to_robot(const RobotModel& robot, PoseDesignOptions& options
   const Eigen::Vector3d lo = robot.frame_anchors.rowwise().minCoeff();
   const Eigen::Vector3d hi = robot.frame_anchors.rowwise().maxCoeff();
   options.half_extent = 0.5 * fraction * (hi - lo);
+  if (robot.suspended) {
+    // The anchors of a crane are all up high: the vertical extent is the drop below them.
+    const double drop = robot.frame_anchors.row(2).mean() - robot.home.position.z();
+    options.half_extent.z() = std::max(options.half_extent.z(), 0.5 * fraction * drop);
+  }
+}
+
+std::optional<Pose> feasible_design_pose(const RobotModel& robot, const Pose& candidate,
+                                         double reference_tension) {
+  if (robot.suspended && robot.num_cables() < 6) {
+    // A suspended robot hangs where the statics put it: keep the candidate's position and yaw,
+    // take roll and pitch from the equilibrium, and keep it if every tension is within limits.
+    const Result<SuspendedState> eq = suspended_equilibrium_pose(robot, candidate);
+    if (!eq || !simple_tension_distribution(robot, eq->pose, reference_tension)) {
+      return std::nullopt;
+    }
+    return eq->pose;
+  }
+  if (!simple_tension_distribution(robot, candidate, reference_tension)) return std::nullopt;
+  return candidate;
 }
 
 Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOptions& options) {
@@ -136,9 +158,13 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
                            ? default_reference_tension(model.robot)
                            : options.reference_tension;
   std::vector<Pose> cands{model.robot.home};  // index 0: home (the gauge pose)
-  for (const Pose& p : candidate_grid(options)) {
-    if ((p.vector() - model.robot.home.vector()).norm() < 1e-12) continue;
-    if (simple_tension_distribution(model.robot, p, f_ref)) cands.push_back(p);
+  for (const Pose& grid_pose : candidate_grid(options)) {
+    const std::optional<Pose> p = feasible_design_pose(model.robot, grid_pose, f_ref);
+    if (!p) continue;
+    const bool seen = std::any_of(cands.begin(), cands.end(), [&](const Pose& c) {
+      return (p->vector() - c.vector()).norm() < 1e-12;
+    });
+    if (!seen) cands.push_back(*p);
   }
   const int C = static_cast<int>(cands.size()) - 1;
   if (C < options.num_poses - 1) {

@@ -9,6 +9,7 @@
 #include "cdpr/calibration/elongation.hpp"
 #include "cdpr/calibration/force_distribution.hpp"
 #include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/suspended_statics.hpp"
 #include "identification_internal.hpp"
 
 namespace cdpr {
@@ -39,6 +40,26 @@ double default_reference_tension(const RobotModel& model) {
 
 Result<Eigen::VectorXd> simple_tension_distribution(const RobotModel& model, const Pose& pose,
                                                     double reference_tension) {
+  if (model.suspended && model.num_cables() < 6) {
+    // Under-actuated: the tensions are unique, and exist only at an equilibrium pose.
+    auto s = suspended_tensions(model, pose);
+    if (!s) return Status(ErrorCode::kNumericalFailure, "tensions: " + s.status().to_string());
+    if (s->wrench_residual > 1e-6 * model.platform.mass * model.gravity) {
+      return Status::error(ErrorCode::kOutOfRange,
+                           "tensions: the suspended platform cannot stay at this pose (%.3g N of "
+                           "its weight unbalanced: not an equilibrium)",
+                           s->wrench_residual);
+    }
+    for (int i = 0; i < model.num_cables(); ++i) {
+      const CableModel& c = model.cables[static_cast<std::size_t>(i)];
+      if (!(s->tensions(i) >= c.f_min && s->tensions(i) <= c.f_max)) {
+        return Status::error(ErrorCode::kOutOfRange,
+                             "tensions: cable %d would carry %.4g N at this pose, outside [%g, %g]",
+                             i + 1, s->tensions(i), c.f_min, c.f_max);
+      }
+    }
+    return Eigen::VectorXd(s->tensions);
+  }
   ForceDistributionData data(model);
   // Retry with 2x and 4x the reference pretension before giving up (more internal force often
   // lifts the slackest cable above f_min while the nearest feasible point at the lower
@@ -182,7 +203,18 @@ Result<CalibratedModel> homed_truth(const RobotModel& truth, const RobotModel& n
   const double f_ref =
       std::isnan(reference_tension) ? default_reference_tension(nominal) : reference_tension;
   CalibratedModel out = CalibratedModel::from_robot(truth);
-  auto off = homing_offsets(truth, nominal, f_ref);
+  if (truth.suspended && truth.num_cables() < 6) {
+    // A suspended crane is homed where it hangs: at the nominal home position and heading, its
+    // roll and pitch those of the true robot's equilibrium there.
+    auto home = suspended_equilibrium_pose(truth, nominal.home);
+    if (!home) {
+      return Status(home.status().code(),
+                    "homing: the true suspended robot cannot hang at the home position: " +
+                        std::string(home.status().message()));
+    }
+    out.robot.home = home->pose;
+  }
+  auto off = homing_offsets(out.robot, nominal, f_ref);
   if (!off) return Status(off.status().code(), "homing: " + std::string(off.status().message()));
   out.readings.length_offsets = *off;
   return out;

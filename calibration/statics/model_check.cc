@@ -7,8 +7,10 @@
 #include <cstddef>
 #include <cstdio>
 #include <limits>
+#include <string>
 
 #include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/suspended_statics.hpp"
 
 namespace cdpr {
 namespace {
@@ -208,6 +210,58 @@ Status check_laser(const LaserModel& l, int j, double tol) {
   return Status::success();
 }
 
+// Suspended robot with m < 6 cables: the platform must hang at home.
+Status check_suspended_home(const RobotModel& model, const ModelCheckOptions& options) {
+  const int m = model.num_cables();
+  if (!(model.gravity > 0.0)) {
+    return Status(ErrorCode::kInvalidArgument,
+                  "gravity: a suspended robot needs gravity > 0 (only the weight keeps its "
+                  "cables taut)");
+  }
+  Result<SuspendedState> s = suspended_tensions(model, model.home);
+  if (!s.ok()) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "cables: at the home pose a cable is degenerate (%s)",
+                         std::string(s.status().message()).c_str());
+  }
+  const double weight = model.platform.mass * model.gravity;
+  if (s->wrench_residual > options.equilibrium_tolerance * weight) {
+    // Where it would hang instead, for the message.
+    std::string hint;
+    SuspendedOptions so;
+    so.min_tension = -std::numeric_limits<double>::infinity();
+    if (const Result<SuspendedState> eq = suspended_equilibrium_pose(model, model.home, so);
+        eq.ok()) {
+      char buf[160];
+      std::snprintf(buf, sizeof(buf), "; at this position it would hang at rpy [%.6g, %.6g, %.6g]",
+                    eq->pose.rpy.x(), eq->pose.rpy.y(), eq->pose.rpy.z());
+      hint = buf;
+    }
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "home.rpy: a suspended robot with %d cables must be in static "
+                         "equilibrium at home, but there its cables cannot balance the weight "
+                         "(%.3g N of %.3g N left over)%s",
+                         m, s->wrench_residual, weight, hint.c_str());
+  }
+  for (int i = 0; i < m; ++i) {
+    const CableModel& c = model.cables[static_cast<std::size_t>(i)];
+    const double f = s->tensions(i);
+    if (!(f > 0.0)) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "cables[%d]: at the home pose this cable would have to push (%.3g N) "
+                           "to hold the platform: a suspended platform cannot hang there",
+                           i, f);
+    }
+    if (f < c.f_min || f > c.f_max) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "cables[%d]: hanging at home needs %.4g N, outside [f_min, f_max] = "
+                           "[%g, %g] N",
+                           i, f, c.f_min, c.f_max);
+    }
+  }
+  return Status::success();
+}
+
 }  // namespace
 
 StructureConditioning structure_conditioning(const RobotModel& model, const Pose& pose,
@@ -241,9 +295,17 @@ StructureConditioning structure_conditioning(const RobotModel& model, const Pose
 
 Status check_model(const RobotModel& model, const ModelCheckOptions& options) {
   const int m = model.num_cables();
-  if (m < options.min_cables) {
+  const bool underactuated = model.suspended && m < 6;
+  if (underactuated && m < 3) {
     return Status::error(ErrorCode::kInvalidArgument,
-                         "cables: a spatial robot needs at least %d cables, got %d",
+                         "cables: a suspended robot needs at least 3 cables, got %d (with fewer "
+                         "the platform is free to turn about the cable line)",
+                         m);
+  }
+  if (!underactuated && m < options.min_cables) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "cables: a spatial robot needs at least %d cables, got %d (a platform "
+                         "that hangs from fewer cables: declare `suspended: true`)",
                          options.min_cables, m);
   }
   CDPR_RETURN_IF_ERROR(check_sizes(model));
@@ -269,6 +331,7 @@ Status check_model(const RobotModel& model, const ModelCheckOptions& options) {
                          "the frame anchor or inside its pulley (degenerate cable)",
                          sc.invalid_cable);
   }
+  if (underactuated) return check_suspended_home(model, options);
   if (sc.rank < 6) {
     return Status::error(ErrorCode::kInvalidArgument,
                          "cables: the structure matrix at the home pose has rank %d < 6 (the "

@@ -184,5 +184,56 @@ TEST(ModelCheck, DegenerateCableAtHome) {
                                        "anchor lies on the frame anchor"));
 }
 
+// Issue 18: a suspended robot with fewer than six cables (the 4-cable crane).
+TEST(ModelCheck, SuspendedCraneWithFourCablesPassesWhenItHangsAtHome) {
+  for (bool pulleys : {false, true}) {
+    const RobotModel crane = testing::crane_robot(pulleys);
+    EXPECT_TRUE(check_model(crane).ok()) << check_model(crane).to_string();
+  }
+}
+
+TEST(ModelCheck, FourCablesAreRefusedUnlessSuspendedAndTheMessageSaysHow) {
+  RobotModel crane = testing::crane_robot();
+  crane.suspended = false;
+  const std::string msg = check(crane);
+  EXPECT_THAT(msg, HasSubstr("at least 6 cables, got 4"));
+  EXPECT_THAT(msg, HasSubstr("suspended: true"));
+}
+
+TEST(ModelCheck, SuspendedCraneNotInEquilibriumAtHomeNamesTheHangingAttitude) {
+  RobotModel crane = testing::crane_robot();
+  crane.home.rpy.x() = 0.1;  // tilted: the four cables cannot hold it there
+  const std::string msg = check(crane);
+  EXPECT_THAT(msg, StartsWith("home.rpy: a suspended robot with 4 cables must be in static "
+                              "equilibrium at home"));
+  EXPECT_THAT(msg, HasSubstr("it would hang at rpy"));
+}
+
+TEST(ModelCheck, SuspendedCraneWhoseCablesWouldPushAtHomeIsRefused) {
+  RobotModel crane = testing::crane_robot();
+  crane.home.position.z() = 2.5;  // above the anchors: the cables would have to push
+  const std::string msg = check(crane);
+  EXPECT_THAT(msg, HasSubstr("would have to push"));
+}
+
+TEST(ModelCheck, SuspendedCraneOverloadedAtHomeNamesTheTensionLimit) {
+  RobotModel crane = testing::crane_robot();
+  crane.platform.mass = 200.0;  // about 500 N per cable, f_max is 300 N
+  const std::string msg = check(crane);
+  EXPECT_THAT(msg, StartsWith("cables[0]: hanging at home needs"));
+  EXPECT_THAT(msg, HasSubstr("[f_min, f_max]"));
+}
+
+TEST(ModelCheck, SuspendedRobotNeedsThreeCables) {
+  RobotModel crane = testing::crane_robot();
+  crane.frame_anchors.conservativeResize(3, 2);
+  crane.platform_anchors.conservativeResize(3, 2);
+  crane.pulleys.resize(2);
+  crane.winches.resize(2);
+  crane.cables.resize(2);
+  crane.force_sensors.resize(2);
+  EXPECT_THAT(check(crane), HasSubstr("at least 3 cables, got 2"));
+}
+
 }  // namespace
 }  // namespace cdpr

@@ -10,6 +10,7 @@
 
 #include "cdpr/calibration/measurement.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "cdpr/calibration/suspended_statics.hpp"
 #include "testing/test_robots.hpp"
 
 namespace cdpr::scenario {
@@ -155,6 +156,61 @@ inline Scenario large_sensor_scenario() {
   Scenario s = large_scenario();
   add_sensor_mounting_errors(s);
   return s;
+}
+
+// CRANE4 (issue 18, config/crane4.yaml): the 4-cable suspended crane with swivel encoders, an
+// inclinometer and load cells. Truth: frame anchors off by up to 10 mm per coordinate (seeded),
+// hidden swivel encoder zeros of up to 0.05 rad and an inclinometer tilted by about a degree on
+// its mount; pulley frames, platform and cables as nominal. The true home pose is where the true
+// crane hangs at the nominal home position and heading (its roll and pitch follow from the
+// statics: the gauge of a suspended robot holds only the home position and yaw), and the encoders
+// are homed there with the nominal model.
+inline Scenario crane_scenario(unsigned seed = 5) {
+  Scenario s;
+  const RobotModel nominal = testing::crane_robot();
+  RobotModel truth = nominal;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-0.01, 0.01);
+  for (int i = 0; i < truth.num_cables(); ++i) {
+    for (int q = 0; q < 3; ++q) truth.frame_anchors(q, i) += u(rng);
+  }
+  truth.swivel_encoders.resize(4);
+  for (int i = 0; i < 4; ++i) {
+    truth.swivel_encoders[static_cast<std::size_t>(i)].zero = 0.05 * std::sin(1.3 * i + 0.4);
+  }
+  truth.inclinometer.mounting_rpy = Eigen::Vector3d(-0.015, 0.011, 0.0);
+  const Result<SuspendedState> home = suspended_equilibrium_pose(truth, nominal.home);
+  if (home) truth.home = home->pose;
+  s.nominal = CalibratedModel::from_robot(nominal);
+  s.truth = CalibratedModel::from_robot(truth);
+  auto off = homing_offsets(truth, nominal, default_reference_tension(nominal));
+  if (off) s.truth.readings.length_offsets = *off;
+  // Where the crane is used: 0.9 x 1.1 x 0.6 m around home, yaw as the statics allow.
+  s.box = {nominal.home.position, Eigen::Vector3d(0.45, 0.55, 0.3), 0.0};
+  return s;
+}
+
+// `n` equilibrium poses of the suspended `model`: its home pose first, then random targets in
+// `box` (position; the yaw within +-0.03 rad) made equilibria (suspended_equilibrium_pose) with
+// every tension within [f_min, f_max]. These are the poses the controller commands.
+inline std::vector<Pose> random_hanging_poses(const RobotModel& model,
+                                              const testing::WorkspaceBox& box, int n,
+                                              unsigned seed) {
+  std::vector<Pose> poses{model.home};
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int guard = 0;
+  while (static_cast<int>(poses.size()) < n && guard++ < 100000) {
+    Pose target;
+    for (int k = 0; k < 3; ++k) target.position(k) = box.center(k) + box.half_extent(k) * u(rng);
+    target.rpy = Eigen::Vector3d(0.0, 0.0, 0.03 * u(rng));
+    SuspendedOptions so;
+    const Result<SuspendedState> eq = suspended_equilibrium_pose(model, target, so);
+    if (!eq) continue;
+    if (!simple_tension_distribution(model, eq->pose, 0.0)) continue;
+    poses.push_back(eq->pose);
+  }
+  return poses;
 }
 
 // `n` poses: the home pose first, then random poses in `box` whose tensions are feasible in

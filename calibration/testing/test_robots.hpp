@@ -164,6 +164,55 @@ inline RobotModel large_robot(bool with_pulleys = true) {
   return make_box_robot(large_spec(), with_pulleys);
 }
 
+// CRANE4 (issue 18): a 4-cable suspended laboratory crane, every value ASSUMED (a typical lab
+// crane, no published robot); config/crane4.yaml copies it. Frame 2.0 x 2.3 x 1.8 m (x, y, z),
+// world origin on the floor at the frame's centre, z up; the four frame anchors are the swivel
+// pulleys at the top corners (+-1.0, +-1.15, 1.8) in the order (+x-y, -x-y, -x+y, +x+y); the
+// cable comes down into each pulley (axis -z, reference towards the centre line). Platform: 13 kg,
+// cables attached at the corners of its 0.3 x 0.3 m top face (z = 0), centre of mass 0.35 m below
+// it (a tool or load hanging under the attachment plate). Stability needs the centre of mass
+// below the point where the cable lines converge (about 0.18 m under the plate at home): with the
+// mass at 0.1 m the platform would balance upside-down-like and tilt far off centre. Home (0, 0,
+// 0.8) m level: an equilibrium by symmetry, every cable at about 53 N. Pulley radius 0.03 m; drum
+// 0.05 m, pitch 0.002 m, gear ratio 10; cable EA 4.0e4 N (2 mm Dyneema-like), 0.002 kg/m, 1.0 m
+// routing, Hooke, tensions 5..300 N; force sensors gain 1.
+inline RobotModel crane_robot(bool with_pulleys = true) {
+  static constexpr double kSx[4] = {1.0, -1.0, -1.0, 1.0};
+  static constexpr double kSy[4] = {-1.0, -1.0, 1.0, 1.0};
+  RobotModel model;
+  model.name = "CRANE4";
+  model.suspended = true;
+  model.frame_anchors.resize(3, 4);
+  model.platform_anchors.resize(3, 4);
+  for (int i = 0; i < 4; ++i) {
+    model.frame_anchors.col(i) << kSx[i] * 1.0, kSy[i] * 1.15, 1.8;
+    model.platform_anchors.col(i) << kSx[i] * 0.15, kSy[i] * 0.15, 0.0;
+    PulleyModel pulley;
+    pulley.radius = with_pulleys ? 0.03 : 0.0;
+    pulley.frame = vertical_swivel_frame(model.frame_anchors.col(i), /*cable_goes_up=*/false);
+    model.pulleys.push_back(pulley);
+    WinchModel w;
+    w.drum_diameter = 0.05;
+    w.drum_pitch = 0.002;
+    w.gear_ratio = 10.0;
+    model.winches.push_back(w);
+    CableModel c;
+    c.ea = 4.0e4;
+    c.mass_per_length = 0.002;
+    c.routing_length = 1.0;
+    c.elongation = ElongationKind::kHooke;
+    c.f_min = 5.0;
+    c.f_max = 300.0;
+    model.cables.push_back(c);
+    model.force_sensors.push_back(ForceSensorModel{});
+  }
+  model.platform.mass = 13.0;
+  model.platform.center_of_mass = Eigen::Vector3d(0.0, 0.0, -0.35);
+  model.platform.inertia = Eigen::Vector3d(0.15, 0.15, 0.2).asDiagonal();
+  model.home = Pose{Eigen::Vector3d(0.0, 0.0, 0.8), Eigen::Vector3d::Zero()};
+  return model;
+}
+
 // Poses uniformly drawn in a box of translations and roll/pitch/yaw within +-max_angle.
 struct WorkspaceBox {
   Eigen::Vector3d center = Eigen::Vector3d::Zero();       // m

@@ -204,6 +204,39 @@ TEST(RobotConfig, MiniIsTheTestRobot) {
   EXPECT_EQ(file->home.rpy, code.home.rpy);
 }
 
+// Issue 18: the shipped 4-cable suspended crane loads, passes the model check for a suspended
+// robot (equilibrium at home) and is the tests' crane (calibration/testing/test_robots.hpp).
+TEST(RobotConfig, Crane4IsASuspendedFourCableRobotAndTheTestCrane) {
+  const Result<RobotModel> file = load_robot_config(source_path("config/crane4.yaml"));
+  ASSERT_TRUE(file.ok()) << file.status().to_string();
+  EXPECT_TRUE(file->suspended);
+  EXPECT_EQ(file->num_cables(), 4);
+  EXPECT_TRUE(file->lasers.empty());
+  EXPECT_TRUE(check_model(*file).ok()) << check_model(*file).to_string();
+  const RobotModel code = cdpr::testing::crane_robot();
+  EXPECT_TRUE(same_bits(file->frame_anchors, code.frame_anchors, "frame_anchors"));
+  EXPECT_TRUE(same_bits(file->platform_anchors, code.platform_anchors, "platform_anchors"));
+  for (std::size_t i = 0; i < 4; ++i) {
+    SCOPED_TRACE("cable " + std::to_string(i + 1));
+    EXPECT_EQ(file->pulleys[i].radius, code.pulleys[i].radius);
+    EXPECT_TRUE(same_bits(file->pulleys[i].frame, code.pulleys[i].frame, "pulley frame"));
+    EXPECT_EQ(file->winches[i].drum_diameter, code.winches[i].drum_diameter);
+    EXPECT_EQ(file->cables[i].ea, code.cables[i].ea);
+    EXPECT_EQ(file->cables[i].routing_length, code.cables[i].routing_length);
+    EXPECT_EQ(file->cables[i].f_max, code.cables[i].f_max);
+    EXPECT_EQ(file->force_sensors[i].gain, code.force_sensors[i].gain);
+  }
+  EXPECT_EQ(file->platform.mass, code.platform.mass);
+  EXPECT_EQ(file->platform.center_of_mass, code.platform.center_of_mass);
+  EXPECT_EQ(file->home.position, code.home.position);
+  // Saved and read back, it stays suspended.
+  const Result<RobotModel> again = parse_robot_config(save_robot_config(*file), "saved.yaml");
+  ASSERT_TRUE(again.ok()) << again.status().to_string();
+  EXPECT_TRUE(again->suspended);
+  EXPECT_THAT(save_robot_config(*file), HasSubstr("suspended: true"));
+  EXPECT_THAT(save_robot_config(cdpr::testing::mini_robot()), Not(HasSubstr("suspended")));
+}
+
 TEST(RobotConfig, LaserSeesTheFloorAtHomeWithinItsRange) {
   for (const char* file : kShipped) {
     SCOPED_TRACE(file);

@@ -5,11 +5,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
+#include "cdpr/calibration/suspended_statics.hpp"
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/recording/recording.hpp"
 #include "fit_process.hpp"
@@ -166,6 +168,76 @@ TEST_F(FitSensors, PosesAreDesignedAndPredictedForTheChannelsGiven) {
                            "swivel", "--estimate", "anchors,laser-plane", "--out", path("b.csv")});
   EXPECT_NE(bad.status, 0);
   EXPECT_THAT(bad.err, HasSubstr("no laser"));
+}
+
+// Issue 18, second part: the 4-cable suspended crane end to end. The truth is config/crane4.yaml
+// with two anchors off by 2-3 cm, swivel encoder zeros off and a tilted inclinometer; the
+// recording (elastic physics, designed equilibrium poses, swivel angles, inclinometer, load cells)
+// is calibrated and diagnosed from the shipped nominal config.
+TEST_F(FitSensors, SuspendedCraneRecordingIsCalibratedAndDiagnosed) {
+  const std::string nominal_path = kSource + "/config/crane4.yaml";
+  std::string yaml = slurp(nominal_path);
+  auto replace = [&](const std::string& from, const std::string& to) {
+    const auto at = yaml.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    yaml.replace(at, from.size(), to);
+  };
+  replace("frame_anchor: [1.0, -1.15, 1.8]", "frame_anchor: [1.03, -1.13, 1.78]");
+  replace("frame_anchor: [-1.0, 1.15, 1.8]", "frame_anchor: [-0.975, 1.17, 1.82]");
+  replace("swivel_encoder: {zero: 0, direction: 1}", "swivel_encoder: {zero: 0.02, direction: 1}");
+  replace("inclinometer: {mounting_rpy: [0, 0, 0]}",
+          "inclinometer: {mounting_rpy: [0.012, -0.017, 0]}");
+  // A suspended robot's config must hang at home: the true crane's home attitude is where it
+  // hangs at the home position (the model check would refuse the level one).
+  {
+    auto moved = cdpr::config::load_robot_config(nominal_path);
+    ASSERT_TRUE(moved.ok());
+    moved->frame_anchors.col(0) = Eigen::Vector3d(1.03, -1.13, 1.78);
+    moved->frame_anchors.col(2) = Eigen::Vector3d(-0.975, 1.17, 1.82);
+    auto hang = cdpr::suspended_equilibrium_pose(*moved, moved->home);
+    ASSERT_TRUE(hang.ok()) << hang.status().to_string();
+    char rpy[160];
+    std::snprintf(rpy, sizeof(rpy), "rpy: [%.17g, %.17g, 0]", hang->pose.rpy.x(),
+                  hang->pose.rpy.y());
+    replace("rpy: [0, 0, 0]", rpy);
+  }
+  const std::string truth = path("crane-truth.yaml");
+  std::ofstream(truth) << yaml;
+
+  const std::string rec = path("crane.csv");
+  const Process s =
+      fit({"simulate", "--config", truth, "--nominal", nominal_path, "--physics", "elastic",
+           "--design", "20", "--channels", "swivel,inclinometer", "--seed", "4", "--out", rec});
+  ASSERT_EQ(s.status, 0) << s.err << s.out;
+  EXPECT_THAT(slurp(rec), HasSubstr("swivel_4,incl_roll,incl_pitch"));
+
+  const std::string cal = path("crane-calibrated.yaml"), report = path("crane-report.json");
+  const Process c = fit({"calibrate", "--config", nominal_path, "--recording", rec, "--out", cal,
+                         "--report", report});
+  ASSERT_EQ(c.status, 0) << c.err << c.out;
+  EXPECT_THAT(c.out, HasSubstr("translation (x, y, z) and heading"));
+  const nlohmann::json j = nlohmann::json::parse(slurp(report));
+  EXPECT_TRUE(j.at("converged").get<bool>());
+  auto nominal = cdpr::config::load_robot_config(nominal_path);
+  auto real = cdpr::config::load_robot_config(truth);
+  auto calibrated = cdpr::config::load_robot_config(cal);
+  ASSERT_TRUE(nominal.ok() && real.ok());
+  ASSERT_TRUE(calibrated.ok()) << calibrated.status().to_string();
+  EXPECT_TRUE(calibrated->suspended);
+  auto rms = [](const cdpr::RobotModel& a, const cdpr::RobotModel& b) {
+    return std::sqrt((a.frame_anchors - b.frame_anchors).colwise().squaredNorm().mean());
+  };
+  const double before = rms(*nominal, *real), after = rms(*calibrated, *real);
+  EXPECT_LT(after, 0.5 * before) << before << " m -> " << after << " m";
+  EXPECT_NEAR(calibrated->inclinometer.mounting_rpy(0), 0.012, 2e-3);
+  EXPECT_NEAR(calibrated->inclinometer.mounting_rpy(1), -0.017, 2e-3);
+
+  const std::string djson = path("crane-diagnose.json");
+  const Process d = fit({"diagnose", "--config", nominal_path, "--recording", rec, "--json", djson,
+                         "--bootstrap", "20", "--folds", "3", "--seed", "2"});
+  EXPECT_EQ(d.status, 0) << d.err << d.out;
+  const nlohmann::json dj = nlohmann::json::parse(slurp(djson));
+  EXPECT_EQ(dj.at("verdict"), "no_mismatch") << d.out;
 }
 
 TEST_F(FitSensors, UnknownChannelIsRefused) {

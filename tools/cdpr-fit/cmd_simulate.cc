@@ -81,8 +81,10 @@ Result<Output> simulate(const SimulateArgs& args) {
   if (!sim.ok()) {
     // Poses designed for the nominal robot can lie just outside the true robot's workspace: the
     // rigid physics puts the platform exactly there, the elastic one lets it settle.
-    const bool hint =
-        !args.elastic && sim.status().message().find("wrench-feasible") != std::string_view::npos;
+    // A suspended robot (m < 6) hangs only at equilibrium poses of the TRUE robot.
+    const bool hint = !args.elastic &&
+                      (sim.status().message().find("wrench-feasible") != std::string_view::npos ||
+                       sim.status().message().find("not an equilibrium") != std::string_view::npos);
     return Status::error(sim.status().code(), "simulating %s at the poses of %s: %.*s%s",
                          args.config.c_str(), poses_source.c_str(),
                          static_cast<int>(sim.status().message().size()),

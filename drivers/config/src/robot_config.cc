@@ -395,11 +395,11 @@ LaserModel Parser::parse_laser(const YamlField& l) {
 
 RobotModel Parser::parse(const YamlField& root) {
   take(root.expect_map("a map of fields"));
-  take(root.check_keys(
-      {"name", "gravity", "defaults", "cables", "platform", "home", "lasers", "inclinometer"}));
+  take(root.check_keys({"name", "gravity", "suspended", "defaults", "cables", "platform", "home",
+                        "lasers", "inclinometer"}));
   // Whole-section messages of check_model point at the section's key line.
-  for (const char* key :
-       {"name", "gravity", "defaults", "cables", "platform", "home", "lasers", "inclinometer"}) {
+  for (const char* key : {"name", "gravity", "suspended", "defaults", "cables", "platform", "home",
+                          "lasers", "inclinometer"}) {
     if (const int line = root.key_line(key); line > 0) lines_.emplace(key, line);
   }
   for (const char* alias : {"pulleys", "winches", "force_sensors", "platform_anchors"}) {
@@ -412,6 +412,10 @@ RobotModel Parser::parse(const YamlField& root) {
   model.name = take(name.text());
   if (const YamlField gravity = root["gravity"]; gravity.present()) {
     model.gravity = number(gravity, Sign::kNonNegative, "m/s^2");
+  }
+  if (const YamlField suspended = root["suspended"]; suspended.present()) {
+    remember("suspended", suspended);
+    model.suspended = take(suspended.boolean());
   }
   if (defaults_->present()) {
     take(defaults_->expect_map("a map with the keys of a cable entry"));
@@ -562,6 +566,7 @@ std::string save_robot_config(const RobotModel& model) {
   out += "# Robot description written by cdpr (save_robot_config). SI units; see docs/config.md.\n";
   out += "name: " + quoted(model.name) + "\n";
   out += "gravity: " + num(model.gravity) + "\n";
+  if (model.suspended) out += "suspended: true\n";
   if (m == 0) return out + "cables: []\n";
 
   // Cable 0 supplies the defaults; the entries list what differs from it.

@@ -101,6 +101,7 @@ struct ParameterBounds {
   double swivel_zero_rad = 0.5;         // swivel encoder zero, +- around the config's
   double inclinometer_mount_rad = 0.2;  // inclinometer mounting roll and pitch, +-
   double imu_yaw_zero_rad = 3.2;        // IMU heading zero, +- (about half a turn: any heading)
+  double home_tilt_rad = 0.2;  // suspended robots: home roll and pitch, +- around the start
 };
 
 struct IdentificationOptions {
@@ -136,6 +137,12 @@ struct IdentificationOptions {
   // its length is then off by the slack (several sigma); at 4 sigma one in 30000.
   double slack_tension_threshold = 3.0;
   double slack_tension_sigmas = 4.0;
+  // Suspended robots with m < 6 cables (RobotModel::suspended, issue 18): the 6 - m equilibrium
+  // components that no tension can balance constrain the pose without sensor noise; this small
+  // model sigma (N, or N m for moments) only keeps them soft. With kHomePose the home pose then
+  // holds its position and heading only: its roll and pitch are estimated ("home.roll",
+  // "home.pitch"), gravity fixing the world frame's tilt.
+  double suspended_equilibrium_sigma = 1e-3;
 
   // --- Gauge and robustness ------------------------------------------------------------------
   Gauge gauge = Gauge::kHomePose;
@@ -312,6 +319,7 @@ struct GeometryInformation {
     int length = 0, laser = 0, wrench = 0, reference = 0, swivel = 0, inclination = 0, imu_yaw = 0;
   } channel_rows;
   bool home_pose_fixed = false;  // the gauge holds a pose at the home pose
+  bool home_tilt_free = false;   // suspended robot: only its position and heading are held
   // Whitened Jacobian blocks per pose (rows = that pose's residuals), filled only when
   // geometry_information is called with keep_jacobians = true.
   std::vector<Eigen::MatrixXd> jacobian_geometry;  // rows x P

@@ -17,6 +17,7 @@
 #include <Eigen/Core>
 #include <cstdint>
 #include <limits>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -75,9 +76,19 @@ struct PoseDesign {
 // Scales the candidate cube to the robot: centred at the home position, half sides
 // `fraction` times the half size of the frame anchors' bounding box per axis (the wrench
 // feasibility filter then trims it to the workspace). MINI: about 0.20 x 0.15 x 0.18 m;
-// IPAnema 3: about 3.4 x 2.2 x 0.8 m. Used when the user gives no box.
+// IPAnema 3: about 3.4 x 2.2 x 0.8 m. A suspended robot (anchors all up high) gets at least
+// `fraction` times half the drop from the anchors to home as vertical half side (CRANE4: 0.2 m).
+// Used when the user gives no box.
 void fit_design_box_to_robot(const RobotModel& robot, PoseDesignOptions& options,
                              double fraction = 0.4);
+
+// The pose the design may use for a candidate, or nullopt when the robot cannot be there: a
+// fully constrained robot needs a feasible tension distribution (simple_tension_distribution);
+// a suspended robot with m < 6 cables (issue 18) is only put where it hangs: the candidate's
+// position and yaw, roll and pitch from the static equilibrium (suspended_statics.hpp), every
+// tension within [f_min, f_max]. design_poses takes its candidates through this filter.
+std::optional<Pose> feasible_design_pose(const RobotModel& robot, const Pose& candidate,
+                                         double reference_tension);
 
 Result<PoseDesign> design_poses(const CalibratedModel& model,
                                 const PoseDesignOptions& options = {});

@@ -37,7 +37,10 @@ Eigen::Matrix<double, 6, 1> platform_weight_wrench(const RobotModel& model, cons
 // reference is raised to 2 and 4 times (more pretension lifts the slackest cable off f_min) and
 // the first distribution with no cable on a limit is taken, else the last feasible one.
 // kOutOfRange when the pose is outside the wrench-feasible workspace, kNumericalFailure when the
-// geometry is degenerate.
+// geometry is degenerate. A suspended robot with m < 6 cables (issue 18) has no choice: its
+// tensions are the unique ones that balance the weight (suspended_statics.hpp), and a pose that
+// is not an equilibrium, or needs a tension outside [f_min, f_max], is kOutOfRange (the reference
+// tension is not used).
 Result<Eigen::VectorXd> simple_tension_distribution(const RobotModel& model, const Pose& pose,
                                                     double reference_tension);
 
@@ -81,7 +84,10 @@ Result<Eigen::VectorXd> homing_offsets(const RobotModel& truth, const RobotModel
 // model's length there), and with elastic physics the platform settles exactly at the home pose
 // when the home pose is commanded, which is what the home-pose gauge of the identification and
 // the paper's method assume. With zero offsets instead the encoders would read absolute true
-// lengths and the platform would settle away from home (by up to the anchor errors).
+// lengths and the platform would settle away from home (by up to the anchor errors). A suspended
+// robot with m < 6 cables is homed where it hangs: the returned robot's home is the true
+// equilibrium at the nominal home position and heading (suspended_statics.hpp), the pose whose
+// position and yaw the identification's gauge holds for such a robot.
 Result<CalibratedModel> homed_truth(
     const RobotModel& truth, const RobotModel& nominal,
     double reference_tension = std::numeric_limits<double>::quiet_NaN());

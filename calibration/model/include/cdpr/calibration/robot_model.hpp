@@ -147,6 +147,11 @@ struct RobotModel {
   // Swivel-angle encoders (issue 18): m entries, or empty = every cable zero 0, direction +1.
   std::vector<SwivelEncoderModel> swivel_encoders;
   InclinometerModel inclinometer;  // used only by recordings with incl_/imu_ columns
+  // Suspended robot (issue 18): the platform hangs from the cables and gravity keeps them taut.
+  // With fewer than six cables (under-actuated, e.g. a 4-cable crane) the cable lengths fix only
+  // m of the six pose coordinates; the other 6 - m follow from the static equilibrium
+  // (suspended_statics.hpp). model_check then asks for equilibrium at home instead of rank 6.
+  bool suspended = false;
 
   // The swivel encoder of cable i (the default one when swivel_encoders is empty).
   SwivelEncoderModel swivel_encoder(int i) const {

@@ -26,6 +26,10 @@ struct ModelCheckOptions {
   double max_condition_number = 1e3;
   // Singular values below rank_tolerance * sigma_max count as zero.
   double rank_tolerance = 1e-9;
+  // Suspended robots with m < 6 cables (RobotModel::suspended): the home pose must be a static
+  // equilibrium, the part of the weight the cables cannot balance below this fraction of m g
+  // (moments divided by the platform radius).
+  double equilibrium_tolerance = 1e-6;
 };
 
 // Conditioning of the structure matrix A^T (6 x m) at a pose, moment rows scaled by 1 / rho
@@ -41,7 +45,10 @@ struct StructureConditioning {
 StructureConditioning structure_conditioning(const RobotModel& model, const Pose& pose,
                                              double rank_tolerance = 1e-9);
 
-// Ok, or kInvalidArgument naming the first wrong field.
+// Ok, or kInvalidArgument naming the first wrong field. A robot with fewer than six cables is
+// accepted when it is suspended (RobotModel::suspended, 3 to 5 cables): instead of rank 6 it must
+// hang at home, i.e. the cable forces balance the platform's weight there (equilibrium_tolerance)
+// with every tension within [f_min, f_max]; the message says which condition fails and why.
 Status check_model(const RobotModel& model, const ModelCheckOptions& options = {});
 
 }  // namespace cdpr
