@@ -731,8 +731,13 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     // estimated with the geometry (two more columns, "home.roll", "home.pitch").
     add_geometry_block(*B, B->poses[static_cast<std::size_t>(opt.home_pose_index)].data(), 6,
                        {false, false, false, true, true, false},
-                       {"home.x", "home.y", "home.z", "home.roll", "home.pitch", "home.yaw"}, "rad",
-                       true, {bounds.home_tilt_rad});
+                       {ParameterId{ParameterKind::kHomePose, -1, 0},
+                        {ParameterKind::kHomePose, -1, 1},
+                        {ParameterKind::kHomePose, -1, 2},
+                        {ParameterKind::kHomePose, -1, 3},
+                        {ParameterKind::kHomePose, -1, 4},
+                        {ParameterKind::kHomePose, -1, 5}},
+                       "rad", true, {bounds.home_tilt_rad});
     B->home_tilt_free = true;
     B->num_geometry = static_cast<int>(B->names.size());
   }

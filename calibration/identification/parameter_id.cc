@@ -141,6 +141,10 @@ std::string parameter_name(const ParameterId& id) {
       return std::string("inclinometer.mount.") + roll_pitch[c];
     case ParameterKind::kImuYawZero:
       return "imu.yaw_zero";
+    case ParameterKind::kHomePose: {
+      static const char* const pose[] = {"x", "y", "z", "roll", "pitch", "yaw"};
+      return std::string("home.") + pose[c];
+    }
   }
   return "unknown";
 }

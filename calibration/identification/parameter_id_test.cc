@@ -31,6 +31,8 @@ TEST(ParameterId, NamesForPeopleAreDerivedFromTheId) {
   EXPECT_EQ(parameter_name({K::kSwivelZero, 3, -1}), "swivel_zero_4");
   EXPECT_EQ(parameter_name({K::kInclinometerMount, -1, 1}), "inclinometer.mount.pitch");
   EXPECT_EQ(parameter_name({K::kImuYawZero, -1, -1}), "imu.yaw_zero");
+  EXPECT_EQ(parameter_name({K::kHomePose, -1, 3}), "home.roll");
+  EXPECT_EQ(parameter_name({K::kHomePose, -1, 4}), "home.pitch");
 }
 
 // Every estimate carries its id, its name is the id's, and no two estimates share an id.

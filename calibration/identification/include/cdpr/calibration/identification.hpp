@@ -196,6 +196,8 @@ enum class ParameterKind {
   kSwivelZero,         // swivel_zero_i, rad
   kInclinometerMount,  // inclinometer.mount.roll/pitch, rad
   kImuYawZero,         // imu.yaw_zero, rad
+  kHomePose,           // home.x/y/z/roll/pitch/yaw (component 0..5); a suspended robot's home
+                       // roll and pitch are estimated (m < 6), m / rad
 };
 
 struct ParameterId {
