@@ -6,6 +6,7 @@
 
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "cdpr/calibration/suspended_statics.hpp"
 
 namespace cdpr {
 
@@ -78,11 +79,31 @@ Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& m
                                                         const AccuracyBox& box, double f_ref,
                                                         const SensorNoise& noise,
                                                         const IdentificationOptions& identification,
-                                                        const std::vector<std::string>& names) {
+                                                        const std::vector<std::string>& names,
+                                                        int* skipped_points) {
+  const int m = model.robot.num_cables();
+  // An under-actuated suspended robot cannot hold a level pose: each target is evaluated where
+  // the platform hangs at its position and yaw.
+  const bool suspended = model.robot.suspended && m < 6;
   std::vector<Pose> grid;
-  for (const Pose& p : box.grid()) {
-    if (simple_tension_distribution(model.robot, p, f_ref)) grid.push_back(p);
+  int skipped = 0;
+  for (const Pose& target : box.grid()) {
+    Pose p = target;
+    if (suspended) {
+      const Result<SuspendedState> hang = suspended_equilibrium_pose(model.robot, target);
+      if (!hang) {
+        ++skipped;
+        continue;
+      }
+      p = hang->pose;
+    }
+    if (simple_tension_distribution(model.robot, p, f_ref)) {
+      grid.push_back(p);
+    } else {
+      ++skipped;
+    }
   }
+  if (skipped_points) *skipped_points = skipped;
   std::vector<Eigen::MatrixXd> out;
   if (grid.empty()) return out;
   SimulationOptions so;
@@ -95,7 +116,9 @@ Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& m
   // the grid records none of those channels, so they are not free there and are mapped by name.
   IdentificationOptions go = identification;
   go.use_laser = false;
-  go.use_equilibrium = false;
+  // A suspended robot's pose also obeys the 6 - m equilibrium conditions no tension can balance:
+  // the equilibrium rows are kept, and only the lengths and those conditions fix the pose below.
+  go.use_equilibrium = suspended;
   go.use_reference = false;
   go.estimate_swivel_zeros = false;
   go.estimate_inclinometer_mounting = false;
@@ -117,9 +140,25 @@ Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& m
   }
   const auto P = static_cast<Eigen::Index>(names.size());
   for (std::size_t k = 0; k < grid.size(); ++k) {
-    const Eigen::MatrixXd Gk =
-        -gg->jacobian_pose[k].completeOrthogonalDecomposition().pseudoInverse() *
-        gg->jacobian_geometry[k];
+    Eigen::MatrixXd Jp = gg->jacobian_pose[k];
+    Eigen::MatrixXd Jg = gg->jacobian_geometry[k];
+    if (suspended) {
+      // Rows of a pose: m lengths, then the equilibrium's m tension errors (the tensions follow
+      // the platform: not a constraint) and its 6 - m conditions. Keep the lengths and the
+      // conditions: a square system (its row scaling does not change G).
+      if (Jp.rows() != m + 6) {
+        return Status::error(ErrorCode::kInternal,
+                             "pose sensitivities: grid point %zu has %d rows, expected %d "
+                             "(lengths and equilibrium)",
+                             k + 1, static_cast<int>(Jp.rows()), m + 6);
+      }
+      Eigen::MatrixXd p(6, 6), g(6, Jg.cols());
+      p << Jp.topRows(m), Jp.bottomRows(6 - m);
+      g << Jg.topRows(m), Jg.bottomRows(6 - m);
+      Jp = std::move(p);
+      Jg = std::move(g);
+    }
+    const Eigen::MatrixXd Gk = -Jp.completeOrthogonalDecomposition().pseudoInverse() * Jg;
     Eigen::MatrixXd G = Eigen::MatrixXd::Zero(Gk.rows(), P);
     for (std::size_t q = 0; q < column.size(); ++q) {
       G.col(column[q]) = Gk.col(static_cast<Eigen::Index>(q));
@@ -160,8 +199,8 @@ Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
   const double f_ref = std::isnan(options.reference_tension)
                            ? default_reference_tension(model.robot)
                            : options.reference_tension;
-  auto sens =
-      pose_sensitivities(model, options.box, f_ref, noise, options.identification, gi->names);
+  auto sens = pose_sensitivities(model, options.box, f_ref, noise, options.identification,
+                                 gi->names, &out.skipped_points);
   if (!sens) return sens.status();
   if (sens->empty()) return out;
   double total = 0.0;

@@ -57,6 +57,7 @@ struct PredictedAccuracy {
   double position_rms_m = 0.0;    // predicted RMS position error over the box grid
   double position_max_m = 0.0;    // largest per-point RMS
   int grid_points = 0;            // feasible grid points used
+  int skipped_points = 0;         // box targets left out (infeasible, or cannot hang)
 };
 
 // Fits the estimated parameters to `channels`, as cdpr-fit calibrate does for a recording: the
@@ -81,12 +82,17 @@ Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
 // channels recorded; kInternal when a parameter of the lengths is not among them). The mounting
 // parameters of the laser, swivel encoders, inclinometer and IMU do not enter the commanded
 // lengths: their columns are zero. Shared by predict_accuracy and the position-accuracy pose
-// design.
+// design. An under-actuated suspended robot (suspended, m < 6) cannot hold a level pose: each box
+// target is replaced by suspended_equilibrium_pose of its position and yaw (targets that cannot
+// hang are skipped), and G = -J^-1 (dr/dp) with r the m cable lengths and the 6 - m equilibrium
+// conditions no tension can balance (the tensions follow the platform). `skipped_points`
+// (optional): how many box targets were left out.
 Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& model,
                                                         const AccuracyBox& box, double f_ref,
                                                         const SensorNoise& noise,
                                                         const IdentificationOptions& identification,
-                                                        const std::vector<std::string>& names);
+                                                        const std::vector<std::string>& names,
+                                                        int* skipped_points = nullptr);
 
 struct RealizedAccuracy {
   double position_rms_m = 0.0;
