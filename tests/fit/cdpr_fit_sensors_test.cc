@@ -240,6 +240,23 @@ TEST_F(FitSensors, SuspendedCraneRecordingIsCalibratedAndDiagnosed) {
   EXPECT_EQ(dj.at("verdict"), "no_mismatch") << d.out;
 }
 
+// The crane's accuracy prediction: its box targets are evaluated where it hangs (a level box
+// would have no feasible point), so the predicted position error is finite and positive.
+TEST_F(FitSensors, SuspendedCraneAccuracyIsPredicted) {
+  const std::string config = kSource + "/config/crane4.yaml", poses = path("crane-poses.csv");
+  const Process dp = fit({"design-poses", "--config", config, "--count", "15", "--out", poses});
+  ASSERT_EQ(dp.status, 0) << dp.err << dp.out;
+  const Process pa = fit({"--json", "predict-accuracy", "--config", config, "--poses", poses,
+                          "--channels", "swivel,inclinometer", "--points-per-axis", "3"});
+  ASSERT_EQ(pa.status, 0) << pa.err << pa.out;
+  const nlohmann::json j = nlohmann::json::parse(pa.out);
+  EXPECT_EQ(j.at("grid_points").get<int>(), 27);
+  const double rms = j.at("position_rms_m").get<double>();
+  EXPECT_TRUE(std::isfinite(rms));
+  EXPECT_GT(rms, 0.0);
+  EXPECT_GE(j.at("position_max_m").get<double>(), rms);
+}
+
 TEST_F(FitSensors, UnknownChannelIsRefused) {
   const Process s = fit({"simulate", "--config", kTruth, "--design", "8", "--channels", "sonar",
                          "--out", path("x.csv")});

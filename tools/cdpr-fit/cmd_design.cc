@@ -209,6 +209,13 @@ Result<Output> predict_accuracy(const PredictArgs& args) {
     << fmt(p->anchor_rms_std_m, 3) << " m\nposition error over the " << p->grid_points
     << "-point test grid (cube of half side " << args.half_extent << " m): RMS "
     << fmt(p->position_rms_m, 3) << " m, max " << fmt(p->position_max_m, 3) << " m\n";
+  if (model->suspended && model->num_cables() < 6) {
+    h << "(suspended robot: each grid target evaluated where the platform hangs at its position "
+         "and heading)\n";
+  }
+  if (p->skipped_points > 0) {
+    h << p->skipped_points << " grid targets skipped (tensions out of limits, or cannot hang)\n";
+  }
   Output out;
   out.json = {{"command", "predict-accuracy"},
               {"config", args.config},
