@@ -12,6 +12,7 @@
 #include "cdpr/calibration/ik_compensation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "cdpr/calibration/suspended_statics.hpp"
 #include "cdpr/calibration/winch.hpp"
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/recording/recording.hpp"
@@ -477,6 +478,67 @@ TEST(Lockstep, SwivelAndInclinometerChannelsSeeTheTruePose) {
   Result<recording::Recording> back = recording::parse_recording(*text, "rec.csv");
   ASSERT_TRUE(back.ok()) << back.status().to_string();
   EXPECT_EQ(back->poses[1].swivels, (*rb)[1].swivels);
+}
+
+// Issue 18: the virtual robot serves a suspended 4-cable crane. The commands of equilibrium poses
+// (planned with simple_tension_distribution's suspended branch) put the true crane, equal to the
+// nominal one, at those poses with the planned tensions.
+TEST(Physics, SuspendedCraneHangsAtTheCommandedEquilibria) {
+  const std::string text = "name: crane\ntruth: {config: " + kSource + "/config/crane4.yaml}\n";
+  Result<Scenario> s = parse_scenario(text, "crane.yaml", kSource);
+  ASSERT_TRUE(s.ok()) << s.status().to_string();
+  const RobotModel crane = load("crane4.yaml");
+  Result<RobotModel> truth = resolve_truth(*s, crane);
+  ASSERT_TRUE(truth.ok()) << truth.status().to_string();
+  Result<Physics> p = Physics::create(*truth, *s, 1);
+  ASSERT_TRUE(p.ok()) << p.status().to_string();
+  double t = 0.0;
+  int reached = 0;
+  for (const Eigen::Vector3d& d : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(0.2, -0.1, 0.05),
+                                   Eigen::Vector3d(-0.15, 0.25, -0.1)}) {
+    Pose target = crane.home;
+    target.position += d;
+    Result<SuspendedState> hang = suspended_equilibrium_pose(crane, target);
+    ASSERT_TRUE(hang.ok()) << hang.status().to_string();
+    Result<Eigen::VectorXd> f =
+        simple_tension_distribution(crane, hang->pose, default_reference_tension(crane));
+    ASSERT_TRUE(f.ok()) << f.status().to_string();
+    Result<Eigen::VectorXd> counts = nominal_counts(crane, hang->pose);
+    ASSERT_TRUE(counts.ok()) << counts.status().to_string();
+    const Status st = p->step(*counts, t);
+    ASSERT_TRUE(st.ok()) << st.to_string();
+    t += 0.01;
+    EXPECT_LT(position_error(p->state().pose, hang->pose), 1e-6);
+    EXPECT_LT((p->state().pose.rpy - hang->pose.rpy).cwiseAbs().maxCoeff(), 1e-6);
+    EXPECT_LT((p->state().tensions - *f).cwiseAbs().maxCoeff(), 1e-3);
+    ++reached;
+  }
+  EXPECT_EQ(reached, 3);
+
+  // The lock-step offline mode (cdpr-sim's recording path) over the same kind of poses.
+  Result<Physics> q = Physics::create(*truth, *s, 2);
+  ASSERT_TRUE(q.ok()) << q.status().to_string();
+  std::vector<Pose> poses;
+  for (const double dx : {0.0, 0.1, -0.2}) {
+    Pose target = crane.home;
+    target.position.x() += dx;
+    Result<SuspendedState> hang = suspended_equilibrium_pose(crane, target);
+    ASSERT_TRUE(hang.ok()) << hang.status().to_string();
+    poses.push_back(hang->pose);
+  }
+  LockstepOptions lo;
+  lo.swivel = true;
+  lo.inclinometer = true;
+  Result<std::vector<LockstepSample>> rec = run_lockstep(*q, crane, poses, lo);
+  ASSERT_TRUE(rec.ok()) << rec.status().to_string();
+  ASSERT_EQ(rec->size(), poses.size());
+  for (std::size_t k = 0; k < poses.size(); ++k) {
+    EXPECT_TRUE((*rec)[k].converged);
+    // Integer counts: the platform settles within the rounding of the commands.
+    EXPECT_LT(position_error((*rec)[k].true_pose, poses[k]), 1e-3);
+    EXPECT_EQ((*rec)[k].swivels.size(), 4);
+    EXPECT_TRUE((*rec)[k].inclination.allFinite());
+  }
 }
 
 }  // namespace
