@@ -315,14 +315,16 @@ std::string diagnosis_text(const Diagnosis& d, const RobotModel& nominal, const 
   }
   if (!d.candidates.empty()) {
     h << "\nCandidates (refitted, best first):\n";
-    std::snprintf(line, sizeof line, "  %-30s %6s %10s %9s %12s %12s %4s\n", "id", "P(in)", "LRT p",
-                  "dBIC", "CV before mm", "CV after mm", "");
+    // P(in): the share of the bootstrap resamples that selected this candidate itself; family:
+    // that selected it or a candidate of its family (confounded members split the first).
+    std::snprintf(line, sizeof line, "  %-30s %6s %6s %10s %9s %12s %12s %4s\n", "id", "P(in)",
+                  "family", "LRT p", "dBIC", "CV before mm", "CV after mm", "");
     h << line;
     for (const EffectFit& e : d.candidates) {
-      std::snprintf(line, sizeof line, "  %-30s %6.2f %10s %9.1f %12s %12s %4s\n", e.id.c_str(),
-                    e.inclusion_probability, p_text(e.lrt_p_value).c_str(), e.bic_delta,
-                    mm(e.cv_rms_before).c_str(), mm(e.cv_rms_after).c_str(),
-                    e.accepted ? "yes" : "");
+      std::snprintf(line, sizeof line, "  %-30s %6.2f %6.2f %10s %9.1f %12s %12s %4s\n",
+                    e.id.c_str(), e.inclusion_probability, e.family_inclusion_probability,
+                    p_text(e.lrt_p_value).c_str(), e.bic_delta, mm(e.cv_rms_before).c_str(),
+                    mm(e.cv_rms_after).c_str(), e.accepted ? "yes" : "");
       h << line;
     }
   } else if (!d.screen.candidates.empty()) {

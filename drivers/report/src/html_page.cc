@@ -839,12 +839,13 @@ std::string candidates_html(const Diagnosis& d) {
   std::ostringstream h;
   if (!d.candidates.empty()) {
     h << "<details><summary>Candidates refitted (" << d.candidates.size()
-      << ")</summary>\n<table>\n<tr>" << th("candidate") << th("inclusion") << th("LRT p")
-      << th("dBIC") << th("CV RMS before (mm)") << th("CV RMS after (mm)") << th("accepted")
-      << "</tr>\n";
+      << ")</summary>\n<table>\n<tr>" << th("candidate") << th("selected itself")
+      << th("its family selected") << th("LRT p") << th("dBIC") << th("CV RMS before (mm)")
+      << th("CV RMS after (mm)") << th("accepted") << "</tr>\n";
     for (const EffectFit& e : d.candidates) {
       h << "<tr" << (e.accepted ? " class=\"acc\"" : "") << ">" << td(e.name + " [" + e.id + "]")
-        << td(num(e.inclusion_probability, 3), true) << td(p_text(e.lrt_p_value), true)
+        << td(num(e.inclusion_probability, 3), true)
+        << td(num(e.family_inclusion_probability, 3), true) << td(p_text(e.lrt_p_value), true)
         << td(num(e.bic_delta, 4), true) << td(mm(e.cv_rms_before), true)
         << td(mm(e.cv_rms_after), true) << td(e.accepted ? "yes" : "") << "</tr>\n";
     }
