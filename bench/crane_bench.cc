@@ -78,22 +78,11 @@ double crb_at_truth(const cdpr::scenario::Scenario& s, const std::vector<cdpr::P
       "simulate");
   const cdpr::GeometryInformation gi =
       must(cdpr::geometry_information(s.truth, sim.set, sim.true_poses, ident_options(c)), "info");
-  const Eigen::VectorXd d = gi.information.diagonal().cwiseMax(1e-300).cwiseSqrt().cwiseInverse();
-  const Eigen::MatrixXd In = d.asDiagonal() * gi.information * d.asDiagonal();
-  const Eigen::MatrixXd cov =
-      d.asDiagonal() * In.completeOrthogonalDecomposition().pseudoInverse() * d.asDiagonal();
-  double sum = 0.0;
-  int count = 0;
-  for (std::size_t q = 0; q < gi.names.size(); ++q) {
-    if (gi.names[q].rfind("a_", 0) != 0) continue;
-    sum += cov(static_cast<Eigen::Index>(q), static_cast<Eigen::Index>(q));
-    ++count;
-  }
   if (summary) {
     auto ir = cdpr::analyze_identifiability(s.truth, sim.set, ident_options(c));
     *summary = ir.ok() ? ir->summary() : std::string(ir.status().message());
   }
-  return count ? std::sqrt(sum / count) : 0.0;
+  return cdpr::bench::anchor_crb_rms(gi);
 }
 
 struct BoxError {
