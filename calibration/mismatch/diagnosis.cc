@@ -16,20 +16,14 @@
 #include "cdpr/calibration/effect_library.hpp"
 #include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "text_format.hpp"
 
 namespace cdpr {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
-std::string format(const char* fmt, auto... args) {
-  const int len = std::snprintf(nullptr, 0, fmt, args...);
-  if (len <= 0) return std::string();
-  std::string out(static_cast<std::size_t>(len) + 1, '\0');
-  std::snprintf(out.data(), out.size(), fmt, args...);
-  out.resize(static_cast<std::size_t>(len));
-  return out;
-}
+using mismatch_detail::format;
 
 // Symmetric pseudo-inverse with the eigenvalue threshold relative to the largest one (after a
 // diagonal scaling, so that columns of very different units are treated alike).

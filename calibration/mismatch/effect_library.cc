@@ -5,18 +5,12 @@
 #include <cstdio>
 
 #include "cdpr/calibration/mismatch.hpp"
+#include "text_format.hpp"
 
 namespace cdpr {
 namespace {
 
-std::string format(const char* fmt, auto... args) {
-  const int len = std::snprintf(nullptr, 0, fmt, args...);
-  if (len <= 0) return std::string();
-  std::string out(static_cast<std::size_t>(len) + 1, '\0');
-  std::snprintf(out.data(), out.size(), fmt, args...);
-  out.resize(static_cast<std::size_t>(len));
-  return out;
-}
+using mismatch_detail::format;
 
 // ---- Words for the fitted coefficients (q of k: per cable when k > 1).
 

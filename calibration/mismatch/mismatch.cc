@@ -14,6 +14,7 @@
 #include "cdpr/calibration/effect_library.hpp"
 #include "cdpr/calibration/elongation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
+#include "text_format.hpp"
 
 namespace cdpr {
 namespace {
@@ -126,11 +127,7 @@ double beta_i(double a, double b, double x) {
   return 1.0 - bt * beta_fraction(b, a, 1.0 - x) / b;
 }
 
-std::string format(const char* fmt, auto... args) {
-  char buf[512];
-  std::snprintf(buf, sizeof buf, fmt, args...);
-  return buf;
-}
+using mismatch_detail::format;
 
 // ------------------------------------------------------------------------------------------
 // Residual layout (mirrors identification.cc's row order per pose: lengths, lasers, wrench,
