@@ -779,10 +779,11 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     if (involves_true) out.all_true_named = out.any_true_named = false;
   }
 
-  // "Suspected, not proven": the proposed follow-up poses are measured (same truth, same noise
-  // seed, appended) and the re-run's verdict and naming replace the first ones, as the operator
-  // would do. One round only.
-  if (d->accepted.empty() && d->follow_up && !d->follow_up->poses.empty()) {
+  // "Suspected, not proven" (with nothing named, or beside the named effects): the proposed
+  // follow-up poses are measured (same truth, same noise seed, appended) and the re-run's verdict
+  // and naming replace the first ones, as the operator would do. One round only; a run whose
+  // separating poses were already measured keeps that re-run.
+  if (!out.separation_tried && d->follow_up && !d->follow_up->poses.empty()) {
     std::vector<Pose> more = r.poses;
     more.insert(more.end(), d->follow_up->poses.begin(), d->follow_up->poses.end());
     auto set2 = record(r, *t, more, noise_seed);

@@ -748,6 +748,7 @@ std::vector<UnexplainedStructure> describe_structure(const DesignData& D, const 
     int channel = 0, cable = 0, var = 0;
     double t = 0.0, p = 1.0, slope = 0.0;
     Eigen::VectorXd z;
+    Eigen::VectorXd constant;  // the cable's constant on the channel (the nuisance), projected
   };
   std::vector<Test> tests;
   for (int ch = 0; ch < 2; ++ch) {
@@ -787,32 +788,67 @@ std::vector<UnexplainedStructure> describe_structure(const DesignData& D, const 
         const double rest = std::max(rss - t.t, 1e-300);
         t.p = f_upper_tail(t.t / (rest / d2), 1.0, d2);
         t.z = std::move(z);
+        t.constant = x0p;
         tests.push_back(std::move(t));
       }
     }
   }
   const double K = static_cast<double>(tests.size());
-  // Per channel and cable, the significant test with the largest statistic: the variable the
-  // residual follows best. It is unexplained when no candidate reproduces its column.
+  // Forward selection over every test (channel x cable x variable): the test with the largest
+  // statistic given the ones already selected (their columns projected out of its column and of
+  // the residual), while that conditional test is significant (Bonferroni over all tests). A
+  // reading error on two cables shows, weaker, on the columns of the other cables (the pose is
+  // estimated from all of them, and the equilibrium rows mix every cable's tension): the
+  // conditional test leaves those shadows out. Each selected test is then unexplained when no
+  // candidate reproduces its column.
   struct Pick {
     const Test* test = nullptr;
+    double p = 1.0;  // Bonferroni-adjusted, given the picks before it
     std::string closest;
     double rho = 0.0;
   };
   std::vector<Pick> picks;
-  for (int ch = 0; ch < 2; ++ch) {
-    for (int i = 0; i < m; ++i) {
-      const Test* best = nullptr;
-      for (const Test& t : tests) {
-        if (t.channel != ch || t.cable != i || !(std::min(1.0, K * t.p) < mopt.alpha)) continue;
-        if (best == nullptr || t.t > best->t) best = &t;
+  {
+    Eigen::MatrixXd U(n, 0);  // orthonormal basis of the selected columns
+    std::vector<bool> used(tests.size(), false);
+    for (std::size_t step = 0; step < tests.size() && step < static_cast<std::size_t>(2 * m);
+         ++step) {
+      const Eigen::VectorXd rp = r - U * (U.transpose() * r);
+      const double dof_p = d2 - static_cast<double>(U.cols());
+      if (dof_p <= 0) break;
+      std::size_t best = tests.size();
+      double best_t = 0.0;
+      for (std::size_t q = 0; q < tests.size(); ++q) {
+        if (used[q]) continue;
+        const Eigen::VectorXd zp = tests[q].z - U * (U.transpose() * tests[q].z);
+        if (!(zp.squaredNorm() > 1e-12 * tests[q].z.squaredNorm())) continue;
+        const double tq = std::pow(zp.dot(rp), 2) / zp.squaredNorm();
+        if (tq > best_t) {
+          best_t = tq;
+          best = q;
+        }
       }
-      if (best == nullptr) continue;
-      // Explained by a candidate when, with that candidate's columns added, the structure is no
-      // longer significant (a partial test); else unexplained. A candidate with a canonical
-      // correlation below structure_coverage cannot explain it.
+      if (best == tests.size()) break;
+      const double rest = std::max(rp.squaredNorm() - best_t, 1e-300);
+      const double p = std::min(1.0, K * f_upper_tail(best_t / (rest / dof_p), 1.0, dof_p));
+      if (!(p < mopt.alpha)) break;
+      used[best] = true;
+      const Eigen::VectorXd q = tests[best].z - U * (U.transpose() * tests[best].z);
+      U.conservativeResize(Eigen::NoChange, U.cols() + 1);
+      U.col(U.cols() - 1) = q.normalized();
       Pick pk;
-      pk.test = best;
+      pk.test = &tests[best];
+      pk.p = p;
+      picks.push_back(std::move(pk));
+    }
+  }
+  // Explained by a candidate when, with that candidate's columns added, the structure is no
+  // longer significant (a partial test); else unexplained. A candidate with a canonical
+  // correlation below structure_coverage cannot explain it.
+  {
+    std::vector<Pick> kept;
+    for (Pick& pk : picks) {
+      const Test* best = pk.test;
       const Eigen::VectorXd zn = best->z.normalized();
       bool explained = false;
       for (std::size_t c = 0; c < bases.size() && !explained; ++c) {
@@ -837,10 +873,24 @@ std::vector<UnexplainedStructure> describe_structure(const DesignData& D, const 
         const double pp = f_upper_tail(tp / (rest / dof_p), 1.0, dof_p);
         explained = !(std::min(1.0, K * pp) < mopt.alpha);
       }
-      if (explained) continue;
-      picks.push_back(std::move(pk));
+      if (!explained) kept.push_back(std::move(pk));
     }
+    picks = std::move(kept);
   }
+  // The slopes fitted jointly (the selected structures together), in cable order for the words.
+  std::vector<double> joint_slope(picks.size(), 0.0);
+  if (!picks.empty()) {
+    Eigen::MatrixXd Z(n, static_cast<Eigen::Index>(picks.size()));
+    for (std::size_t q = 0; q < picks.size(); ++q)
+      Z.col(static_cast<Eigen::Index>(q)) = picks[q].test->z;
+    const Eigen::VectorXd b = Z.colPivHouseholderQr().solve(r);
+    for (std::size_t q = 0; q < picks.size(); ++q) joint_slope[q] = b(static_cast<Eigen::Index>(q));
+  }
+  std::vector<std::size_t> pick_order(picks.size());
+  for (std::size_t q = 0; q < picks.size(); ++q) pick_order[q] = q;
+  std::stable_sort(pick_order.begin(), pick_order.end(), [&](std::size_t a, std::size_t b) {
+    return picks[a].test->cable < picks[b].test->cable;
+  });
   // Grouped by channel and variable.
   for (int ch = 0; ch < 2; ++ch) {
     for (int v = 0; v < static_cast<int>(std::size(vars)); ++v) {
@@ -850,12 +900,17 @@ std::vector<UnexplainedStructure> describe_structure(const DesignData& D, const 
       u.unit = vars[v].unit[0] == '\0' ? std::string(channel_unit[ch])
                                        : std::string(channel_unit[ch]) + "/" + vars[v].unit;
       Eigen::VectorXd per_pose = Eigen::VectorXd::Zero(np);
-      for (const Pick& pk : picks) {
+      for (std::size_t q : pick_order) {
+        const Pick& pk = picks[q];
         const Test& t = *pk.test;
         if (t.channel != ch || t.var != v) continue;
         u.cables.push_back(t.cable);
-        u.slopes.push_back(t.slope);
-        u.p_values.push_back(std::min(1.0, K * t.p));
+        u.slopes.push_back(joint_slope[q]);
+        u.p_values.push_back(pk.p);
+        u.columns.conservativeResize(n, u.columns.cols() + 1);
+        u.columns.col(u.columns.cols() - 1) = t.z;
+        u.constants.conservativeResize(n, u.constants.cols() + 1);
+        u.constants.col(u.constants.cols() - 1) = t.constant;
         if (pk.rho > u.closest_correlation) {
           u.closest_correlation = pk.rho;
           u.closest_candidate = pk.closest;
@@ -863,7 +918,7 @@ std::vector<UnexplainedStructure> describe_structure(const DesignData& D, const 
         for (int j = 0; j < np; ++j) {
           const auto uj = static_cast<std::size_t>(j);
           const int r0 = D.pose_start[uj], nr = D.pose_start[uj + 1] - r0;
-          per_pose(j) += t.slope * t.z.segment(r0, nr).dot(r.segment(r0, nr));
+          per_pose(j) += joint_slope[q] * t.z.segment(r0, nr).dot(r.segment(r0, nr));
         }
       }
       if (u.cables.empty()) continue;
@@ -1388,6 +1443,52 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
   }
   // --- DESCRIBE: structure that no candidate explains.
   if (mopt.describe_structure) out.unexplained = describe_structure(D, Q1, bases, out, mopt);
+  // Each candidate's test beyond the unexplained structures.
+  {
+    Eigen::MatrixXd U(n, 0);
+    for (const auto& u : out.unexplained) {
+      // The structure with its nuisance: a constant per listed cable (friction on a cable paid
+      // out more often than reeled in also shifts its mean reading).
+      Eigen::MatrixXd W(n, U.cols() + u.columns.cols() + u.constants.cols());
+      W << U, u.columns, u.constants;
+      U = W;
+    }
+    if (U.cols() > 0) U = column_basis(U, mopt.rank_tolerance);
+    const Eigen::VectorXd rU = r - U * (U.transpose() * r);
+    std::vector<std::size_t> order;
+    std::vector<double> p(out.candidates.size(), 1.0);
+    for (std::size_t c = 0; c < out.candidates.size(); ++c) {
+      if (out.candidates[c].rank == 0) continue;
+      order.push_back(c);
+      if (U.cols() == 0) {
+        p[c] = out.candidates[c].p_value;
+        continue;
+      }
+      // bases[c] is orthonormal: the singular values of its part outside U say how much of each
+      // direction is left.
+      Eigen::JacobiSVD<Eigen::MatrixXd> svd(bases[c] - U * (U.transpose() * bases[c]),
+                                            Eigen::ComputeThinU);
+      int rk = 0;
+      for (Eigen::Index q = 0; q < svd.singularValues().size(); ++q) {
+        if (svd.singularValues()(q) > std::sqrt(mopt.rank_tolerance)) ++rk;
+      }
+      const Eigen::MatrixXd B = svd.matrixU().leftCols(rk);
+      const double dof_c = out.dof - static_cast<double>(U.cols() + B.cols());
+      if (B.cols() == 0 || dof_c <= 0) continue;
+      const double t = (B.transpose() * rU).squaredNorm();
+      const double rest = std::max(rU.squaredNorm() - t, 1e-300);
+      p[c] = f_upper_tail((t / static_cast<double>(B.cols())) / (rest / dof_c),
+                          static_cast<double>(B.cols()), dof_c);
+    }
+    std::sort(order.begin(), order.end(),
+              [&](std::size_t a, std::size_t b) { return p[a] < p[b]; });
+    double running = 0.0;
+    const double K = static_cast<double>(order.size());
+    for (std::size_t q = 0; q < order.size(); ++q) {
+      running = std::max(running, std::min(1.0, (K - static_cast<double>(q)) * p[order[q]]));
+      out.candidates[order[q]].p_beyond_structure = running;
+    }
+  }
 
   std::stable_sort(out.candidates.begin(), out.candidates.end(),
                    [](const CandidateScreen& a, const CandidateScreen& b) {

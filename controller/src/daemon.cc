@@ -1061,7 +1061,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
       pretensions.insert(pretensions.end(), cf.separating_pretensions.begin(),
                          cf.separating_pretensions.end());
     }
-    if (diagnosis->accepted.empty() && diagnosis->follow_up) {
+    if (diagnosis->follow_up) {
       extra.insert(extra.end(), diagnosis->follow_up->poses.begin(),
                    diagnosis->follow_up->poses.end());
       pretensions.insert(pretensions.end(), diagnosis->follow_up->pretensions.begin(),

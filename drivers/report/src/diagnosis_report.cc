@@ -67,8 +67,29 @@ nlohmann::json effect_json(const EffectFit& e) {
           {"cv_normalized_before", number_or_null(e.cv_normalized_before)},
           {"cv_normalized_after", number_or_null(e.cv_normalized_after)},
           {"accepted", e.accepted},
+          {"round", e.round},
           {"modelled_in_config", e.modelled_in_config},
           {"parameters", params}};
+}
+
+nlohmann::json unexplained_json(const std::vector<UnexplainedStructure>& all) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const UnexplainedStructure& u : all) {
+    nlohmann::json cables = nlohmann::json::array(), poses = nlohmann::json::array();
+    for (int c : u.cables) cables.push_back(c + 1);
+    for (int j : u.poses) poses.push_back(j);
+    out.push_back({{"channel", u.channel},
+                   {"variable", u.variable},
+                   {"cables", cables},
+                   {"slopes", u.slopes},
+                   {"unit", u.unit},
+                   {"p_values", u.p_values},
+                   {"poses", poses},
+                   {"closest_candidate", u.closest_candidate},
+                   {"closest_correlation", number_or_null(u.closest_correlation)},
+                   {"description", u.description}});
+  }
+  return out;
 }
 
 nlohmann::json misfit_json(const MisfitGroup& g) {
@@ -196,6 +217,7 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const RobotModel& nominal,
                                  {"statistic", number_or_null(s.statistic)},
                                  {"p_value", number_or_null(s.p_value)},
                                  {"p_adjusted", number_or_null(s.p_adjusted)},
+                                 {"p_beyond_structure", number_or_null(s.p_beyond_structure)},
                                  {"explained_fraction", number_or_null(s.explained_fraction)},
                                  {"bic_delta", number_or_null(s.bic_delta)},
                                  {"significant", s.significant}});
@@ -262,7 +284,15 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const RobotModel& nominal,
         {"channels", screen_channels},
         {"cables", screen_cables},
         {"significant_structure", structure},
+        {"unexplained", unexplained_json(d.screen.unexplained)},
         {"candidates", screen_candidates}}},
+      {"screen_after",
+       d.screen_after
+           ? nlohmann::json{{"chi2", number_or_null(d.screen_after->chi2)},
+                            {"dof", d.screen_after->dof},
+                            {"p_value", number_or_null(d.screen_after->p_value)},
+                            {"unexplained", unexplained_json(d.screen_after->unexplained)}}
+           : nlohmann::json(nullptr)},
       {"calibrated_config",
        c.calibrated_config.empty() ? nlohmann::json(nullptr) : nlohmann::json(c.calibrated_config)},
       {"warnings", c.warnings},

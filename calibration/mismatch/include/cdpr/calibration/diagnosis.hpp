@@ -43,6 +43,8 @@ struct DiagnosisOptions {
   // detection. 0: never; above 1: always (the lowest p-value). When the screen's overall misfit
   // test fails and nothing is named (verdict "mismatch unexplained"), the candidate with the lowest
   // p-value is a suspect whatever this threshold (more poses are the next step there anyway).
+  // Beside named effects, the second screening round's candidates (other families) are screened
+  // the same way, without that last rule.
   double suspect_p = 0.2;
   int follow_up_poses = 20;
   // The first accepted effect must also be seen by the linear screen: its screen p-value
@@ -84,6 +86,9 @@ struct EffectFit {
   // acceptance test (an effect of the laser or the force sensors may leave the lengths alone).
   double cv_normalized_before = 0.0, cv_normalized_after = 0.0;
   bool accepted = false;
+  // 1: found by the first screen (the standard model's residual); 2: by the second screening
+  // round, on the residual the effects accepted before it leave.
+  int round = 1;
   bool modelled_in_config = false;  // the calibrated config can carry it (else: report only)
   std::vector<EffectParameter> parameters;
 };
@@ -124,10 +129,15 @@ struct Diagnosis {
   std::vector<std::string> findings;  // plain-language sentences, most important first
   IdentificationReport before;        // the standard identification
   MismatchSummary screen;             // locate_mismatch on `before`
+  // locate_mismatch on the model with the accepted effects (the second screening round; its
+  // `unexplained` is what that model still leaves). Empty when nothing was accepted.
+  std::optional<MismatchSummary> screen_after;
   std::vector<EffectFit> candidates;  // refitted candidates, best first
   std::vector<EffectFit> accepted;    // the named effects (subset of candidates)
   std::vector<ConfoundedFinding> confounded;
-  std::optional<FollowUp> follow_up;  // with no effect named: a suspect and poses to decide it
+  // A suspect and the poses to decide it: with no effect named, from the screen; beside named
+  // effects, from the second screening round (screen_after).
+  std::optional<FollowUp> follow_up;
   std::optional<IdentificationReport> after;  // identification with the accepted effects
   CalibratedModel model_after;                // the calibrated model carrying the accepted effects
   std::vector<ChannelRms> channels;           // residual RMS before/after per channel

@@ -113,6 +113,11 @@ struct UnexplainedStructure {
   std::string closest_candidate;
   double closest_correlation = 0.0;
   std::string description;  // one sentence
+  // Rows x listed cables: each test's column in the screen's residual space (whitened, the
+  // identification and the per-cable constant projected out), for partial tests against it.
+  Eigen::MatrixXd columns;
+  // The same cables' constants on the channel (the tests' nuisance), projected the same way.
+  Eigen::MatrixXd constants;
 };
 
 // Misfit of one group of residuals (a channel, a cable or a pose).
@@ -154,6 +159,11 @@ struct CandidateScreen {
   double f_statistic = 0.0;  // (T / k) / ((RSS - T) / (dof - k))
   double p_value = 1.0;      // F upper tail
   double p_adjusted = 1.0;   // Holm over the screened library
+  // The same test with the unexplained structures' columns (MismatchSummary::unexplained) also
+  // projected out, Holm over the library: a candidate significant only through a structure it
+  // does not explain is a proxy for it (diagnose() does not name it). The structures enter with
+  // their per-cable constants. Equal to p_adjusted when nothing is unexplained.
+  double p_beyond_structure = 1.0;
   double explained_fraction = 0.0;  // T / RSS
   double bic_delta = 0.0;           // n ln((RSS - T) / RSS) + k ln n; negative = worth adding
   bool significant = false;         // p_adjusted < alpha
