@@ -93,10 +93,9 @@ TEST(Identification, ErrorIsConsistentWithTheReportedStd) {
   double sum = 0.0;
   int count = 0;
   for (const ParameterEstimate& p : rep->parameters) {
-    if (p.name.rfind("a_", 0) != 0) continue;
-    const int cable = std::stoi(p.name.substr(2, p.name.find('.') - 2)) - 1;
-    const int axis = p.name.back() - 'x';
-    const double z = (p.value - d.s.truth.robot.frame_anchors(axis, cable)) / p.std_dev;
+    if (p.id.kind != ParameterKind::kFrameAnchor) continue;
+    const double z =
+        (p.value - d.s.truth.robot.frame_anchors(p.id.component, p.id.index)) / p.std_dev;
     sum += z * z;
     ++count;
   }
