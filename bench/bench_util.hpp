@@ -7,11 +7,13 @@
 #include <cstddef>
 #include <cstdio>
 #include <cstdlib>
-#include <optional>
 #include <utility>
+#include <vector>
 
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/predicted_accuracy.hpp"
+#include "cdpr/calibration/simulate.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr::bench {
@@ -115,6 +117,13 @@ struct BoxError {
   int points = 0;  // box targets evaluated
 };
 
+// The BoxError of `model` over `box` on the robot `truth` (measure_position_accuracy).
+inline BoxError realized_box_error(const CalibratedModel& truth, const CalibratedModel& model,
+                                   const AccuracyBox& box) {
+  const RealizedAccuracy acc = must(measure_position_accuracy(truth, model, box), "accuracy");
+  return BoxError{acc.position_rms_m, acc.position_max_m, acc.grid_points};
+}
+
 // What the Monte Carlo of a configuration gives: the runs that converged, those the identification
 // refused, and over the converged runs the anchor errors, the mean chi2/dof and the box error (RMS
 // and mean over the runs of each run's RMS, and the largest point error).
@@ -129,29 +138,32 @@ struct MonteCarlo {
   double box_mean() const { return sum_box / std::max(1, ok); }
 };
 
-// Seeds 0 .. seeds - 1: `identify_seed(seed)` simulates the seed's recording and identifies it
-// (std::nullopt when the simulation failed: the seed is skipped), `box_error(model)` is the
-// BoxError of a calibrated model. Runs that are refused or do not converge are not counted.
-template <typename IdentifySeed, typename BoxErrorOf>
-MonteCarlo monte_carlo(int seeds, const Eigen::Matrix3Xd& true_anchors, IdentifySeed identify_seed,
-                       BoxErrorOf box_error) {
-  MonteCarlo mc(true_anchors);
+// Seeds 0 .. seeds - 1: `truth` is commanded to `commands` by the simulation `simulation` with
+// noise seed 1000 + seed (a recording the simulator fails on is skipped), `nominal` is calibrated
+// from it with `identification`, and `box_error(model)` gives the BoxError of the calibrated
+// model. Runs that are refused or do not converge are not counted.
+template <typename BoxErrorOf>
+MonteCarlo monte_carlo(int seeds, const CalibratedModel& truth, const CalibratedModel& nominal,
+                       const std::vector<Pose>& commands, const SensorNoise& noise,
+                       const SimulationOptions& simulation,
+                       const IdentificationOptions& identification, BoxErrorOf box_error) {
+  MonteCarlo mc(truth.robot.frame_anchors);
   for (int seed = 0; seed < seeds; ++seed) {
-    std::optional<Result<IdentificationReport>> rep = identify_seed(seed);
-    if (!rep) continue;
-    if (!rep->ok()) {
+    auto sim = simulate_measurements(truth, commands, noise, 1000 + seed, simulation);
+    if (!sim.ok()) continue;
+    auto rep = identify(nominal, sim->set, identification);
+    if (!rep.ok()) {
       ++mc.refused;
       continue;
     }
-    const IdentificationReport& r = rep->value();
-    if (!r.converged) continue;
+    if (!rep->converged) continue;
     ++mc.ok;
-    mc.sum_chi2_dof += r.chi2 / std::max(1, r.dof);
-    const BoxError be = box_error(r.estimate);
+    mc.sum_chi2_dof += rep->chi2 / std::max(1, rep->dof);
+    const BoxError be = box_error(rep->estimate);
     mc.sum_box += be.rms;
     mc.sum_box2 += be.rms * be.rms;
     mc.box_max = std::max(mc.box_max, be.max);
-    mc.anchors.add(r);
+    mc.anchors.add(*rep);
   }
   return mc;
 }

@@ -22,7 +22,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <optional>
 #include <string>
 #include <vector>
 
@@ -153,14 +152,8 @@ int main(int argc, char** argv) {
     const double crb = crb_at_truth(crane, poses, c, &summary);
     summaries.push_back(std::string(c.name) + ":\n" + summary);
     const cdpr::bench::MonteCarlo mc = cdpr::bench::monte_carlo(
-        seeds, crane.truth.robot.frame_anchors,
-        [&](int seed) -> std::optional<cdpr::Result<cdpr::IdentificationReport>> {
-          auto sim = cdpr::simulate_measurements(crane.truth, poses, bench_noise(), 1000 + seed,
-                                                 sim_options(crane, c, true));
-          if (!sim.ok()) return std::nullopt;
-          return cdpr::identify(crane.nominal, sim->set, ident_options(c));
-        },
-        [&](const cdpr::CalibratedModel& estimate) {
+        seeds, crane.truth, crane.nominal, poses, bench_noise(), sim_options(crane, c, true),
+        ident_options(c), [&](const cdpr::CalibratedModel& estimate) {
           return box_error(crane.truth, estimate, box);
         });
     if (mc.ok == 0) {

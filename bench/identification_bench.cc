@@ -15,7 +15,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <optional>
 #include <string>
 #include <vector>
 
@@ -67,14 +66,20 @@ cdpr::SensorNoise bench_noise() {
   return n;
 }
 
-cdpr::SimulatedMeasurements simulate(const cdpr::scenario::Scenario& s,
-                                     const std::vector<Pose>& poses, std::uint64_t seed,
-                                     bool elastic = true) {
+cdpr::SimulationOptions simulation_options(const cdpr::scenario::Scenario& s, bool elastic = true) {
   cdpr::SimulationOptions so;
   so.physics = elastic && g_elastic ? cdpr::SimulationOptions::Physics::kElastic
                                     : cdpr::SimulationOptions::Physics::kRigid;
   so.controller = &s.nominal;
-  return must(cdpr::simulate_measurements(s.truth, poses, bench_noise(), seed, so), "simulate");
+  return so;
+}
+
+cdpr::SimulatedMeasurements simulate(const cdpr::scenario::Scenario& s,
+                                     const std::vector<Pose>& poses, std::uint64_t seed,
+                                     bool elastic = true) {
+  return must(cdpr::simulate_measurements(s.truth, poses, bench_noise(), seed,
+                                          simulation_options(s, elastic)),
+              "simulate");
 }
 
 // The paper's set-up: coordinates outside V known (measured), laser plane known. With
@@ -326,15 +331,9 @@ int main(int argc, char** argv) {
     std::printf("\n== MINI: Monte Carlo over %d seeds (designed poses) ==\n", seeds);
     const auto t0 = std::chrono::steady_clock::now();
     const cdpr::bench::MonteCarlo mc = cdpr::bench::monte_carlo(
-        seeds, mini.truth.robot.frame_anchors,
-        [&](int seed) -> std::optional<cdpr::Result<cdpr::IdentificationReport>> {
-          const cdpr::SimulatedMeasurements sim = simulate(mini, designed, 1000 + seed);
-          return cdpr::identify(mini.nominal, sim.set, cdpr::IdentificationOptions{});
-        },
-        [&](const cdpr::CalibratedModel& estimate) {
-          const cdpr::RealizedAccuracy acc =
-              must(cdpr::measure_position_accuracy(mini.truth, estimate, iso), "accuracy");
-          return cdpr::bench::BoxError{acc.position_rms_m, acc.position_max_m, acc.grid_points};
+        seeds, mini.truth, mini.nominal, designed, bench_noise(), simulation_options(mini),
+        cdpr::IdentificationOptions{}, [&](const cdpr::CalibratedModel& estimate) {
+          return cdpr::bench::realized_box_error(mini.truth, estimate, iso);
         });
     const int ok = mc.ok;
     const double rms_err = mc.anchors.rms();

@@ -34,7 +34,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <optional>
 #include <string>
 #include <vector>
 
@@ -209,17 +208,9 @@ int main(int argc, char** argv) {
     const double crb = crb_at_truth(s, poses, c, &summary);
     summaries.push_back(std::string(c.name) + ":\n" + summary);
     const cdpr::bench::MonteCarlo mc = cdpr::bench::monte_carlo(
-        seeds, s.truth.robot.frame_anchors,
-        [&](int seed) -> std::optional<cdpr::Result<cdpr::IdentificationReport>> {
-          auto sim = cdpr::simulate_measurements(s.truth, poses, bench_noise(), 1000 + seed,
-                                                 sim_options(s, c, true));
-          if (!sim.ok()) return std::nullopt;
-          return cdpr::identify(s.nominal, sim->set, ident_options(c));
-        },
+        seeds, s.truth, s.nominal, poses, bench_noise(), sim_options(s, c, true), ident_options(c),
         [&](const cdpr::CalibratedModel& estimate) {
-          const cdpr::RealizedAccuracy acc =
-              must(cdpr::measure_position_accuracy(s.truth, estimate, box), "accuracy");
-          return cdpr::bench::BoxError{acc.position_rms_m, acc.position_max_m, acc.grid_points};
+          return cdpr::bench::realized_box_error(s.truth, estimate, box);
         });
     const double rms = mc.anchors.rms();
     std::printf(
