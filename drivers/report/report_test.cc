@@ -166,11 +166,13 @@ TEST_F(CalibrationReport, LargestAnchorChangeCarriesItsUncertaintyAlongTheChange
   Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
   for (std::size_t q = 0; q < id_.parameters.size(); ++q) {
     for (std::size_t k = 0; k < id_.parameters.size(); ++k) {
-      const std::string& a = id_.parameters[q].name;
-      const std::string& b = id_.parameters[k].name;
-      const std::string prefix = "a_" + std::to_string(worst + 1) + ".";
-      if (a.rfind(prefix, 0) != 0 || b.rfind(prefix, 0) != 0) continue;
-      cov(a.back() - 'x', b.back() - 'x') =
+      const ParameterId& a = id_.parameters[q].id;
+      const ParameterId& b = id_.parameters[k].id;
+      const auto of_worst = [&](const ParameterId& id) {
+        return id.kind == ParameterKind::kFrameAnchor && id.index == worst;
+      };
+      if (!of_worst(a) || !of_worst(b)) continue;
+      cov(a.component, b.component) =
           id_.covariance(static_cast<Eigen::Index>(q), static_cast<Eigen::Index>(k));
     }
   }
