@@ -126,7 +126,7 @@ TEST_F(CalibrationReport, HtmlShowsAnchorsWithTheirStdAndResidualsPerCableAndPos
   // Cable 3's standard deviation in the anchor table, from its three coordinates.
   double var = 0.0;
   for (const ParameterEstimate& p : id_.parameters) {
-    if (p.name.rfind("a_3.", 0) == 0) var += p.std_dev * p.std_dev;
+    if (p.id.kind == ParameterKind::kFrameAnchor && p.id.index == 2) var += p.std_dev * p.std_dev;
   }
   ASSERT_GT(var, 0.0);
   EXPECT_THAT(r.html, HasSubstr("<td class=\"n\">" + fmt(1e3 * std::sqrt(var), 3) + "</td></tr>"));
