@@ -17,12 +17,7 @@ namespace {
 // MINI, 20 random poses, default noise: the recording every identification below runs on.
 const MeasurementSet& mini_recording() {
   static const MeasurementSet set = [] {
-    const scenario::Scenario s = scenario::mini_scenario();
-    const std::vector<Pose> poses =
-        scenario::random_feasible_poses(s.nominal.robot, s.box, 20, 11, &s.truth.robot);
-    SimulationOptions so;
-    so.controller = &s.nominal;
-    auto sim = simulate_measurements(s.truth, poses, SensorNoise{}, 5, so);
+    auto sim = scenario::simulate_random_poses(scenario::mini_scenario(), 20, 11, 5);
     EXPECT_TRUE(sim.ok()) << sim.status().to_string();
     return sim.ok() ? sim->set : MeasurementSet{};
   }();

@@ -57,11 +57,7 @@ class CalibrationReport : public ::testing::Test {
  protected:
   void SetUp() override {
     s_ = scenario::mini_scenario();
-    const std::vector<Pose> poses =
-        scenario::random_feasible_poses(s_.nominal.robot, s_.box, 20, 3, &s_.truth.robot);
-    SimulationOptions so;
-    so.controller = &s_.nominal;
-    auto sim = simulate_measurements(s_.truth, poses, SensorNoise{}, 5, so);
+    auto sim = scenario::simulate_random_poses(s_, 20, 3, 5);
     ASSERT_TRUE(sim.ok()) << sim.status().to_string();
     set_ = sim->set;
     auto rep = identify(s_.nominal, set_);
