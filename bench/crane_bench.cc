@@ -85,10 +85,7 @@ double crb_at_truth(const cdpr::scenario::Scenario& s, const std::vector<cdpr::P
   return cdpr::bench::anchor_crb_rms(gi);
 }
 
-struct BoxError {
-  double rms = 0.0, max = 0.0;
-  int points = 0;
-};
+using cdpr::bench::BoxError;
 
 // The controller `ctrl` commands the equilibrium pose of each target; the true crane settles.
 BoxError box_error(const cdpr::CalibratedModel& truth, const cdpr::CalibratedModel& ctrl,
@@ -154,46 +151,21 @@ int main(int argc, char** argv) {
     std::string summary;
     const double crb = crb_at_truth(crane, poses, c, &summary);
     summaries.push_back(std::string(c.name) + ":\n" + summary);
-    double sum_sq = 0.0, sum_std2 = 0.0, sum_chi2 = 0.0, sum_pos2 = 0.0, pos_max = 0.0;
-    long covered = 0, total = 0;
-    int ok = 0, refused = 0;
-    for (int seed = 0; seed < seeds; ++seed) {
-      auto sim = cdpr::simulate_measurements(crane.truth, poses, bench_noise(), 1000 + seed,
-                                             sim_options(crane, c, true));
-      if (!sim.ok()) continue;
-      auto rep = cdpr::identify(crane.nominal, sim->set, ident_options(c));
-      if (!rep.ok()) {
-        ++refused;
-        continue;
-      }
-      if (!rep->converged) continue;
-      ++ok;
-      sum_chi2 += rep->chi2 / std::max(1, rep->dof);
-      const BoxError be = box_error(crane.truth, rep->estimate, box);
-      sum_pos2 += be.rms * be.rms;
-      pos_max = std::max(pos_max, be.max);
-      for (const cdpr::ParameterEstimate& p : rep->parameters) {
-        if (p.name.rfind("a_", 0) != 0) continue;
-        const int cable = std::stoi(p.name.substr(2, p.name.find('.') - 2)) - 1;
-        const int axis = p.name.back() - 'x';
-        const double e = p.value - crane.truth.robot.frame_anchors(axis, cable);
-        sum_sq += e * e;
-        sum_std2 += p.std_dev * p.std_dev;
-        covered += std::abs(e) <= 1.96 * p.std_dev ? 1 : 0;
-        ++total;
-      }
-    }
-    if (ok == 0) {
-      std::printf("%-24s refused or failed in every run (%d refused)\n", c.name, refused);
+    const cdpr::bench::MonteCarlo mc = cdpr::bench::monte_carlo(
+        seeds, crane.truth, crane.nominal, poses, bench_noise(), sim_options(crane, c, true),
+        ident_options(c), [&](const cdpr::CalibratedModel& estimate) {
+          return box_error(crane.truth, estimate, box);
+        });
+    if (mc.ok == 0) {
+      std::printf("%-24s refused or failed in every run (%d refused)\n", c.name, mc.refused);
       continue;
     }
-    const double rms = std::sqrt(sum_sq / std::max<long>(1, total));
-    std::printf(
-        "%-24s %9.3f %9.3f %8.3f %9.3f %9.1f %9.3f %9.3f %8.3f %6d  (%.0f s)\n", c.name, 1e3 * rms,
-        1e3 * crb, rms / crb, 1e3 * std::sqrt(sum_std2 / std::max<long>(1, total)),
-        100.0 * static_cast<double>(covered) / static_cast<double>(std::max<long>(1, total)),
-        1e3 * std::sqrt(sum_pos2 / std::max(1, ok)), 1e3 * pos_max, sum_chi2 / std::max(1, ok), ok,
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    const double rms = mc.anchors.rms();
+    std::printf("%-24s %9.3f %9.3f %8.3f %9.3f %9.1f %9.3f %9.3f %8.3f %6d  (%.0f s)\n", c.name,
+                1e3 * rms, 1e3 * crb, rms / crb, 1e3 * mc.anchors.reported_std(),
+                mc.anchors.coverage_percent(), 1e3 * mc.box_rms(), 1e3 * mc.box_max, mc.chi2_dof(),
+                mc.ok,
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     std::fflush(stdout);
   }
   std::printf("\nIdentifiability at the truth (per configuration):\n");

@@ -66,14 +66,20 @@ cdpr::SensorNoise bench_noise() {
   return n;
 }
 
-cdpr::SimulatedMeasurements simulate(const cdpr::scenario::Scenario& s,
-                                     const std::vector<Pose>& poses, std::uint64_t seed,
-                                     bool elastic = true) {
+cdpr::SimulationOptions simulation_options(const cdpr::scenario::Scenario& s, bool elastic = true) {
   cdpr::SimulationOptions so;
   so.physics = elastic && g_elastic ? cdpr::SimulationOptions::Physics::kElastic
                                     : cdpr::SimulationOptions::Physics::kRigid;
   so.controller = &s.nominal;
-  return must(cdpr::simulate_measurements(s.truth, poses, bench_noise(), seed, so), "simulate");
+  return so;
+}
+
+cdpr::SimulatedMeasurements simulate(const cdpr::scenario::Scenario& s,
+                                     const std::vector<Pose>& poses, std::uint64_t seed,
+                                     bool elastic = true) {
+  return must(cdpr::simulate_measurements(s.truth, poses, bench_noise(), seed,
+                                          simulation_options(s, elastic)),
+              "simulate");
 }
 
 // The paper's set-up: coordinates outside V known (measured), laser plane known. With
@@ -323,42 +329,15 @@ int main(int argc, char** argv) {
   // ---------------- Monte Carlo ----------------
   {
     std::printf("\n== MINI: Monte Carlo over %d seeds (designed poses) ==\n", seeds);
-    const int P = 24;
-    Eigen::VectorXd sum_err = Eigen::VectorXd::Zero(P), sum_sq = Eigen::VectorXd::Zero(P);
-    long covered = 0, total = 0;
-    double sum_std2 = 0.0, sum_chi2_dof = 0.0, sum_pos = 0.0, sum_pos2 = 0.0;
-    int ok = 0;
     const auto t0 = std::chrono::steady_clock::now();
-    for (int seed = 0; seed < seeds; ++seed) {
-      const cdpr::SimulatedMeasurements sim = simulate(mini, designed, 1000 + seed);
-      auto rep = cdpr::identify(mini.nominal, sim.set, cdpr::IdentificationOptions{});
-      if (!rep.ok() || !rep->converged) continue;
-      ++ok;
-      sum_chi2_dof += rep->chi2 / std::max(1, rep->dof);
-      {
-        const double pos =
-            must(cdpr::measure_position_accuracy(mini.truth, rep->estimate, iso), "accuracy")
-                .position_rms_m;
-        sum_pos += pos;
-        sum_pos2 += pos * pos;
-      }
-      int k = 0;
-      for (const cdpr::ParameterEstimate& p : rep->parameters) {
-        if (p.name.rfind("a_", 0) != 0) continue;
-        const int cable = std::stoi(p.name.substr(2, p.name.find('.') - 2)) - 1;
-        const int axis = p.name.back() - 'x';
-        const double e = p.value - mini.truth.robot.frame_anchors(axis, cable);
-        sum_err(k) += e;
-        sum_sq(k) += e * e;
-        sum_std2 += p.std_dev * p.std_dev;
-        covered += std::abs(e) <= 1.96 * p.std_dev ? 1 : 0;
-        ++total;
-        ++k;
-      }
-    }
-    const Eigen::VectorXd bias = sum_err / std::max(1, ok);
-    const double rms_err = std::sqrt(sum_sq.sum() / std::max<long>(1, total));
-    const double rms_std = std::sqrt(sum_std2 / std::max<long>(1, total));
+    const cdpr::bench::MonteCarlo mc = cdpr::bench::monte_carlo(
+        seeds, mini.truth, mini.nominal, designed, bench_noise(), simulation_options(mini),
+        cdpr::IdentificationOptions{}, [&](const cdpr::CalibratedModel& estimate) {
+          return cdpr::bench::realized_box_error(mini.truth, estimate, iso);
+        });
+    const int ok = mc.ok;
+    const double rms_err = mc.anchors.rms();
+    const double rms_std = mc.anchors.reported_std();
     std::printf("  converged runs                 %d / %d (%.1f s)\n", ok, seeds,
                 seconds_since(t0));
     std::printf("  anchor RMS error               %.4f mm\n", 1e3 * rms_err);
@@ -372,15 +351,13 @@ int main(int argc, char** argv) {
     std::printf(
         "  box position RMS over runs     %.4f mm (mean of per-run RMS %.4f mm; target "
         "<= 0.5 mm), nominal %.4f mm\n",
-        1e3 * std::sqrt(sum_pos2 / std::max(1, ok)), 1e3 * sum_pos / std::max(1, ok),
-        1e3 * rm.nominal_pos_rms);
+        1e3 * mc.box_rms(), 1e3 * mc.box_mean(), 1e3 * rm.nominal_pos_rms);
     std::printf("  bias: RMS over coords %.4f mm, max %.4f mm (std of the mean %.4f mm)\n",
-                1e3 * std::sqrt(bias.squaredNorm() / P), 1e3 * bias.cwiseAbs().maxCoeff(),
+                1e3 * mc.anchors.bias(), 1e3 * mc.anchors.bias_max(),
                 1e3 * rms_err / std::sqrt(std::max(1, ok)));
-    std::printf("  chi2/dof (mean over runs)      %.3f\n", sum_chi2_dof / std::max(1, ok));
-    std::printf(
-        "  coverage of the 95 %% interval  %.1f %% (target 90-98 %%)\n",
-        100.0 * static_cast<double>(covered) / static_cast<double>(std::max<long>(1, total)));
+    std::printf("  chi2/dof (mean over runs)      %.3f\n", mc.chi2_dof());
+    std::printf("  coverage of the 95 %% interval  %.1f %% (target 90-98 %%)\n",
+                mc.anchors.coverage_percent());
   }
 
   // ---------------- Large robot ----------------

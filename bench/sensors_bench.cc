@@ -207,59 +207,20 @@ int main(int argc, char** argv) {
     std::string summary;
     const double crb = crb_at_truth(s, poses, c, &summary);
     summaries.push_back(std::string(c.name) + ":\n" + summary);
-    // Per anchor coordinate (3 x m): sum of the errors, for the bias.
-    Eigen::Matrix3Xd sum_err = Eigen::Matrix3Xd::Zero(3, s.truth.robot.num_cables());
-    Eigen::Array<int, 3, Eigen::Dynamic> count_err =
-        Eigen::Array<int, 3, Eigen::Dynamic>::Zero(3, s.truth.robot.num_cables());
-    double sum_sq = 0.0, sum_std2 = 0.0, sum_chi2 = 0.0, sum_pos2 = 0.0, pos_max = 0.0;
-    long covered = 0, total = 0;
-    int ok = 0;
-    for (int seed = 0; seed < seeds; ++seed) {
-      auto sim = cdpr::simulate_measurements(s.truth, poses, bench_noise(), 1000 + seed,
-                                             sim_options(s, c, true));
-      if (!sim.ok()) continue;
-      auto rep = cdpr::identify(s.nominal, sim->set, ident_options(c));
-      if (!rep.ok() || !rep->converged) continue;
-      ++ok;
-      sum_chi2 += rep->chi2 / std::max(1, rep->dof);
-      const cdpr::RealizedAccuracy acc =
-          must(cdpr::measure_position_accuracy(s.truth, rep->estimate, box), "accuracy");
-      sum_pos2 += acc.position_rms_m * acc.position_rms_m;
-      pos_max = std::max(pos_max, acc.position_max_m);
-      for (const cdpr::ParameterEstimate& p : rep->parameters) {
-        if (p.name.rfind("a_", 0) != 0) continue;
-        const int cable = std::stoi(p.name.substr(2, p.name.find('.') - 2)) - 1;
-        const int axis = p.name.back() - 'x';
-        const double e = p.value - s.truth.robot.frame_anchors(axis, cable);
-        sum_sq += e * e;
-        sum_err(axis, cable) += e;
-        count_err(axis, cable) += 1;
-        sum_std2 += p.std_dev * p.std_dev;
-        covered += std::abs(e) <= 1.96 * p.std_dev ? 1 : 0;
-        ++total;
-      }
-    }
-    const double rms = std::sqrt(sum_sq / std::max<long>(1, total));
-    // Bias: RMS over the estimated coordinates of the mean error (its noise floor is about
-    // rms / sqrt(runs)).
-    double bias2 = 0.0;
-    int biased = 0;
-    for (Eigen::Index q = 0; q < sum_err.size(); ++q) {
-      const int n = count_err(q);
-      if (n == 0) continue;
-      bias2 += (sum_err(q) / n) * (sum_err(q) / n);
-      ++biased;
-    }
-    const double bias = std::sqrt(bias2 / std::max(1, biased));
+    const cdpr::bench::MonteCarlo mc = cdpr::bench::monte_carlo(
+        seeds, s.truth, s.nominal, poses, bench_noise(), sim_options(s, c, true), ident_options(c),
+        [&](const cdpr::CalibratedModel& estimate) {
+          return cdpr::bench::realized_box_error(s.truth, estimate, box);
+        });
+    const double rms = mc.anchors.rms();
     std::printf(
         "%-26s %8.3f %8.3f %7.3f %8.3f %8.3f %8.1f %8.3f %8.3f %8.3f %8.3f %6d  (bias %.3f mm, "
         "noise floor %.3f mm; design %.0f s, %.0f s)\n",
         c.name, 1e3 * rms, 1e3 * crb, rms / crb, 1e3 * predicted.anchor_rms_std_m,
-        1e3 * std::sqrt(sum_std2 / std::max<long>(1, total)),
-        100.0 * static_cast<double>(covered) / static_cast<double>(std::max<long>(1, total)),
-        1e3 * std::sqrt(sum_pos2 / std::max(1, ok)), 1e3 * predicted.position_rms_m, 1e3 * pos_max,
-        sum_chi2 / std::max(1, ok), ok, 1e3 * bias, 1e3 * rms / std::sqrt(std::max(1, ok)),
-        design_s, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        1e3 * mc.anchors.reported_std(), mc.anchors.coverage_percent(), 1e3 * mc.box_rms(),
+        1e3 * predicted.position_rms_m, 1e3 * mc.box_max, mc.chi2_dof(), mc.ok,
+        1e3 * mc.anchors.bias(), 1e3 * rms / std::sqrt(std::max(1, mc.ok)), design_s,
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
     std::fflush(stdout);
   }
   std::printf("\nIdentifiability at the truth (per configuration):\n");

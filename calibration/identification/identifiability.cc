@@ -13,22 +13,32 @@ namespace cdpr {
 
 namespace {
 
-// Words for a parameter name ("o_3" -> "the length offset of cable 3").
-std::string words(const std::string& name) {
-  auto cable_of = [&](std::size_t prefix) { return name.substr(prefix); };
-  if (name.rfind("o_", 0) == 0) return "the length offset of cable " + cable_of(2);
-  if (name.rfind("s_", 0) == 0) return "the transmission scale of cable " + cable_of(2);
-  if (name.rfind("ea_scale_", 0) == 0) return "the stiffness EA of cable " + cable_of(9);
-  if (name == "ea_scale") return "the shared cable stiffness EA";
-  if (name.rfind("force_gain_", 0) == 0) return "the force sensor gain of cable " + cable_of(11);
-  if (name.rfind("force_offset_", 0) == 0)
-    return "the force sensor offset of cable " + cable_of(13);
-  if (name.rfind("b_", 0) == 0) return name + " (platform anchor)";
-  if (name.rfind("swivel_zero_", 0) == 0) return "the swivel encoder zero of cable " + cable_of(12);
-  if (name == "inclinometer.mount.roll") return "the inclinometer's mounting roll";
-  if (name == "inclinometer.mount.pitch") return "the inclinometer's mounting pitch";
-  if (name == "imu.yaw_zero") return "the IMU's heading zero";
-  return name;
+// Words for a parameter ({kLengthOffset, 2} -> "the length offset of cable 3").
+std::string words(const ParameterId& id) {
+  const std::string cable = std::to_string(id.index + 1);
+  switch (id.kind) {
+    case ParameterKind::kLengthOffset:
+      return "the length offset of cable " + cable;
+    case ParameterKind::kLengthScale:
+      return "the transmission scale of cable " + cable;
+    case ParameterKind::kStiffness:
+      return id.index < 0 ? "the shared cable stiffness EA" : "the stiffness EA of cable " + cable;
+    case ParameterKind::kForceGain:
+      return "the force sensor gain of cable " + cable;
+    case ParameterKind::kForceOffset:
+      return "the force sensor offset of cable " + cable;
+    case ParameterKind::kPlatformAnchor:
+      return parameter_name(id) + " (platform anchor)";
+    case ParameterKind::kSwivelZero:
+      return "the swivel encoder zero of cable " + cable;
+    case ParameterKind::kInclinometerMount:
+      return id.component == 0 ? "the inclinometer's mounting roll"
+                               : "the inclinometer's mounting pitch";
+    case ParameterKind::kImuYawZero:
+      return "the IMU's heading zero";
+    default:
+      return parameter_name(id);
+  }
 }
 
 struct Named {
@@ -44,7 +54,6 @@ std::vector<Named> components(const GeometryInformation& gi, const Eigen::Vector
   const int P = static_cast<int>(v.size());
   std::vector<bool> used(static_cast<std::size_t>(P), false);
   const int m = static_cast<int>(gi.anchor_columns.cols());
-  const char* axis = "xyz";
   for (int i = 0; i < m; ++i) {
     Eigen::Vector3d w_si = Eigen::Vector3d::Zero();
     double importance2 = 0.0;
@@ -66,7 +75,7 @@ std::vector<Named> components(const GeometryInformation& gi, const Eigen::Vector
     if (count == 0) continue;
     const double importance = std::sqrt(importance2);
     if (importance < opt.component_threshold) continue;
-    const std::string a = "a_" + std::to_string(i + 1);
+    const std::string a = parameter_name({ParameterKind::kFrameAnchor, i, -1});  // "a_3"
     const Eigen::Vector3d u = gi.home_cable_directions.col(i);
     const double along = w_si.dot(u);
     // Sign convention: "+" moves the anchor away from the platform along its cable.
@@ -74,7 +83,8 @@ std::vector<Named> components(const GeometryInformation& gi, const Eigen::Vector
       out.push_back(
           {a + " along cable " + std::to_string(i + 1), along > 0 ? importance : -importance});
     } else if (big * big >= 0.8 * importance2) {
-      out.push_back({a + "." + axis[biggest], v(gi.anchor_columns(biggest, i))});
+      out.push_back({parameter_name({ParameterKind::kFrameAnchor, i, biggest}),
+                     v(gi.anchor_columns(biggest, i))});
     } else {
       char buf[96];
       const Eigen::Vector3d dir = w_si.normalized();
@@ -86,7 +96,7 @@ std::vector<Named> components(const GeometryInformation& gi, const Eigen::Vector
   for (int q = 0; q < P; ++q) {
     if (used[static_cast<std::size_t>(q)]) continue;
     if (std::abs(v(q)) < opt.component_threshold) continue;
-    out.push_back({words(gi.names[static_cast<std::size_t>(q)]), v(q)});
+    out.push_back({words(gi.ids[static_cast<std::size_t>(q)]), v(q)});
   }
   std::sort(out.begin(), out.end(),
             [](const Named& x, const Named& y) { return std::abs(x.weight) > std::abs(y.weight); });
@@ -143,6 +153,7 @@ IdentifiabilityReport analyze_identifiability(const GeometryInformation& gi,
   IdentifiabilityReport r;
   const Eigen::MatrixXd& S = gi.information;
   const int P = static_cast<int>(S.rows());
+  r.parameter_ids = gi.ids;
   r.parameter_names = gi.names;
   r.num_parameters = P;
   r.num_residuals = gi.num_residuals;
@@ -283,7 +294,7 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
       {"inclinometer", c.inclination, &IdentificationOptions::use_inclinometer},
       {"IMU yaw", c.imu_yaw, &IdentificationOptions::use_imu_yaw},
   };
-  const int P = static_cast<int>(gi->names.size());
+  const int P = static_cast<int>(gi->ids.size());
   auto stds = [&](const Eigen::MatrixXd& S) {
     const int n = static_cast<int>(S.rows());
     Eigen::VectorXd d(n);
@@ -327,13 +338,13 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
     // Without the channel, parameters only it observes are not estimated at all (the
     // identification frees a mounting parameter only where its channel is used): they count as
     // unidentifiable without it, and the rank is that of the full choice minus them.
-    const int P2 = static_cast<int>(g2->names.size());
+    const int P2 = static_cast<int>(g2->ids.size());
     const Eigen::VectorXd wo2 = stds(g2->information);
     Eigen::VectorXd wo = Eigen::VectorXd::Constant(P, std::numeric_limits<double>::infinity());
     for (int q2 = 0; q2 < P2; ++q2) {
       const auto it =
-          std::find(gi->names.begin(), gi->names.end(), g2->names[static_cast<std::size_t>(q2)]);
-      if (it != gi->names.end()) wo(static_cast<int>(it - gi->names.begin())) = wo2(q2);
+          std::find(gi->ids.begin(), gi->ids.end(), g2->ids[static_cast<std::size_t>(q2)]);
+      if (it != gi->ids.end()) wo(static_cast<int>(it - gi->ids.begin())) = wo2(q2);
     }
     std::vector<std::pair<std::string, double>> gains;
     for (int q = 0; q < P; ++q) {

@@ -4,7 +4,9 @@
 
 #include <cmath>
 #include <random>
+#include <set>
 #include <string>
+#include <vector>
 
 #include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/simulate.hpp"
@@ -91,10 +93,9 @@ TEST(Identification, ErrorIsConsistentWithTheReportedStd) {
   double sum = 0.0;
   int count = 0;
   for (const ParameterEstimate& p : rep->parameters) {
-    if (p.name.rfind("a_", 0) != 0) continue;
-    const int cable = std::stoi(p.name.substr(2, p.name.find('.') - 2)) - 1;
-    const int axis = p.name.back() - 'x';
-    const double z = (p.value - d.s.truth.robot.frame_anchors(axis, cable)) / p.std_dev;
+    if (p.id.kind != ParameterKind::kFrameAnchor) continue;
+    const double z =
+        (p.value - d.s.truth.robot.frame_anchors(p.id.component, p.id.index)) / p.std_dev;
     sum += z * z;
     ++count;
   }
@@ -220,6 +221,110 @@ TEST(Identifiability, NamesAnchorAlongCableAgainstOffset) {
     }
   }
   EXPECT_TRUE(named) << rep->summary();
+}
+
+// The words of every parameter kind in the named directions, pinned: hand-made information whose
+// weak directions are known (blocks I - c w w^T of the column-normalised information, one block per
+// direction, c close to 1; one parameter with no information at all).
+TEST(Identifiability, NamesEveryParameterKindInWords) {
+  using K = ParameterKind;
+  struct Block {
+    std::vector<ParameterId> ids;
+    std::vector<double> w;        // the weak direction (each entry +-1: a uniform diagonal)
+    std::set<std::string> words;  // the expected component descriptions
+  };
+  const std::vector<Block> blocks = {
+      {{{K::kFrameAnchor, 0, 0},
+        {K::kFrameAnchor, 0, 1},
+        {K::kFrameAnchor, 0, 2},
+        {K::kLengthOffset, 0, -1}},
+       {1, 1, 1, -1},
+       {"a_1 along cable 1", "the length offset of cable 1"}},
+      {{{K::kFrameAnchor, 1, 1}, {K::kLengthScale, 1, -1}},
+       {1, -1},
+       {"a_2.y", "the transmission scale of cable 2"}},
+      {{{K::kFrameAnchor, 2, 0}, {K::kFrameAnchor, 2, 1}, {K::kFrameAnchor, 2, 2}},
+       {1, 1, 1},
+       {"a_3 along (0.58, 0.58, 0.58)"}},
+      {{{K::kStiffness, 3, -1}, {K::kStiffness, -1, -1}},
+       {1, -1},
+       {"the stiffness EA of cable 4", "the shared cable stiffness EA"}},
+      {{{K::kForceGain, 0, -1}, {K::kForceOffset, 5, -1}},
+       {1, 1},
+       {"the force sensor gain of cable 1", "the force sensor offset of cable 6"}},
+      {{{K::kPlatformAnchor, 1, 1}, {K::kSwivelZero, 4, -1}},
+       {1, -1},
+       {"b_2.y (platform anchor)", "the swivel encoder zero of cable 5"}},
+      {{{K::kInclinometerMount, -1, 0}, {K::kInclinometerMount, -1, 1}},
+       {1, 1},
+       {"the inclinometer's mounting roll", "the inclinometer's mounting pitch"}},
+      {{{K::kImuYawZero, -1, -1}, {K::kLaserPlaneOffset, 0, -1}},
+       {1, -1},
+       {"the IMU's heading zero", "laser_1.plane.c"}},
+      {{{K::kHomePose, -1, 3}}, {0}, {"home.roll"}},  // no information at all
+  };
+  GeometryInformation gi;
+  int P = 0;
+  for (const Block& b : blocks) P += static_cast<int>(b.ids.size());
+  gi.information = Eigen::MatrixXd::Zero(P, P);
+  gi.anchor_columns = Eigen::Matrix3Xi::Constant(3, 3, -1);
+  gi.home_cable_directions.resize(3, 3);
+  gi.home_cable_directions << Eigen::Vector3d::Ones().normalized(), Eigen::Vector3d::UnitX(),
+      Eigen::Vector3d::UnitZ();
+  gi.num_residuals = 100;
+  int col = 0;
+  for (std::size_t k = 0; k < blocks.size(); ++k) {
+    const Block& b = blocks[k];
+    const int n = static_cast<int>(b.ids.size());
+    Eigen::VectorXd w(n);
+    for (int q = 0; q < n; ++q) w(q) = b.w[static_cast<std::size_t>(q)];
+    if (w.norm() > 0) {
+      w.normalize();
+      const double c = 1.0 - 1e-4 * static_cast<double>(k + 1);  // distinct weak values
+      gi.information.block(col, col, n, n) =
+          Eigen::MatrixXd::Identity(n, n) - c * w * w.transpose();
+    }
+    for (int q = 0; q < n; ++q) {
+      const ParameterId& id = b.ids[static_cast<std::size_t>(q)];
+      gi.ids.push_back(id);
+      gi.names.push_back(parameter_name(id));
+      if (id.kind == K::kFrameAnchor) gi.anchor_columns(id.component, id.index) = col + q;
+    }
+    col += n;
+  }
+  IdentifiabilityOptions io;
+  io.weak_tolerance = 0.5;
+  const IdentifiabilityReport r = analyze_identifiability(gi, io);
+  ASSERT_EQ(r.directions.size(), blocks.size()) << r.summary();
+  EXPECT_EQ(r.unobserved, std::vector<int>{P - 1});
+  for (const Block& b : blocks) {
+    bool found = false;
+    for (const ParameterDirection& d : r.directions) {
+      std::set<std::string> words;
+      for (const DirectionComponent& c : d.components) {
+        // The sign of a direction is arbitrary: "a_3 along (-0.58, ...)" is the same direction.
+        std::string text = c.description;
+        if (text.find(" along (-") != std::string::npos) {
+          for (std::size_t at = 0; (at = text.find("-", at)) != std::string::npos;)
+            text.erase(at, 1);
+        }
+        words.insert(text);
+      }
+      if (words != b.words) continue;
+      found = true;
+      for (const DirectionComponent& c : d.components) {
+        EXPECT_NE(d.description.find(c.description), std::string::npos) << d.description;
+      }
+      if (b.words.size() == 1) {
+        EXPECT_EQ(d.description, d.components[0].description + " is not determined by the data");
+      } else {
+        EXPECT_NE(d.description.find(" trades against "), std::string::npos) << d.description;
+      }
+    }
+    EXPECT_TRUE(found) << *b.words.begin() << "\n" << r.summary();
+  }
+  EXPECT_TRUE(r.directions.front().null) << r.summary();
+  EXPECT_EQ(r.directions.front().description, "home.roll is not determined by the data");
 }
 
 }  // namespace

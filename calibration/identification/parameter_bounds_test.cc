@@ -40,14 +40,15 @@ const Data& mini_data() {
 }
 
 struct KindCase {
-  std::string name;   // the parameter name prefix in IdentificationReport::parameters
-  double half_range;  // the tight range set for the test (relative kinds)
+  ParameterKind kind;  // the estimates of IdentificationReport::parameters it concerns
+  double half_range;   // the tight range set for the test (relative kinds)
   // Switches the kind on and narrows its range to `half_range`.
   std::function<void(IdentificationOptions&, double)> enable;
 };
 
-bool starts_with(const std::string& s, const std::string& p) {
-  return s.rfind(p, 0) == 0;
+// "a_1.x", "o_1", "laser_1.plane.c", ...: which kind a case is about, for the trace.
+std::string kind_name(ParameterKind kind) {
+  return parameter_name({kind, 0, 0});
 }
 
 // Each kind's range is narrowed far below what the data ask for (the truth or the noise moves the
@@ -55,65 +56,66 @@ bool starts_with(const std::string& s, const std::string& p) {
 // bound, and the report says so.
 TEST(ParameterBounds, EveryParameterKindIsHeldInsideItsRange) {
   const std::vector<KindCase> kinds = {
-      {"a_", 1e-4, [](IdentificationOptions& o, double h) { o.bounds.frame_anchor_m = h; }},
-      {"b_", 1e-5,
+      {ParameterKind::kFrameAnchor, 1e-4,
+       [](IdentificationOptions& o, double h) { o.bounds.frame_anchor_m = h; }},
+      {ParameterKind::kPlatformAnchor, 1e-5,
        [](IdentificationOptions& o, double h) {
          o.estimate_platform_anchors = true;
          o.estimate_frame_anchors = false;
          o.bounds.platform_anchor_m = h;
        }},
-      {"o", 1e-5, [](IdentificationOptions& o, double h) { o.bounds.length_offset_m = h; }},
-      {"s", 1e-6,
+      {ParameterKind::kLengthOffset, 1e-5,
+       [](IdentificationOptions& o, double h) { o.bounds.length_offset_m = h; }},
+      {ParameterKind::kLengthScale, 1e-6,
        [](IdentificationOptions& o, double h) {
          o.estimate_length_scales = true;
          o.bounds.length_scale = h;
        }},
-      {"force_gain", 1e-5,
+      {ParameterKind::kForceGain, 1e-5,
        [](IdentificationOptions& o, double h) {
          o.estimate_force_gains = true;
          o.bounds.force_gain = h;
        }},
-      {"force_offset", 1e-6,
+      {ParameterKind::kForceOffset, 1e-6,
        [](IdentificationOptions& o, double h) {
          o.estimate_force_offsets = true;
          o.bounds.force_offset_fraction = h;  // x f_max (200 N) x gain (2): 4e-4 raw
        }},
-      {"laser_1.origin", 1e-5,
+      {ParameterKind::kLaserOrigin, 1e-5,
        [](IdentificationOptions& o, double h) {
          o.estimate_laser_origin = true;
          o.estimate_laser_plane = false;
          o.bounds.laser_origin_m = h;
        }},
-      {"laser_1.direction", 1e-6,
+      {ParameterKind::kLaserDirection, 1e-6,
        [](IdentificationOptions& o, double h) {
          o.estimate_laser_direction = true;
          o.estimate_laser_plane = false;
          o.bounds.laser_direction_rad = h;
        }},
-      {"laser_1.plane.normal", 1e-6,
+      {ParameterKind::kLaserPlaneNormal, 1e-6,
        [](IdentificationOptions& o, double h) { o.bounds.plane_normal_rad = h; }},
-      {"laser_1.plane.c", 1e-5,
+      {ParameterKind::kLaserPlaneOffset, 1e-5,
        [](IdentificationOptions& o, double h) { o.bounds.plane_offset_m = h; }},
   };
   const Data& d = mini_data();
   for (const KindCase& k : kinds) {
-    SCOPED_TRACE(k.name);
+    SCOPED_TRACE(kind_name(k.kind));
     IdentificationOptions opt;
     k.enable(opt, k.half_range);
     auto rep = identify(d.s.nominal, d.set, opt);
     ASSERT_TRUE(rep.ok()) << rep.status().to_string();
     int of_kind = 0, at_bound = 0;
     for (const ParameterEstimate& p : rep->parameters) {
-      if (!starts_with(p.name, k.name)) continue;
-      // "o" and "s" must not catch other names.
-      if ((k.name == "o" || k.name == "s") && p.name.size() > 1 && p.name[1] != '_') continue;
+      if (p.id.kind != k.kind) continue;
       ++of_kind;
       const double tol = 1e-9 * std::max(1.0, std::abs(p.initial));
       EXPECT_GE(p.value, p.lower - tol) << p.name;
       EXPECT_LE(p.value, p.upper + tol) << p.name;
       const double width = p.upper - p.lower;
-      const double expected =
-          k.name == "force_offset" ? 2.0 * k.half_range * 200.0 * 2.0 : 2.0 * k.half_range;
+      const double expected = k.kind == ParameterKind::kForceOffset
+                                  ? 2.0 * k.half_range * 200.0 * 2.0
+                                  : 2.0 * k.half_range;
       EXPECT_NEAR(width, expected, 1e-9 * expected) << p.name;
       at_bound += p.at_bound ? 1 : 0;
     }
@@ -153,7 +155,7 @@ TEST(ParameterBounds, StiffnessStaysWithinItsFactorOfTheConfig) {
     ASSERT_TRUE(bounded.ok()) << bounded.status().to_string();
     int at_lower = 0;
     for (const ParameterEstimate& p : bounded->parameters) {
-      if (!starts_with(p.name, "ea_scale")) continue;
+      if (p.id.kind != ParameterKind::kStiffness) continue;
       EXPECT_NEAR(p.lower, -0.1, 1e-12);
       EXPECT_NEAR(p.upper, 0.1, 1e-12);
       EXPECT_GE(p.value, -0.1 - 1e-12);
@@ -238,7 +240,7 @@ namespace {
 // roll and pitch, IMU heading zero. MINI with swivel encoders, inclinometer and IMU; the truth
 // hides zeros of up to 0.05 rad, a mounting of (0.012, -0.017) rad and a heading zero of 0.4 rad.
 struct SensorKindCase {
-  std::string name;        // parameter name prefix in IdentificationReport::parameters
+  ParameterKind kind;      // the estimates of IdentificationReport::parameters it concerns
   double default_half;     // ParameterBounds' default half range
   double narrow_half;      // a range the truth lies outside of
   double truth_magnitude;  // the largest true deviation of the kind from the config, rad
@@ -283,11 +285,11 @@ std::vector<SensorKindCase> sensor_kinds(const scenario::Scenario& s) {
   const double yaw = std::abs(t.inclinometer.yaw_zero - n.inclinometer.yaw_zero);
   const ParameterBounds defaults;
   return {
-      {"swivel_zero_", defaults.swivel_zero_rad, 0.2 * swivel, swivel,
+      {ParameterKind::kSwivelZero, defaults.swivel_zero_rad, 0.2 * swivel, swivel,
        [](IdentificationOptions& o, double h) { o.bounds.swivel_zero_rad = h; }},
-      {"inclinometer.mount.", defaults.inclinometer_mount_rad, 0.2 * mount, mount,
+      {ParameterKind::kInclinometerMount, defaults.inclinometer_mount_rad, 0.2 * mount, mount,
        [](IdentificationOptions& o, double h) { o.bounds.inclinometer_mount_rad = h; }},
-      {"imu.yaw_zero", defaults.imu_yaw_zero_rad, 0.2 * yaw, yaw,
+      {ParameterKind::kImuYawZero, defaults.imu_yaw_zero_rad, 0.2 * yaw, yaw,
        [](IdentificationOptions& o, double h) { o.bounds.imu_yaw_zero_rad = h; }},
   };
 }
@@ -300,12 +302,12 @@ TEST(ParameterBounds, SensorKindsHaveTheirDefaultRangesAndFitInside) {
   auto rep = identify(s.nominal, set, sensor_kind_options());
   ASSERT_TRUE(rep.ok()) << rep.status().to_string();
   for (const SensorKindCase& k : sensor_kinds(s)) {
-    SCOPED_TRACE(k.name);
+    SCOPED_TRACE(kind_name(k.kind));
     ASSERT_GT(k.truth_magnitude, 0.0);
     ASSERT_LT(k.truth_magnitude, k.default_half);
     int of_kind = 0;
     for (const ParameterEstimate& p : rep->parameters) {
-      if (!starts_with(p.name, k.name)) continue;
+      if (p.id.kind != k.kind) continue;
       ++of_kind;
       EXPECT_NEAR(p.upper - p.lower, 2.0 * k.default_half, 1e-9 * k.default_half) << p.name;
       EXPECT_FALSE(p.at_bound) << p.name;
@@ -321,14 +323,14 @@ TEST(ParameterBounds, SensorKindsAreHeldAtTheirBoundAndReported) {
   const scenario::Scenario s = scenario::mini_sensor_scenario();
   const MeasurementSet& set = sensor_set(s);
   for (const SensorKindCase& k : sensor_kinds(s)) {
-    SCOPED_TRACE(k.name);
+    SCOPED_TRACE(kind_name(k.kind));
     IdentificationOptions opt = sensor_kind_options();
     k.narrow(opt, k.narrow_half);
     auto rep = identify(s.nominal, set, opt);
     ASSERT_TRUE(rep.ok()) << rep.status().to_string();
     int of_kind = 0, at_bound = 0;
     for (const ParameterEstimate& p : rep->parameters) {
-      if (!starts_with(p.name, k.name)) continue;
+      if (p.id.kind != k.kind) continue;
       ++of_kind;
       const double tol = 1e-9 * std::max(1.0, std::abs(p.initial));
       EXPECT_NEAR(p.upper - p.lower, 2.0 * k.narrow_half, 1e-9 * k.narrow_half) << p.name;

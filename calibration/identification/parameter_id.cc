@@ -111,12 +111,16 @@ std::string parameter_name(const ParameterId& id) {
   static const char* const uv[] = {"u", "v"};
   static const char* const roll_pitch[] = {"roll", "pitch"};
   const int c = id.component;
+  // ".x" for component 0 of {"x", "y", "z"}; "" for the whole vector (component -1).
+  const auto part = [c](const char* const* names) {
+    return c < 0 ? std::string() : std::string(".") + names[c];
+  };
   const std::string laser = "laser" + numbered(id.index);
   switch (id.kind) {
     case ParameterKind::kFrameAnchor:
-      return "a" + numbered(id.index) + "." + xyz[c];
+      return "a" + numbered(id.index) + part(xyz);
     case ParameterKind::kPlatformAnchor:
-      return "b" + numbered(id.index) + "." + xyz[c];
+      return "b" + numbered(id.index) + part(xyz);
     case ParameterKind::kLengthOffset:
       return "o" + numbered(id.index);
     case ParameterKind::kLengthScale:
@@ -128,22 +132,22 @@ std::string parameter_name(const ParameterId& id) {
     case ParameterKind::kForceOffset:
       return "force_offset" + numbered(id.index);
     case ParameterKind::kLaserOrigin:
-      return laser + ".origin." + xyz[c];
+      return laser + ".origin" + part(xyz);
     case ParameterKind::kLaserDirection:
-      return laser + ".direction." + uv[c];
+      return laser + ".direction" + part(uv);
     case ParameterKind::kLaserPlaneNormal:
-      return laser + ".plane.normal." + uv[c];
+      return laser + ".plane.normal" + part(uv);
     case ParameterKind::kLaserPlaneOffset:
       return laser + ".plane.c";
     case ParameterKind::kSwivelZero:
       return "swivel_zero" + numbered(id.index);
     case ParameterKind::kInclinometerMount:
-      return std::string("inclinometer.mount.") + roll_pitch[c];
+      return "inclinometer.mount" + part(roll_pitch);
     case ParameterKind::kImuYawZero:
       return "imu.yaw_zero";
     case ParameterKind::kHomePose: {
       static const char* const pose[] = {"x", "y", "z", "roll", "pitch", "yaw"};
-      return std::string("home.") + pose[c];
+      return "home" + part(pose);
     }
   }
   return "unknown";

@@ -14,40 +14,58 @@
 namespace cdpr {
 namespace {
 
+// MINI, 20 random poses, default noise: the recording every identification below runs on.
+const MeasurementSet& mini_recording() {
+  static const MeasurementSet set = [] {
+    auto sim = scenario::simulate_random_poses(scenario::mini_scenario(), 20, 11, 5);
+    EXPECT_TRUE(sim.ok()) << sim.status().to_string();
+    return sim.ok() ? sim->set : MeasurementSet{};
+  }();
+  return set;
+}
+
 TEST(ParameterId, NamesForPeopleAreDerivedFromTheId) {
   using K = ParameterKind;
-  EXPECT_EQ(parameter_name({K::kFrameAnchor, 2, 0}), "a_3.x");
-  EXPECT_EQ(parameter_name({K::kPlatformAnchor, 0, 2}), "b_1.z");
-  EXPECT_EQ(parameter_name({K::kLengthOffset, 4, -1}), "o_5");
-  EXPECT_EQ(parameter_name({K::kLengthScale, 7, -1}), "s_8");
-  EXPECT_EQ(parameter_name({K::kStiffness, -1, -1}), "ea_scale");
-  EXPECT_EQ(parameter_name({K::kStiffness, 1, -1}), "ea_scale_2");
-  EXPECT_EQ(parameter_name({K::kForceGain, 0, -1}), "force_gain_1");
-  EXPECT_EQ(parameter_name({K::kForceOffset, 5, -1}), "force_offset_6");
-  EXPECT_EQ(parameter_name({K::kLaserOrigin, 0, 1}), "laser_1.origin.y");
-  EXPECT_EQ(parameter_name({K::kLaserDirection, 1, 1}), "laser_2.direction.v");
-  EXPECT_EQ(parameter_name({K::kLaserPlaneNormal, 0, 0}), "laser_1.plane.normal.u");
-  EXPECT_EQ(parameter_name({K::kLaserPlaneOffset, 0, -1}), "laser_1.plane.c");
-  EXPECT_EQ(parameter_name({K::kSwivelZero, 3, -1}), "swivel_zero_4");
-  EXPECT_EQ(parameter_name({K::kInclinometerMount, -1, 1}), "inclinometer.mount.pitch");
-  EXPECT_EQ(parameter_name({K::kImuYawZero, -1, -1}), "imu.yaw_zero");
-  EXPECT_EQ(parameter_name({K::kHomePose, -1, 3}), "home.roll");
-  EXPECT_EQ(parameter_name({K::kHomePose, -1, 4}), "home.pitch");
+  struct Case {
+    ParameterId id;
+    const char* name;
+  };
+  const Case cases[] = {
+      {{K::kFrameAnchor, 2, 0}, "a_3.x"},
+      {{K::kPlatformAnchor, 0, 2}, "b_1.z"},
+      {{K::kLengthOffset, 4, -1}, "o_5"},
+      {{K::kLengthScale, 7, -1}, "s_8"},
+      {{K::kStiffness, -1, -1}, "ea_scale"},
+      {{K::kStiffness, 1, -1}, "ea_scale_2"},
+      {{K::kForceGain, 0, -1}, "force_gain_1"},
+      {{K::kForceOffset, 5, -1}, "force_offset_6"},
+      {{K::kLaserOrigin, 0, 1}, "laser_1.origin.y"},
+      {{K::kLaserDirection, 1, 1}, "laser_2.direction.v"},
+      {{K::kLaserPlaneNormal, 0, 0}, "laser_1.plane.normal.u"},
+      {{K::kLaserPlaneOffset, 0, -1}, "laser_1.plane.c"},
+      {{K::kSwivelZero, 3, -1}, "swivel_zero_4"},
+      {{K::kInclinometerMount, -1, 1}, "inclinometer.mount.pitch"},
+      {{K::kImuYawZero, -1, -1}, "imu.yaw_zero"},
+      {{K::kHomePose, -1, 3}, "home.roll"},
+      {{K::kHomePose, -1, 4}, "home.pitch"},
+      // A vector kind without its component names the whole vector.
+      {{K::kFrameAnchor, 2, -1}, "a_3"},
+      {{K::kPlatformAnchor, 0, -1}, "b_1"},
+      {{K::kLaserOrigin, 0, -1}, "laser_1.origin"},
+      {{K::kLaserPlaneNormal, 1, -1}, "laser_2.plane.normal"},
+      {{K::kInclinometerMount, -1, -1}, "inclinometer.mount"},
+      {{K::kHomePose, -1, -1}, "home"},
+  };
+  for (const Case& c : cases) EXPECT_EQ(parameter_name(c.id), c.name);
 }
 
 // Every estimate carries its id, its name is the id's, and no two estimates share an id.
 TEST(ParameterId, EveryEstimateCarriesItsId) {
   const scenario::Scenario s = scenario::mini_scenario();
-  const std::vector<Pose> poses =
-      scenario::random_feasible_poses(s.nominal.robot, s.box, 20, 11, &s.truth.robot);
-  SimulationOptions so;
-  so.controller = &s.nominal;
-  auto sim = simulate_measurements(s.truth, poses, SensorNoise{}, 5, so);
-  ASSERT_TRUE(sim.ok()) << sim.status().to_string();
   IdentificationOptions opt;
   opt.estimate_stiffness = StiffnessEstimate::kPerCable;
   opt.estimate_force_gains = true;
-  auto rep = identify(s.nominal, sim->set, opt);
+  auto rep = identify(s.nominal, mini_recording(), opt);
   ASSERT_TRUE(rep.ok()) << rep.status().to_string();
   std::set<std::string> names;
   int anchors = 0, stiffness = 0;
@@ -82,17 +100,12 @@ TEST(ParameterId, EachEstimateWordSwitchesOnItsKinds) {
   EXPECT_EQ(find_estimate_item("no-such-item"), nullptr);
   // Switched on in an identification, a word's kinds are among the estimates.
   const scenario::Scenario s = scenario::mini_scenario();
-  const std::vector<Pose> poses =
-      scenario::random_feasible_poses(s.nominal.robot, s.box, 20, 11, &s.truth.robot);
-  SimulationOptions so;
-  so.controller = &s.nominal;
-  auto sim = simulate_measurements(s.truth, poses, SensorNoise{}, 5, so);
-  ASSERT_TRUE(sim.ok()) << sim.status().to_string();
+  ASSERT_GT(mini_recording().num_poses(), 0);
   for (const char* word : {"scales", "force-offsets", "stiffness"}) {
     SCOPED_TRACE(word);
     IdentificationOptions o;
     find_estimate_item(word)->set(o, true);
-    auto rep = identify(s.nominal, sim->set, o);
+    auto rep = identify(s.nominal, mini_recording(), o);
     ASSERT_TRUE(rep.ok()) << rep.status().to_string();
     int of_word = 0;
     for (const ParameterEstimate& p : rep->parameters) {

@@ -60,10 +60,10 @@ Result<Eigen::MatrixXd> position_weight(const CalibratedModel& model,
                                         const PoseDesignOptions& options, double f_ref,
                                         const GeometryInformation& gi) {
   auto sens = pose_sensitivities(model, options.accuracy_box, f_ref, options.noise,
-                                 options.identification, gi.names);
+                                 options.identification, gi.ids);
   if (!sens) return sens.status();
   if (sens->empty()) return Eigen::MatrixXd(Eigen::MatrixXd::Zero(0, 0));
-  const auto P = static_cast<Eigen::Index>(gi.names.size());
+  const auto P = static_cast<Eigen::Index>(gi.ids.size());
   Eigen::MatrixXd W = Eigen::MatrixXd::Zero(P, P);
   for (const Eigen::MatrixXd& G : *sens) W += G.topRows<3>().transpose() * G.topRows<3>();
   return Eigen::MatrixXd(W / static_cast<double>(sens->size()));

@@ -79,7 +79,7 @@ Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& m
                                                         const AccuracyBox& box, double f_ref,
                                                         const SensorNoise& noise,
                                                         const IdentificationOptions& identification,
-                                                        const std::vector<std::string>& names,
+                                                        const std::vector<ParameterId>& ids,
                                                         int* skipped_points) {
   const int m = model.robot.num_cables();
   // An under-actuated suspended robot cannot hold a level pose: each target is evaluated where
@@ -113,7 +113,7 @@ Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& m
   if (!gsim) return gsim.status();
   // Lengths only, and no pose held by the gauge: every grid pose is free. The mounting
   // parameters of the issue 18 channels do not enter the lengths (their columns of G are zero);
-  // the grid records none of those channels, so they are not free there and are mapped by name.
+  // the grid records none of those channels, so they are not free there and are mapped by id.
   IdentificationOptions go = identification;
   go.use_laser = false;
   // A suspended robot's pose also obeys the 6 - m equilibrium conditions no tension can balance:
@@ -127,18 +127,18 @@ Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& m
   if (go.gauge == Gauge::kHomePoseAndLaserPlane) go.gauge = Gauge::kLaserPlane;
   auto gg = geometry_information(model, gsim->set, grid, go, /*keep_jacobians=*/true);
   if (!gg) return gg.status();
-  // Column of each of the grid's parameters in `names`.
-  std::vector<Eigen::Index> column(gg->names.size());
-  for (std::size_t q = 0; q < gg->names.size(); ++q) {
-    const auto it = std::find(names.begin(), names.end(), gg->names[q]);
-    if (it == names.end()) {
+  // Column of each of the grid's parameters in `ids`.
+  std::vector<Eigen::Index> column(gg->ids.size());
+  for (std::size_t q = 0; q < gg->ids.size(); ++q) {
+    const auto it = std::find(ids.begin(), ids.end(), gg->ids[q]);
+    if (it == ids.end()) {
       return Status::error(ErrorCode::kInternal,
                            "pose sensitivities: parameter %s is not in the list",
                            gg->names[q].c_str());
     }
-    column[q] = static_cast<Eigen::Index>(it - names.begin());
+    column[q] = static_cast<Eigen::Index>(it - ids.begin());
   }
-  const auto P = static_cast<Eigen::Index>(names.size());
+  const auto P = static_cast<Eigen::Index>(ids.size());
   for (std::size_t k = 0; k < grid.size(); ++k) {
     Eigen::MatrixXd Jp = gg->jacobian_pose[k];
     Eigen::MatrixXd Jg = gg->jacobian_geometry[k];
@@ -182,13 +182,14 @@ Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
   auto gi = geometry_information(model, sim->set, poses, options.identification);
   if (!gi) return gi.status();
   PredictedAccuracy out;
+  out.ids = gi->ids;
   out.names = gi->names;
   out.covariance = normalized_pinv(gi->information, options.rank_tolerance, &out.rank);
   out.crb_std = out.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
   double sum = 0.0;
   int count = 0;
-  for (std::size_t q = 0; q < out.names.size(); ++q) {
-    if (out.names[q].rfind("a_", 0) == 0) {
+  for (std::size_t q = 0; q < out.ids.size(); ++q) {
+    if (out.ids[q].kind == ParameterKind::kFrameAnchor) {
       sum += out.covariance(static_cast<int>(q), static_cast<int>(q));
       ++count;
     }
@@ -199,8 +200,8 @@ Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
   const double f_ref = std::isnan(options.reference_tension)
                            ? default_reference_tension(model.robot)
                            : options.reference_tension;
-  auto sens = pose_sensitivities(model, options.box, f_ref, noise, options.identification,
-                                 gi->names, &out.skipped_points);
+  auto sens = pose_sensitivities(model, options.box, f_ref, noise, options.identification, gi->ids,
+                                 &out.skipped_points);
   if (!sens) return sens.status();
   if (sens->empty()) return out;
   double total = 0.0;

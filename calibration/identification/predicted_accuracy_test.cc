@@ -70,15 +70,17 @@ TEST(PredictedAccuracy, EqualsTheBoundOfTheChannelsRecorded) {
   ASSERT_TRUE(ir.ok()) << ir.status().to_string();
   ASSERT_EQ(a->names, gi->names);
   ASSERT_EQ(a->names, ir->parameter_names);
+  ASSERT_EQ(a->ids, ir->parameter_ids);
   EXPECT_EQ(a->rank, ir->rank);
   ASSERT_TRUE(ir->identifiable());
   // The channels' mounting parameters are among the estimated, the laser's are not.
-  const auto has = [&](const std::string& n) {
-    return std::find(a->names.begin(), a->names.end(), n) != a->names.end();
+  ASSERT_EQ(a->ids, gi->ids);
+  const auto has = [&](const ParameterId& id) {
+    return std::find(a->ids.begin(), a->ids.end(), id) != a->ids.end();
   };
-  EXPECT_TRUE(has("swivel_zero_1"));
-  EXPECT_TRUE(has("inclinometer.mount.roll"));
-  EXPECT_FALSE(has("laser_1.plane.c"));
+  EXPECT_TRUE(has({ParameterKind::kSwivelZero, 0, -1}));
+  EXPECT_TRUE(has({ParameterKind::kInclinometerMount, -1, 0}));
+  EXPECT_FALSE(has({ParameterKind::kLaserPlaneOffset, 0, -1}));
   // Full rank: the bound is the square root of the diagonal of the inverse information.
   const Eigen::VectorXd crb = gi->information.inverse().diagonal().cwiseSqrt();
   ASSERT_EQ(crb.size(), a->crb_std.size());

@@ -11,6 +11,7 @@
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "testing/identification_scenario.hpp"
+#include "testing/residual_derivatives.hpp"
 
 namespace cdpr {
 namespace {
@@ -37,9 +38,7 @@ SimulatedMeasurements simulate(const SensorScenario& d, bool laser, bool swivel,
   so.swivel = swivel;
   so.inclinometer = incl;
   so.imu_yaw = yaw;
-  auto sim = simulate_measurements(d.s.truth, d.poses, SensorNoise{}, seed, so);
-  EXPECT_TRUE(sim.ok()) << sim.status().to_string();
-  return sim.ok() ? *sim : SimulatedMeasurements{};
+  return testing::simulated(d.s.truth, d.poses, so, seed);
 }
 
 IdentificationOptions sensor_options(bool laser) {
@@ -98,16 +97,12 @@ TEST(SensorChannels, NoiseFreeResidualsAreZeroAtTheTruth) {
   EXPECT_EQ(gi->channel_rows.imu_yaw, 12);
   auto r = evaluate_residuals(d.s.truth, sim.set, sim.true_poses, sensor_options(true));
   ASSERT_TRUE(r.ok()) << r.status().to_string();
-  double worst = 0.0;
-  for (const Eigen::VectorXd& v : *r) worst = std::max(worst, v.cwiseAbs().maxCoeff());
   // Normalised residuals (sigma 0.5..10 mrad): 1e-9 is below 1e-11 rad.
-  EXPECT_LT(worst, 1e-9);
+  EXPECT_LT(testing::largest_residual(*r), 1e-9);
   // At the nominal mounting they are not zero: the test would see a wrong model.
   auto r0 = evaluate_residuals(d.s.nominal, sim.set, sim.true_poses, sensor_options(true));
   ASSERT_TRUE(r0.ok());
-  double worst0 = 0.0;
-  for (const Eigen::VectorXd& v : *r0) worst0 = std::max(worst0, v.cwiseAbs().maxCoeff());
-  EXPECT_GT(worst0, 10.0);
+  EXPECT_GT(testing::largest_residual(*r0), 10.0);
 }
 
 // The exact (automatic) derivatives of every residual with respect to the pose and to the new
@@ -128,74 +123,34 @@ TEST(SensorChannels, ExactDerivativesMatchFiniteDifferences) {
     poses[j].position += Eigen::Vector3d(1e-3, -2e-3, 1.5e-3) * static_cast<double>(j % 3);
     poses[j].rpy += Eigen::Vector3d(0.01, -0.02, 0.015);
   }
-  auto gi = geometry_information(at, sim.set, poses, o, /*keep_jacobians=*/true);
-  ASSERT_TRUE(gi.ok()) << gi.status().to_string();
-  auto residuals = [&](const CalibratedModel& model, const std::vector<Pose>& ps) {
-    auto r = evaluate_residuals(model, sim.set, ps, o);
-    EXPECT_TRUE(r.ok()) << r.status().to_string();
-    return r.ok() ? *r : std::vector<Eigen::VectorXd>{};
-  };
-  auto expect_close = [](const Eigen::VectorXd& fd, const Eigen::VectorXd& exact,
-                         const std::string& what) {
-    ASSERT_EQ(fd.size(), exact.size()) << what;
-    for (Eigen::Index q = 0; q < fd.size(); ++q) {
-      EXPECT_NEAR(fd(q), exact(q), 2e-6 * std::max(1.0, std::abs(exact(q))))
-          << what << ", row " << q;
-    }
-  };
+  const testing::ResidualDerivativeCheck check(at, sim.set, poses, o, /*step=*/1e-6,
+                                               /*tolerance=*/2e-6);
+  ASSERT_TRUE(check.ok());
   // Pose coordinates of pose 3.
-  const double h = 1e-6;
-  for (int q = 0; q < 6; ++q) {
-    std::vector<Pose> plus = poses, minus = poses;
-    auto vp = plus[3].vector();
-    auto vm = minus[3].vector();
-    vp(q) += h;
-    vm(q) -= h;
-    plus[3] = Pose::from_vector(vp);
-    minus[3] = Pose::from_vector(vm);
-    const Eigen::VectorXd fd = (residuals(at, plus)[3] - residuals(at, minus)[3]) / (2.0 * h);
-    expect_close(fd, gi->jacobian_pose[3].col(q), "pose coordinate " + std::to_string(q));
-  }
+  check.expect_pose_derivatives(3);
   // The new parameters, and one anchor coordinate (through the swivel rows too).
-  auto column = [&](const std::string& name) {
-    const auto it = std::find(gi->names.begin(), gi->names.end(), name);
-    EXPECT_NE(it, gi->names.end()) << name;
-    return static_cast<int>(it - gi->names.begin());
-  };
-  struct Param {
-    std::string name;
-    void (*apply)(CalibratedModel&, double);
-  };
-  const Param params[] = {
-      {"a_2.y", [](CalibratedModel& c, double x) { c.robot.frame_anchors(1, 1) += x; }},
-      {"swivel_zero_3", [](CalibratedModel& c, double x) { c.robot.swivel_encoders[2].zero += x; }},
-      {"inclinometer.mount.roll",
-       [](CalibratedModel& c, double x) {
-         c.robot.inclinometer.mounting_rpy =
-             rpy_from_rotation(rotation_from_rpy<double>(c.robot.inclinometer.mounting_rpy) *
-                               rotation_from_rpy<double>(x, 0.0, 0.0));
-       }},
-      {"inclinometer.mount.pitch",
-       [](CalibratedModel& c, double x) {
-         c.robot.inclinometer.mounting_rpy =
-             rpy_from_rotation(rotation_from_rpy<double>(c.robot.inclinometer.mounting_rpy) *
-                               rotation_from_rpy<double>(0.0, x, 0.0));
-       }},
-      {"imu.yaw_zero", [](CalibratedModel& c, double x) { c.robot.inclinometer.yaw_zero += x; }},
-  };
-  for (const Param& p : params) {
-    const int col = column(p.name);
-    if (col >= static_cast<int>(gi->names.size())) continue;
-    CalibratedModel plus = at, minus = at;
-    p.apply(plus, h);
-    p.apply(minus, -h);
-    const auto rp = residuals(plus, poses);
-    const auto rm = residuals(minus, poses);
-    for (std::size_t j = 0; j < poses.size(); ++j) {
-      expect_close((rp[j] - rm[j]) / (2.0 * h), gi->jacobian_geometry[j].col(col),
-                   p.name + " at pose " + std::to_string(j));
-    }
-  }
+  using K = ParameterKind;
+  check.expect_parameter_derivatives({K::kFrameAnchor, 1, 1}, [](CalibratedModel& c, double x) {
+    c.robot.frame_anchors(1, 1) += x;
+  });
+  check.expect_parameter_derivatives({K::kSwivelZero, 2, -1}, [](CalibratedModel& c, double x) {
+    c.robot.swivel_encoders[2].zero += x;
+  });
+  check.expect_parameter_derivatives(
+      {K::kInclinometerMount, -1, 0}, [](CalibratedModel& c, double x) {
+        c.robot.inclinometer.mounting_rpy =
+            rpy_from_rotation(rotation_from_rpy<double>(c.robot.inclinometer.mounting_rpy) *
+                              rotation_from_rpy<double>(x, 0.0, 0.0));
+      });
+  check.expect_parameter_derivatives(
+      {K::kInclinometerMount, -1, 1}, [](CalibratedModel& c, double x) {
+        c.robot.inclinometer.mounting_rpy =
+            rpy_from_rotation(rotation_from_rpy<double>(c.robot.inclinometer.mounting_rpy) *
+                              rotation_from_rpy<double>(0.0, x, 0.0));
+      });
+  check.expect_parameter_derivatives({K::kImuYawZero, -1, -1}, [](CalibratedModel& c, double x) {
+    c.robot.inclinometer.yaw_zero += x;
+  });
 }
 
 TEST(SensorChannels, NoiseFreeDataRecoversTheMountingErrors) {

@@ -14,6 +14,7 @@
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/calibration/suspended_statics.hpp"
 #include "testing/identification_scenario.hpp"
+#include "testing/residual_derivatives.hpp"
 
 namespace cdpr {
 namespace {
@@ -38,9 +39,7 @@ SimulatedMeasurements simulate(const Crane& c, bool noise, std::uint64_t seed = 
   so.laser = false;
   so.swivel = true;
   so.inclinometer = true;
-  auto sim = simulate_measurements(c.s.truth, c.commands, SensorNoise{}, seed, so);
-  EXPECT_TRUE(sim.ok()) << sim.status().to_string();
-  return sim.ok() ? *sim : SimulatedMeasurements{};
+  return testing::simulated(c.s.truth, c.commands, so, seed);
 }
 
 IdentificationOptions crane_options() {
@@ -49,12 +48,6 @@ IdentificationOptions crane_options() {
   o.estimate_swivel_zeros = true;
   o.estimate_inclinometer_mounting = true;
   return o;
-}
-
-double worst(const std::vector<Eigen::VectorXd>& r) {
-  double w = 0.0;
-  for (const Eigen::VectorXd& v : r) w = std::max(w, v.cwiseAbs().maxCoeff());
-  return w;
 }
 
 TEST(SuspendedIdentification, ScenarioHangsWhereTheStaticsSay) {
@@ -90,10 +83,10 @@ TEST(SuspendedIdentification, NoiseFreeResidualsAreZeroAtTheTruth) {
   EXPECT_TRUE(gi->home_tilt_free);
   auto r = evaluate_residuals(c.s.truth, sim.set, sim.true_poses, o);
   ASSERT_TRUE(r.ok()) << r.status().to_string();
-  EXPECT_LT(worst(*r), 1e-4);
+  EXPECT_LT(testing::largest_residual(*r), 1e-4);
   auto r0 = evaluate_residuals(c.s.nominal, sim.set, sim.true_poses, o);
   ASSERT_TRUE(r0.ok());
-  EXPECT_GT(worst(*r0), 10.0);
+  EXPECT_GT(testing::largest_residual(*r0), 10.0);
 }
 
 // The exact derivatives of the suspended equilibrium rows (and the others) with respect to the
@@ -109,62 +102,21 @@ TEST(SuspendedIdentification, ExactDerivativesMatchFiniteDifferences) {
     poses[j].position += Eigen::Vector3d(1e-3, -2e-3, 1.5e-3) * static_cast<double>(j % 3);
     poses[j].rpy += Eigen::Vector3d(0.01, -0.02, 0.015);
   }
-  auto gi = geometry_information(at, sim.set, poses, o, /*keep_jacobians=*/true);
-  ASSERT_TRUE(gi.ok()) << gi.status().to_string();
-  auto residuals = [&](const CalibratedModel& model, const std::vector<Pose>& ps) {
-    auto r = evaluate_residuals(model, sim.set, ps, o);
-    EXPECT_TRUE(r.ok()) << r.status().to_string();
-    return r.ok() ? *r : std::vector<Eigen::VectorXd>{};
-  };
-  auto expect_close = [](const Eigen::VectorXd& fd, const Eigen::VectorXd& exact,
-                         const std::string& what) {
-    ASSERT_EQ(fd.size(), exact.size()) << what;
-    for (Eigen::Index q = 0; q < fd.size(); ++q) {
-      EXPECT_NEAR(fd(q), exact(q), 1e-5 * std::max(1.0, std::abs(exact(q))))
-          << what << ", row " << q;
-    }
-  };
-  const double h = 1e-7;
-  for (int q = 0; q < 6; ++q) {
-    std::vector<Pose> plus = poses, minus = poses;
-    auto vp = plus[3].vector();
-    auto vm = minus[3].vector();
-    vp(q) += h;
-    vm(q) -= h;
-    plus[3] = Pose::from_vector(vp);
-    minus[3] = Pose::from_vector(vm);
-    const Eigen::VectorXd fd = (residuals(at, plus)[3] - residuals(at, minus)[3]) / (2.0 * h);
-    expect_close(fd, gi->jacobian_pose[3].col(q), "pose coordinate " + std::to_string(q));
-  }
-  auto column = [&](const std::string& name) {
-    const auto it = std::find(gi->names.begin(), gi->names.end(), name);
-    EXPECT_NE(it, gi->names.end()) << name;
-    return static_cast<int>(it - gi->names.begin());
-  };
+  const testing::ResidualDerivativeCheck check(at, sim.set, poses, o, /*step=*/1e-7,
+                                               /*tolerance=*/1e-5);
+  ASSERT_TRUE(check.ok());
+  check.expect_pose_derivatives(3);
   // An anchor coordinate (every pose's rows).
-  {
-    const int col = column("a_2.y");
-    CalibratedModel plus = at, minus = at;
-    plus.robot.frame_anchors(1, 1) += h;
-    minus.robot.frame_anchors(1, 1) -= h;
-    const auto rp = residuals(plus, poses);
-    const auto rm = residuals(minus, poses);
-    for (std::size_t j = 0; j < poses.size(); ++j) {
-      expect_close((rp[j] - rm[j]) / (2.0 * h), gi->jacobian_geometry[j].col(col),
-                   "a_2.y at pose " + std::to_string(j));
-    }
-  }
+  check.expect_parameter_derivatives(
+      {ParameterKind::kFrameAnchor, 1, 1},
+      [](CalibratedModel& m, double x) { m.robot.frame_anchors(1, 1) += x; });
   // The home pose's roll (a geometry column for a suspended robot): only pose 0's rows move.
-  {
-    const int col = column("home.roll");
-    CalibratedModel plus = at, minus = at;
-    plus.robot.home.rpy.x() += h;
-    minus.robot.home.rpy.x() -= h;
-    const auto rp = residuals(plus, poses);
-    const auto rm = residuals(minus, poses);
-    expect_close((rp[0] - rm[0]) / (2.0 * h), gi->jacobian_geometry[0].col(col), "home.roll");
-    EXPECT_GT(gi->jacobian_geometry[0].col(col).norm(), 1.0);
-  }
+  const ParameterId home_roll{ParameterKind::kHomePose, -1, 3};
+  check.expect_parameter_derivatives(
+      home_roll, [](CalibratedModel& m, double x) { m.robot.home.rpy.x() += x; }, /*only_pose=*/0);
+  const int col = check.column(home_roll);
+  ASSERT_GE(col, 0);
+  EXPECT_GT(check.information().jacobian_geometry[0].col(col).norm(), 1.0);
 }
 
 // Noise-free data: the estimator, started from the nominal crane, returns the truth: anchors,

@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 #include <cmath>
+#include <cstdint>
 #include <random>
 #include <vector>
 
@@ -230,6 +231,20 @@ inline std::vector<Pose> random_feasible_poses(const RobotModel& model,
     poses.push_back(p);
   }
   return poses;
+}
+
+// The recording of `s`'s truth at `n` random feasible poses (random_feasible_poses with seed
+// `pose_seed`, feasible in the nominal model and the truth), commanded by the nominal model, with
+// `noise` drawn from seed `noise_seed`.
+inline Result<SimulatedMeasurements> simulate_random_poses(const Scenario& s, int n,
+                                                           unsigned pose_seed,
+                                                           std::uint64_t noise_seed,
+                                                           const SensorNoise& noise = {}) {
+  const std::vector<Pose> poses =
+      random_feasible_poses(s.nominal.robot, s.box, n, pose_seed, &s.truth.robot);
+  SimulationOptions so;
+  so.controller = &s.nominal;
+  return simulate_measurements(s.truth, poses, noise, noise_seed, so);
 }
 
 }  // namespace cdpr::scenario

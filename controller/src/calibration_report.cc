@@ -30,9 +30,9 @@ json finite_or_null(double v) {
 // estimated.
 double anchor_std(const IdentificationReport* fit, int cable, char axis) {
   if (fit == nullptr) return std::numeric_limits<double>::quiet_NaN();
-  const std::string name = "a_" + std::to_string(cable + 1) + "." + axis;
+  const ParameterId id{ParameterKind::kFrameAnchor, cable, axis - 'x'};
   for (const ParameterEstimate& p : fit->parameters) {
-    if (p.name == name) return p.std_dev;
+    if (p.id == id) return p.std_dev;
   }
   return std::numeric_limits<double>::quiet_NaN();
 }

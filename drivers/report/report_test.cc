@@ -57,11 +57,7 @@ class CalibrationReport : public ::testing::Test {
  protected:
   void SetUp() override {
     s_ = scenario::mini_scenario();
-    const std::vector<Pose> poses =
-        scenario::random_feasible_poses(s_.nominal.robot, s_.box, 20, 3, &s_.truth.robot);
-    SimulationOptions so;
-    so.controller = &s_.nominal;
-    auto sim = simulate_measurements(s_.truth, poses, SensorNoise{}, 5, so);
+    auto sim = scenario::simulate_random_poses(s_, 20, 3, 5);
     ASSERT_TRUE(sim.ok()) << sim.status().to_string();
     set_ = sim->set;
     auto rep = identify(s_.nominal, set_);
@@ -126,7 +122,7 @@ TEST_F(CalibrationReport, HtmlShowsAnchorsWithTheirStdAndResidualsPerCableAndPos
   // Cable 3's standard deviation in the anchor table, from its three coordinates.
   double var = 0.0;
   for (const ParameterEstimate& p : id_.parameters) {
-    if (p.name.rfind("a_3.", 0) == 0) var += p.std_dev * p.std_dev;
+    if (p.id.kind == ParameterKind::kFrameAnchor && p.id.index == 2) var += p.std_dev * p.std_dev;
   }
   ASSERT_GT(var, 0.0);
   EXPECT_THAT(r.html, HasSubstr("<td class=\"n\">" + fmt(1e3 * std::sqrt(var), 3) + "</td></tr>"));
@@ -166,11 +162,13 @@ TEST_F(CalibrationReport, LargestAnchorChangeCarriesItsUncertaintyAlongTheChange
   Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
   for (std::size_t q = 0; q < id_.parameters.size(); ++q) {
     for (std::size_t k = 0; k < id_.parameters.size(); ++k) {
-      const std::string& a = id_.parameters[q].name;
-      const std::string& b = id_.parameters[k].name;
-      const std::string prefix = "a_" + std::to_string(worst + 1) + ".";
-      if (a.rfind(prefix, 0) != 0 || b.rfind(prefix, 0) != 0) continue;
-      cov(a.back() - 'x', b.back() - 'x') =
+      const ParameterId& a = id_.parameters[q].id;
+      const ParameterId& b = id_.parameters[k].id;
+      const auto of_worst = [&](const ParameterId& id) {
+        return id.kind == ParameterKind::kFrameAnchor && id.index == worst;
+      };
+      if (!of_worst(a) || !of_worst(b)) continue;
+      cov(a.component, b.component) =
           id_.covariance(static_cast<Eigen::Index>(q), static_cast<Eigen::Index>(k));
     }
   }

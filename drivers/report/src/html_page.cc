@@ -74,12 +74,10 @@ std::vector<double> cable_rms_m(const std::vector<PoseResiduals>& residuals, int
 bool anchor_covariance(const IdentificationReport* fit, int cable, Eigen::Matrix3d* cov) {
   if (fit == nullptr) return false;
   int idx[3] = {-1, -1, -1};
-  const std::string prefix = "a_" + std::to_string(cable + 1) + ".";
   for (std::size_t q = 0; q < fit->parameters.size(); ++q) {
-    const std::string& n = fit->parameters[q].name;
-    if (n.size() != prefix.size() + 1 || n.compare(0, prefix.size(), prefix) != 0) continue;
-    const char axis = n.back();
-    if (axis >= 'x' && axis <= 'z') idx[axis - 'x'] = static_cast<int>(q);
+    const ParameterId& id = fit->parameters[q].id;
+    if (id.kind != ParameterKind::kFrameAnchor || id.index != cable) continue;
+    if (id.component >= 0 && id.component < 3) idx[id.component] = static_cast<int>(q);
   }
   cov->setZero();
   bool any = false;

@@ -57,7 +57,8 @@ struct ChannelContribution {
 };
 
 struct IdentifiabilityReport {
-  std::vector<std::string> parameter_names;
+  std::vector<ParameterId> parameter_ids;      // what each parameter is (code reads these)
+  std::vector<std::string> parameter_names;    // parameter_name of each id, for people
   Eigen::VectorXd singular_values;             // SI, descending
   Eigen::VectorXd normalized_singular_values;  // column-normalised, descending
   int num_parameters = 0;

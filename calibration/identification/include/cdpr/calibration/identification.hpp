@@ -207,7 +207,8 @@ struct ParameterId {
   bool operator==(const ParameterId&) const = default;
 };
 
-// "a_3.x", "o_5", "ea_scale", "laser_1.plane.c", "inclinometer.mount.pitch", ...
+// "a_3.x", "o_5", "ea_scale", "laser_1.plane.c", "inclinometer.mount.pitch", ...; a vector kind
+// with component -1 names the whole vector: "a_3", "laser_1.origin", "home".
 std::string parameter_name(const ParameterId& id);
 
 // The words of `cdpr-fit ... --estimate` and the parameter kinds each switches on: one table

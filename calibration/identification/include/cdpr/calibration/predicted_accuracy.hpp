@@ -49,9 +49,10 @@ struct PredictedAccuracyOptions {
 };
 
 struct PredictedAccuracy {
-  std::vector<std::string> names;
-  Eigen::VectorXd crb_std;     // Cramer-Rao bound (standard deviation) of each parameter
-  Eigen::MatrixXd covariance;  // of the parameters
+  std::vector<ParameterId> ids;    // the estimated parameters (code reads these)
+  std::vector<std::string> names;  // parameter_name of each id, for people
+  Eigen::VectorXd crb_std;         // Cramer-Rao bound (standard deviation) of each parameter
+  Eigen::MatrixXd covariance;      // of the parameters
   int rank = 0;
   double anchor_rms_std_m = 0.0;  // sqrt(mean variance) over the estimated anchor coordinates
   double position_rms_m = 0.0;    // predicted RMS position error over the box grid
@@ -78,7 +79,7 @@ Result<PredictedAccuracy> predict_accuracy(const CalibratedModel& model,
 
 // The sensitivity of the pose the platform reaches to the geometry parameters, at each point of
 // `box` where the tensions are feasible at f_ref: G = -pinv(dL/dx) (dL/dp) (rows: position m,
-// then orientation rad; columns: `names`, the parameters `identification` estimates with the
+// then orientation rad; columns: `ids`, the parameters `identification` estimates with the
 // channels recorded; kInternal when a parameter of the lengths is not among them). The mounting
 // parameters of the laser, swivel encoders, inclinometer and IMU do not enter the commanded
 // lengths: their columns are zero. Shared by predict_accuracy and the position-accuracy pose
@@ -91,7 +92,7 @@ Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& m
                                                         const AccuracyBox& box, double f_ref,
                                                         const SensorNoise& noise,
                                                         const IdentificationOptions& identification,
-                                                        const std::vector<std::string>& names,
+                                                        const std::vector<ParameterId>& ids,
                                                         int* skipped_points = nullptr);
 
 struct RealizedAccuracy {
