@@ -1061,10 +1061,6 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
       pretensions.insert(pretensions.end(), cf.separating_pretensions.begin(),
                          cf.separating_pretensions.end());
     }
-    // A suspect's follow-up poses are measured when nothing is named. Beside named effects they
-    // are proposed in the report only: on the virtual robot one of them overloaded cable 2 (230 N,
-    // daemon_vcan), the extra-pose grid's feasibility check not covering the named effects'
-    // tensions there.
     if (diagnosis->accepted.empty() && diagnosis->follow_up) {
       extra.insert(extra.end(), diagnosis->follow_up->poses.begin(),
                    diagnosis->follow_up->poses.end());

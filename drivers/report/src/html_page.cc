@@ -283,14 +283,8 @@ std::string next_step(const PageInput& in, double p) {
                not_carried + " (the config has no field for it; compensate it elsewhere)." +
                confounded + extra;
       }
-      std::string suspect;
-      if (d->follow_up) {
-        suspect = " A further effect is suspected beside them (" + d->follow_up->name +
-                  "): optionally measure the " + std::to_string(d->follow_up->poses.size()) +
-                  " follow-up poses below to decide it.";
-      }
       return "Accept the calibrated model: it carries the named effect" +
-             std::string(d->accepted.size() == 1 ? "" : "s") + "." + confounded + suspect + extra;
+             std::string(d->accepted.size() == 1 ? "" : "s") + "." + confounded + extra;
     }
     case Diagnosis::Verdict::kMismatchUnexplained:
       return "Do not accept: the model does not explain the recording and no candidate effect "

@@ -43,8 +43,6 @@ struct DiagnosisOptions {
   // detection. 0: never; above 1: always (the lowest p-value). When the screen's overall misfit
   // test fails and nothing is named (verdict "mismatch unexplained"), the candidate with the lowest
   // p-value is a suspect whatever this threshold (more poses are the next step there anyway).
-  // Beside named effects, the second screening round's candidates (other families) are screened
-  // the same way, without that last rule.
   double suspect_p = 0.2;
   int follow_up_poses = 20;
   // The first accepted effect must also be seen by the linear screen: its screen p-value
@@ -135,9 +133,7 @@ struct Diagnosis {
   std::vector<EffectFit> candidates;  // refitted candidates, best first
   std::vector<EffectFit> accepted;    // the named effects (subset of candidates)
   std::vector<ConfoundedFinding> confounded;
-  // A suspect and the poses to decide it: with no effect named, from the screen; beside named
-  // effects, from the second screening round (screen_after).
-  std::optional<FollowUp> follow_up;
+  std::optional<FollowUp> follow_up;  // with no effect named: a suspect and poses to decide it
   std::optional<IdentificationReport> after;  // identification with the accepted effects
   CalibratedModel model_after;                // the calibrated model carrying the accepted effects
   std::vector<ChannelRms> channels;           // residual RMS before/after per channel
