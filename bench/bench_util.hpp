@@ -7,9 +7,11 @@
 #include <cstddef>
 #include <cstdio>
 #include <cstdlib>
+#include <string>
 #include <utility>
 #include <vector>
 
+#include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/measurement.hpp"
 #include "cdpr/calibration/predicted_accuracy.hpp"
@@ -53,6 +55,23 @@ inline double anchor_crb_rms(const GeometryInformation& gi) {
     ++count;
   }
   return count ? std::sqrt(sum / count) : 0.0;
+}
+
+// The anchor Cramer-Rao RMS at the truth: noise-free readings of `commands` simulated on `truth`
+// (the channels `simulation` sets) and the Fisher information of `identification` there.
+// `summary` (optional) receives the identifiability analysis in words.
+inline double crb_at_truth(const CalibratedModel& truth, const std::vector<Pose>& commands,
+                           const SensorNoise& noise, const SimulationOptions& simulation,
+                           const IdentificationOptions& identification, std::string* summary) {
+  const SimulatedMeasurements sim =
+      must(simulate_measurements(truth, commands, noise, 0, simulation), "simulate");
+  const GeometryInformation gi =
+      must(geometry_information(truth, sim.set, sim.true_poses, identification), "info");
+  if (summary) {
+    auto ir = analyze_identifiability(truth, sim.set, identification);
+    *summary = ir.ok() ? ir->summary() : std::string(ir.status().message());
+  }
+  return anchor_crb_rms(gi);
 }
 
 // The errors of the estimated frame anchor coordinates against the true anchors, accumulated over

@@ -71,20 +71,6 @@ cdpr::IdentificationOptions ident_options(const Config& c) {
   return o;
 }
 
-double crb_at_truth(const cdpr::scenario::Scenario& s, const std::vector<cdpr::Pose>& commands,
-                    const Config& c, std::string* summary) {
-  const cdpr::SimulatedMeasurements sim = must(
-      cdpr::simulate_measurements(s.truth, commands, bench_noise(), 0, sim_options(s, c, false)),
-      "simulate");
-  const cdpr::GeometryInformation gi =
-      must(cdpr::geometry_information(s.truth, sim.set, sim.true_poses, ident_options(c)), "info");
-  if (summary) {
-    auto ir = cdpr::analyze_identifiability(s.truth, sim.set, ident_options(c));
-    *summary = ir.ok() ? ir->summary() : std::string(ir.status().message());
-  }
-  return cdpr::bench::anchor_crb_rms(gi);
-}
-
 using cdpr::bench::BoxError;
 
 // The controller `ctrl` commands the equilibrium pose of each target; the true crane settles.
@@ -149,7 +135,9 @@ int main(int argc, char** argv) {
   for (const Config& c : configs) {
     const auto t0 = std::chrono::steady_clock::now();
     std::string summary;
-    const double crb = crb_at_truth(crane, poses, c, &summary);
+    const double crb =
+        cdpr::bench::crb_at_truth(crane.truth, poses, bench_noise(), sim_options(crane, c, false),
+                                  ident_options(c), &summary);
     summaries.push_back(std::string(c.name) + ":\n" + summary);
     const cdpr::bench::MonteCarlo mc = cdpr::bench::monte_carlo(
         seeds, crane.truth, crane.nominal, poses, bench_noise(), sim_options(crane, c, true),

@@ -121,22 +121,6 @@ cdpr::PoseDesign design_for(const Robot& r, const Config& c) {
   return must(cdpr::design_poses(r.s.nominal, d), "design");
 }
 
-// RMS over the anchor coordinates of the Cramer-Rao std at the truth.
-double crb_at_truth(const cdpr::scenario::Scenario& s, const std::vector<cdpr::Pose>& commands,
-                    const Config& c, std::string* summary) {
-  const cdpr::SimulatedMeasurements sim = must(
-      cdpr::simulate_measurements(s.truth, commands, bench_noise(), 0, sim_options(s, c, false)),
-      "simulate");
-  const cdpr::GeometryInformation gi =
-      must(cdpr::geometry_information(s.truth, sim.set, sim.true_poses, ident_options(c)), "info");
-  const double rms = cdpr::bench::anchor_crb_rms(gi);
-  if (summary) {
-    auto ir = cdpr::analyze_identifiability(s.truth, sim.set, ident_options(c));
-    *summary = ir.ok() ? ir->summary() : std::string(ir.status().message());
-  }
-  return rms;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -205,7 +189,8 @@ int main(int argc, char** argv) {
     const cdpr::PredictedAccuracy predicted =
         must(cdpr::predict_accuracy(s.nominal, poses, bench_noise(), po), "prediction");
     std::string summary;
-    const double crb = crb_at_truth(s, poses, c, &summary);
+    const double crb = cdpr::bench::crb_at_truth(
+        s.truth, poses, bench_noise(), sim_options(s, c, false), ident_options(c), &summary);
     summaries.push_back(std::string(c.name) + ":\n" + summary);
     const cdpr::bench::MonteCarlo mc = cdpr::bench::monte_carlo(
         seeds, s.truth, s.nominal, poses, bench_noise(), sim_options(s, c, true), ident_options(c),

@@ -54,6 +54,32 @@ std::string kind_name(ParameterKind kind) {
 // Each kind's range is narrowed far below what the data ask for (the truth or the noise moves the
 // estimate by more): every estimate of that kind stays inside its range, at least one ends on a
 // bound, and the report says so.
+// Every estimate of `kind` lies inside its range of width `width`, at least one is held on the
+// bound and listed by parameters_at_bound(), the report warns about it and is not trustworthy.
+void expect_held_at_bound_and_reported(const IdentificationReport& rep, ParameterKind kind,
+                                       double width) {
+  int of_kind = 0, at_bound = 0;
+  const std::vector<std::string> flagged = rep.parameters_at_bound();
+  for (const ParameterEstimate& p : rep.parameters) {
+    if (p.id.kind != kind) continue;
+    ++of_kind;
+    const double tol = 1e-9 * std::max(1.0, std::abs(p.initial));
+    EXPECT_GE(p.value, p.lower - tol) << p.name;
+    EXPECT_LE(p.value, p.upper + tol) << p.name;
+    EXPECT_NEAR(p.upper - p.lower, width, 1e-9 * width) << p.name;
+    if (p.at_bound) {
+      ++at_bound;
+      EXPECT_NE(std::find(flagged.begin(), flagged.end(), p.name), flagged.end()) << p.name;
+    }
+  }
+  EXPECT_GT(of_kind, 0);
+  EXPECT_GT(at_bound, 0) << rep.full_report();
+  bool warned = false;
+  for (const std::string& w : rep.warnings) warned = warned || w.find("bound") != std::string::npos;
+  EXPECT_TRUE(warned);
+  EXPECT_FALSE(rep.trustworthy());
+}
+
 TEST(ParameterBounds, EveryParameterKindIsHeldInsideItsRange) {
   const std::vector<KindCase> kinds = {
       {ParameterKind::kFrameAnchor, 1e-4,
@@ -105,28 +131,9 @@ TEST(ParameterBounds, EveryParameterKindIsHeldInsideItsRange) {
     k.enable(opt, k.half_range);
     auto rep = identify(d.s.nominal, d.set, opt);
     ASSERT_TRUE(rep.ok()) << rep.status().to_string();
-    int of_kind = 0, at_bound = 0;
-    for (const ParameterEstimate& p : rep->parameters) {
-      if (p.id.kind != k.kind) continue;
-      ++of_kind;
-      const double tol = 1e-9 * std::max(1.0, std::abs(p.initial));
-      EXPECT_GE(p.value, p.lower - tol) << p.name;
-      EXPECT_LE(p.value, p.upper + tol) << p.name;
-      const double width = p.upper - p.lower;
-      const double expected = k.kind == ParameterKind::kForceOffset
-                                  ? 2.0 * k.half_range * 200.0 * 2.0
-                                  : 2.0 * k.half_range;
-      EXPECT_NEAR(width, expected, 1e-9 * expected) << p.name;
-      at_bound += p.at_bound ? 1 : 0;
-    }
-    EXPECT_GT(of_kind, 0);
-    EXPECT_GT(at_bound, 0);
-    EXPECT_EQ(static_cast<int>(rep->parameters_at_bound().size()) > 0, true);
-    bool warned = false;
-    for (const std::string& w : rep->warnings)
-      warned = warned || w.find("bound") != std::string::npos;
-    EXPECT_TRUE(warned);
-    EXPECT_FALSE(rep->trustworthy());
+    const double expected = k.kind == ParameterKind::kForceOffset ? 2.0 * k.half_range * 200.0 * 2.0
+                                                                  : 2.0 * k.half_range;
+    expect_held_at_bound_and_reported(*rep, k.kind, expected);
   }
 }
 
@@ -328,27 +335,7 @@ TEST(ParameterBounds, SensorKindsAreHeldAtTheirBoundAndReported) {
     k.narrow(opt, k.narrow_half);
     auto rep = identify(s.nominal, set, opt);
     ASSERT_TRUE(rep.ok()) << rep.status().to_string();
-    int of_kind = 0, at_bound = 0;
-    for (const ParameterEstimate& p : rep->parameters) {
-      if (p.id.kind != k.kind) continue;
-      ++of_kind;
-      const double tol = 1e-9 * std::max(1.0, std::abs(p.initial));
-      EXPECT_NEAR(p.upper - p.lower, 2.0 * k.narrow_half, 1e-9 * k.narrow_half) << p.name;
-      EXPECT_GE(p.value, p.lower - tol) << p.name;
-      EXPECT_LE(p.value, p.upper + tol) << p.name;
-      if (p.at_bound) {
-        ++at_bound;
-        const std::vector<std::string> flagged = rep->parameters_at_bound();
-        EXPECT_NE(std::find(flagged.begin(), flagged.end(), p.name), flagged.end()) << p.name;
-      }
-    }
-    EXPECT_GT(of_kind, 0);
-    EXPECT_GT(at_bound, 0) << rep->full_report();
-    bool warned = false;
-    for (const std::string& w : rep->warnings)
-      warned = warned || w.find("bound") != std::string::npos;
-    EXPECT_TRUE(warned);
-    EXPECT_FALSE(rep->trustworthy());
+    expect_held_at_bound_and_reported(*rep, k.kind, 2.0 * k.narrow_half);
   }
 }
 
