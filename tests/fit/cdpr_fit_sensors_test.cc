@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,6 +38,29 @@ class FitSensors : public FitProcessTest {
     const std::string out = path("truth.yaml");
     std::ofstream(out) << yaml;
     return out;
+  }
+
+  // The calibrated config `cal` read back: its frame anchors at least halve the nominal
+  // config's distance to the truth's (RMS), and the inclinometer's mounting tilt (0.012, -0.017
+  // rad in the truth) is found to a fraction of its size. nullopt (with a failure) when a config
+  // does not load.
+  std::optional<cdpr::RobotModel> expect_anchors_and_mounting_found(const std::string& nominal_path,
+                                                                    const std::string& truth,
+                                                                    const std::string& cal) const {
+    auto nominal = cdpr::config::load_robot_config(nominal_path);
+    auto real = cdpr::config::load_robot_config(truth);
+    auto calibrated = cdpr::config::load_robot_config(cal);
+    EXPECT_TRUE(nominal.ok() && real.ok());
+    EXPECT_TRUE(calibrated.ok()) << calibrated.status().to_string();
+    if (!nominal.ok() || !real.ok() || !calibrated.ok()) return std::nullopt;
+    auto rms = [](const cdpr::RobotModel& a, const cdpr::RobotModel& b) {
+      return std::sqrt((a.frame_anchors - b.frame_anchors).colwise().squaredNorm().mean());
+    };
+    const double before = rms(*nominal, *real), after = rms(*calibrated, *real);
+    EXPECT_LT(after, 0.5 * before) << before << " m -> " << after << " m";
+    EXPECT_NEAR(calibrated->inclinometer.mounting_rpy(0), 0.012, 2e-3);
+    EXPECT_NEAR(calibrated->inclinometer.mounting_rpy(1), -0.017, 2e-3);
+    return *calibrated;
   }
 };
 
@@ -101,19 +125,8 @@ TEST_F(FitSensors, SwivelAndInclinometerRecordingIsCalibratedAndDiagnosedWithout
     EXPECT_THAT(c.out, HasSubstr("channel " + ch.at("description").get<std::string>()));
   }
 
-  auto nominal = cdpr::config::load_robot_config(kNominal);
-  auto real = cdpr::config::load_robot_config(truth);
-  auto calibrated = cdpr::config::load_robot_config(cal);
-  ASSERT_TRUE(nominal.ok() && real.ok());
-  ASSERT_TRUE(calibrated.ok()) << calibrated.status().to_string();
-  auto rms = [](const cdpr::RobotModel& a, const cdpr::RobotModel& b) {
-    return std::sqrt((a.frame_anchors - b.frame_anchors).colwise().squaredNorm().mean());
-  };
-  const double before = rms(*nominal, *real), after = rms(*calibrated, *real);
-  EXPECT_LT(after, 0.5 * before) << before << " m -> " << after << " m";
-  // The inclinometer's tilt on its mount is found to a fraction of its 1 degree.
-  EXPECT_NEAR(calibrated->inclinometer.mounting_rpy(0), 0.012, 2e-3);
-  EXPECT_NEAR(calibrated->inclinometer.mounting_rpy(1), -0.017, 2e-3);
+  const auto calibrated = expect_anchors_and_mounting_found(kNominal, truth, cal);
+  ASSERT_TRUE(calibrated.has_value());
   ASSERT_EQ(calibrated->swivel_encoders.size(), 8u);
 
   // diagnose: the nominal model, calibrated with these channels, explains the recording.
@@ -218,19 +231,9 @@ TEST_F(FitSensors, SuspendedCraneRecordingIsCalibratedAndDiagnosed) {
   EXPECT_THAT(c.out, HasSubstr("translation (x, y, z) and heading"));
   const nlohmann::json j = nlohmann::json::parse(slurp(report));
   EXPECT_TRUE(j.at("converged").get<bool>());
-  auto nominal = cdpr::config::load_robot_config(nominal_path);
-  auto real = cdpr::config::load_robot_config(truth);
-  auto calibrated = cdpr::config::load_robot_config(cal);
-  ASSERT_TRUE(nominal.ok() && real.ok());
-  ASSERT_TRUE(calibrated.ok()) << calibrated.status().to_string();
+  const auto calibrated = expect_anchors_and_mounting_found(nominal_path, truth, cal);
+  ASSERT_TRUE(calibrated.has_value());
   EXPECT_TRUE(calibrated->suspended);
-  auto rms = [](const cdpr::RobotModel& a, const cdpr::RobotModel& b) {
-    return std::sqrt((a.frame_anchors - b.frame_anchors).colwise().squaredNorm().mean());
-  };
-  const double before = rms(*nominal, *real), after = rms(*calibrated, *real);
-  EXPECT_LT(after, 0.5 * before) << before << " m -> " << after << " m";
-  EXPECT_NEAR(calibrated->inclinometer.mounting_rpy(0), 0.012, 2e-3);
-  EXPECT_NEAR(calibrated->inclinometer.mounting_rpy(1), -0.017, 2e-3);
 
   const std::string djson = path("crane-diagnose.json");
   const Process d = fit({"diagnose", "--config", nominal_path, "--recording", rec, "--json", djson,
