@@ -1023,12 +1023,14 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
     const bool aborted = s.code() == ErrorCode::kAborted && abort_.load() &&
                          rt_->snapshot().fault.kind == FaultKind::kNone;
     finish_calibration(aborted ? "aborted" : "failed", s.to_string());
+    // The worker's part is over before the state says so: a request that follows the state
+    // change at once (a script's next `calibrate`) must not find the worker still running.
+    worker_running_ = false;
     if (rt_->snapshot().fault.kind == FaultKind::kNone) {
       set_state(DaemonState::kHolding, std::string("calibration ") +
                                            (aborted ? "aborted" : "failed") +
                                            "; the active geometry is unchanged");
     }
-    worker_running_ = false;
   };
 
   if (Status s = measure_list(poses, {}, 0); !s.ok()) return fail(s);
@@ -1155,6 +1157,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
     calibration_->before_version = g->version;
     calibration_->message = out.verdict;
   }
+  worker_running_ = false;  // before the state: see fail() above
   set_state(DaemonState::kAwaitingAcceptance,
             "calibration " + std::to_string(id) + ": " + out.verdict +
                 (out.gates_passed ? "; every gate passed" : "; gates failed: " + out.failed_gates));
@@ -1163,7 +1166,6 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
                           {"outcome", "awaiting_acceptance"},
                           {"gates_passed", out.gates_passed},
                           {"message", out.verdict}});
-  worker_running_ = false;
   if (config_.acceptance.mode == AcceptanceMode::kAuto && out.gates_passed) {
     const Reply r = cmd_accept(peer);
     if (!r.ok) spdlog::error("automatic acceptance failed: {}", r.message);

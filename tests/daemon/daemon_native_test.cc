@@ -9,6 +9,7 @@
 // power on with the true platform at home (the reference platform).
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -223,6 +224,26 @@ TEST_F(DaemonNative, RejectKeepsTheGeometryRestartKeepsTheAcceptedOneAndRollback
   const Reply diff = request("geometry_diff", {{"from", v1}, {"to", v2}});
   ASSERT_TRUE(diff.ok) << diff.message;
   EXPECT_GT(diff.result["largest_change_m"].get<double>(), 0.0);
+}
+
+TEST_F(DaemonNative, ACalibrationStartsAtOnceAfterThePreviousOneWasRejected) {
+  // The worker thread publishes its events through the sink: a slow sink holds the worker just
+  // after it announced the outcome, as a preempted thread would on a loaded PC. A script that
+  // rejects and calibrates again at once must not be told a calibration still runs.
+  start_daemon(quick());
+  std::atomic<int> slowed{0};
+  daemon().set_event_sink([&slowed](const json& e) {
+    if (e["event"] == "calibration" && e["data"].value("outcome", "") == "awaiting_acceptance") {
+      ++slowed;
+      std::this_thread::sleep_for(200ms);
+    }
+  });
+  ASSERT_GT(calibrate(), 0);
+  ASSERT_TRUE(request("reject").ok);
+  EXPECT_EQ(daemon().state(), DaemonState::kHolding);
+  const Reply again = request("calibrate");
+  EXPECT_TRUE(again.ok) << again.code << ": " << again.message;
+  EXPECT_EQ(slowed.load(), 1);
 }
 
 TEST_F(DaemonNative, AutoAcceptanceAppliesACalibrationWhoseGatesPassAndWaitsOtherwise) {
