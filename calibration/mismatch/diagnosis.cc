@@ -910,21 +910,25 @@ bool proxy_for_structure(const MismatchSummary& screen, const std::string& id, d
 }
 
 // Two candidates confounded on this pose set (canonical correlation of their projected columns
-// above the threshold) are never accepted together by the first round's forward steps and swaps.
-// The second screening round (`second_round`) tries a candidate confounded with an accepted one
-// when that one is estimated by identify() (`conditional`): its parameters are then in the model
-// the newcomer is screened and tested against, so the test is conditional on it (per-cable force
-// gains beside the shared EA: 0.90 for one direction of eight). Letting the first round's forward
-// steps do the same was measured worse (3 seeds: MINI compound 21/24 instead of 20/24, LARGE 17/27
-// instead of 19/27: elasticity beside creep, 0.97, and compliance beside the gains were named).
+// above the threshold) are not accepted together unless the newcomer `id` keeps at least
+// `own_directions` directions of its own (its rank minus the canonical correlations above the
+// threshold): per-cable force gains beside creep or sag keep 7 of 8 and are tried, creep or
+// elasticity beside the gains keep none. The second screening round (`second_round`) also tries
+// every candidate beside an effect estimated by identify() (`conditional`): its parameters are then
+// in the model the newcomer is screened and tested against, so the test is conditional on it.
+// Letting every confounded pair into the first round's forward steps was measured worse (3 seeds:
+// LARGE compound 17/27 instead of 19/27: elasticity beside creep, 0.97, was named); with the own
+// directions rule LARGE's gains beside creep are named in 3 of 3 (docs/mismatch-benchmark.md).
 bool confounded_clash(const std::vector<ConfoundedPair>& pairs, const std::string& accepted_id,
-                      const std::string& id, bool conditional = false) {
+                      const std::string& id, bool conditional = false, int own_directions = 0) {
   const EffectDescriptor* e = find_effect(accepted_id);
   if (conditional && e != nullptr && e->refit == EffectRefit::kIdentification) return false;
   for (const auto& p : pairs) {
-    if ((p.first == accepted_id && p.second == id) || (p.first == id && p.second == accepted_id)) {
-      return true;
-    }
+    const bool first = p.first == id && p.second == accepted_id;
+    if (!first && !(p.first == accepted_id && p.second == id)) continue;
+    const int own = (first ? p.first_rank : p.second_rank) - p.directions;
+    if (own_directions > 0 && own >= own_directions) return false;
+    return true;
   }
   return false;
 }
@@ -959,7 +963,7 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
   std::set<std::string> families_taken;
   std::set<std::string>& ids_taken = out.ids_taken;
   auto is_confounded = [&](const std::string& accepted_id, const std::string& id) {
-    return confounded_clash(pairs, accepted_id, id);
+    return confounded_clash(pairs, accepted_id, id, false, options.forward_own_directions);
   };
   auto joint_bic = [&](const State& st, int k) {
     return st.report.chi2 + st.report.log_det_covariance - ctx.log_det0 + k * ctx.logn;
@@ -1175,7 +1179,8 @@ MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& scr
       if (cc == nullptr || groups.count(selection_group(cc->family))) continue;
       bool clash = false;
       for (const auto& f : acc.accepted) {
-        clash = clash || confounded_clash(screen0.confounded, f.id, cs.id, /*conditional=*/true);
+        clash = clash || confounded_clash(screen0.confounded, f.id, cs.id, /*conditional=*/true,
+                                          options.second_round_own_directions);
       }
       if (clash) continue;
       EffectFit fit;
@@ -1206,6 +1211,80 @@ MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& scr
                      return a.bic_delta < b.bic_delta;
                    });
   return last;
+}
+
+// ---- Stage 3c, the backward check: once the second round accepted an effect, an earlier one may
+// only have stood in for it (winch compliance per winch for per-cable force gains). Each accepted
+// effect is tested for removal: the others refitted jointly from the standard model, the
+// likelihood ratio of the full set against that (Holm over the accepted effects). The effect with
+// the weakest evidence is dropped while its corrected p-value is not below alpha. Returns whether
+// an effect was dropped.
+bool backward_check(const RefitContext& ctx, const State& standard, Acceptance& acc) {
+  const double alpha = ctx.options.screen.alpha;
+  bool dropped = false;
+  while (acc.accepted.size() >= 2) {
+    const double dev_full =
+        acc.current.report.chi2 + acc.current.report.log_det_covariance - ctx.log_det0;
+    std::vector<double> p;
+    std::vector<std::optional<State>> states;
+    std::vector<std::vector<EffectFit>> sets;
+    for (std::size_t pos = 0; pos < acc.accepted.size(); ++pos) {
+      State st = standard;
+      std::vector<EffectFit> fits;
+      bool ok = true;
+      for (std::size_t q = 0; q < acc.accepted.size() && ok; ++q) {
+        if (q == pos) continue;
+        EffectFit f;
+        auto nx = refit(ctx, st, acc.accepted[q].id, f);
+        if (!nx) {
+          ok = false;
+          break;
+        }
+        st = std::move(*nx);
+        f.accepted = true;
+        f.round = acc.accepted[q].round;
+        fits.push_back(std::move(f));
+      }
+      const int k = acc.accepted[pos].extra_parameters;
+      if (!ok || k <= 0) {
+        p.push_back(0.0);  // cannot be tested: kept
+        states.emplace_back();
+        sets.emplace_back();
+        continue;
+      }
+      const double dev = st.report.chi2 + st.report.log_det_covariance - ctx.log_det0;
+      p.push_back(chi2_upper_tail(std::max(0.0, dev - dev_full), k));
+      states.emplace_back(std::move(st));
+      sets.push_back(std::move(fits));
+    }
+    const std::vector<double> adj = holm(p);
+    std::size_t weakest = 0;
+    for (std::size_t q = 1; q < adj.size(); ++q) {
+      if (p[q] > p[weakest]) weakest = q;
+    }
+    if (adj[weakest] < alpha || !states[weakest]) break;
+    const std::string gone = acc.accepted[weakest].id;
+    acc.current = std::move(*states[weakest]);
+    acc.accepted = std::move(sets[weakest]);
+    acc.ids_taken.erase(gone);
+    for (auto& c : acc.candidates) {
+      if (c.id == gone) c.accepted = false;
+    }
+    dropped = true;
+  }
+  if (dropped) {
+    for (auto& c : acc.candidates) {
+      for (const auto& f : acc.accepted) {
+        if (c.id == f.id) c = f;
+      }
+    }
+    std::stable_sort(acc.candidates.begin(), acc.candidates.end(),
+                     [](const EffectFit& a, const EffectFit& b) {
+                       if (a.accepted != b.accepted) return a.accepted;
+                       return a.bic_delta < b.bic_delta;
+                     });
+  }
+  return dropped;
 }
 
 // ---- Stage 4, naming: the screen's confounded pairs that this recording cannot tell apart (both
@@ -1746,6 +1825,14 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   Acceptance acc = accept_effects(ctx, standard, d.screen);
   // Stage 3b, the second screening round on what the accepted effects leave.
   if (!acc.accepted.empty()) d.screen_after = second_round(ctx, d.screen, acc);
+  // Stage 3c, the backward check when the second round added an effect.
+  const bool second = std::any_of(acc.accepted.begin(), acc.accepted.end(),
+                                  [](const EffectFit& f) { return f.round == 2; });
+  if (second && options.backward_check && backward_check(ctx, standard, acc)) {
+    auto again =
+        locate_mismatch(acc.current.report, acc.current.set, acc.current.opt, options.screen);
+    if (again) d.screen_after = std::move(*again);
+  }
   // Stage 4, naming: the pairs this recording cannot tell apart.
   const std::vector<ConfoundedPair> found = confounded_pairs(ctx, standard, d.screen, acc);
   d.accepted = std::move(acc.accepted);

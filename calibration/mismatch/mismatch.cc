@@ -1424,12 +1424,16 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
         continue;  // refinements of one effect are compared by nested tests, not confounded
       }
       const Eigen::MatrixXd M = bases[a].transpose() * bases[b];
-      const double rho = Eigen::JacobiSVD<Eigen::MatrixXd>(M).singularValues()(0);
+      const Eigen::VectorXd cc = Eigen::JacobiSVD<Eigen::MatrixXd>(M).singularValues();
+      const double rho = cc(0);
       if (rho <= mopt.confound_threshold) continue;
       ConfoundedPair p;
       p.first = lib[a].id;
       p.second = lib[b].id;
       p.correlation = rho;
+      p.directions = static_cast<int>((cc.array() > mopt.confound_threshold).count());
+      p.first_rank = static_cast<int>(bases[a].cols());
+      p.second_rank = static_cast<int>(bases[b].cols());
       p.description = format(
           "%s and %s are confounded on this pose set (canonical correlation %.2f after the "
           "identification is projected out): the data cannot tell them apart; separate them with "

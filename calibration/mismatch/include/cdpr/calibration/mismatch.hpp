@@ -174,6 +174,10 @@ struct ConfoundedPair {
   std::string first, second;  // candidate ids
   double correlation = 0.0;   // largest canonical correlation of the projected columns
   std::string description;    // one sentence in words
+  // Canonical correlations above the threshold (directions the two share), and each one's rank
+  // (projected columns): first_rank - directions of the first's directions are its own.
+  int directions = 0;
+  int first_rank = 0, second_rank = 0;
 };
 
 struct MismatchSummary {
