@@ -175,8 +175,7 @@ TEST(DirectionEffects, NoiseFreePulleyFrictionIsRepresentedExactlyAndNamed) {
 
 TEST(DirectionEffects, EachIsNamedWithRealisticNoise) {
   // One at a time: on MINI the two are confounded (canonical correlation about 0.85: a length
-  // error at a free pose shows mostly in the equilibrium rows, like a tension error), and the
-  // locator never accepts two confounded candidates together.
+  // error at a free pose shows mostly in the equilibrium rows, like a tension error).
   for (std::uint64_t seed : {1001u, 1002u}) {
     SCOPED_TRACE(seed);
     for (const bool hysteresis : {true, false}) {
