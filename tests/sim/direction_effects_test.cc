@@ -285,6 +285,11 @@ TEST(DirectionEffects, ACandidateSignificantOnlyThroughUnexplainedStructureIsNot
   expect_described(*d);
 }
 
+// Force sensor gain errors of 1-2 %, signs per cable (the compound tests' second effect).
+std::vector<double> force_gains() {
+  return {0.02, -0.02, 0.015, -0.01, -0.02, 0.02, -0.015, 0.01};
+}
+
 // Compound effects: cable elasticity (the true EA 25 % below the nominal) and force sensor gain
 // errors (2 %, signs per cable) together, realistic noise. The elasticity dominates the first
 // screen, so the bootstrap selects it and the gain misses the inclusion threshold (before the
@@ -295,13 +300,12 @@ TEST(DirectionEffects, ACandidateSignificantOnlyThroughUnexplainedStructureIsNot
 // round is what finds them.
 TEST(CompoundEffects, ASmallerEffectHiddenByALargerOneIsNamedByTheSecondRound) {
   const double ea = mini().truth.cables[0].ea;
-  const std::vector<double> gain = {0.02, -0.02, 0.015, -0.01, -0.02, 0.02, -0.015, 0.01};
   for (std::uint64_t seed : {1001u, 1002u}) {
     SCOPED_TRACE(seed);
     const MeasurementSet set = record_with(
         [&](sim::HiddenEffects& e) {
           e.hooke_ea.values = {0.75 * ea};
-          e.force_gain_error.values = gain;
+          e.force_gain_error.values = force_gains();
         },
         true, seed);
     Result<Diagnosis> first = diagnose(mini().nominal, set, nullptr, {}, options(true));
@@ -336,7 +340,6 @@ TEST(CompoundEffects, ASmallerEffectHiddenByALargerOneIsNamedByTheSecondRound) {
 // runs before and in 7 of 8 after (1006: elasticity for creep, the two share their direction).
 TEST(CompoundEffects, ForceGainsBesideCreepAreBothNamedThoughTheyShareOneDirection) {
   const double ea = mini().truth.cables[0].ea;
-  const std::vector<double> gain = {0.02, -0.02, 0.015, -0.01, -0.02, 0.02, -0.015, 0.01};
   for (std::uint64_t seed : {1003u, 1004u}) {
     SCOPED_TRACE(seed);
     const MeasurementSet set = record_with(
@@ -345,7 +348,7 @@ TEST(CompoundEffects, ForceGainsBesideCreepAreBothNamedThoughTheyShareOneDirecti
           c.tau_s = 10.0;
           c.coefficient = 0.1 / (ea * std::log1p(500.0 / c.tau_s));
           e.creep = c;
-          e.force_gain_error.values = gain;
+          e.force_gain_error.values = force_gains();
         },
         true, seed);
     Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
