@@ -51,9 +51,6 @@ std::string kind_name(ParameterKind kind) {
   return parameter_name({kind, 0, 0});
 }
 
-// Each kind's range is narrowed far below what the data ask for (the truth or the noise moves the
-// estimate by more): every estimate of that kind stays inside its range, at least one ends on a
-// bound, and the report says so.
 // Every estimate of `kind` lies inside its range of width `width`, at least one is held on the
 // bound and listed by parameters_at_bound(), the report warns about it and is not trustworthy.
 void expect_held_at_bound_and_reported(const IdentificationReport& rep, ParameterKind kind,
@@ -80,6 +77,9 @@ void expect_held_at_bound_and_reported(const IdentificationReport& rep, Paramete
   EXPECT_FALSE(rep.trustworthy());
 }
 
+// Each kind's range is narrowed far below what the data ask for (the truth or the noise moves the
+// estimate by more): every estimate of that kind stays inside its range, at least one ends on a
+// bound, and the report says so.
 TEST(ParameterBounds, EveryParameterKindIsHeldInsideItsRange) {
   const std::vector<KindCase> kinds = {
       {ParameterKind::kFrameAnchor, 1e-4,

@@ -777,6 +777,11 @@ std::optional<State> refit_gauss_newton(const RefitContext& ctx, const State& cu
   return next;
 }
 
+// -2 log likelihood of a state up to the constant shared by all states of this recording.
+double deviance(const RefitContext& ctx, const State& st) {
+  return st.report.chi2 + st.report.log_det_covariance - ctx.log_det0;
+}
+
 // Stage 2, refit: the model of `cur` with candidate `id` added, fitted in full by the refit hook
 // of the candidate's descriptor (effect_library.hpp); `fit` says how much better it is. nullopt:
 // the candidate cannot be fitted on this state.
@@ -796,7 +801,7 @@ std::optional<State> refit(const RefitContext& ctx, const State& cur, const std:
     }
   }
   fit.chi2_before = cur.report.chi2;
-  fit.deviance_before = cur.report.chi2 + cur.report.log_det_covariance - ctx.log_det0;
+  fit.deviance_before = deviance(ctx, cur);
   fit.cv_rms_before = cur.cv.length_m;
   fit.cv_normalized_before = cur.cv.normalized;
   const EffectDescriptor* effect = find_effect(id);
@@ -815,7 +820,7 @@ std::optional<State> refit(const RefitContext& ctx, const State& cur, const std:
   fit.chi2_after = next->report.chi2;
   fit.cv_rms_after = next->cv.length_m;
   fit.cv_normalized_after = next->cv.normalized;
-  fit.deviance_after = next->report.chi2 + next->report.log_det_covariance - ctx.log_det0;
+  fit.deviance_after = deviance(ctx, *next);
   fit.lrt_statistic = fit.deviance_before - fit.deviance_after;
   fit.lrt_p_value =
       fit.extra_parameters > 0 ? chi2_upper_tail(fit.lrt_statistic, fit.extra_parameters) : 1.0;
@@ -933,6 +938,38 @@ bool confounded_clash(const std::vector<ConfoundedPair>& pairs, const std::strin
   return false;
 }
 
+// The effects `ids` refitted jointly from the standard model, in that order (each marked
+// accepted); nullopt when one cannot be fitted.
+struct JointFit {
+  State state;
+  std::vector<EffectFit> fits;
+  int parameters = 0;  // the effects' extra parameters together
+};
+std::optional<JointFit> joint_refit(const RefitContext& ctx, const State& standard,
+                                    const std::vector<std::string>& ids) {
+  JointFit out{standard, {}, 0};
+  for (const std::string& id : ids) {
+    EffectFit f;
+    auto nx = refit(ctx, out.state, id, f);
+    if (!nx) return std::nullopt;
+    out.state = std::move(*nx);
+    out.parameters += f.extra_parameters;
+    f.accepted = true;
+    out.fits.push_back(std::move(f));
+  }
+  return out;
+}
+
+// The candidate list as reported: each accepted effect's entry is its accepted fit, the accepted
+// ones first, then by BIC.
+void order_candidates(std::vector<EffectFit>& candidates) {
+  std::stable_sort(candidates.begin(), candidates.end(),
+                   [](const EffectFit& a, const EffectFit& b) {
+                     if (a.accepted != b.accepted) return a.accepted;
+                     return a.bic_delta < b.bic_delta;
+                   });
+}
+
 // ---- Stage 3, acceptance: every kept candidate refitted from the standard model (the trials),
 // forward selection from each of the best passing first effects, then swaps.
 struct Acceptance {
@@ -965,9 +1002,7 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
   auto is_confounded = [&](const std::string& accepted_id, const std::string& id) {
     return confounded_clash(pairs, accepted_id, id, false, options.forward_own_directions);
   };
-  auto joint_bic = [&](const State& st, int k) {
-    return st.report.chi2 + st.report.log_det_covariance - ctx.log_det0 + k * ctx.logn;
-  };
+  auto joint_bic = [&](const State& st, int k) { return deviance(ctx, st) + k * ctx.logn; };
   // Forward selection, started from each of the (up to four) best first effects that pass: the
   // greedy path from the single best may begin with a per-cable effect that also absorbs part of
   // a second one (winch compliance per winch for elasticity + drum scale). Each path adds
@@ -1088,28 +1123,13 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
         for (std::size_t q = 0; q < out.accepted.size(); ++q) {
           ids.push_back(q == pos ? id : out.accepted[q].id);
         }
-        State st = standard;
-        std::vector<EffectFit> fits;
-        int k = 0;
-        bool ok = true;
-        for (const std::string& e : ids) {
-          EffectFit f;
-          auto nx = refit(ctx, st, e, f);
-          if (!nx) {
-            ok = false;
-            break;
-          }
-          st = std::move(*nx);
-          k += f.extra_parameters;
-          f.accepted = true;
-          fits.push_back(std::move(f));
-        }
-        if (!ok) continue;
-        const double b = joint_bic(st, k);
+        auto joint = joint_refit(ctx, standard, ids);
+        if (!joint) continue;
+        const double b = joint_bic(joint->state, joint->parameters);
         if (b < best_bic) {
           best_bic = b;
-          best_state = std::move(st);
-          best_set = std::move(fits);
+          best_state = std::move(joint->state);
+          best_set = std::move(joint->fits);
         }
       }
     }
@@ -1134,11 +1154,7 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
                                     [&](const EffectFit& c) { return c.id == f.id; });
     if (!listed) out.candidates.push_back(f);
   }
-  std::stable_sort(out.candidates.begin(), out.candidates.end(),
-                   [](const EffectFit& a, const EffectFit& b) {
-                     if (a.accepted != b.accepted) return a.accepted;
-                     return a.bic_delta < b.bic_delta;
-                   });
+  order_candidates(out.candidates);
   out.current = std::move(current);
   return out;
 }
@@ -1208,11 +1224,7 @@ MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& scr
     }
     if (!listed) acc.candidates.push_back(f);
   }
-  std::stable_sort(acc.candidates.begin(), acc.candidates.end(),
-                   [](const EffectFit& a, const EffectFit& b) {
-                     if (a.accepted != b.accepted) return a.accepted;
-                     return a.bic_delta < b.bic_delta;
-                   });
+  order_candidates(acc.candidates);
   return last;
 }
 
@@ -1226,49 +1238,36 @@ bool backward_check(const RefitContext& ctx, const State& standard, Acceptance& 
   const double alpha = ctx.options.screen.alpha;
   bool dropped = false;
   while (acc.accepted.size() >= 2) {
-    const double dev_full =
-        acc.current.report.chi2 + acc.current.report.log_det_covariance - ctx.log_det0;
+    const double dev_full = deviance(ctx, acc.current);
     std::vector<double> p;
-    std::vector<std::optional<State>> states;
-    std::vector<std::vector<EffectFit>> sets;
+    std::vector<std::optional<JointFit>> without;
     for (std::size_t pos = 0; pos < acc.accepted.size(); ++pos) {
-      State st = standard;
-      std::vector<EffectFit> fits;
-      bool ok = true;
-      for (std::size_t q = 0; q < acc.accepted.size() && ok; ++q) {
-        if (q == pos) continue;
-        EffectFit f;
-        auto nx = refit(ctx, st, acc.accepted[q].id, f);
-        if (!nx) {
-          ok = false;
-          break;
-        }
-        st = std::move(*nx);
-        f.accepted = true;
-        f.round = acc.accepted[q].round;
-        fits.push_back(std::move(f));
+      std::vector<std::string> ids;
+      for (std::size_t q = 0; q < acc.accepted.size(); ++q) {
+        if (q != pos) ids.push_back(acc.accepted[q].id);
       }
+      auto joint = joint_refit(ctx, standard, ids);
       const int k = acc.accepted[pos].extra_parameters;
-      if (!ok || k <= 0) {
+      if (!joint || k <= 0) {
         p.push_back(0.0);  // cannot be tested: kept
-        states.emplace_back();
-        sets.emplace_back();
+        without.emplace_back();
         continue;
       }
-      const double dev = st.report.chi2 + st.report.log_det_covariance - ctx.log_det0;
-      p.push_back(chi2_upper_tail(std::max(0.0, dev - dev_full), k));
-      states.emplace_back(std::move(st));
-      sets.push_back(std::move(fits));
+      p.push_back(chi2_upper_tail(std::max(0.0, deviance(ctx, joint->state) - dev_full), k));
+      for (std::size_t q = 0, f = 0; q < acc.accepted.size(); ++q) {
+        if (q != pos) joint->fits[f++].round = acc.accepted[q].round;
+      }
+      without.push_back(std::move(joint));
     }
     const std::vector<double> adj = holm(p);
     std::size_t weakest = 0;
     for (std::size_t q = 1; q < adj.size(); ++q) {
       if (p[q] > p[weakest]) weakest = q;
     }
-    if (adj[weakest] < alpha || !states[weakest]) break;
+    if (adj[weakest] < alpha || !without[weakest]) break;
     const std::string gone = acc.accepted[weakest].id;
-    acc.current = std::move(*states[weakest]);
-    acc.accepted = std::move(sets[weakest]);
+    acc.current = std::move(without[weakest]->state);
+    acc.accepted = std::move(without[weakest]->fits);
     acc.ids_taken.erase(gone);
     for (auto& c : acc.candidates) {
       if (c.id == gone) c.accepted = false;
@@ -1281,11 +1280,7 @@ bool backward_check(const RefitContext& ctx, const State& standard, Acceptance& 
         if (c.id == f.id) c = f;
       }
     }
-    std::stable_sort(acc.candidates.begin(), acc.candidates.end(),
-                     [](const EffectFit& a, const EffectFit& b) {
-                       if (a.accepted != b.accepted) return a.accepted;
-                       return a.bic_delta < b.bic_delta;
-                     });
+    order_candidates(acc.candidates);
   }
   return dropped;
 }

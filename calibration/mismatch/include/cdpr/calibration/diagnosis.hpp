@@ -54,10 +54,11 @@ struct DiagnosisOptions {
   // screen.confound_threshold) are not accepted together, unless the newcomer keeps at least this
   // many directions of its own: its rank minus the canonical correlations above the threshold
   // (ConfoundedPair::directions). Per-cable force gains (8) beside cable creep or one shared mass
-  // per length keep 7 and are tried; creep beside the gains keeps none. The forward steps and swaps
-  // of the first round use forward_own_directions; the second screening round uses
-  // second_round_own_directions (beside an effect estimated by the identification it tries every
-  // candidate, its screen being conditional on that effect). 0: never on that ground.
+  // per length keep 7 and are tried; creep beside the gains keeps none. The first round's forward
+  // steps use forward_own_directions (its swaps, joint refits of the whole set, keep confounded
+  // candidates exclusive); the second screening round uses second_round_own_directions (beside an
+  // effect estimated by the identification it tries every candidate, its screen being conditional
+  // on that effect). 0: never on that ground.
   int forward_own_directions = 4;
   int second_round_own_directions = 4;
   // After the second round accepted an effect, each earlier one is tested for removal (the others
