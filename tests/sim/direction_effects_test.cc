@@ -67,20 +67,21 @@ std::vector<double> on_cables_2_and_5(double v) {
   return {0.0, v, 0.0, 0.0, v, 0.0, 0.0, 0.0};
 }
 
-// A recording of MINI with the hidden effects that `hide` sets.
-MeasurementSet record_with(const std::function<void(sim::HiddenEffects&)>& hide, bool noise,
-                           std::uint64_t seed) {
+// A recording of MINI with the hidden effects that `hide` sets (it may also change the truth).
+MeasurementSet record_with(const std::function<void(sim::HiddenEffects&, RobotModel&)>& hide,
+                           bool noise, std::uint64_t seed) {
   const Mini& m = mini();
   sim::Scenario s;
   s.name = "direction effects";
-  hide(s.effects);
+  RobotModel base = m.truth;
+  hide(s.effects, base);
   const RobotModel& nom = m.nominal.robot;
   if (noise) {
     s.noise.encoder_counts = stated_noise().sigma_length / winch_metres_per_count(nom.winches[0]);
     s.noise.force_raw = stated_noise().sigma_force * std::abs(nom.force_sensors[0].gain);
     s.noise.laser = stated_noise().sigma_laser;
   }
-  Result<RobotModel> truth = sim::resolve_truth(s, m.truth);
+  Result<RobotModel> truth = sim::resolve_truth(s, base);
   EXPECT_TRUE(truth.ok()) << truth.status().to_string();
   Result<sim::Physics> physics = sim::Physics::create(*truth, s, seed);
   EXPECT_TRUE(physics.ok()) << physics.status().to_string();
@@ -98,7 +99,7 @@ MeasurementSet record_with(const std::function<void(sim::HiddenEffects&)>& hide,
 
 MeasurementSet record(double hysteresis_m, double friction_n, bool noise, std::uint64_t seed) {
   return record_with(
-      [&](sim::HiddenEffects& e) {
+      [&](sim::HiddenEffects& e, RobotModel&) {
         if (hysteresis_m > 0) e.cable_hysteresis.values = on_cables_2_and_5(hysteresis_m);
         if (friction_n > 0) e.pulley_friction.values = on_cables_2_and_5(friction_n);
       },
@@ -303,7 +304,7 @@ TEST(CompoundEffects, ASmallerEffectHiddenByALargerOneIsNamedByTheSecondRound) {
   for (std::uint64_t seed : {1001u, 1002u}) {
     SCOPED_TRACE(seed);
     const MeasurementSet set = record_with(
-        [&](sim::HiddenEffects& e) {
+        [&](sim::HiddenEffects& e, RobotModel&) {
           e.hooke_ea.values = {0.75 * ea};
           e.force_gain_error.values = force_gains();
         },
@@ -343,7 +344,7 @@ TEST(CompoundEffects, ForceGainsBesideCreepAreBothNamedThoughTheyShareOneDirecti
   for (std::uint64_t seed : {1003u, 1004u}) {
     SCOPED_TRACE(seed);
     const MeasurementSet set = record_with(
-        [&](sim::HiddenEffects& e) {
+        [&](sim::HiddenEffects& e, RobotModel&) {
           sim::CreepEffect c;
           c.tau_s = 10.0;
           c.coefficient = 0.1 / (ea * std::log1p(500.0 / c.tau_s));
@@ -356,6 +357,46 @@ TEST(CompoundEffects, ForceGainsBesideCreepAreBothNamedThoughTheyShareOneDirecti
     ASSERT_EQ(d->verdict, Diagnosis::Verdict::kMismatchNamed) << d->headline;
     EXPECT_NE(accepted(*d, "creep"), nullptr) << d->headline;
     EXPECT_NE(accepted(*d, "force sensor gain"), nullptr) << d->headline;
+    EXPECT_EQ(d->accepted.size(), 2u) << d->headline;
+  }
+}
+
+// Cable creep (one law for all cables) beside per-winch drum scale errors, realistic noise (the
+// benchmark's creep + drum sizes). The creep shows most on a few cables, so the residual's tests
+// "the length readings of cable i follow the tension" are significant there. Fitted, the single
+// creep column (or a shared EA, confounded with it on these poses, 0.95) leaves them
+// insignificant, though it is far from any one cable's column: the structure is explained, not
+// reported as physics outside the library. Before, these seeds reported it as unexplained (the
+// candidate had to contain the structure's column, canonical correlation above 0.8), and every
+// candidate it shadowed counted as its proxy and was never a first effect.
+TEST(CompoundEffects, CreepSeenOnAFewCablesIsExplainedNotReportedAsStructureOutsideTheLibrary) {
+  const double ea = mini().truth.cables[0].ea;
+  const Eigen::VectorXd home_counts =
+      sim::nominal_counts(mini().nominal.robot, mini().nominal.robot.home).value();
+  const std::vector<double> scale = {0.002, -0.0015, 0.001, -0.002, 0.0015, -0.001, 0.002, -0.0005};
+  for (std::uint64_t seed : {1001u, 1002u, 1004u}) {
+    SCOPED_TRACE(seed);
+    const MeasurementSet set = record_with(
+        [&](sim::HiddenEffects& e, RobotModel& truth) {
+          sim::CreepEffect c;
+          c.tau_s = 10.0;
+          c.coefficient = 0.1 / (ea * std::log1p(500.0 / c.tau_s));
+          e.creep = c;
+          e.transmission_scale.values = scale;
+          // Homed at the home pose: the scale acts on the length paid out from there.
+          for (int i = 0; i < truth.num_cables(); ++i) {
+            auto& w = truth.winches[static_cast<std::size_t>(i)];
+            w.length_offset -=
+                scale[static_cast<std::size_t>(i)] * winch_length_change<double>(w, home_counts(i));
+          }
+        },
+        true, seed);
+    Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
+    ASSERT_TRUE(d.ok()) << d.status().to_string();
+    EXPECT_TRUE(d->screen.unexplained.empty()) << d->screen.text();
+    EXPECT_NE(accepted(*d, "drum scale"), nullptr) << d->headline;
+    EXPECT_TRUE(accepted(*d, "creep") != nullptr || accepted(*d, "elasticity") != nullptr)
+        << d->headline;
     EXPECT_EQ(d->accepted.size(), 2u) << d->headline;
   }
 }

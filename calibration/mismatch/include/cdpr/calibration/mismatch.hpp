@@ -41,8 +41,10 @@
 //    orientation, temperature), the column "an error of this cable's reading proportional to v"
 //    (with a constant per cable as nuisance, J projected out) is tested by an F-test (Bonferroni
 //    over all tests). A significant one is reported (MismatchSummary::unexplained) unless a
-//    library candidate explains it: canonical correlation above structure_coverage and the test,
-//    with the candidate's columns added, no longer significant.
+//    library candidate explains it: with the candidate's columns added, the test no longer
+//    significant against the residual the candidate leaves (a candidate with a canonical
+//    correlation above structure_coverage) or against the noise left once the candidate and every
+//    selected structure are fitted (any candidate).
 #pragma once
 
 #include <Eigen/Core>
@@ -84,7 +86,9 @@ struct MismatchOptions {
   bool describe_structure = true;
   // A structure whose projected column has a canonical correlation above this with a library
   // candidate's projected columns may be that candidate's: it is unexplained only if it stays
-  // significant with the candidate's columns added (a partial F-test).
+  // significant with the candidate's columns added (a partial F-test against the residual the
+  // candidate leaves). Any candidate explains it also when the test, against the noise left once
+  // the candidate and every selected structure are fitted, is no longer significant.
   double structure_coverage = 0.8;
 };
 
