@@ -860,6 +860,19 @@ std::vector<UnexplainedStructure> describe_structure(const DesignData& D, const 
     Eigen::MatrixXd Z(n, static_cast<Eigen::Index>(picks.size()));
     for (std::size_t q = 0; q < picks.size(); ++q)
       Z.col(static_cast<Eigen::Index>(q)) = picks[q].test->z;
+    // Per candidate (computed once, for the first structure that needs it): the residual sum of
+    // squares and degrees of freedom once it and every selected structure are fitted.
+    std::vector<std::optional<std::pair<double, double>>> noise_left(bases.size());
+    auto noise_with = [&](std::size_t c) {
+      if (!noise_left[c]) {
+        Eigen::MatrixXd W(n, bases[c].cols() + Z.cols());
+        W << bases[c], Z;
+        const Eigen::MatrixXd full = column_basis(W, mopt.rank_tolerance);
+        noise_left[c] = std::make_pair((r - full * (full.transpose() * r)).squaredNorm(),
+                                       d2 - static_cast<double>(full.cols()));
+      }
+      return *noise_left[c];
+    };
     std::vector<Pick> kept;
     for (Pick& pk : picks) {
       const Eigen::VectorXd& z = pk.test->z;
@@ -874,14 +887,16 @@ std::vector<UnexplainedStructure> describe_structure(const DesignData& D, const 
         }
         const Eigen::VectorXd zp = z - B * (B.transpose() * z);
         const double k = static_cast<double>(B.cols());
-        // No degrees of freedom left, or inside the candidate's span (to rounding): the
-        // candidate has the structure's shape.
-        if ((d2 - k <= 0 && rho > mopt.structure_coverage) ||
-            !(zp.squaredNorm() > 1e-12 * z.squaredNorm())) {
+        // Inside the candidate's span (to rounding): the candidate has the structure's shape.
+        if (!(zp.squaredNorm() > 1e-12 * z.squaredNorm())) {
           explained = true;
           continue;
         }
-        if (d2 - k <= 0) continue;
+        // No degrees of freedom left: a close candidate may be it; nothing can be tested.
+        if (d2 - k <= 0) {
+          explained = rho > mopt.structure_coverage;
+          continue;
+        }
         const Eigen::VectorXd rp = r - B * (B.transpose() * r);
         const double tp = std::pow(zp.dot(rp), 2) / zp.squaredNorm();
         auto insignificant = [&](double rest, double dof_p) {
@@ -892,12 +907,8 @@ std::vector<UnexplainedStructure> describe_structure(const DesignData& D, const 
           explained = true;
           continue;
         }
-        Eigen::MatrixXd W(n, B.cols() + Z.cols());
-        W << B, Z;
-        const Eigen::MatrixXd full = column_basis(W, mopt.rank_tolerance);
-        const double dof_full = d2 - static_cast<double>(full.cols());
-        explained = dof_full > 0 &&
-                    insignificant((r - full * (full.transpose() * r)).squaredNorm(), dof_full);
+        const auto [rss_left, dof_left] = noise_with(c);
+        explained = dof_left > 0 && insignificant(rss_left, dof_left);
       }
       if (!explained) kept.push_back(std::move(pk));
     }
