@@ -617,7 +617,8 @@ struct RunResult {
   bool confounded = false, separation_tried = false, separated = false;
   // A suspect with no effect named: its follow-up poses appended, the re-run decides.
   bool follow_up = false, follow_up_named = false;
-  std::string follow_up_error;  // the follow-up poses could not be measured or diagnosed
+  std::string follow_up_error;   // the follow-up poses could not be measured or diagnosed
+  std::string separation_error;  // the separating poses could not be measured or diagnosed
   // The first diagnosis's most significant unmodelled screen candidate (the suspect when nothing
   // is named and it passes DiagnosisOptions::suspect_p): its p-values before / after Holm.
   std::string top_id;
@@ -758,9 +759,15 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     std::vector<Pose> more = r.poses;
     more.insert(more.end(), cf.separating_poses.begin(), cf.separating_poses.end());
     auto set2 = record(r, *t, more, noise_seed);
-    if (!set2.ok()) break;  // the separating poses cannot be measured: not separated
+    if (!set2.ok()) {  // the separating poses cannot be measured: not separated
+      out.separation_error = "simulation: " + set2.status().to_string();
+      break;
+    }
     auto d2 = cdpr::diagnose(r.nominal, *set2, nullptr, cdpr::IdentificationOptions{}, dopt);
-    if (!d2.ok()) break;
+    if (!d2.ok()) {
+      out.separation_error = "diagnose: " + d2.status().to_string();
+      break;
+    }
     RunResult again;
     const std::vector<std::string> fam2 = accepted_families(*d2);
     score(again, fam2, c);
@@ -1062,6 +1069,18 @@ void print_robot(const Robot& r, const Residual& baseline, const std::vector<Mag
               reduction(false));
   std::printf("  held-out misfit in excess of the noise, reduction (median) %6.1f %%\n",
               reduction(true));
+  // The benchmark's own failures: appended (separating or follow-up) poses that the virtual robot
+  // could not measure or that diagnose refused. Such a run counts as not separated.
+  int appended_failed = 0, runs_ok = 0;
+  for (const auto& s : stats) {
+    for (const auto& run : s.runs) {
+      if (!run.ok) continue;
+      ++runs_ok;
+      appended_failed += !run.separation_error.empty() || !run.follow_up_error.empty() ? 1 : 0;
+    }
+  }
+  std::printf("  runs whose appended poses could not be measured or diagnosed   %d of %d\n",
+              appended_failed, runs_ok);
 }
 
 std::vector<std::string> split(const std::string& s) {
@@ -1280,8 +1299,9 @@ int main(int argc, char** argv) {
                   named.empty() ? "-" : named.c_str(), res.seconds,
                   elapsed / n * static_cast<double>(static_cast<int>(jobs.size()) - n));
       if (res.separation_tried) {
-        std::printf("        confounded: separating poses appended, re-run %s\n",
-                    res.separated ? "separated the true effect" : "did not separate");
+        std::printf("        confounded: separating poses appended, re-run %s%s%s\n",
+                    res.separated ? "separated the true effect" : "did not separate",
+                    res.separation_error.empty() ? "" : ": ", res.separation_error.c_str());
       }
       if (!res.follow_up_error.empty()) {
         std::printf("        suspect: the follow-up failed (%s)\n", res.follow_up_error.c_str());
@@ -1311,13 +1331,14 @@ int main(int argc, char** argv) {
           for (const auto& f : res.named_families) named += (named.empty() ? "" : ", ") + f;
           std::printf(
               "verdict [%s] %s seed %zu: %s | named %s | all %d any %d extra %d | conf %d sep "
-              "%d/%d | follow-up %d named %d%s | first named %d | top %s p %.6g Holm %.6g | "
+              "%d/%d%s | follow-up %d named %d%s | first named %d | top %s p %.6g Holm %.6g | "
               "held %.6g -> %.6g | %s\n",
               r.name.c_str(), s.c->label.c_str(), seed,
               res.ok ? cdpr::to_string(res.verdict) : ("failed: " + res.error).c_str(),
               named.empty() ? "-" : named.c_str(), res.all_true_named, res.any_true_named,
-              res.extra_named, res.confounded, res.separated, res.separation_tried, res.follow_up,
-              res.follow_up_named,
+              res.extra_named, res.confounded, res.separated, res.separation_tried,
+              res.separation_error.empty() ? "" : (" error " + res.separation_error).c_str(),
+              res.follow_up, res.follow_up_named,
               res.follow_up_error.empty() ? "" : (" error " + res.follow_up_error).c_str(),
               res.first_named, res.top_id.empty() ? "-" : res.top_id.c_str(), res.top_p,
               res.top_p_adjusted, res.held_before, res.held_after, res.screen_channels.c_str());

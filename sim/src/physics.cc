@@ -318,11 +318,53 @@ bool Physics::solve_sag(const Eigen::VectorXd& l, Eigen::Vector3d& r, Eigen::Mat
       }
     }
     if (!accepted) {
-      std::fprintf(stderr, "sag stall it %d residual %g\n", iters, scaled_max(w, rho_));
       return scaled_max(w, rho_) <= 10.0 * tolerance;
     }
   }
   return false;
+}
+
+// Robust path for cables without their weight: the library solver from the previous pose, from
+// the rigid FK of the commands, then from poses below the start (with exact commands every cable
+// is slack at the rigid FK pose, and a platform hanging in slack cables gives the solver no
+// stiffness to work with). Leaves the tensions in data_.
+Status Physics::solve_weightless(Eigen::Vector3d& r, Eigen::Matrix3d& R, int& iters) {
+  ElastostaticOptions eo;
+  eo.wrench_tolerance = options_.wrench_tolerance;
+  eo.max_iterations = std::max(options_.max_iterations, 100);
+  std::vector<std::optional<Pose>> starts;
+  if (have_pose_) starts.emplace_back(state_.pose);
+  starts.emplace_back(std::nullopt);
+  // Below the previous pose, and below the rigid FK of the new commands: after a long move
+  // (extra poses appended to a recording) the previous pose is far from the new one.
+  std::vector<Pose> bases;
+  if (have_pose_) bases.push_back(state_.pose);
+  ForwardKinematicsOptions fo;
+  fo.max_residual = std::numeric_limits<double>::infinity();
+  const ForwardKinematicsSummary fk = forward_kinematics(work_, lengths_, fo, data_.fk);
+  if (fk.pose.vector().allFinite()) bases.push_back(fk.pose);
+  if (bases.empty()) bases.push_back(state_.pose);
+  for (const Pose& base : bases) {
+    for (const double drop : {1e-5, 1e-4, 1e-3, 1e-2, 3e-2}) {
+      Pose p = base;
+      p.position.z() -= drop;
+      starts.emplace_back(p);
+    }
+  }
+  ElastostaticSummary s;
+  for (const std::optional<Pose>& start : starts) {
+    eo.initial_pose = start;
+    s = solve_elastostatics(work_, lengths_, eo, data_);
+    iters += s.iterations;
+    if (s.success()) break;
+  }
+  if (!s.success()) {
+    return s.status.ok() ? Status(ErrorCode::kNumericalFailure, "no elasto-static equilibrium")
+                         : s.status;
+  }
+  r = s.pose.position;
+  R = s.rotation;
+  return Status::success();
 }
 
 Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double time_s) {
@@ -358,46 +400,10 @@ Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double tim
   int iters = 0;
   if (have_pose_ && !scenario_.effects.sag) ok = solve_newton(lengths_, r, R, iters);
   if (!ok && (!scenario_.effects.sag || !have_pose_)) {
-    // Robust path: the library solver from the previous pose, from the rigid FK of the commands,
-    // then from poses below the start (with exact commands every cable is slack at the rigid FK
-    // pose, and a platform hanging in slack cables gives the solver no stiffness to work with).
-    ElastostaticOptions eo;
-    eo.wrench_tolerance = options_.wrench_tolerance;
-    eo.max_iterations = std::max(options_.max_iterations, 100);
-    std::vector<std::optional<Pose>> starts;
-    if (have_pose_) starts.emplace_back(state_.pose);
-    starts.emplace_back(std::nullopt);
-    // Below the previous pose, and below the rigid FK of the new commands: after a long move
-    // (extra poses appended to a recording) the previous pose is far from the new one.
-    std::vector<Pose> bases;
-    if (have_pose_) bases.push_back(state_.pose);
-    ForwardKinematicsOptions fo;
-    fo.max_residual = std::numeric_limits<double>::infinity();
-    const ForwardKinematicsSummary fk = forward_kinematics(work_, lengths_, fo, data_.fk);
-    if (fk.pose.vector().allFinite()) bases.push_back(fk.pose);
-    if (bases.empty()) bases.push_back(state_.pose);
-    for (const Pose& base : bases) {
-      for (const double drop : {1e-5, 1e-4, 1e-3, 1e-2, 3e-2}) {
-        Pose p = base;
-        p.position.z() -= drop;
-        starts.emplace_back(p);
-      }
-    }
-    ElastostaticSummary s;
-    for (const std::optional<Pose>& start : starts) {
-      eo.initial_pose = start;
-      s = solve_elastostatics(work_, lengths_, eo, data_);
-      iters += s.iterations;
-      if (s.success()) break;
-    }
-    ok = s.success();
-    if (ok) {
-      r = s.pose.position;
-      R = s.rotation;
-    }
+    const Status st = solve_weightless(r, R, iters);
+    ok = st.ok();
     if (!ok && !scenario_.effects.sag) {
       state_.converged = false;
-      Status st = s.status;
       return Status::error(ErrorCode::kNumericalFailure, "sim physics at t = %.6g s: %.*s", time_s,
                            static_cast<int>(st.message().size()), st.message().data());
     }
@@ -408,6 +414,18 @@ Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double tim
     int sag_iters = 0;
     ok = solve_sag(lengths_, r, R, sag_iters);
     iters += sag_iters;
+    if (!ok && have_pose_) {
+      // From the previous pose the sag solver can stall (on a long move some cables go nearly
+      // slack on the way and the line search finds no descent): again from the equilibrium of
+      // the cables without their weight.
+      r = state_.pose.position;
+      R = state_.rotation;
+      if (solve_weightless(r, R, iters).ok()) {
+        sag_tensions_ = data_.tensions;
+        ok = solve_sag(lengths_, r, R, sag_iters);
+        iters += sag_iters;
+      }
+    }
     if (!ok) {
       state_.converged = false;
       return Status::error(ErrorCode::kNumericalFailure,

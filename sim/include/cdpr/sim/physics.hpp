@@ -116,6 +116,7 @@ class Physics {
   void update_cable_laws(double time_s);
   bool solve_newton(const Eigen::VectorXd& l, Eigen::Vector3d& r, Eigen::Matrix3d& R, int& iters);
   bool solve_sag(const Eigen::VectorXd& l, Eigen::Vector3d& r, Eigen::Matrix3d& R, int& iters);
+  Status solve_weightless(Eigen::Vector3d& r, Eigen::Matrix3d& R, int& iters);
   bool sag_wrench(const Eigen::VectorXd& l, const Eigen::Vector3d& r, const Eigen::Matrix3d& R,
                   Wrench& w, Eigen::VectorXd& tensions);
 
