@@ -512,6 +512,9 @@ cdpr::Result<MeasurementSet> record(const Robot& r, const TruthSetup& t,
 struct Residual {
   double sigmas = 0.0;
   std::string channel;
+  // Sum of the squared normalised residuals over every channel: the noncentrality of the test of
+  // this effect's exact shape (noise-free, after the standard identification).
+  double noncentrality = 0.0;
   bool ok = false;
   std::string error;
 };
@@ -549,6 +552,7 @@ Residual leftover(const Robot& r, const std::vector<Component>& parts) {
     add(2, p.wrench_normalized);
   }
   const char* names[3] = {"lengths", "laser", "equilibrium"};
+  out.noncentrality = ss[0] + ss[1] + ss[2];
   for (int c = 0; c < 3; ++c) {
     const double rms = n[c] ? std::sqrt(ss[c] / n[c]) : 0.0;
     if (rms >= out.sigmas) {
@@ -910,6 +914,21 @@ void print_robot(const Robot& r, const Residual& baseline, const std::vector<Mag
                   m.small_scale, m.small.sigmas, e->describe(r, m.small_scale).c_str());
     }
   }
+
+  // The detection bound: a test that knows the effect's exact shape and sign (Neyman-Pearson, one
+  // parameter) at a 5 % false-alarm rate names it with probability Phi(sqrt(lambda) - 1.645); no
+  // method with that false-alarm rate does better, and diagnose() also has to find the shape
+  // among its candidates and correct for their number.
+  std::printf(
+      "  detection bound at the realistic size (lambda = sum of squared normalised residuals "
+      "left; best test at 5 %% false alarms names it in Phi(sqrt(lambda) - 1.645)):\n   ");
+  for (const Magnitude& m : mags) {
+    if (!m.realistic.ok) continue;
+    const double lambda = m.realistic.noncentrality;
+    const double power = 0.5 * std::erfc(-(std::sqrt(lambda) - 1.6448536) / std::sqrt(2.0));
+    std::printf(" %s lambda %.1f: %.0f %%;", m.key.c_str(), lambda, 100.0 * power);
+  }
+  std::printf("\n");
 
   // Confusion matrix: rows = cases, columns = named families.
   std::set<std::string> cols;

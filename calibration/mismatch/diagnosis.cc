@@ -978,6 +978,9 @@ struct Acceptance {
   std::vector<EffectFit> accepted;
   State current;                    // the model with the accepted effects
   std::set<std::string> ids_taken;  // the accepted effects' ids
+  // Joint BIC of each set of effects refitted jointly from the standard model by the swaps, in
+  // the order refitted (+inf: could not be fitted); stage 4 judges pairs in the set with them.
+  std::map<std::vector<std::string>, double> joint_bics;
 };
 
 Acceptance accept_effects(const RefitContext& ctx, const State& standard,
@@ -1124,8 +1127,10 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
           ids.push_back(q == pos ? id : out.accepted[q].id);
         }
         auto joint = joint_refit(ctx, standard, ids);
+        out.joint_bics[ids] = joint ? joint_bic(joint->state, joint->parameters)
+                                    : std::numeric_limits<double>::infinity();
         if (!joint) continue;
-        const double b = joint_bic(joint->state, joint->parameters);
+        const double b = out.joint_bics[ids];
         if (b < best_bic) {
           best_bic = b;
           best_state = std::move(joint->state);
@@ -1293,6 +1298,32 @@ std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const Stat
   // only when this recording cannot tell its two fits apart: a BIC difference of more than
   // DiagnosisOptions::decisive_bic between them (both fitted from the standard model) is very
   // strong evidence for the better one (Kass and Raftery), and then it is named alone.
+  // Beside other accepted effects, the alternative is also judged in the accepted set: the set
+  // with the accepted effect swapped for it, refitted jointly from the standard model. Alone, an
+  // alternative can lose decisively where beside the others it does not (MINI creep + drum scale
+  // + laser tilt: a common drum scale takes creep's constant part, and the shared EA beside the
+  // drum scales fits as well as creep, while alone creep loses to it by 15 in BIC); the pair is
+  // then reported, and its separating poses decide.
+  const double logn = ctx.logn;
+  int k_now = 0;
+  for (const auto& f : acc.accepted) k_now += f.extra_parameters;
+  const double bic_now = deviance(ctx, acc.current) + k_now * logn;
+  auto close_in_the_set = [&](const std::string& taken_id, const std::string& other_id) {
+    if (acc.accepted.size() < 2) return false;  // alone is the set
+    std::vector<std::string> ids;
+    for (const auto& f : acc.accepted) {
+      if (f.id != taken_id && f.id == other_id) return false;
+      ids.push_back(f.id == taken_id ? other_id : f.id);
+    }
+    auto known = acc.joint_bics.find(ids);  // the swaps' last pass tried most of these
+    if (known == acc.joint_bics.end()) {
+      auto joint = joint_refit(ctx, standard, ids);
+      const double b = joint ? deviance(ctx, joint->state) + joint->parameters * logn
+                             : std::numeric_limits<double>::infinity();
+      known = acc.joint_bics.emplace(ids, b).first;
+    }
+    return known->second - bic_now <= ctx.options.decisive_bic;
+  };
   std::vector<ConfoundedPair> found;
   for (const auto& p : screen.confounded) {
     const bool taken_a = acc.ids_taken.count(p.first) > 0,
@@ -1312,7 +1343,8 @@ std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const Stat
       const EffectFit* taken = taken_a ? fa : fb;
       const EffectFit* other = taken_a ? fb : fa;
       if (other == nullptr) continue;  // the other cannot be fitted at all: nothing to confuse
-      if (taken != nullptr && other->bic_delta - taken->bic_delta > ctx.options.decisive_bic)
+      if (taken != nullptr && other->bic_delta - taken->bic_delta > ctx.options.decisive_bic &&
+          !close_in_the_set(taken_a ? p.first : p.second, taken_a ? p.second : p.first))
         continue;
     }
     found.push_back(p);

@@ -401,5 +401,95 @@ TEST(CompoundEffects, CreepSeenOnAFewCablesIsExplainedNotReportedAsStructureOuts
   }
 }
 
+// Creep beside per-winch drum scale errors named as a constant elasticity: the common mode of the
+// drum scales takes creep's constant part (with similar tensions F L ~ L), and beside them a
+// shared EA (or EA per cable) fits as well as the creep's time law, though alone creep is
+// decisively better or worse than it. The recording cannot tell them apart, so the pair is
+// reported with separating poses: whatever took creep's place is listed as confounded with creep.
+// Before (the pair judged by the two fits alone from the standard model), seeds 1003-1005 named
+// drum scale + elasticity with no pair to creep; 1001-1010 now all name creep or list it.
+TEST(CompoundEffects, AnEffectStandingInForCreepBesideDrumScalesIsReportedAsConfoundedWithIt) {
+  const double ea = mini().truth.cables[0].ea;
+  const Eigen::VectorXd home_counts =
+      sim::nominal_counts(mini().nominal.robot, mini().nominal.robot.home).value();
+  const std::vector<double> scale = {0.002, -0.002, 0.0015, -0.001, -0.002, 0.002, -0.0015, 0.001};
+  for (std::uint64_t seed : {1003u, 1004u, 1005u}) {
+    SCOPED_TRACE(seed);
+    const MeasurementSet set = record_with(
+        [&](sim::HiddenEffects& e, RobotModel& truth) {
+          sim::CreepEffect c;
+          c.tau_s = 10.0;
+          c.coefficient = 0.1 / (ea * std::log1p(500.0 / c.tau_s));
+          e.creep = c;
+          e.transmission_scale.values = scale;
+          for (int i = 0; i < truth.num_cables(); ++i) {
+            auto& w = truth.winches[static_cast<std::size_t>(i)];
+            w.length_offset -=
+                scale[static_cast<std::size_t>(i)] * winch_length_change<double>(w, home_counts(i));
+          }
+        },
+        true, seed);
+    Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
+    ASSERT_TRUE(d.ok()) << d.status().to_string();
+    ASSERT_EQ(d->accepted.size(), 2u) << d->headline;
+    EXPECT_NE(accepted(*d, "drum scale"), nullptr) << d->headline;
+    if (accepted(*d, "creep") != nullptr) continue;
+    const EffectFit& other =
+        d->accepted[0].family == "drum scale" ? d->accepted[1] : d->accepted[0];
+    const ConfoundedFinding* with_creep = nullptr;
+    for (const ConfoundedFinding& c : d->confounded) {
+      if ((c.first == other.id && c.second == "creep_shared") ||
+          (c.second == other.id && c.first == "creep_shared"))
+        with_creep = &c;
+    }
+    ASSERT_NE(with_creep, nullptr) << other.id << " named for the creep, not listed with it";
+    EXPECT_FALSE(with_creep->separating_poses.empty());
+    EXPECT_LT(with_creep->correlation_with_extra, with_creep->correlation);
+  }
+}
+
+// A tilted laser mount (0.5 degree about x and y, the benchmark's realistic size: 0.57 sigma left
+// on the laser after the standard identification) is the beam direction alone. The screen tests the
+// candidate `laser_direction` on its 2 directions: noise-free it explains the whole misfit, and
+// with realistic noise its test is stronger than the whole mounting's (origin and direction, 4
+// directions once the plane offset is estimated) on the same data. The whole mounting alone had
+// to carry the tilt before, and with its extra directions missed the screen's gate more often.
+TEST(LaserMounting, ATiltedMountIsTestedOnTheBeamDirectionsAlone) {
+  constexpr double kDeg = 3.14159265358979323846 / 180.0;
+  auto tilt = [&](sim::HiddenEffects& e, RobotModel&) {
+    e.laser_mount_tilt = Eigen::Vector3d(0.5 * kDeg, -0.5 * kDeg, 0.0);
+  };
+  {
+    const MeasurementSet set = record_with(tilt, false, 1);
+    Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
+    ASSERT_TRUE(d.ok()) << d.status().to_string();
+    const CandidateScreen* beam = d->screen.find("laser_direction");
+    const CandidateScreen* mount = d->screen.find("laser_mounting");
+    ASSERT_NE(beam, nullptr);
+    ASSERT_NE(mount, nullptr);
+    EXPECT_EQ(beam->rank, 2);
+    EXPECT_GT(mount->rank, beam->rank);
+    EXPECT_GT(beam->explained_fraction, 0.99) << "the beam direction is the whole misfit";
+  }
+  int stronger = 0;
+  for (std::uint64_t seed = 1001; seed <= 1006; ++seed) {
+    const MeasurementSet set = record_with(tilt, true, seed);
+    Result<MismatchSummary> s = [&]() -> Result<MismatchSummary> {
+      Result<IdentificationReport> rep = identify(mini().nominal, set, {});
+      if (!rep.ok()) return rep.status();
+      return locate_mismatch(*rep, set, {}, MismatchOptions{});
+    }();
+    ASSERT_TRUE(s.ok()) << s.status().to_string();
+    const CandidateScreen* beam = s->find("laser_direction");
+    const CandidateScreen* mount = s->find("laser_mounting");
+    ASSERT_NE(beam, nullptr);
+    ASSERT_NE(mount, nullptr);
+    stronger += beam->p_value < mount->p_value ? 1 : 0;
+  }
+  // 5 of 6: with seed 1002 the mounting's origin directions also take some of the noise.
+  EXPECT_GE(stronger, 5) << "of 6 seeds, the beam direction's test was the stronger one in "
+                         << stronger;
+}
+
 }  // namespace
 }  // namespace cdpr

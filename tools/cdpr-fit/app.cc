@@ -403,9 +403,10 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
     return kExitUsage;
   }
 
-  // Ceres reports evaluation trouble through glog (dozens of lines per residual block): only
-  // with -v. The reason reaches the user as the command's one-line error.
-  FLAGS_minloglevel = verbose ? google::GLOG_INFO : google::GLOG_ERROR;
+  // Ceres reports evaluation trouble through glog (dozens of lines per residual block, and an
+  // ERROR line when a diagnosis tries an alternative effect whose fit cannot be evaluated, which
+  // diagnose handles): only with -v. The reason reaches the user as the command's one-line error.
+  FLAGS_minloglevel = verbose ? google::GLOG_INFO : google::GLOG_FATAL;
   auto sink = std::make_shared<spdlog::sinks::ostream_sink_mt>(err);
   spdlog::logger log("cdpr-fit", sink);
   log.set_pattern("cdpr-fit: %v");
