@@ -361,6 +361,29 @@ TEST(CompoundEffects, ForceGainsBesideCreepAreBothNamedThoughTheyShareOneDirecti
   }
 }
 
+// MINI with cable creep (compliance +10 % of 1/EA over the 500 s recording, tau 10 s) and drum
+// scale errors `scale` per winch, realistic noise. Homed at the home pose: the scale acts on the
+// length paid out from there.
+MeasurementSet record_creep_and_drum_scales(const std::vector<double>& scale, std::uint64_t seed) {
+  const double ea = mini().truth.cables[0].ea;
+  const Eigen::VectorXd home_counts =
+      sim::nominal_counts(mini().nominal.robot, mini().nominal.robot.home).value();
+  return record_with(
+      [&](sim::HiddenEffects& e, RobotModel& truth) {
+        sim::CreepEffect c;
+        c.tau_s = 10.0;
+        c.coefficient = 0.1 / (ea * std::log1p(500.0 / c.tau_s));
+        e.creep = c;
+        e.transmission_scale.values = scale;
+        for (int i = 0; i < truth.num_cables(); ++i) {
+          auto& w = truth.winches[static_cast<std::size_t>(i)];
+          w.length_offset -=
+              scale[static_cast<std::size_t>(i)] * winch_length_change<double>(w, home_counts(i));
+        }
+      },
+      true, seed);
+}
+
 // Cable creep (one law for all cables) beside per-winch drum scale errors, realistic noise (the
 // benchmark's creep + drum sizes). The creep shows most on a few cables, so the residual's tests
 // "the length readings of cable i follow the tension" are significant there. Fitted, the single
@@ -370,27 +393,10 @@ TEST(CompoundEffects, ForceGainsBesideCreepAreBothNamedThoughTheyShareOneDirecti
 // candidate had to contain the structure's column, canonical correlation above 0.8), and every
 // candidate it shadowed counted as its proxy and was never a first effect.
 TEST(CompoundEffects, CreepSeenOnAFewCablesIsExplainedNotReportedAsStructureOutsideTheLibrary) {
-  const double ea = mini().truth.cables[0].ea;
-  const Eigen::VectorXd home_counts =
-      sim::nominal_counts(mini().nominal.robot, mini().nominal.robot.home).value();
   const std::vector<double> scale = {0.002, -0.0015, 0.001, -0.002, 0.0015, -0.001, 0.002, -0.0005};
   for (std::uint64_t seed : {1001u, 1002u, 1004u}) {
     SCOPED_TRACE(seed);
-    const MeasurementSet set = record_with(
-        [&](sim::HiddenEffects& e, RobotModel& truth) {
-          sim::CreepEffect c;
-          c.tau_s = 10.0;
-          c.coefficient = 0.1 / (ea * std::log1p(500.0 / c.tau_s));
-          e.creep = c;
-          e.transmission_scale.values = scale;
-          // Homed at the home pose: the scale acts on the length paid out from there.
-          for (int i = 0; i < truth.num_cables(); ++i) {
-            auto& w = truth.winches[static_cast<std::size_t>(i)];
-            w.length_offset -=
-                scale[static_cast<std::size_t>(i)] * winch_length_change<double>(w, home_counts(i));
-          }
-        },
-        true, seed);
+    const MeasurementSet set = record_creep_and_drum_scales(scale, seed);
     Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
     ASSERT_TRUE(d.ok()) << d.status().to_string();
     EXPECT_TRUE(d->screen.unexplained.empty()) << d->screen.text();
@@ -409,26 +415,10 @@ TEST(CompoundEffects, CreepSeenOnAFewCablesIsExplainedNotReportedAsStructureOuts
 // Before (the pair judged by the two fits alone from the standard model), seeds 1003-1005 named
 // drum scale + elasticity with no pair to creep; 1001-1010 now all name creep or list it.
 TEST(CompoundEffects, AnEffectStandingInForCreepBesideDrumScalesIsReportedAsConfoundedWithIt) {
-  const double ea = mini().truth.cables[0].ea;
-  const Eigen::VectorXd home_counts =
-      sim::nominal_counts(mini().nominal.robot, mini().nominal.robot.home).value();
   const std::vector<double> scale = {0.002, -0.002, 0.0015, -0.001, -0.002, 0.002, -0.0015, 0.001};
   for (std::uint64_t seed : {1003u, 1004u, 1005u}) {
     SCOPED_TRACE(seed);
-    const MeasurementSet set = record_with(
-        [&](sim::HiddenEffects& e, RobotModel& truth) {
-          sim::CreepEffect c;
-          c.tau_s = 10.0;
-          c.coefficient = 0.1 / (ea * std::log1p(500.0 / c.tau_s));
-          e.creep = c;
-          e.transmission_scale.values = scale;
-          for (int i = 0; i < truth.num_cables(); ++i) {
-            auto& w = truth.winches[static_cast<std::size_t>(i)];
-            w.length_offset -=
-                scale[static_cast<std::size_t>(i)] * winch_length_change<double>(w, home_counts(i));
-          }
-        },
-        true, seed);
+    const MeasurementSet set = record_creep_and_drum_scales(scale, seed);
     Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
     ASSERT_TRUE(d.ok()) << d.status().to_string();
     ASSERT_EQ(d->accepted.size(), 2u) << d->headline;
