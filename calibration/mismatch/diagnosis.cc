@@ -1302,8 +1302,8 @@ std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const Stat
   // with the accepted effect swapped for it, refitted jointly from the standard model. Alone, an
   // alternative can lose decisively where beside the others it does not (MINI creep + drum scale
   // + laser tilt: a common drum scale takes creep's constant part, and the shared EA beside the
-  // drum scales fits as well as creep, while alone creep loses to it by 15 in BIC); the pair is
-  // then reported, and its separating poses decide.
+  // drum scales fits as well as creep, while alone the two differ by more than decisive_bic);
+  // the pair is then reported, and its separating poses decide.
   const double logn = ctx.logn;
   int k_now = 0;
   for (const auto& f : acc.accepted) k_now += f.extra_parameters;
