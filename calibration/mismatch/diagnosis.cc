@@ -782,6 +782,17 @@ double deviance(const RefitContext& ctx, const State& st) {
   return st.report.chi2 + st.report.log_det_covariance - ctx.log_det0;
 }
 
+// BIC of a state with effects of k extra parameters together (up to the shared constant).
+double joint_bic(const RefitContext& ctx, const State& st, int k) {
+  return deviance(ctx, st) + k * ctx.logn;
+}
+
+int extra_parameters(const std::vector<EffectFit>& effects) {
+  int k = 0;
+  for (const auto& f : effects) k += f.extra_parameters;
+  return k;
+}
+
 // Stage 2, refit: the model of `cur` with candidate `id` added, fitted in full by the refit hook
 // of the candidate's descriptor (effect_library.hpp); `fit` says how much better it is. nullopt:
 // the candidate cannot be fitted on this state.
@@ -1005,7 +1016,6 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
   auto is_confounded = [&](const std::string& accepted_id, const std::string& id) {
     return confounded_clash(pairs, accepted_id, id, false, options.forward_own_directions);
   };
-  auto joint_bic = [&](const State& st, int k) { return deviance(ctx, st) + k * ctx.logn; };
   // Forward selection, started from each of the (up to four) best first effects that pass: the
   // greedy path from the single best may begin with a per-cable effect that also absorbs part of
   // a second one (winch compliance per winch for elasticity + drum scale). Each path adds
@@ -1076,9 +1086,7 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
       ids.insert(f.id);
       path.state = best->state;
     }
-    int k = 0;
-    for (const auto& f : path.accepted) k += f.extra_parameters;
-    path.bic = joint_bic(path.state, k);
+    path.bic = joint_bic(ctx, path.state, extra_parameters(path.accepted));
     return path;
   };
   if (options.max_effects > 0 && !firsts.empty()) {
@@ -1103,9 +1111,7 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
   // the whole set, and admitting those made a mutated 12-pose recording's diagnose spend 138
   // refits (100 s) on swaps, for no change in the benchmark's verdicts.
   for (int pass = 0; pass < 3 && out.accepted.size() >= 2; ++pass) {
-    int k_now = 0;
-    for (const auto& f : out.accepted) k_now += f.extra_parameters;
-    const double bic_now = joint_bic(current, k_now);
+    const double bic_now = joint_bic(ctx, current, extra_parameters(out.accepted));
     double best_bic = bic_now - 2.0;  // a swap must gain clearly
     std::optional<State> best_state;
     std::vector<EffectFit> best_set;
@@ -1127,10 +1133,10 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
           ids.push_back(q == pos ? id : out.accepted[q].id);
         }
         auto joint = joint_refit(ctx, standard, ids);
-        out.joint_bics[ids] = joint ? joint_bic(joint->state, joint->parameters)
-                                    : std::numeric_limits<double>::infinity();
+        const double b = joint ? joint_bic(ctx, joint->state, joint->parameters)
+                               : std::numeric_limits<double>::infinity();
+        out.joint_bics[ids] = b;
         if (!joint) continue;
-        const double b = out.joint_bics[ids];
         if (b < best_bic) {
           best_bic = b;
           best_state = std::move(joint->state);
@@ -1304,10 +1310,7 @@ std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const Stat
   // + laser tilt: a common drum scale takes creep's constant part, and the shared EA beside the
   // drum scales fits as well as creep, while alone the two differ by more than decisive_bic);
   // the pair is then reported, and its separating poses decide.
-  const double logn = ctx.logn;
-  int k_now = 0;
-  for (const auto& f : acc.accepted) k_now += f.extra_parameters;
-  const double bic_now = deviance(ctx, acc.current) + k_now * logn;
+  const double bic_now = joint_bic(ctx, acc.current, extra_parameters(acc.accepted));
   auto close_in_the_set = [&](const std::string& taken_id, const std::string& other_id) {
     if (acc.accepted.size() < 2) return false;  // alone is the set
     std::vector<std::string> ids;
@@ -1318,7 +1321,7 @@ std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const Stat
     auto known = acc.joint_bics.find(ids);  // the swaps' last pass tried most of these
     if (known == acc.joint_bics.end()) {
       auto joint = joint_refit(ctx, standard, ids);
-      const double b = joint ? deviance(ctx, joint->state) + joint->parameters * logn
+      const double b = joint ? joint_bic(ctx, joint->state, joint->parameters)
                              : std::numeric_limits<double>::infinity();
       known = acc.joint_bics.emplace(ids, b).first;
     }
