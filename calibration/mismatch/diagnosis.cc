@@ -1360,6 +1360,28 @@ std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const Stat
 // +-tilt pitch}, each at the planned pretension and at twice it (equal tensions at different free
 // lengths tell a ~F*L effect from a ~F one), simulated noise-free with the standard estimate and
 // appended to the recording as one augmented design.
+// When an extra pose measured right after the recording would be read: time and temperature
+// (NaN where the recording has none).
+PoseMeasurement next_reading_slot(const MeasurementSet& set) {
+  PoseMeasurement next;
+  double first = kNaN, last = kNaN;
+  int timed = 0;
+  for (const PoseMeasurement& pm : set.poses) {
+    if (std::isfinite(pm.time)) {
+      if (!std::isfinite(first)) first = pm.time;
+      last = pm.time;
+      ++timed;
+    }
+    if (std::isfinite(pm.temperature)) next.temperature = pm.temperature;
+  }
+  if (timed >= 2) {
+    next.time = last + (last - first) / static_cast<double>(timed - 1);
+  } else if (timed == 1) {
+    next.time = last;
+  }
+  return next;
+}
+
 struct ExtraPoseGrid {
   std::vector<Pose> poses;
   std::vector<double> pretensions;       // N, per pose
@@ -1415,6 +1437,13 @@ ExtraPoseGrid extra_pose_grid(const RobotModel& robot, const IdentificationRepor
         }
       }
     }
+    // The extra poses are measured after the recording: their time is the next pose's (the
+    // recording's mean spacing after its last pose), their temperature the last one read. The
+    // time-dependent candidates (creep, drifts) are evaluated there, not where the simulation
+    // below would put them (pose g at g seconds, as if at the start: a creep column near zero
+    // on those made 6 extra poses seem to separate creep from elasticity, canonical correlation
+    // 0.95 -> 0.11, which the poses measured after the recording did not).
+    const PoseMeasurement next = next_reading_slot(set);
     MeasurementSet all = set;
     std::vector<Pose> all_poses = before.poses;
     for (const double level : {f_ref, 2.0 * f_ref}) {
@@ -1432,6 +1461,8 @@ ExtraPoseGrid extra_pose_grid(const RobotModel& robot, const IdentificationRepor
       if (!sim) continue;
       for (std::size_t g = 0; g < ok.size(); ++g) {
         all.poses.push_back(sim->set.poses[g]);
+        all.poses.back().time = next.time;
+        all.poses.back().temperature = next.temperature;
         all_poses.push_back(ok[g]);
         cand.push_back(ok[g]);
         cand_pretension.push_back(level);

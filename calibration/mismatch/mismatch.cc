@@ -1472,14 +1472,23 @@ Result<MismatchSummary> locate_mismatch(const IdentificationReport& report,
       p.directions = static_cast<int>((cc.array() > mopt.confound_threshold).count());
       p.first_rank = static_cast<int>(bases[a].cols());
       p.second_rank = static_cast<int>(bases[b].cols());
+      // One grows with time, the other does not: no pose measured after the recording tells them
+      // apart as well as a pose measured again after a long wait (creep has nearly levelled off
+      // by the end of a recording, so new poses see it as a constant compliance).
+      auto timed = [](const Candidate& c) {
+        const EffectDescriptor* e = find_effect(c.id);
+        return e != nullptr && e->plotted_against.name == "time";
+      };
+      const char* hint = (lib[a].family == "elasticity" && lib[b].family == "compliance")
+                             ? " (equal tension at very different free lengths)"
+                         : timed(lib[a]) != timed(lib[b])
+                             ? " (a loaded pose held and measured again after a long wait)"
+                             : "";
       p.description = format(
           "%s and %s are confounded on this pose set (canonical correlation %.2f after the "
           "identification is projected out): the data cannot tell them apart; separate them with "
           "poses that excite one without the other%s, or a bench test",
-          lib[a].name.c_str(), lib[b].name.c_str(), rho,
-          (lib[a].family == "elasticity" && lib[b].family == "compliance")
-              ? " (equal tension at very different free lengths)"
-              : "");
+          lib[a].name.c_str(), lib[b].name.c_str(), rho, hint);
       out.confounded.push_back(std::move(p));
     }
   }
