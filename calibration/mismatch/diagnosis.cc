@@ -1374,11 +1374,9 @@ PoseMeasurement next_reading_slot(const MeasurementSet& set) {
     }
     if (std::isfinite(pm.temperature)) next.temperature = pm.temperature;
   }
-  if (timed >= 2) {
-    next.time = last + (last - first) / static_cast<double>(timed - 1);
-  } else if (timed == 1) {
-    next.time = last;
-  }
+  if (timed >= 2) next.time = last + (last - first) / static_cast<double>(timed - 1);
+  // One time stamp, or times so large that the next one overflows: the last one.
+  if (timed >= 1 && !std::isfinite(next.time)) next.time = last;
   return next;
 }
 

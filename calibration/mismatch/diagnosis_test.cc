@@ -142,6 +142,42 @@ TEST(Diagnosis, ConfoundedElasticityAndComplianceGetBothFitsAndSeparatingPoses) 
   }
 }
 
+// The extra poses are judged at the time they will be measured (after the recording): for a pair
+// with no time dependence that time changes nothing, however the recording's clock runs, even
+// when the next time stamp would overflow.
+TEST(Diagnosis, SeparatingPosesOfATimelessPairDoNotDependOnTheRecordingsClock) {
+  const RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim = simulate(d, 5);
+  conceal_hooke(d, sim, 5.0e4);
+  DiagnosisOptions o = quick_options();
+  o.decisive_bic = std::numeric_limits<double>::infinity();
+  auto poses_of = [&](const MeasurementSet& set) {
+    auto diag = diagnose(d.s.nominal, set, nullptr, {}, o);
+    EXPECT_TRUE(diag.ok()) << diag.status().to_string();
+    if (!diag.ok()) return std::vector<Pose>{};
+    for (const ConfoundedFinding& c : diag->confounded) {
+      EXPECT_TRUE(std::isfinite(c.correlation_with_extra)) << c.first << " / " << c.second;
+    }
+    const ConfoundedFinding* pair = confounded(*diag, "hooke_shared", "compliance_shared");
+    EXPECT_NE(pair, nullptr);
+    return pair != nullptr ? pair->separating_poses : std::vector<Pose>{};
+  };
+  const std::vector<Pose> reference = poses_of(sim.set);
+  ASSERT_EQ(static_cast<int>(reference.size()), o.separating_poses);
+  MeasurementSet late = sim.set;
+  const double np = static_cast<double>(late.num_poses());
+  for (int j = 0; j < late.num_poses(); ++j) {
+    // The last time stamp is the largest double; the next one would be infinite.
+    late.poses[static_cast<std::size_t>(j)].time =
+        std::numeric_limits<double>::max() * (1.0 - 0.5 * (np - 1.0 - j) / np);
+  }
+  const std::vector<Pose> moved = poses_of(late);
+  ASSERT_EQ(moved.size(), reference.size());
+  for (std::size_t q = 0; q < moved.size(); ++q) {
+    EXPECT_TRUE(moved[q].vector().isApprox(reference[q].vector())) << q;
+  }
+}
+
 TEST(Diagnosis, SuspectWithoutANamedEffectGetsFeasibleFollowUpPosesThatAddInformation) {
   const RigidMini d = rigid_mini(25);
   const SimulatedMeasurements sim = simulate(d, 2);
