@@ -559,7 +559,14 @@ class MatrixCell {
     if (state == "fault") {
       // As an operator would: wait for a running worker to end, let the cause go away, then
       // fault_reset (and once more if the first came too early).
+      // The worker identifies in real time while the cell steps robot time as fast as it can
+      // (slowed only in the state `identifying`; this one is `fault`): paced, robot time runs
+      // with the wall clock, so the bound is real seconds. Unpaced, 300 s of robot time went by
+      // in a few real seconds on a loaded machine, the worker was still identifying at the reset,
+      // and its end turned the reset's outcome ("fault_reset leaves fault" or "leaves holding").
+      cell_->pace(true);
       cell_->run_until([&] { return !worker_busy(); }, 300.0);
+      cell_->pace(false);
       cell_->run_until([] { return false; }, 0.5);
       const Reply r = cell_->request("fault_reset");
       if (!r.ok) {
