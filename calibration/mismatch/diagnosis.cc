@@ -1360,6 +1360,12 @@ std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const Stat
 // +-tilt pitch}, each at the planned pretension and at twice it (equal tensions at different free
 // lengths tell a ~F*L effect from a ~F one), simulated noise-free with the standard estimate and
 // appended to the recording as one augmented design.
+struct ExtraPoseGrid {
+  std::vector<Pose> poses;
+  std::vector<double> pretensions;       // N, per pose
+  std::optional<MismatchDesign> design;  // the recording with the grid appended
+};
+
 // When an extra pose measured right after the recording would be read: time and temperature
 // (NaN where the recording has none).
 PoseMeasurement next_reading_slot(const MeasurementSet& set) {
@@ -1379,12 +1385,6 @@ PoseMeasurement next_reading_slot(const MeasurementSet& set) {
   if (timed >= 1 && !std::isfinite(next.time)) next.time = last;
   return next;
 }
-
-struct ExtraPoseGrid {
-  std::vector<Pose> poses;
-  std::vector<double> pretensions;       // N, per pose
-  std::optional<MismatchDesign> design;  // the recording with the grid appended
-};
 
 ExtraPoseGrid extra_pose_grid(const RobotModel& robot, const IdentificationReport& before,
                               const MeasurementSet& set,
