@@ -531,7 +531,6 @@ struct Folds {
 
 Folds assign_folds(const MismatchDesign& D0, int np, const DiagnosisOptions& options) {
   Folds out;
-  out.K = std::min(options.cv_folds, np);
   std::vector<int>& fold = out.fold;
   fold.resize(static_cast<std::size_t>(np));
   {
@@ -543,6 +542,8 @@ Folds assign_folds(const MismatchDesign& D0, int np, const DiagnosisOptions& opt
     std::erase_if(perm,
                   [&](int j) { return D0.jacobian_pose[static_cast<std::size_t>(j)].norm() == 0; });
     for (int j = 0; j < np; ++j) fold[static_cast<std::size_t>(j)] = -1;
+    out.K = options.cv_folds == 0 ? std::max(1, static_cast<int>(perm.size()))
+                                  : std::min(options.cv_folds, np);
     for (std::size_t q = 0; q < perm.size(); ++q) {
       fold[static_cast<std::size_t>(perm[q])] = static_cast<int>(q) % out.K;
     }
@@ -1586,10 +1587,11 @@ std::optional<FollowUp> follow_up(const MismatchSummary& screen, const RobotMode
 // written where the config can hold them), the held-out RMS (cross-validation or the validation
 // recording) and the per-channel RMS.
 Status model_the_effects(Diagnosis& d, const State& current, const CvRms& cv_before, int K,
-                         const MeasurementSet* validation,
+                         bool leave_one_out, const MeasurementSet* validation,
                          const IdentificationOptions& identification, int nl) {
-  d.held_out_source =
-      validation != nullptr ? "validation recording" : format("%d-fold cross-validation", K);
+  d.held_out_source = validation != nullptr ? "validation recording"
+                      : leave_one_out       ? "leave-one-pose-out cross-validation"
+                                            : format("%d-fold cross-validation", K);
   d.held_out_rms_before = cv_before.length_m;
   d.held_out_rms_after = cv_before.length_m;
   if (!d.accepted.empty()) {
@@ -1828,11 +1830,14 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   if (validation != nullptr) {
     CDPR_RETURN_IF_ERROR(check_set(*validation, "validation recording"));
   }
-  if (options.bootstrap_samples < 0 || options.cv_folds < 2 || options.max_effects < 0 ||
+  if (options.bootstrap_samples < 0 || (options.cv_folds < 2 && options.cv_folds != 0) ||
+      options.max_effects < 0 ||
       !(options.inclusion_threshold >= 0 && options.inclusion_threshold <= 1)) {
-    return Status(ErrorCode::kInvalidArgument,
-                  "diagnose: options need bootstrap_samples >= 0, cv_folds >= 2, max_effects >= 0 "
-                  "and 0 <= inclusion_threshold <= 1");
+    return Status(
+        ErrorCode::kInvalidArgument,
+        "diagnose: options need bootstrap_samples >= 0, cv_folds >= 2 (or 0: leave one pose "
+        "out), max_effects >= 0 "
+        "and 0 <= inclusion_threshold <= 1");
   }
 
   Diagnosis d;
@@ -1918,8 +1923,8 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   // they found LARGE's laser tilt beside sag and MINI's force gain beside creep once each).
 
   // Stage 6, the model with the accepted effects; stage 7, the verdict.
-  CDPR_RETURN_IF_ERROR(
-      model_the_effects(d, acc.current, cv_before, K, validation, identification, nl));
+  CDPR_RETURN_IF_ERROR(model_the_effects(d, acc.current, cv_before, K, options.cv_folds == 0,
+                                         validation, identification, nl));
   state_verdict(d, alpha);
   return d;
 }

@@ -187,6 +187,28 @@ TEST(Diagnosis, SeparatingPosesOfATimelessPairDoNotDependOnTheRecordingsClock) {
   }
 }
 
+// cv_folds 0 holds out one pose at a time (every pose but the home pose, which the gauge fixes):
+// the same folds as K = the number of poses, and the report says which it was.
+TEST(Diagnosis, LeaveOnePoseOutIsAFoldForEveryPoseThatCanBeHeldOut) {
+  const ElasticCase ec;
+  DiagnosisOptions loo = ec.o, each = ec.o;
+  loo.cv_folds = 0;
+  each.cv_folds = ec.sim.set.num_poses();
+  auto a = diagnose(ec.d.s.nominal, ec.sim.set, nullptr, {}, loo);
+  auto b = diagnose(ec.d.s.nominal, ec.sim.set, nullptr, {}, each);
+  ASSERT_TRUE(a.ok()) << a.status().to_string();
+  ASSERT_TRUE(b.ok()) << b.status().to_string();
+  ASSERT_FALSE(a->accepted.empty());
+  // The same folds; the fits agree to rounding (the solver's sums are not ordered).
+  EXPECT_NEAR(a->held_out_rms_before, b->held_out_rms_before, 1e-9 * b->held_out_rms_before);
+  EXPECT_NEAR(a->held_out_rms_after, b->held_out_rms_after, 1e-9 * b->held_out_rms_after);
+  EXPECT_EQ(a->held_out_source, "leave-one-pose-out cross-validation");
+  EXPECT_EQ(b->held_out_source, std::to_string(each.cv_folds) + "-fold cross-validation");
+  DiagnosisOptions one = ec.o;
+  one.cv_folds = 1;
+  EXPECT_FALSE(diagnose(ec.d.s.nominal, ec.sim.set, nullptr, {}, one).ok());
+}
+
 TEST(Diagnosis, SuspectWithoutANamedEffectGetsFeasibleFollowUpPosesThatAddInformation) {
   const RigidMini d = rigid_mini(25);
   const SimulatedMeasurements sim = simulate(d, 2);

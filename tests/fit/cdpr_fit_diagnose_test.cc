@@ -240,10 +240,24 @@ TEST_F(Diagnose, RecordingTooSmallToTellEffectsApartIsInconclusive) {
   EXPECT_FALSE(fs::exists(out));
 }
 
+// --folds 0: leave one pose out; the report says so.
+TEST_F(Diagnose, FoldsZeroHoldsOutOnePoseAtATime) {
+  const std::string rec = simulate_elastic(12, "loo.csv");
+  const std::string json = path("loo.json");
+  const Process r = diagnose(rec, {"--json", json, "--bootstrap", "20", "--folds", "0"});
+  ASSERT_EQ(r.status, 0) << r.err << r.out;
+  EXPECT_THAT(r.out, HasSubstr("leave-one-pose-out cross-validation"));
+  const nlohmann::json j = nlohmann::json::parse(slurp(json));
+  EXPECT_EQ(j.at("options").at("folds").get<int>(), 0);
+  EXPECT_EQ(j.at("held_out").at("source"), "leave-one-pose-out cross-validation");
+}
+
 TEST_F(Diagnose, UsageErrorsExitWithTwo) {
   EXPECT_EQ(fit({"diagnose", "--config", kNominal}).status, 2);  // --recording missing
   const std::string rec = simulate_elastic(12, "rec.csv");
   EXPECT_EQ(fit({"diagnose", "--config", kNominal, "--recording", rec, "--folds", "1"}).status, 2);
+  EXPECT_EQ(fit({"diagnose", "--config", kNominal, "--recording", rec, "--folds", "-1"}).status, 2);
+  EXPECT_EQ(fit({"diagnose", "--config", kNominal, "--recording", rec, "--folds", "0x"}).status, 2);
   EXPECT_EQ(
       fit({"diagnose", "--config", kNominal, "--recording", rec, "--noise-length", "-1"}).status,
       2);

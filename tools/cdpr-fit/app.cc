@@ -6,6 +6,7 @@
 
 #include <CLI/CLI.hpp>
 #include <chrono>
+#include <cstdlib>
 #include <exception>
 #include <functional>
 #include <memory>
@@ -373,9 +374,17 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
   dg->add_option("--bootstrap", diag.bootstrap, "bootstrap resamples over poses")
       ->capture_default_str()
       ->check(CLI::Range(1, 100000));
-  dg->add_option("--folds", diag.folds, "K of K-fold cross-validation over poses")
+  dg->add_option("--folds", diag.folds,
+                 "K of K-fold cross-validation over poses (0: leave one pose out)")
       ->capture_default_str()
-      ->check(CLI::Range(2, 100000));
+      ->check(CLI::Validator(
+          [](std::string& v) {
+            char* end = nullptr;
+            const long k = std::strtol(v.c_str(), &end, 10);
+            const bool ok = end != v.c_str() && *end == '\0' && (k == 0 || (k >= 2 && k <= 100000));
+            return ok ? std::string() : "must be 0 (leave one pose out) or 2 to 100000";
+          },
+          "0 or 2..100000"));
   dg->callback([&] {
     command = "diagnose";
     if (dg_json->count() > 0) {

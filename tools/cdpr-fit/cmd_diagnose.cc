@@ -76,8 +76,9 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
     return Status::error(ErrorCode::kInvalidArgument, "--bootstrap %d: must be at least 1",
                          args.bootstrap);
   }
-  if (args.folds < 2) {
-    return Status::error(ErrorCode::kInvalidArgument, "--folds %d: must be at least 2", args.folds);
+  if (args.folds < 2 && args.folds != 0) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "--folds %d: must be at least 2, or 0 (leave one pose out)", args.folds);
   }
   auto nominal = load_config(args.config);
   if (!nominal.ok()) return nominal.status();

@@ -24,10 +24,12 @@ struct DiagnosisOptions {
   int bootstrap_samples = 100;       // resamples over poses for inclusion probabilities
   ProgressCallback progress;         // "bootstrap resamples" b of bootstrap_samples; empty: none
   double inclusion_threshold = 0.6;  // keep candidates selected in at least this fraction
-  int cv_folds = 5;                  // K-fold cross-validation over poses (2 <= K <= N)
-  unsigned seed = 1;                 // bootstrap and fold assignment (deterministic)
-  int max_effects = 3;               // at most this many effects are accepted together
-  int min_poses = 12;                // below this the verdict is kInconclusive
+  // K-fold cross-validation over poses (2 <= K <= N); 0: leave one pose out (every pose that can
+  // be held out is a fold of its own; the home pose, fixed by the gauge, never is).
+  int cv_folds = 5;
+  unsigned seed = 1;    // bootstrap and fold assignment (deterministic)
+  int max_effects = 3;  // at most this many effects are accepted together
+  int min_poses = 12;   // below this the verdict is kInconclusive
   // Two candidates that the screen finds confounded (canonical correlation above
   // screen.confound_threshold) are reported as "A or B" only when their full fits differ by less
   // than this in BIC; a larger difference is very strong evidence for the better one.
