@@ -13,6 +13,7 @@
 #include <limits>
 #include <set>
 #include <sstream>
+#include <string>
 
 #include "cdpr/calibration/mismatch.hpp"
 #include "cdpr/calibration/predicted_accuracy.hpp"
@@ -891,7 +892,8 @@ std::string html_page(const PageInput& in) {
     for (const std::string& e : c.estimated) h << " " << html_escape(e);
   }
   if (d != nullptr) {
-    h << "; seed " << c.seed << ", bootstrap " << c.bootstrap << ", folds " << c.folds;
+    h << "; seed " << c.seed << ", bootstrap " << c.bootstrap << ", folds "
+      << (c.folds == 0 ? std::string("leave one pose out") : std::to_string(c.folds));
   }
   h << "</p>\n</header>\n";
 
