@@ -1122,6 +1122,7 @@ int main(int argc, char** argv) {
   bool verbose = false;
   bool verdicts = false;  // one deterministic line per case and seed at the end of each robot
   bool force_candidates = cdpr::MismatchOptions{}.force_sensor_candidates;
+  int folds = cdpr::DiagnosisOptions{}.cv_folds;  // 0: leave one pose out
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--seeds" && i + 1 < argc) {
@@ -1140,11 +1141,13 @@ int main(int argc, char** argv) {
       only = split(argv[++i]);
     } else if (a == "--workers" && i + 1 < argc) {
       workers = std::max(1, std::atoi(argv[++i]));
+    } else if (a == "--folds" && i + 1 < argc) {
+      folds = std::atoi(argv[++i]);
     } else {
       std::fprintf(stderr,
                    "usage: mismatch_bench [--seeds N] [--quick] [--robot mini|large|both] "
                    "[--effects a,b,...] [--workers N] [--verbose] [--verdicts] "
-                   "[--force-sensor-candidates on|off]\n"
+                   "[--force-sensor-candidates on|off] [--folds K (0: leave one pose out)]\n"
                    "  effects:");
       for (const Effect& e : effects()) std::fprintf(stderr, " %s", e.key.c_str());
       std::fprintf(stderr,
@@ -1157,6 +1160,10 @@ int main(int argc, char** argv) {
   bool seeds_given = false;
   for (int i = 1; i < argc; ++i) seeds_given = seeds_given || std::strcmp(argv[i], "--seeds") == 0;
   if (quick && !seeds_given) seeds = 3;
+  if (folds < 0 || folds == 1) {
+    std::fprintf(stderr, "--folds must be 0 (leave one pose out) or at least 2, got %d\n", folds);
+    return 2;
+  }
   if (robots != "mini" && robots != "large" && robots != "both") {
     std::fprintf(stderr, "--robot must be mini, large or both, got %s\n", robots.c_str());
     return 2;
@@ -1187,8 +1194,10 @@ int main(int argc, char** argv) {
     }
   }
 
-  std::printf("cdpr concealed-effect benchmark of the mismatch locator (seeds %d%s, %d workers)\n",
-              seeds, quick ? ", quick" : "", workers);
+  std::printf(
+      "cdpr concealed-effect benchmark of the mismatch locator (seeds %d%s, %d workers, %s)\n",
+      seeds, quick ? ", quick" : "", workers,
+      folds == 0 ? "leave-one-pose-out CV" : (std::to_string(folds) + "-fold CV").c_str());
   std::printf(
       "noise: laser 1 mm, encoder 0.1 mm, force 1 N; 25 designed poses; lock-step physics "
       "(cdpr-sim), %.0f s per pose\n",
@@ -1203,6 +1212,7 @@ int main(int argc, char** argv) {
 
   cdpr::DiagnosisOptions dopt;  // the product's defaults: the analysis runs blind
   dopt.screen.force_sensor_candidates = force_candidates;
+  dopt.cv_folds = folds;
   const auto t_all = std::chrono::steady_clock::now();
   std::vector<std::string> which;
   if (robots != "large") which.push_back("mini");

@@ -74,6 +74,59 @@ TEST(Diagnosis, NullDataGivesNoMismatchAcrossSeeds) {
   EXPECT_EQ(false_findings, 0);
 }
 
+// A wild reading (a mistyped cell, a unit slip) is named where it is, not explained by physics:
+// a least-squares fit spreads it over the geometry and the effects would fit the smear.
+TEST(Diagnosis, AWildReadingIsNamedWhereItIsAndNothingElse) {
+  const RigidMini d = rigid_mini(25);
+  struct Wild {
+    int pose, index;
+    bool laser;
+    double error;  // m
+  };
+  for (const Wild w : {Wild{7, 4, false, 0.30}, Wild{0, 7, false, -0.05}, Wild{12, 0, true, 0.1}}) {
+    SimulatedMeasurements sim = simulate(d, 5);
+    PoseMeasurement& pm = sim.set.poses[static_cast<std::size_t>(w.pose)];
+    (w.laser ? pm.laser_distances : pm.cable_lengths)(w.index) += w.error;
+    auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, quick_options());
+    ASSERT_TRUE(diag.ok()) << diag.status().to_string();
+    SCOPED_TRACE(trace(*diag));
+    EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kInconclusive);
+    EXPECT_TRUE(diag->accepted.empty());
+    ASSERT_EQ(diag->gross_readings.size(), 1u);
+    const GrossReading& g = diag->gross_readings.front();
+    EXPECT_EQ(g.pose, w.pose);
+    EXPECT_EQ(g.index, w.index);
+    EXPECT_EQ(g.channel, w.laser ? "laser distance" : "cable length");
+    // The robust fit leaves the whole error on the reading (model minus reading).
+    EXPECT_NEAR(g.residual, -w.error, 0.02 * std::abs(w.error));
+    EXPECT_NE(diag->headline.find(w.laser ? "laser distance 1"
+                                          : "cable length " + std::to_string(w.index + 1)),
+              std::string::npos);
+  }
+  // Two wild readings are both named, the larger first.
+  SimulatedMeasurements two = simulate(d, 6);
+  two.set.poses[3].cable_lengths(1) += 0.2;
+  two.set.poses[9].cable_lengths(5) -= 0.1;
+  auto both = diagnose(d.s.nominal, two.set, nullptr, {}, quick_options());
+  ASSERT_TRUE(both.ok()) << both.status().to_string();
+  ASSERT_EQ(both->gross_readings.size(), 2u) << trace(*both);
+  EXPECT_EQ(both->gross_readings[0].pose, 3);
+  EXPECT_EQ(both->gross_readings[1].pose, 9);
+}
+
+// A concealed effect leaves structure over many readings, not a few wild ones: no gross reading.
+TEST(Diagnosis, AStrongEffectIsNotTakenForWildReadings) {
+  const RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim = simulate(d, 3);
+  conceal_hooke(d, sim, 1.0e4);  // EA 10 kN: several mm of stretch, tens of sigmas
+  auto diag = diagnose(d.s.nominal, sim.set, nullptr, {}, quick_options());
+  ASSERT_TRUE(diag.ok()) << diag.status().to_string();
+  SCOPED_TRACE(trace(*diag));
+  EXPECT_GT(diag->before.chi2, 100.0 * diag->before.dof);
+  EXPECT_TRUE(diag->gross_readings.empty());
+  EXPECT_EQ(diag->verdict, Diagnosis::Verdict::kMismatchNamed);
+}
+
 TEST(Diagnosis, ConcealedHookeElasticityIsNamedModelledAndPredictsBetter) {
   const RigidMini d = rigid_mini(25);
   SimulatedMeasurements sim = simulate(d, 3);

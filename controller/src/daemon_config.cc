@@ -122,7 +122,11 @@ Status read_identification(const YamlField& n, IdentificationSettings& s) {
   CDPR_RETURN_IF_ERROR(n.optional("laser_plane", o.estimate_laser_plane));
   CDPR_RETURN_IF_ERROR(n.optional("diagnose", s.diagnose));
   CDPR_RETURN_IF_ERROR(n.optional("bootstrap", s.bootstrap, 1, 100000));
-  return n.optional("folds", s.folds, 2, 1000);
+  CDPR_RETURN_IF_ERROR(n.optional("folds", s.folds, 0, 1000));
+  if (s.folds == 1) {
+    return n["folds"].error("1 fold holds out nothing: 0 (leave one pose out) or 2..1000");
+  }
+  return Status::success();
 }
 
 Status read_acceptance(const YamlField& n, AcceptanceGates& g) {

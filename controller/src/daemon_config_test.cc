@@ -84,6 +84,26 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
   EXPECT_NE(bad_yaml.status().to_string().find("d.yaml:"), std::string::npos);
 }
 
+// The mismatch locator's cross-validation: leave one pose out unless K >= 2 folds are asked for;
+// one fold would hold out nothing and is refused where it is written.
+TEST(DaemonConfig, FoldsLeaveOnePoseOutByDefaultAndRefuseOne) {
+  auto dflt = parse_daemon_config("robot: r\ncanopen: n\n", "d.yaml");
+  ASSERT_TRUE(dflt.ok()) << dflt.status().to_string();
+  EXPECT_EQ(dflt->identification.folds, 0);
+  auto five = parse_daemon_config("robot: r\ncanopen: n\nidentification: {folds: 5}\n", "d.yaml");
+  ASSERT_TRUE(five.ok()) << five.status().to_string();
+  EXPECT_EQ(five->identification.folds, 5);
+  for (const char* bad : {"1", "-1", "1001", "many"}) {
+    auto c = parse_daemon_config(
+        std::string("robot: r\ncanopen: n\nidentification:\n  folds: ") + bad + "\n", "d.yaml");
+    ASSERT_FALSE(c.ok()) << bad;
+    EXPECT_NE(c.status().to_string().find("d.yaml:4:"), std::string::npos)
+        << c.status().to_string();
+    EXPECT_NE(c.status().to_string().find("identification.folds"), std::string::npos)
+        << c.status().to_string();
+  }
+}
+
 TEST(DaemonConfig, TheShippedRobotPcConfigAndTheFilesItNamesLoad) {
   auto c = load_daemon_config(CDPR_SOURCE_DIR "/config/cdprd.yaml");
   ASSERT_TRUE(c.ok()) << c.status().to_string();

@@ -26,8 +26,8 @@
 namespace cdpr::fit_test {
 namespace {
 
-// A smaller bootstrap and fewer folds than the defaults (100, 5), for the runs that check the
-// options are taken; the others use the defaults, as an engineer would.
+// A smaller bootstrap and fewer folds than the defaults (100 resamples, leave one pose out), for
+// the runs that check the options are taken; the others use the defaults, as an engineer would.
 const std::vector<std::string> kQuick = {"--bootstrap", "20", "--folds", "3", "--seed", "2"};
 
 using Process = ProcessResult;
@@ -238,6 +238,29 @@ TEST_F(Diagnose, RecordingTooSmallToTellEffectsApartIsInconclusive) {
   EXPECT_EQ(r2.status, 4) << r2.err << r2.out;
   EXPECT_THAT(r2.out, HasSubstr("not written"));
   EXPECT_FALSE(fs::exists(out));
+}
+
+// One mistyped length cell (a wild reading): inconclusive (exit 4), the reading named in the
+// words and the JSON, no physics named.
+TEST_F(Diagnose, AWildReadingIsNamedAndTheVerdictIsInconclusive) {
+  const std::string clean = simulate_elastic(25, "clean.csv");
+  const std::string rec = altered(clean, "wild.csv", [](cdpr::recording::Recording& x) {
+    x.poses[4].lengths(2) += 0.25;  // 250 mm: a digit slipped
+  });
+  const std::string json = path("wild.json");
+  const Process r = diagnose(rec, {"--json", json});
+  ASSERT_EQ(r.status, 4) << r.err << r.out;
+  EXPECT_THAT(r.out, HasSubstr("verdict: inconclusive"));
+  EXPECT_THAT(r.out, HasSubstr("cable length 3 of the 5th pose: off by 250."));
+  const nlohmann::json j = nlohmann::json::parse(slurp(json));
+  EXPECT_EQ(j.at("verdict"), "inconclusive");
+  EXPECT_TRUE(j.at("named_effects").empty());
+  ASSERT_EQ(j.at("gross_readings").size(), 1u);
+  const nlohmann::json& g = j.at("gross_readings").at(0);
+  EXPECT_EQ(g.at("pose").get<int>(), 5);
+  EXPECT_EQ(g.at("channel"), "cable length");
+  EXPECT_EQ(g.at("index").get<int>(), 3);
+  EXPECT_NEAR(g.at("residual_si").get<double>(), -0.25, 0.005);
 }
 
 // --folds 0: leave one pose out; the report says so.

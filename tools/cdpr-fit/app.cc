@@ -375,7 +375,7 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
       ->capture_default_str()
       ->check(CLI::Range(1, 100000));
   dg->add_option("--folds", diag.folds,
-                 "K of K-fold cross-validation over poses (0: leave one pose out)")
+                 "cross-validation over poses: 0 leaves one pose out, K >= 2 K folds")
       ->capture_default_str()
       ->check(CLI::Validator(
           [](std::string& v) {

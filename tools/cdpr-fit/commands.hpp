@@ -152,7 +152,7 @@ struct DiagnoseArgs {
   double noise_force = std::numeric_limits<double>::quiet_NaN();   // N
   unsigned seed = 1;
   int bootstrap = 100;
-  int folds = 5;
+  int folds = 0;  // 0: leave one pose out
 };
 // Exit statuses of diagnose (Output::exit_status).
 inline constexpr int kExitNoMismatch = 0;

@@ -238,6 +238,14 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const RobotModel& nominal,
   }
   nlohmann::json named = nlohmann::json::array();
   for (const EffectFit& e : d.accepted) named.push_back(e.id);
+  nlohmann::json gross = nlohmann::json::array();
+  for (const GrossReading& g : d.gross_readings) {
+    gross.push_back({{"pose", g.pose + 1},  // counted from 1, as in the words
+                     {"channel", g.channel},
+                     {"index", g.index < 0 ? nlohmann::json(nullptr) : nlohmann::json(g.index + 1)},
+                     {"residual_si", number_or_null(g.residual)},
+                     {"sigmas", number_or_null(g.sigmas)}});
+  }
   return {
       {"command", "diagnose"},
       {"inputs",
@@ -262,6 +270,7 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const RobotModel& nominal,
       {"headline", d.headline},
       {"findings", d.findings},
       {"named_effects", named},
+      {"gross_readings", gross},
       {"accepted", accepted},
       {"candidates", candidates},
       {"confounded", confounded},

@@ -79,7 +79,7 @@ struct IdentificationSettings {
   IdentificationOptions options;  // which parameters are estimated (defaults: identification.hpp)
   bool diagnose = true;           // run the mismatch locator after the identification
   int bootstrap = 100;
-  int folds = 5;
+  int folds = 0;  // cross-validation of the mismatch locator: 0 leaves one pose out, else K folds
 };
 
 enum class AcceptanceMode { kManual, kAuto };
