@@ -247,9 +247,12 @@ TEST_F(Diagnose, AWildReadingIsNamedAndTheVerdictIsInconclusive) {
   const std::string rec = altered(clean, "wild.csv", [](cdpr::recording::Recording& x) {
     x.poses[4].lengths(2) += 0.25;  // 250 mm: a digit slipped
   });
-  const std::string json = path("wild.json");
-  const Process r = diagnose(rec, {"--json", json});
+  const std::string json = path("wild.json"), out = path("wild.yaml");
+  const Process r = diagnose(rec, {"--json", json, "--out", out});
   ASSERT_EQ(r.status, 4) << r.err << r.out;
+  // The identification is dragged by the wild reading: no calibrated config, and it says so.
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_THAT(r.out, HasSubstr("not written: the recording holds a gross reading"));
   EXPECT_THAT(r.out, HasSubstr("verdict: inconclusive"));
   EXPECT_THAT(r.out, HasSubstr("cable length 3 of the 5th pose: off by 250."));
   const nlohmann::json j = nlohmann::json::parse(slurp(json));

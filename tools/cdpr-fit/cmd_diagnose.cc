@@ -124,11 +124,14 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
   c.seed = args.seed;
   c.bootstrap = args.bootstrap;
   c.folds = args.folds;
-  // Without the standard identification (too few poses) there is nothing calibrated to write.
-  const bool calibrated = !d.before.residuals.empty();
+  // Without the standard identification (too few poses) there is nothing calibrated to write;
+  // with a gross reading the identification is dragged by it: nothing to write either.
+  const bool calibrated = !d.before.residuals.empty() && d.gross_readings.empty();
   if (!args.out.empty() && !calibrated) {
-    warnings.push_back("--out " + args.out +
-                       " not written: no identification was run on this recording");
+    warnings.push_back("--out " + args.out + " not written: " +
+                       (d.gross_readings.empty()
+                            ? std::string("no identification was run on this recording")
+                            : std::string("the recording holds a gross reading (above)")));
   }
   c.calibrated_config = calibrated ? args.out : std::string();
   c.warnings = warnings;

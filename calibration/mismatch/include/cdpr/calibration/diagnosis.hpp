@@ -174,8 +174,8 @@ struct Diagnosis {
   std::optional<IdentificationReport> after;  // identification with the accepted effects
   CalibratedModel model_after;                // the calibrated model carrying the accepted effects
   std::vector<ChannelRms> channels;           // residual RMS before/after per channel
-  // Readings far from every model (stage 0); when any, the verdict is inconclusive and nothing
-  // further is diagnosed.
+  // Readings far from every model (stage 0); when any, the verdict is inconclusive, nothing
+  // further is diagnosed and model_after stays the nominal (the identification is dragged).
   std::vector<GrossReading> gross_readings;
   // Held-out length residual RMS (m): the validation recording when given, else K-fold CV.
   std::string held_out_source;  // "validation recording", "leave-one-pose-out cross-validation"
