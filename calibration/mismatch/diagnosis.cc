@@ -1583,115 +1583,11 @@ std::optional<FollowUp> follow_up(const MismatchSummary& screen, const RobotMode
   return std::nullopt;
 }
 
-// ---- Stage 0, gross readings (DiagnosisOptions::gross_sigmas): the standard model refitted with
-// a Cauchy loss, which a few wild readings cannot drag, and the readings it leaves far out.
-std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
-                                              const MeasurementSet& set,
-                                              const IdentificationOptions& identification,
-                                              const DiagnosisOptions& options) {
-  if (!(options.gross_sigmas > 0)) return {};
-  IdentificationOptions robust = identification;
-  robust.loss = RobustLoss::kCauchy;
-  robust.loss_scale = 3.0;
-  // One reading at a time: the worst is taken out (marked missing) and the rest refitted, so a
-  // wild length reading does not also flag the equilibrium it tilted.
-  MeasurementSet rest = set;
-  std::vector<GrossReading> out;
-  std::size_t isolated = 1;
-  while (true) {
-    auto rep = identify(nominal, rest, robust);
-    if (!rep) return {};
-    // Every normalised residual, with where it comes from (the equilibrium of a pose is one
-    // reading: its whitened rows mix the cables' tensions).
-    std::vector<GrossReading> all;
-    auto add = [&](int j, const char* channel, int index, double si, double sigmas) {
-      if (std::isfinite(sigmas)) all.push_back({j, channel, index, si, std::abs(sigmas)});
-    };
-    for (int j = 0; j < static_cast<int>(rep->residuals.size()); ++j) {
-      const PoseResiduals& r = rep->residuals[static_cast<std::size_t>(j)];
-      for (Eigen::Index i = 0; i < r.length_normalized.size(); ++i) {
-        add(j, "cable length", static_cast<int>(i), r.length_m(i), r.length_normalized(i));
-      }
-      for (Eigen::Index i = 0; i < r.laser_normalized.size(); ++i) {
-        add(j, "laser distance", static_cast<int>(i), r.laser_m(i), r.laser_normalized(i));
-      }
-      if (r.wrench_normalized.allFinite()) {
-        add(j, "equilibrium", -1, r.wrench_si.head<3>().norm(),
-            r.wrench_normalized.cwiseAbs().maxCoeff());
-      }
-      for (Eigen::Index i = 0; i < r.swivel_normalized.size(); ++i) {
-        add(j, "swivel angle", static_cast<int>(i), r.swivel_rad(i), r.swivel_normalized(i));
-      }
-      if (r.inclination_normalized.allFinite()) {
-        const int c =
-            std::abs(r.inclination_normalized(0)) >= std::abs(r.inclination_normalized(1)) ? 0 : 1;
-        add(j, "inclination", -1, r.inclination_rad(c), r.inclination_normalized(c));
-      }
-      add(j, "IMU yaw", -1, r.imu_yaw_rad, r.imu_yaw_normalized);
-    }
-    if (all.empty()) return {};
-    isolated = std::max<std::size_t>(1, all.size() / 50);
-    std::vector<double> mags;
-    for (const auto& g : all) mags.push_back(g.sigmas);
-    const auto q95 = mags.begin() + static_cast<std::ptrdiff_t>(0.95 * (mags.size() - 1));
-    std::nth_element(mags.begin(), q95, mags.end());
-    const double gate = std::max(options.gross_sigmas, options.gross_spread * *q95);
-    const auto worst = std::max_element(
-        all.begin(), all.end(),
-        [](const GrossReading& a, const GrossReading& b) { return a.sigmas < b.sigmas; });
-    if (!(worst->sigmas > gate)) break;
-    out.push_back(*worst);
-    if (out.size() > isolated) return {};  // structure, not a few wild readings
-    PoseMeasurement& pm = rest.poses[static_cast<std::size_t>(worst->pose)];
-    const double nan = std::numeric_limits<double>::quiet_NaN();
-    if (worst->channel == std::string("cable length")) {
-      pm.cable_lengths(worst->index) = nan;
-    } else if (worst->channel == std::string("laser distance")) {
-      pm.laser_distances(worst->index) = nan;
-    } else if (worst->channel == std::string("equilibrium")) {
-      pm.tensions.setConstant(nan);
-    } else if (worst->channel == std::string("swivel angle")) {
-      pm.swivel_angles(worst->index) = nan;
-    } else if (worst->channel == std::string("inclination")) {
-      pm.inclination.setConstant(nan);
-    } else {
-      pm.imu_yaw = nan;
-    }
-  }
-  return out;
-}
-
-// "the 3rd pose": people count the recording's poses from 1.
-std::string nth_pose(int j) {
-  const int n = j + 1;
-  const char* suffix = (n % 100 >= 11 && n % 100 <= 13) ? "th"
-                       : n % 10 == 1                    ? "st"
-                       : n % 10 == 2                    ? "nd"
-                       : n % 10 == 3                    ? "rd"
-                                                        : "th";
-  return format("the %d%s pose", n, suffix);
-}
-
-std::string describe_gross(const GrossReading& g) {
-  std::string what = g.channel;
-  if (g.index >= 0) what += format(" %d", g.index + 1);
-  std::string size;
-  if (g.channel == "equilibrium") {
-    size = format("the force readings out of balance by %.0f N", g.residual);
-  } else if (g.channel == "cable length" || g.channel == "laser distance") {
-    size = format("off by %.1f mm", 1e3 * std::abs(g.residual));
-  } else {
-    size = format("off by %.1f mrad", 1e3 * std::abs(g.residual));
-  }
-  return format("%s of %s: %s (%.0f sigmas)", what.c_str(), nth_pose(g.pose).c_str(), size.c_str(),
-                g.sigmas);
-}
-
 void state_gross_readings(Diagnosis& d) {
   d.verdict = Diagnosis::Verdict::kInconclusive;
   std::string list;
   for (const auto& g : d.gross_readings) {
-    list += (list.empty() ? "" : "; ") + describe_gross(g);
+    list += (list.empty() ? "" : "; ") + describe(g);
   }
   d.headline = format(
       "Inconclusive: %s far from every model (%s): a corrupted or mistyped value, a unit slip or "
@@ -1701,7 +1597,7 @@ void state_gross_readings(Diagnosis& d) {
       d.gross_readings.size() == 1 ? "that reading" : "those readings");
   d.findings.push_back(d.headline);
   for (const auto& g : d.gross_readings) {
-    d.findings.push_back("Gross reading: " + describe_gross(g) +
+    d.findings.push_back("Gross reading: " + describe(g) +
                          " from the standard model refitted with a robust (Cauchy) loss.");
   }
 }
@@ -1919,6 +1815,113 @@ const char* to_string(Diagnosis::Verdict v) {
       return "inconclusive";
   }
   return "unknown";
+}
+
+// ---- Stage 0, gross readings (DiagnosisOptions::gross_sigmas): the standard model refitted with
+// a Cauchy loss, which a few wild readings cannot drag, and the readings it leaves far out.
+std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
+                                              const MeasurementSet& set,
+                                              const IdentificationOptions& identification,
+                                              const DiagnosisOptions& options) {
+  if (!(options.gross_sigmas > 0)) return {};
+  IdentificationOptions robust = identification;
+  robust.loss = RobustLoss::kCauchy;
+  robust.loss_scale = 3.0;
+  robust.progress = {};
+  // One reading at a time: the worst is taken out (marked missing) and the rest refitted, so a
+  // wild length reading does not also flag the equilibrium it tilted.
+  MeasurementSet rest = set;
+  std::vector<GrossReading> out;
+  std::size_t isolated = 1;
+  while (true) {
+    auto rep = identify(nominal, rest, robust);
+    if (!rep) return {};
+    // Every normalised residual, with where it comes from (the equilibrium of a pose is one
+    // reading: its whitened rows mix the cables' tensions).
+    std::vector<GrossReading> all;
+    auto add = [&](int j, const char* channel, int index, double si, double sigmas) {
+      if (std::isfinite(sigmas)) all.push_back({j, channel, index, si, std::abs(sigmas)});
+    };
+    for (int j = 0; j < static_cast<int>(rep->residuals.size()); ++j) {
+      const PoseResiduals& r = rep->residuals[static_cast<std::size_t>(j)];
+      for (Eigen::Index i = 0; i < r.length_normalized.size(); ++i) {
+        add(j, "cable length", static_cast<int>(i), r.length_m(i), r.length_normalized(i));
+      }
+      for (Eigen::Index i = 0; i < r.laser_normalized.size(); ++i) {
+        add(j, "laser distance", static_cast<int>(i), r.laser_m(i), r.laser_normalized(i));
+      }
+      if (r.wrench_normalized.allFinite()) {
+        add(j, "equilibrium", -1, r.wrench_si.head<3>().norm(),
+            r.wrench_normalized.cwiseAbs().maxCoeff());
+      }
+      for (Eigen::Index i = 0; i < r.swivel_normalized.size(); ++i) {
+        add(j, "swivel angle", static_cast<int>(i), r.swivel_rad(i), r.swivel_normalized(i));
+      }
+      if (r.inclination_normalized.allFinite()) {
+        const int c =
+            std::abs(r.inclination_normalized(0)) >= std::abs(r.inclination_normalized(1)) ? 0 : 1;
+        add(j, "inclination", -1, r.inclination_rad(c), r.inclination_normalized(c));
+      }
+      add(j, "IMU yaw", -1, r.imu_yaw_rad, r.imu_yaw_normalized);
+    }
+    if (all.empty()) return {};
+    isolated = std::max<std::size_t>(1, all.size() / 50);
+    std::vector<double> mags;
+    for (const auto& g : all) mags.push_back(g.sigmas);
+    const auto q95 = mags.begin() + static_cast<std::ptrdiff_t>(0.95 * (mags.size() - 1));
+    std::nth_element(mags.begin(), q95, mags.end());
+    const double gate = std::max(options.gross_sigmas, options.gross_spread * *q95);
+    const auto worst = std::max_element(
+        all.begin(), all.end(),
+        [](const GrossReading& a, const GrossReading& b) { return a.sigmas < b.sigmas; });
+    if (!(worst->sigmas > gate)) break;
+    out.push_back(*worst);
+    if (out.size() > isolated) return {};  // structure, not a few wild readings
+    PoseMeasurement& pm = rest.poses[static_cast<std::size_t>(worst->pose)];
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    if (worst->channel == std::string("cable length")) {
+      pm.cable_lengths(worst->index) = nan;
+    } else if (worst->channel == std::string("laser distance")) {
+      pm.laser_distances(worst->index) = nan;
+    } else if (worst->channel == std::string("equilibrium")) {
+      pm.tensions.setConstant(nan);
+    } else if (worst->channel == std::string("swivel angle")) {
+      pm.swivel_angles(worst->index) = nan;
+    } else if (worst->channel == std::string("inclination")) {
+      pm.inclination.setConstant(nan);
+    } else {
+      pm.imu_yaw = nan;
+    }
+  }
+  return out;
+}
+
+namespace {
+// "the 3rd pose": people count the recording's poses from 1.
+std::string nth_pose(int j) {
+  const int n = j + 1;
+  const char* suffix = (n % 100 >= 11 && n % 100 <= 13) ? "th"
+                       : n % 10 == 1                    ? "st"
+                       : n % 10 == 2                    ? "nd"
+                       : n % 10 == 3                    ? "rd"
+                                                        : "th";
+  return format("the %d%s pose", n, suffix);
+}
+}  // namespace
+
+std::string describe(const GrossReading& g) {
+  std::string what = g.channel;
+  if (g.index >= 0) what += format(" %d", g.index + 1);
+  std::string size;
+  if (g.channel == "equilibrium") {
+    size = format("the force readings out of balance by %.0f N", g.residual);
+  } else if (g.channel == "cable length" || g.channel == "laser distance") {
+    size = format("off by %.1f mm", 1e3 * std::abs(g.residual));
+  } else {
+    size = format("off by %.1f mrad", 1e3 * std::abs(g.residual));
+  }
+  return format("%s of %s: %s (%.0f sigmas)", what.c_str(), nth_pose(g.pose).c_str(), size.c_str(),
+                g.sigmas);
 }
 
 Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet& set,

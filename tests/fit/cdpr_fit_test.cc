@@ -532,12 +532,36 @@ TEST_F(CdprFit, CalibrateExitStatusSaysWhetherTheModelPassed) {
   EXPECT_EQ(j.at("fit_test").at("verdict"), "fit_rejected");
   EXPECT_LT(j.at("fit_test").at("p_value").get<double>(), 0.01);
   EXPECT_FALSE(j.at("fit_test").at("reasons").empty());
+  EXPECT_TRUE(j.at("fit_test").at("gross_readings").empty());  // a missing effect, no wild reading
 
   // The same with --json: stdout is the document, the notice is on stderr.
   r = fit({"calibrate", "--config", kNominal, "--recording", drum, "--json"});
   EXPECT_EQ(r.status, 3);
   EXPECT_EQ(nlohmann::json::parse(r.out).at("fit_test").at("verdict"), "fit_rejected");
   EXPECT_THAT(r.err, HasSubstr("did not pass"));
+}
+
+// One mistyped length cell: the calibration fails and says which reading, not "a missing
+// effect"; the next step is that reading.
+TEST_F(CdprFit, CalibrateNamesAWildReadingAsTheReasonItFailed) {
+  const std::string rec = simulate_elastic(25, "elastic.csv");
+  ASSERT_FALSE(HasFailure());
+  auto recording = cdpr::recording::read_recording(rec);
+  ASSERT_TRUE(recording.ok()) << recording.status().to_string();
+  recording->poses[10].lengths(6) -= 0.04;  // 40 mm
+  const std::string wild = path("wild.csv"), report = path("wild.json");
+  ASSERT_TRUE(cdpr::recording::write_recording(*recording, wild).ok());
+  const ProcessResult r =
+      fit({"calibrate", "--config", kNominal, "--recording", wild, "--report", report});
+  EXPECT_NE(r.status, 0) << r.err << r.out;
+  EXPECT_THAT(r.err, HasSubstr("a reading is far from every model (cable length 7 of the 11th "
+                               "pose: off by "));
+  EXPECT_THAT(r.err, HasSubstr("next step: check that reading, measure the pose again"));
+  const nlohmann::json j = nlohmann::json::parse(slurp(report));
+  ASSERT_EQ(j.at("fit_test").at("gross_readings").size(), 1u);
+  EXPECT_THAT(j.at("fit_test").at("gross_readings").at(0).get<std::string>(),
+              HasSubstr("cable length 7 of the 11th pose"));
+  EXPECT_THAT(j.at("fit_test").at("next_step").get<std::string>(), HasSubstr("that reading"));
 }
 
 }  // namespace cdpr::fit_test

@@ -3,6 +3,7 @@
 #include <sstream>
 
 #include "cdpr/calibration/calibration_verdict.hpp"
+#include "cdpr/calibration/diagnosis.hpp"
 #include "cdpr/calibration/identifiability.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/paper_method.hpp"
@@ -399,10 +400,30 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   // The verdict: fit test, convergence, physical ranges, the identification's own checks.
   CalibrationVerdictOptions vo;
   vo.alpha = args.fit_alpha;
-  const CalibrationVerdict verdict = judge_calibration(r, vo);
+  CalibrationVerdict verdict = judge_calibration(r, vo);
+  // A calibration that did not pass: is it a wild reading (a mistyped cell, a glitch)? Then that
+  // is the reason to state first, and the next step is the reading, not a missing effect.
+  std::vector<std::string> gross;
+  if (!verdict.passed()) {
+    for (const GrossReading& g : find_gross_readings(initial, *set, options)) {
+      gross.push_back(describe(g));
+    }
+  }
+  if (!gross.empty()) {
+    std::string list;
+    for (const std::string& g : gross) list += (list.empty() ? "" : "; ") + g;
+    verdict.reasons.insert(verdict.reasons.begin(),
+                           std::string(gross.size() == 1 ? "a reading is" : "readings are") +
+                               " far from every model (" + list +
+                               "): a corrupted or mistyped value, a unit slip or a sensor glitch");
+  }
   const int status = exit_status_of(verdict);
-  const std::string next = next_step(verdict, args);
+  const std::string next =
+      gross.empty() ? next_step(verdict, args)
+                    : "check " + std::string(gross.size() == 1 ? "that reading" : "those readings") +
+                          ", measure the pose again or leave it out, and calibrate again";
   j["fit_test"] = verdict_json(verdict, next, status);
+  j["fit_test"]["gross_readings"] = gross;
   j["exit_status"] = status;
   const std::string verdict_line = verdict.passed()
                                        ? std::string("# Verdict: passed.\n")

@@ -190,6 +190,17 @@ struct Diagnosis {
 
 const char* to_string(Diagnosis::Verdict v);
 
+// Stage 0 of diagnose() on its own (DiagnosisOptions::gross_sigmas, gross_spread): the readings
+// of `set` far from every model, largest first; empty when there are none, or more than a few
+// (then they are structure), or the robust refit fails. `cdpr-fit calibrate` names them when its
+// verdict fails.
+std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
+                                              const MeasurementSet& set,
+                                              const IdentificationOptions& identification = {},
+                                              const DiagnosisOptions& options = {});
+// "cable length 3 of the 5th pose: off by 250.1 mm (2115 sigmas)" (poses counted from 1).
+std::string describe(const GrossReading& g);
+
 // Diagnoses `set` against `nominal`. `validation` (optional) is a second recording of the same
 // robot used only for held-out prediction. Errors: kInvalidArgument (the set does not match the
 // model: cable count, laser count; bad options), and those of identify().
