@@ -1832,7 +1832,6 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
   // wild length reading does not also flag the equilibrium it tilted.
   MeasurementSet rest = set;
   std::vector<GrossReading> out;
-  std::size_t isolated = 1;
   while (true) {
     auto rep = identify(nominal, rest, robust);
     if (!rep) return {};
@@ -1865,7 +1864,7 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
       add(j, "IMU yaw", -1, r.imu_yaw_rad, r.imu_yaw_normalized);
     }
     if (all.empty()) return {};
-    isolated = std::max<std::size_t>(1, all.size() / 50);
+    const std::size_t isolated = std::max<std::size_t>(1, all.size() / 50);
     std::vector<double> mags;
     for (const auto& g : all) mags.push_back(g.sigmas);
     const auto q95 = mags.begin() + static_cast<std::ptrdiff_t>(0.95 * (mags.size() - 1));
@@ -1879,15 +1878,15 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
     if (out.size() > isolated) return {};  // structure, not a few wild readings
     PoseMeasurement& pm = rest.poses[static_cast<std::size_t>(worst->pose)];
     const double nan = std::numeric_limits<double>::quiet_NaN();
-    if (worst->channel == std::string("cable length")) {
+    if (worst->channel == "cable length") {
       pm.cable_lengths(worst->index) = nan;
-    } else if (worst->channel == std::string("laser distance")) {
+    } else if (worst->channel == "laser distance") {
       pm.laser_distances(worst->index) = nan;
-    } else if (worst->channel == std::string("equilibrium")) {
+    } else if (worst->channel == "equilibrium") {
       pm.tensions.setConstant(nan);
-    } else if (worst->channel == std::string("swivel angle")) {
+    } else if (worst->channel == "swivel angle") {
       pm.swivel_angles(worst->index) = nan;
-    } else if (worst->channel == std::string("inclination")) {
+    } else if (worst->channel == "inclination") {
       pm.inclination.setConstant(nan);
     } else {
       pm.imu_yaw = nan;
