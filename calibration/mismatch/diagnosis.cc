@@ -1892,6 +1892,17 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
       pm.imu_yaw = nan;
     }
   }
+  if (out.empty()) return out;
+  // Without them the rest must fit within the noise: physics concentrated in a few poses (the
+  // separating poses of a strong elasticity, the force-gain error at LARGE's highest tensions)
+  // also leaves a few readings far out of a robust fit, but the rest then still misfits.
+  IdentificationOptions plain = identification;
+  plain.progress = {};
+  auto rest_fit = identify(nominal, rest, plain);
+  if (!rest_fit || rest_fit->dof <= 0 ||
+      !(chi2_upper_tail(rest_fit->chi2, rest_fit->dof) >= options.gross_rest_p)) {
+    return {};
+  }
   return out;
 }
 

@@ -75,9 +75,15 @@ struct DiagnosisOptions {
   // slip, a sensor glitch), not missing physics: when at most max(1, 2 % of the readings) are, the
   // verdict is inconclusive and names them; more are structure, left to the effects. A least-
   // squares fit spreads one such reading over the whole geometry, and the effects would fit the
-  // smear (a 336 mm error in one length reading of MINI: three effects named, 100 s). 0: no check.
+  // smear (a 336 mm error in one length reading of MINI: three effects named, 100 s). They are
+  // named only when the rest, without them, fits within the noise (chi^2 upper-tail p-value of the
+  // standard identification at least gross_rest_p): physics concentrated in a few poses also
+  // leaves a few readings far out of a robust fit (LARGE's force gains at its highest tensions,
+  // the separating poses of a strong elasticity), but then the rest still misfits. So a wild
+  // reading beside a real effect is left to the effects. 0: no check.
   double gross_sigmas = 20.0;
   double gross_spread = 10.0;
+  double gross_rest_p = 1e-3;
 };
 
 // One fitted effect parameter, in SI units (and as shown to people).
