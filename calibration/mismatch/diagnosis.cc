@@ -1828,12 +1828,26 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
   robust.loss = RobustLoss::kCauchy;
   robust.loss_scale = 3.0;
   robust.progress = {};
+  IdentificationOptions plain = identification;
+  plain.progress = {};
+  auto full = identify(nominal, set, plain);
+  if (!full) return {};
+  // The robust cost is not convex: from the nominal model (LARGE's anchors 3 cm = 300 sigmas off)
+  // it flattens every residual and a pose can settle far off, leaving its clean readings metres
+  // out; from the least-squares estimate it cannot reach a fit that a wild reading dragged to a
+  // bound. Both starts, the lower robust cost kept.
+  auto robust_fit = [&](const MeasurementSet& s) -> Result<IdentificationReport> {
+    auto a = identify(nominal, s, robust);
+    auto b = identify(full->estimate, s, robust);
+    if (!a.ok() || (b.ok() && b->final_cost < a->final_cost)) return b;
+    return a;
+  };
   // One reading at a time: the worst is taken out (marked missing) and the rest refitted, so a
   // wild length reading does not also flag the equilibrium it tilted.
   MeasurementSet rest = set;
   std::vector<GrossReading> out;
   while (true) {
-    auto rep = identify(nominal, rest, robust);
+    auto rep = robust_fit(rest);
     if (!rep) return {};
     // Every normalised residual, with where it comes from (the equilibrium of a pose is one
     // reading: its whitened rows mix the cables' tensions).
@@ -1893,14 +1907,18 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
     }
   }
   if (out.empty()) return out;
-  // Without them the rest must fit within the noise: physics concentrated in a few poses (the
-  // separating poses of a strong elasticity, the force-gain error at LARGE's highest tensions)
-  // also leaves a few readings far out of a robust fit, but the rest then still misfits.
-  IdentificationOptions plain = identification;
-  plain.progress = {};
+  // Without them the rest must fit within the noise (else: physics, which can also leave a few
+  // readings far out of a robust fit where it sits in a few poses), and taking them out must
+  // lower the least-squares chi^2 as wild readings do (at least a quarter of gross_sigmas^2
+  // each), not as clean readings of a misplaced robust fit would.
   auto rest_fit = identify(nominal, rest, plain);
   if (!rest_fit || rest_fit->dof <= 0 ||
       !(chi2_upper_tail(rest_fit->chi2, rest_fit->dof) >= options.gross_rest_p)) {
+    return {};
+  }
+  const double drop = full->chi2 - rest_fit->chi2;
+  if (!(drop >= 0.25 * options.gross_sigmas * options.gross_sigmas *
+                    static_cast<double>(out.size()))) {
     return {};
   }
   return out;
