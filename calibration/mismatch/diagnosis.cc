@@ -1917,8 +1917,8 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
     return {};
   }
   const double drop = full->chi2 - rest_fit->chi2;
-  if (!(drop >= 0.25 * options.gross_sigmas * options.gross_sigmas *
-                    static_cast<double>(out.size()))) {
+  if (!(drop >=
+        0.25 * options.gross_sigmas * options.gross_sigmas * static_cast<double>(out.size()))) {
     return {};
   }
   return out;

@@ -419,9 +419,10 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   }
   const int status = exit_status_of(verdict);
   const std::string next =
-      gross.empty() ? next_step(verdict, args)
-                    : "check " + std::string(gross.size() == 1 ? "that reading" : "those readings") +
-                          ", measure the pose again or leave it out, and calibrate again";
+      gross.empty()
+          ? next_step(verdict, args)
+          : "check " + std::string(gross.size() == 1 ? "that reading" : "those readings") +
+                ", measure the pose again or leave it out, and calibrate again";
   j["fit_test"] = verdict_json(verdict, next, status);
   j["fit_test"]["gross_readings"] = gross;
   j["exit_status"] = status;
