@@ -1585,16 +1585,9 @@ std::optional<FollowUp> follow_up(const MismatchSummary& screen, const RobotMode
 
 void state_gross_readings(Diagnosis& d) {
   d.verdict = Diagnosis::Verdict::kInconclusive;
-  std::string list;
-  for (const auto& g : d.gross_readings) {
-    list += (list.empty() ? "" : "; ") + describe(g);
-  }
-  d.headline = format(
-      "Inconclusive: %s far from every model (%s): a corrupted or mistyped value, a unit slip or "
-      "a sensor glitch, not missing physics. Check %s, measure the pose again or leave it out, "
-      "and diagnose again.",
-      d.gross_readings.size() == 1 ? "a reading is" : "readings are", list.c_str(),
-      d.gross_readings.size() == 1 ? "that reading" : "those readings");
+  d.headline = "Inconclusive: " + describe(d.gross_readings) + ", not missing physics. Check " +
+               (d.gross_readings.size() == 1 ? "that reading" : "those readings") +
+               ", measure the pose again or leave it out, and diagnose again.";
   d.findings.push_back(d.headline);
   for (const auto& g : d.gross_readings) {
     d.findings.push_back("Gross reading: " + describe(g) +
@@ -1821,6 +1814,7 @@ const char* to_string(Diagnosis::Verdict v) {
 // a Cauchy loss, which a few wild readings cannot drag, and the readings it leaves far out.
 std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
                                               const MeasurementSet& set,
+                                              const IdentificationReport& standard,
                                               const IdentificationOptions& identification,
                                               const DiagnosisOptions& options) {
   if (!(options.gross_sigmas > 0)) return {};
@@ -1830,15 +1824,13 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
   robust.progress = {};
   IdentificationOptions plain = identification;
   plain.progress = {};
-  auto full = identify(nominal, set, plain);
-  if (!full) return {};
   // The robust cost is not convex: from the nominal model (LARGE's anchors 3 cm = 300 sigmas off)
   // it flattens every residual and a pose can settle far off, leaving its clean readings metres
   // out; from the least-squares estimate it cannot reach a fit that a wild reading dragged to a
   // bound. Both starts, the lower robust cost kept.
   auto robust_fit = [&](const MeasurementSet& s) -> Result<IdentificationReport> {
     auto a = identify(nominal, s, robust);
-    auto b = identify(full->estimate, s, robust);
+    auto b = identify(standard.estimate, s, robust);
     if (!a.ok() || (b.ok() && b->final_cost < a->final_cost)) return b;
     return a;
   };
@@ -1916,7 +1908,7 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
       !(chi2_upper_tail(rest_fit->chi2, rest_fit->dof) >= options.gross_rest_p)) {
     return {};
   }
-  const double drop = full->chi2 - rest_fit->chi2;
+  const double drop = standard.chi2 - rest_fit->chi2;
   if (!(drop >=
         0.25 * options.gross_sigmas * options.gross_sigmas * static_cast<double>(out.size()))) {
     return {};
@@ -1950,6 +1942,14 @@ std::string describe(const GrossReading& g) {
   }
   return format("%s of %s: %s (%.0f sigmas)", what.c_str(), nth_pose(g.pose).c_str(), size.c_str(),
                 g.sigmas);
+}
+
+std::string describe(const std::vector<GrossReading>& readings) {
+  std::string list;
+  for (const GrossReading& g : readings) list += (list.empty() ? "" : "; ") + describe(g);
+  return std::string(readings.size() == 1 ? "a reading is" : "readings are") +
+         " far from every model (" + list +
+         "): a corrupted or mistyped value, a unit slip or a sensor glitch";
 }
 
 Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet& set,
@@ -2017,7 +2017,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   if (!before) return before.status();
   d.before = std::move(*before);
   // Stage 0, gross readings: nothing is named on a recording with a wild reading.
-  d.gross_readings = find_gross_readings(nominal, set, identification, options);
+  d.gross_readings = find_gross_readings(nominal, set, d.before, identification, options);
   if (!d.gross_readings.empty()) {
     state_gross_readings(d);
     return d;

@@ -130,10 +130,13 @@ TEST(Diagnosis, AStrongEffectIsNotTakenForWildReadings) {
   // fit can leave readings far out on recordings with physics: LARGE's compound benchmark, 10 of
   // 90 runs without this check). Only with that check off is it named.
   sim.set.poses[9].cable_lengths(3) += 0.3;
-  EXPECT_TRUE(find_gross_readings(d.s.nominal, sim.set).empty());
+  auto standard = identify(d.s.nominal, sim.set);
+  ASSERT_TRUE(standard.ok()) << standard.status().to_string();
+  EXPECT_TRUE(find_gross_readings(d.s.nominal, sim.set, *standard).empty());
   DiagnosisOptions unchecked;
   unchecked.gross_rest_p = 0;
-  const std::vector<GrossReading> g = find_gross_readings(d.s.nominal, sim.set, {}, unchecked);
+  const std::vector<GrossReading> g =
+      find_gross_readings(d.s.nominal, sim.set, *standard, {}, unchecked);
   ASSERT_EQ(g.size(), 1u);
   EXPECT_EQ(g[0].pose, 9);
   EXPECT_EQ(g[0].index, 3);

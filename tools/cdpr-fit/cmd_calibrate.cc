@@ -403,20 +403,12 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   CalibrationVerdict verdict = judge_calibration(r, vo);
   // A calibration that did not pass: is it a wild reading (a mistyped cell, a glitch)? Then that
   // is the reason to state first, and the next step is the reading, not a missing effect.
+  const std::vector<GrossReading> wild = verdict.passed()
+                                             ? std::vector<GrossReading>{}
+                                             : find_gross_readings(initial, *set, r, options);
   std::vector<std::string> gross;
-  if (!verdict.passed()) {
-    for (const GrossReading& g : find_gross_readings(initial, *set, options)) {
-      gross.push_back(describe(g));
-    }
-  }
-  if (!gross.empty()) {
-    std::string list;
-    for (const std::string& g : gross) list += (list.empty() ? "" : "; ") + g;
-    verdict.reasons.insert(verdict.reasons.begin(),
-                           std::string(gross.size() == 1 ? "a reading is" : "readings are") +
-                               " far from every model (" + list +
-                               "): a corrupted or mistyped value, a unit slip or a sensor glitch");
-  }
+  for (const GrossReading& g : wild) gross.push_back(describe(g));
+  if (!wild.empty()) verdict.reasons.insert(verdict.reasons.begin(), describe(wild));
   const int status = exit_status_of(verdict);
   const std::string next =
       gross.empty()

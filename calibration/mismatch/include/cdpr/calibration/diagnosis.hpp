@@ -197,16 +197,21 @@ struct Diagnosis {
 
 const char* to_string(Diagnosis::Verdict v);
 
-// Stage 0 of diagnose() on its own (DiagnosisOptions::gross_sigmas, gross_spread): the readings
-// of `set` far from every model, largest first; empty when there are none, or more than a few
-// (then they are structure), or the robust refit fails. `cdpr-fit calibrate` names them when its
-// verdict fails.
+// Stage 0 of diagnose() on its own (DiagnosisOptions::gross_sigmas, gross_spread, gross_rest_p):
+// the readings of `set` far from every model, in the order taken out (largest first); empty when
+// there are none, or more than a few (then they are structure), or a refit fails. `standard` is
+// identify(nominal, set, identification), which the caller already has. `cdpr-fit calibrate`
+// names them when its verdict fails.
 std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
                                               const MeasurementSet& set,
+                                              const IdentificationReport& standard,
                                               const IdentificationOptions& identification = {},
                                               const DiagnosisOptions& options = {});
 // "cable length 3 of the 5th pose: off by 250.1 mm (2115 sigmas)" (poses counted from 1).
 std::string describe(const GrossReading& g);
+// "a reading is far from every model (<each>): a corrupted or mistyped value, a unit slip or a
+// sensor glitch" (the words of diagnose's verdict and of calibrate's reason).
+std::string describe(const std::vector<GrossReading>& readings);
 
 // Diagnoses `set` against `nominal`. `validation` (optional) is a second recording of the same
 // robot used only for held-out prediction. Errors: kInvalidArgument (the set does not match the
