@@ -781,6 +781,35 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     out.all_true_named = again.all_true_named;
     out.any_true_named = again.any_true_named;
     out.extra_named = again.extra_named;
+    out.text +=
+        "\n--- after the separating poses ---\n" + diagnosis_text(*d2, r.nominal.robot, *set2);
+    // A second round (measuring.extra_pose_rounds 2): the re-run's suspect beside the named
+    // effects gets its follow-up poses.
+    if (dopt.follow_up_beside_named && d2->follow_up && !d2->follow_up->poses.empty()) {
+      more.insert(more.end(), d2->follow_up->poses.begin(), d2->follow_up->poses.end());
+      auto set3 = record(r, *t, more, noise_seed);
+      cdpr::DiagnosisOptions once = dopt;
+      once.follow_up_poses = 0;
+      auto d3 = set3.ok()
+                    ? cdpr::diagnose(r.nominal, *set3, nullptr, cdpr::IdentificationOptions{}, once)
+                    : cdpr::Result<Diagnosis>(set3.status());
+      if (!d3.ok()) out.follow_up_error = d3.status().to_string();
+      if (d3.ok()) {
+        RunResult third;
+        const std::vector<std::string> fam3 = accepted_families(*d3);
+        score(third, fam3, c);
+        out.follow_up = true;
+        out.follow_up_named = !fam3.empty();
+        out.separated = third.any_true_named && !third.extra_named;
+        out.param_error = parameter_error(*d3, r, c);
+        out.named_families = fam3;
+        out.all_true_named = third.all_true_named;
+        out.any_true_named = third.any_true_named;
+        out.extra_named = third.extra_named;
+        out.text +=
+            "\n--- after the follow-up poses ---\n" + diagnosis_text(*d3, r.nominal.robot, *set3);
+      }
+    }
     break;
   }
   if (out.confounded && !out.separated) {
@@ -1123,6 +1152,8 @@ int main(int argc, char** argv) {
   bool verdicts = false;  // one deterministic line per case and seed at the end of each robot
   bool force_candidates = cdpr::MismatchOptions{}.force_sensor_candidates;
   int folds = cdpr::DiagnosisOptions{}.cv_folds;  // 0: leave one pose out
+  bool beside = cdpr::DiagnosisOptions{}.follow_up_beside_named;
+  int first_seed = 0;  // seeds first_seed .. first_seed + seeds - 1
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--seeds" && i + 1 < argc) {
@@ -1141,13 +1172,18 @@ int main(int argc, char** argv) {
       only = split(argv[++i]);
     } else if (a == "--workers" && i + 1 < argc) {
       workers = std::max(1, std::atoi(argv[++i]));
+    } else if (a == "--first-seed" && i + 1 < argc) {
+      first_seed = std::max(0, std::atoi(argv[++i]));
+    } else if (a == "--follow-up-beside-named") {
+      beside = true;
     } else if (a == "--folds" && i + 1 < argc) {
       folds = std::atoi(argv[++i]);
     } else {
       std::fprintf(stderr,
                    "usage: mismatch_bench [--seeds N] [--quick] [--robot mini|large|both] "
                    "[--effects a,b,...] [--workers N] [--verbose] [--verdicts] "
-                   "[--force-sensor-candidates on|off] [--folds K (0: leave one pose out)]\n"
+                   "[--force-sensor-candidates on|off] [--folds K (0: leave one pose out)] "
+                   "[--follow-up-beside-named] [--first-seed S]\n"
                    "  effects:");
       for (const Effect& e : effects()) std::fprintf(stderr, " %s", e.key.c_str());
       std::fprintf(stderr,
@@ -1213,6 +1249,7 @@ int main(int argc, char** argv) {
   cdpr::DiagnosisOptions dopt;  // the product's defaults: the analysis runs blind
   dopt.screen.force_sensor_candidates = force_candidates;
   dopt.cv_folds = folds;
+  dopt.follow_up_beside_named = beside;
   const auto t_all = std::chrono::steady_clock::now();
   std::vector<std::string> which;
   if (robots != "large") which.push_back("mini");
@@ -1309,7 +1346,8 @@ int main(int argc, char** argv) {
     for (std::size_t c = 0; c < cases.size(); ++c) {
       stats[c].c = &cases[c];
       stats[c].runs.resize(static_cast<std::size_t>(seeds));
-      for (int s = 0; s < seeds; ++s) jobs.push_back({static_cast<int>(c), s});
+      for (int s = first_seed; s < first_seed + seeds; ++s)
+        jobs.push_back({static_cast<int>(c), s});
     }
     std::atomic<int> done{0};
     const auto t_runs = std::chrono::steady_clock::now();

@@ -1534,10 +1534,10 @@ std::vector<ConfoundedFinding> separate(const std::vector<ConfoundedPair>& found
 // whatever its corrected p-value.
 std::optional<FollowUp> follow_up(const MismatchSummary& screen, const RobotModel& estimate,
                                   const std::function<const ExtraPoseGrid&()>& grid_of, int np,
-                                  const DiagnosisOptions& options) {
+                                  const DiagnosisOptions& options, bool misfit_clause = true) {
   const double alpha = options.screen.alpha;
   {
-    const bool unexplained_misfit = screen.p_value < alpha;
+    const bool unexplained_misfit = misfit_clause && screen.p_value < alpha;
     const CandidateScreen* suspect = nullptr;
     for (const auto& cs : screen.candidates) {
       if (cs.modelled || cs.rank == 0) continue;
@@ -1871,15 +1871,21 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
     }
     if (all.empty()) return {};
     const std::size_t isolated = std::max<std::size_t>(1, all.size() / 50);
-    std::vector<double> mags;
-    for (const auto& g : all) mags.push_back(g.sigmas);
-    const auto q95 = mags.begin() + static_cast<std::ptrdiff_t>(0.95 * (mags.size() - 1));
-    std::nth_element(mags.begin(), q95, mags.end());
-    const double gate = std::max(options.gross_sigmas, options.gross_spread * *q95);
-    const auto worst = std::max_element(
-        all.begin(), all.end(),
-        [](const GrossReading& a, const GrossReading& b) { return a.sigmas < b.sigmas; });
-    if (!(worst->sigmas > gate)) break;
+    // Each channel against its own spread: missing physics can leave the lengths thousands of
+    // their (sub-micrometre) sigmas out while a wild laser reading is hundreds of its own.
+    std::map<std::string, std::vector<double>> mags;
+    for (const auto& g : all) mags[g.channel].push_back(g.sigmas);
+    std::map<std::string, double> gate;
+    for (auto& [channel, v] : mags) {
+      const auto q95 = v.begin() + static_cast<std::ptrdiff_t>(0.95 * (v.size() - 1));
+      std::nth_element(v.begin(), q95, v.end());
+      gate[channel] = std::max(options.gross_sigmas, options.gross_spread * *q95);
+    }
+    const auto worst =
+        std::max_element(all.begin(), all.end(), [&](const GrossReading& a, const GrossReading& b) {
+          return a.sigmas / gate[a.channel] < b.sigmas / gate[b.channel];
+        });
+    if (!(worst->sigmas > gate[worst->channel])) break;
     out.push_back(*worst);
     if (out.size() > isolated) return {};  // structure, not a few wild readings
     PoseMeasurement& pm = rest.poses[static_cast<std::size_t>(worst->pose)];
@@ -1899,20 +1905,38 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
     }
   }
   if (out.empty()) return out;
-  // Without them the rest must fit within the noise (else: physics, which can also leave a few
-  // readings far out of a robust fit where it sits in a few poses), and taking them out must
-  // lower the least-squares chi^2 as wild readings do (at least a quarter of gross_sigmas^2
-  // each), not as clean readings of a misplaced robust fit would.
+  // Taking them out must lower the least-squares chi^2 as wild readings do (at least a quarter of
+  // gross_sigmas^2 each), not as clean readings of a misplaced robust fit would, and without them
+  // the rest must fit within the noise or the drop must be most of the misfit (else: physics,
+  // which can also leave a few readings far out of a robust fit where it sits in a few poses).
   auto rest_fit = identify(nominal, rest, plain);
-  if (!rest_fit || rest_fit->dof <= 0 ||
-      !(chi2_upper_tail(rest_fit->chi2, rest_fit->dof) >= options.gross_rest_p)) {
-    return {};
-  }
+  if (!rest_fit || rest_fit->dof <= 0) return {};
   const double drop = standard.chi2 - rest_fit->chi2;
   if (!(drop >=
         0.25 * options.gross_sigmas * options.gross_sigmas * static_cast<double>(out.size()))) {
     return {};
   }
+  const bool rest_fits = chi2_upper_tail(rest_fit->chi2, rest_fit->dof) >= options.gross_rest_p;
+  // The misfit beyond the noise of the channels the readings are in (standard fit): the readings
+  // must carry gross_share of it when the rest does not fit.
+  std::set<std::string> channels;
+  for (const GrossReading& g : out) channels.insert(g.channel);
+  double excess = 0.0;
+  auto add_excess = [&](const char* channel, const auto& v) {
+    if (!channels.count(channel)) return;
+    for (Eigen::Index i = 0; i < v.size(); ++i) {
+      if (std::isfinite(v(i))) excess += v(i) * v(i) - 1.0;
+    }
+  };
+  for (const PoseResiduals& r : standard.residuals) {
+    add_excess("cable length", r.length_normalized);
+    add_excess("laser distance", r.laser_normalized);
+    add_excess("equilibrium", r.wrench_normalized);
+    add_excess("swivel angle", r.swivel_normalized);
+    add_excess("inclination", r.inclination_normalized);
+    add_excess("IMU yaw", Eigen::Matrix<double, 1, 1>::Constant(r.imu_yaw_normalized));
+  }
+  if (!rest_fits && !(drop >= options.gross_share * excess)) return {};
   return out;
 }
 
@@ -2075,6 +2099,10 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   if (!found.empty()) d.confounded = separate(found, acc.trials, grid_of(), np, options);
   if (d.accepted.empty() && options.follow_up_poses > 0) {
     d.follow_up = follow_up(d.screen, d.before.estimate.robot, grid_of, np, options);
+  } else if (!d.accepted.empty() && options.follow_up_poses > 0 && options.follow_up_beside_named &&
+             d.screen_after) {
+    d.follow_up = follow_up(*d.screen_after, d.before.estimate.robot, grid_of, np, options,
+                            /*misfit_clause=*/false);
   }
   // A suspect beside named effects (the second round's screen) gets no follow-up poses: measured
   // (20 more poses) and diagnosed again, they cost more than they found on the benchmark (6 seeds

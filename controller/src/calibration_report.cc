@@ -187,6 +187,11 @@ json calibration_json(const CalibrationOutcome& o, const CalibrationReportContex
       row.push_back(finite_or_null(r.length_normalized(i)));
     residuals.push_back(row);
   }
+  json remeasured = json::array();
+  for (const RemeasuredPose& r : c.remeasured) {
+    remeasured.push_back(
+        {{"pose", r.row + 1}, {"measured_again_as", r.again + 1}, {"reading", r.reading}});
+  }
   return {{"calibration", c.calibration},
           {"daemon", c.daemon},
           {"geometry_version_before", c.geometry_version},
@@ -199,6 +204,7 @@ json calibration_json(const CalibrationOutcome& o, const CalibrationReportContex
             {"laser", c.laser_config},
             {"daemon", c.daemon_config}}},
           {"poses", o.poses},
+          {"poses_measured_again", remeasured},
           {"verdict", o.verdict},
           {"verdict_key", o.verdict_key},
           {"named_effects", effects},
@@ -244,7 +250,13 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
   h << "</table>\n<p>" << report::html_escape(c.daemon)
     << "; geometry version before: " << c.geometry_version << "; recording <code>"
     << report::html_escape(std::filesystem::path(c.recording).filename().string()) << "</code>; "
-    << o.poses << " poses; started " << report::html_escape(c.started) << ".</p>\n</section>\n";
+    << o.poses << " poses; started " << report::html_escape(c.started) << ".</p>\n";
+  for (const RemeasuredPose& r : c.remeasured) {
+    h << "<p>Pose " << r.row + 1 << " was measured again as pose " << r.again + 1 << ": "
+      << report::html_escape(r.reading)
+      << ". Its first row stays in the recording and is left out of the identification.</p>\n";
+  }
+  h << "</section>\n";
   std::string page = report_page;
   const std::size_t body = page.find("<body>");
   if (body == std::string::npos)

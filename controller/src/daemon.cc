@@ -969,6 +969,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   bool header_written = false;
   const double t0 = now_s();
 
+  std::vector<double> row_pretensions;  // per recorded row, the pretension it was measured at
   auto measure_list = [&](const std::vector<Pose>& list, const std::vector<double>& pretensions,
                           int first_index) -> Status {
     for (std::size_t j = 0; j < list.size(); ++j) {
@@ -980,6 +981,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
       if (Status s = measure_pose(list[j], pre, row); !s.ok()) {
         return s.prepend("pose " + std::to_string(index) + ": ");
       }
+      row_pretensions.push_back(pre);
       row.time_s = now_s() - t0;
       recording::Recording one = rec;
       one.poses = {row};
@@ -1041,12 +1043,29 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   Result<Diagnosis> diagnosis = Status(ErrorCode::kInternal, "not run");
   Result<IdentificationReport> report = Status(ErrorCode::kInternal, "not run");
   MeasurementSet set;
-  for (int round = 0;; ++round) {
+  // Rows of the recording left out of the identification (a gross reading, measured again as a
+  // new row); the file keeps them as evidence.
+  std::vector<bool> left_out;
+  std::vector<RemeasuredPose> remeasured;
+  int remeasure_round = 0;
+  for (int round = 0;;) {
     auto read = recording::read_recording(rec_path);
     if (!read.ok()) return fail(read.status());
     auto ms_set = recording::to_measurement_set(*read);
     if (!ms_set.ok()) return fail(ms_set.status());
     set = std::move(*ms_set);
+    left_out.resize(static_cast<std::size_t>(set.num_poses()), false);
+    std::vector<int> rows;  // the recording's row of each pose of `set`
+    {
+      MeasurementSet kept;
+      kept.noise = set.noise;
+      for (int j = 0; j < static_cast<int>(set.poses.size()); ++j) {
+        if (left_out[static_cast<std::size_t>(j)]) continue;
+        kept.poses.push_back(std::move(set.poses[static_cast<std::size_t>(j)]));
+        rows.push_back(j);
+      }
+      set = std::move(kept);
+    }
     report = identify(initial, set, config_.identification.options);
     if (!report.ok()) return fail(report.status());
     if (!config_.identification.diagnose) break;
@@ -1055,7 +1074,45 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
     dopt.cv_folds = config_.identification.folds;
     diagnosis = diagnose(initial, set, nullptr, config_.identification.options, dopt);
     if (!diagnosis.ok()) return fail(diagnosis.status());
-    if (round >= ms.extra_pose_rounds) break;
+    if (!diagnosis->gross_readings.empty() && remeasure_round < ms.remeasure_rounds) {
+      // A gross reading (a beam on the wrong target, a glitch): its pose is measured again and the
+      // row is left out; the extra-pose rounds are not spent on it.
+      ++remeasure_round;
+      std::vector<Pose> again;
+      std::vector<double> pretensions;
+      const int first = static_cast<int>(rec.poses.size());
+      for (const GrossReading& gr : diagnosis->gross_readings) {
+        const int row = rows[static_cast<std::size_t>(gr.pose)];
+        if (left_out[static_cast<std::size_t>(row)]) {  // (two readings of one pose)
+          for (RemeasuredPose& r : remeasured) {
+            if (r.row == row) r.reading += "; " + describe(gr);
+          }
+          continue;
+        }
+        left_out[static_cast<std::size_t>(row)] = true;
+        remeasured.push_back({row, first + static_cast<int>(again.size()), describe(gr)});
+        again.push_back(rec.poses[static_cast<std::size_t>(row)].commanded);
+        pretensions.push_back(row_pretensions[static_cast<std::size_t>(row)]);
+      }
+      for (std::size_t j = remeasured.size() - again.size(); j < remeasured.size(); ++j) {
+        spdlog::warn(
+            "calibration {}: pose {} is measured again as pose {} ({}); its row stays in "
+            "the recording and is left out of the identification",
+            id, remeasured[j].row + 1, remeasured[j].again + 1, remeasured[j].reading);
+      }
+      set_state(DaemonState::kMeasuring, "calibration " + std::to_string(id) + ": " +
+                                             std::to_string(again.size()) +
+                                             " poses measured again (gross reading)");
+      {
+        std::lock_guard lock(mu_);
+        calibration_->poses += static_cast<int>(again.size());
+      }
+      poses.insert(poses.end(), again.begin(), again.end());
+      if (Status s = measure_list(again, pretensions, first); !s.ok()) return fail(s);
+      set_state(DaemonState::kIdentifying, "calibration " + std::to_string(id) + ": identifying");
+      continue;
+    }
+    if (round++ >= ms.extra_pose_rounds) break;
     std::vector<Pose> extra;
     std::vector<double> pretensions;
     for (const ConfoundedFinding& cf : diagnosis->confounded) {
@@ -1110,6 +1167,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   ctx.daemon_config = config_.file;
   ctx.started = rec.metadata.get(recording::key::kDate);
   ctx.measuring_s = now_s() - t0;
+  ctx.remeasured = remeasured;
   // The calibration report of cdpr-fit (the library), under the daemon's decision.
   const CalibratedModel after_model = diagnosis.ok() ? diagnosis->model_after : report->estimate;
   report::CalibrationReportInput rin;

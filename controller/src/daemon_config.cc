@@ -83,8 +83,8 @@ Status read_measuring(const YamlField& n, const std::string& dir, MeasuringSetti
   CDPR_RETURN_IF_ERROR(
       n.check_keys({"poses", "pose_file", "laser_samples", "laser_interval_s", "average_cycles",
                     "settle_window_s", "settle_position_tolerance", "settle_tension_tolerance",
-                    "settle_timeout_s", "tension_band", "extra_pose_rounds", "noise_length_m",
-                    "noise_force_n", "noise_laser_m"}));
+                    "settle_timeout_s", "tension_band", "extra_pose_rounds", "remeasure_rounds",
+                    "noise_length_m", "noise_force_n", "noise_laser_m"}));
   CDPR_RETURN_IF_ERROR(n.optional("poses", m.poses, 7, 1000));
   CDPR_RETURN_IF_ERROR(n.optional("pose_file", m.pose_file));
   m.pose_file = resolve(dir, m.pose_file);
@@ -99,6 +99,7 @@ Status read_measuring(const YamlField& n, const std::string& dir, MeasuringSetti
   CDPR_RETURN_IF_ERROR(in_range(n, "settle_timeout_s", 0.01, 3600.0, "s", m.settle_timeout_s));
   CDPR_RETURN_IF_ERROR(in_range(n, "tension_band", 0.0, 1e5, "N", m.tension_band));
   CDPR_RETURN_IF_ERROR(n.optional("extra_pose_rounds", m.extra_pose_rounds, 0, 10));
+  CDPR_RETURN_IF_ERROR(n.optional("remeasure_rounds", m.remeasure_rounds, 0, 10));
   CDPR_RETURN_IF_ERROR(in_range(n, "noise_length_m", 1e-12, 1.0, "m", m.noise_length_m));
   CDPR_RETURN_IF_ERROR(in_range(n, "noise_force_n", 1e-9, 1e5, "N", m.noise_force_n));
   return in_range(n, "noise_laser_m", 1e-12, 1.0, "m", m.noise_laser_m);

@@ -150,10 +150,11 @@ class VirtualCell {
     }
     robot->step(clock.now());
     const sim::LaserChannel l = physics->state().lasers.front();
-    slave->set_distance(l.true_distance, laser_status.value_or(l.status));
+    slave->set_distance(l.true_distance + laser_offset_m, laser_status.value_or(l.status));
   }
   bool robot_dead = false;
   std::optional<sim::LaserStatus> laser_status;
+  double laser_offset_m = 0.0;  // added to the laser's distance (a beam on the wrong target)
 
   // One SYNC period: the daemon's RT cycle, then the robot until the next one; the supervisor
   // every 5 cycles. While the worker identifies, the CPU is left to it (the robot holds).

@@ -11,6 +11,7 @@
 
 #include <nlohmann/json.hpp>
 #include <string>
+#include <vector>
 
 #include "cdpr/calibration/diagnosis.hpp"
 #include "cdpr/calibration/identification.hpp"
@@ -43,6 +44,14 @@ struct CalibrationOutcome {
   int poses = 0;
 };
 
+// A pose measured again because the mismatch locator found a gross reading in it: its first row
+// stays in the recording and is left out of the identification.
+struct RemeasuredPose {
+  int row = 0;          // 0-based row of the recording left out
+  int again = 0;        // 0-based row that measured the pose again
+  std::string reading;  // the gross reading(s), in words (describe(GrossReading))
+};
+
 struct CalibrationReportContext {
   int calibration = 0;
   std::string daemon;
@@ -50,6 +59,7 @@ struct CalibrationReportContext {
   std::string recording, robot_config, canopen_config, laser_config, daemon_config;
   std::string started;
   double measuring_s = 0.0;
+  std::vector<RemeasuredPose> remeasured;
 };
 
 // The gates and the proposed model. `diagnosis` may be nullptr. The referenced reports must

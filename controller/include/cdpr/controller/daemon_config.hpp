@@ -69,6 +69,9 @@ struct MeasuringSettings {
   // (length trims, mostly internal force); 0: off.
   double tension_band = 3.0;
   int extra_pose_rounds = 1;  // rounds of extra poses the mismatch locator may ask for
+  // Rounds in which the poses of gross readings (Diagnosis::gross_readings) are measured again
+  // (their first rows left out of the identification); not counted in extra_pose_rounds.
+  int remeasure_rounds = 1;
   // Noise of ONE reading of each sensor; the recording states the noise of the averages.
   double noise_length_m = 1e-6;
   double noise_force_n = 0.5;

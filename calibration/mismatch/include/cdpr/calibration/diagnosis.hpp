@@ -49,6 +49,10 @@ struct DiagnosisOptions {
   // p-value is a suspect whatever this threshold (more poses are the next step there anyway).
   double suspect_p = 0.2;
   int follow_up_poses = 20;
+  // Beside named effects, the second screening round's candidate with the lowest p-value is a
+  // suspect when its corrected p-value is below suspect_p (the misfit clause above does not
+  // apply there); its follow-up poses are proposed like those of a suspect with nothing named.
+  bool follow_up_beside_named = false;
   // The first accepted effect must also be seen by the linear screen: its screen p-value
   // (after Holm's correction over the library) below this. On noise, a nonlinear refit can reach a
   // far minimum whose likelihood ratio overstates its significance (chi^2 with the nominal degrees
@@ -70,21 +74,25 @@ struct DiagnosisOptions {
   // that only stood in for the one found later is dropped.
   bool backward_check = true;
   // Gross readings (stage 0): a reading that a robust refit (Cauchy loss) of the standard model
-  // leaves more than max(gross_sigmas, gross_spread x the 95th percentile of all its normalised
-  // residuals) sigmas away is a gross error of the recording (a corrupted or mistyped cell, a unit
-  // slip, a sensor glitch), not missing physics: when at most max(1, 2 % of the readings) are, the
-  // verdict is inconclusive and names them; more are structure, left to the effects. A least-
-  // squares fit spreads one such reading over the whole geometry, and the effects would fit the
-  // smear (a 336 mm error in one length reading of MINI: three effects named, 100 s). They are
-  // named only when the rest, without them, fits within the noise (chi^2 upper-tail p-value of the
-  // standard identification at least gross_rest_p) and taking them out lowers its chi^2 by at
-  // least gross_sigmas^2 / 4 each: a robust fit can also leave readings far out on a recording
-  // with physics in it (on LARGE's compound benchmark, 10 of 90 runs without these two conditions;
-  // one traced: a pose settled metres off), but then the rest still misfits. So a wild reading
-  // beside a real effect is left to the effects (docs/mismatch-benchmark.md). 0: no check.
+  // leaves more than max(gross_sigmas, gross_spread x the 95th percentile of the normalised
+  // residuals of its channel) sigmas away is a gross error of the recording (a corrupted or
+  // mistyped cell, a unit slip, a sensor glitch, a laser beam on the wrong target), not missing
+  // physics: when at most max(1, 2 % of the readings) are, the verdict is inconclusive and names
+  // them; more are structure, left to the effects. A least-squares fit spreads one such reading
+  // over the whole geometry, and the effects would fit the smear (a 336 mm error in one length
+  // reading of MINI: three effects named, 100 s). They are named only when taking them out lowers
+  // the standard identification's chi^2 by at least gross_sigmas^2 / 4 each, and either the rest
+  // without them fits within the noise (chi^2 upper-tail p-value at least gross_rest_p) or that
+  // drop is at least gross_share of the misfit in excess of the noise in their channels (the sum
+  // of their squared normalised residuals minus their count). A robust fit can also leave
+  // readings far out on a recording with physics in it (LARGE's compound benchmark: 10 of 90 runs
+  // with the robust fit alone; one traced: a pose settled metres off), but then taking them out
+  // leaves the misfit where it was. A wild reading beside a real effect is named when it carries
+  // most of its channel's misfit (docs/mismatch-locator.md). 0: no check.
   double gross_sigmas = 20.0;
   double gross_spread = 10.0;
   double gross_rest_p = 1e-3;
+  double gross_share = 0.5;
 };
 
 // One fitted effect parameter, in SI units (and as shown to people).
