@@ -756,6 +756,40 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     const bool b = !true_effect_named(cf.second_fit.family, present).empty();
     return a != b;
   };
+  // The follow-up poses appended to `base`, measured (same truth, same noise seed) and diagnosed
+  // once more (no further follow-up): the re-run's verdict and naming replace the run's.
+  auto run_follow_up = [&](std::vector<Pose> base, const cdpr::FollowUp& fu) {
+    base.insert(base.end(), fu.poses.begin(), fu.poses.end());
+    auto set2 = record(r, *t, base, noise_seed);
+    cdpr::DiagnosisOptions once = dopt;
+    once.follow_up_poses = 0;
+    auto d2 = set2.ok()
+                  ? cdpr::diagnose(r.nominal, *set2, nullptr, cdpr::IdentificationOptions{}, once)
+                  : cdpr::Result<Diagnosis>(set2.status());
+    if (!d2.ok()) {
+      out.follow_up_error = d2.status().to_string();
+      return false;
+    }
+    out.follow_up = true;
+    RunResult again;
+    const std::vector<std::string> fam2 = accepted_families(*d2);
+    score(again, fam2, c);
+    out.named_families = fam2;
+    out.all_true_named = again.all_true_named;
+    out.any_true_named = again.any_true_named;
+    out.extra_named = again.extra_named;
+    out.follow_up_named = !fam2.empty();
+    out.verdict = d2->verdict;
+    out.param_error = parameter_error(*d2, r, c);
+    if (!d2->accepted.empty()) {
+      // The held-out figures of the run that named the effect (on the longer recording).
+      out.held_before = d2->held_out_rms_before;
+      out.held_after = d2->held_out_rms_after;
+    }
+    out.text +=
+        "\n--- after the follow-up poses ---\n" + diagnosis_text(*d2, r.nominal.robot, *set2);
+    return true;
+  };
   for (const cdpr::ConfoundedFinding& cf : d->confounded) {
     if (!out.confounded) break;
     if (!matters(cf) || cf.separating_poses.empty()) continue;
@@ -785,30 +819,9 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
         "\n--- after the separating poses ---\n" + diagnosis_text(*d2, r.nominal.robot, *set2);
     // A second round (measuring.extra_pose_rounds 2): the re-run's suspect beside the named
     // effects gets its follow-up poses.
-    if (dopt.follow_up_beside_named && d2->follow_up && !d2->follow_up->poses.empty()) {
-      more.insert(more.end(), d2->follow_up->poses.begin(), d2->follow_up->poses.end());
-      auto set3 = record(r, *t, more, noise_seed);
-      cdpr::DiagnosisOptions once = dopt;
-      once.follow_up_poses = 0;
-      auto d3 = set3.ok()
-                    ? cdpr::diagnose(r.nominal, *set3, nullptr, cdpr::IdentificationOptions{}, once)
-                    : cdpr::Result<Diagnosis>(set3.status());
-      if (!d3.ok()) out.follow_up_error = d3.status().to_string();
-      if (d3.ok()) {
-        RunResult third;
-        const std::vector<std::string> fam3 = accepted_families(*d3);
-        score(third, fam3, c);
-        out.follow_up = true;
-        out.follow_up_named = !fam3.empty();
-        out.separated = third.any_true_named && !third.extra_named;
-        out.param_error = parameter_error(*d3, r, c);
-        out.named_families = fam3;
-        out.all_true_named = third.all_true_named;
-        out.any_true_named = third.any_true_named;
-        out.extra_named = third.extra_named;
-        out.text +=
-            "\n--- after the follow-up poses ---\n" + diagnosis_text(*d3, r.nominal.robot, *set3);
-      }
+    if (dopt.follow_up_beside_named && d2->follow_up && !d2->follow_up->poses.empty() &&
+        run_follow_up(more, *d2->follow_up)) {
+      out.separated = out.any_true_named && !out.extra_named;
     }
     break;
   }
@@ -824,35 +837,7 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
   // and naming replace the first ones, as the operator would do. One round only; a run whose
   // separating poses were already measured keeps that re-run.
   if (!out.separation_tried && d->follow_up && !d->follow_up->poses.empty()) {
-    std::vector<Pose> more = r.poses;
-    more.insert(more.end(), d->follow_up->poses.begin(), d->follow_up->poses.end());
-    auto set2 = record(r, *t, more, noise_seed);
-    cdpr::DiagnosisOptions once = dopt;
-    once.follow_up_poses = 0;
-    auto d2 = set2.ok()
-                  ? cdpr::diagnose(r.nominal, *set2, nullptr, cdpr::IdentificationOptions{}, once)
-                  : cdpr::Result<Diagnosis>(set2.status());
-    if (!d2.ok()) out.follow_up_error = d2.status().to_string();
-    if (d2.ok()) {
-      out.follow_up = true;
-      RunResult again;
-      const std::vector<std::string> fam2 = accepted_families(*d2);
-      score(again, fam2, c);
-      out.named_families = fam2;
-      out.all_true_named = again.all_true_named;
-      out.any_true_named = again.any_true_named;
-      out.extra_named = again.extra_named;
-      out.follow_up_named = !fam2.empty();
-      out.verdict = d2->verdict;
-      out.param_error = parameter_error(*d2, r, c);
-      if (!d2->accepted.empty()) {
-        // The held-out figures of the run that named the effect (on the longer recording).
-        out.held_before = d2->held_out_rms_before;
-        out.held_after = d2->held_out_rms_after;
-      }
-      out.text +=
-          "\n--- after the follow-up poses ---\n" + diagnosis_text(*d2, r.nominal.robot, *set2);
-    }
+    run_follow_up(r.poses, *d->follow_up);
   }
   out.seconds = seconds_since(t0);
   return out;
