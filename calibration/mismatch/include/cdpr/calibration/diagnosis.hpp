@@ -83,12 +83,12 @@ struct DiagnosisOptions {
   // reading of MINI: three effects named, 100 s). They are named only when taking them out lowers
   // the standard identification's chi^2 by at least gross_sigmas^2 / 4 each, and either the rest
   // without them fits within the noise (chi^2 upper-tail p-value at least gross_rest_p) or that
-  // drop is at least gross_share of the misfit in excess of the noise in their channels (the sum
-  // of their squared normalised residuals minus their count). A robust fit can also leave
-  // readings far out on a recording with physics in it (LARGE's compound benchmark: 10 of 90 runs
-  // with the robust fit alone; one traced: a pose settled metres off), but then taking them out
-  // leaves the misfit where it was. A wild reading beside a real effect is named when it carries
-  // most of its channel's misfit (docs/mismatch-locator.md). 0: no check.
+  // drop is at least gross_share of the whole misfit beyond the noise (chi^2 - dof). A robust fit
+  // can also leave readings far out on a recording with physics in it (LARGE's compound benchmark:
+  // 10 of 90 runs with the robust fit alone, one traced: a pose settled metres off; MINI's pulley
+  // friction at 3x noise: one length reading 60 sigmas out), but then taking them out leaves most
+  // of the misfit where it was (friction: 0.30-0.34 of it). A wild reading beside a real effect
+  // carries nearly all of it and is named (docs/mismatch-locator.md). 0: no check.
   double gross_sigmas = 20.0;
   double gross_spread = 10.0;
   double gross_rest_p = 1e-3;
