@@ -1081,8 +1081,9 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
       std::vector<Pose> again;
       std::vector<double> pretensions;
       const int first = static_cast<int>(rec.poses.size());
-      for (const GrossReading& gr : diagnosis->gross_readings) {
+      for (GrossReading gr : diagnosis->gross_readings) {
         const int row = rows[static_cast<std::size_t>(gr.pose)];
+        gr.pose = row;  // in words, the recording's row (rows left out before shift the set's)
         if (left_out[static_cast<std::size_t>(row)]) {  // (two readings of one pose)
           for (RemeasuredPose& r : remeasured) {
             if (r.row == row) r.reading += "; " + describe(gr);
