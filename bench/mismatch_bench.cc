@@ -1370,7 +1370,8 @@ int main(int argc, char** argv) {
       }
       if (verbose && res.ok) std::printf("%s\n", res.text.c_str());
       std::fflush(stdout);
-      stats[static_cast<std::size_t>(j.c)].runs[static_cast<std::size_t>(j.seed)] = std::move(res);
+      stats[static_cast<std::size_t>(j.c)].runs[static_cast<std::size_t>(j.seed - first_seed)] =
+          std::move(res);
     });
     if (verdicts) {
       // Every seed's verdict in case order, free of timings and worker order: two runs of the
@@ -1385,7 +1386,7 @@ int main(int argc, char** argv) {
               "verdict [%s] %s seed %zu: %s | named %s | all %d any %d extra %d | conf %d sep "
               "%d/%d%s | follow-up %d named %d%s | first named %d | top %s p %.6g Holm %.6g | "
               "held %.6g -> %.6g | %s\n",
-              r.name.c_str(), s.c->label.c_str(), seed,
+              r.name.c_str(), s.c->label.c_str(), seed + static_cast<std::size_t>(first_seed),
               res.ok ? cdpr::to_string(res.verdict) : ("failed: " + res.error).c_str(),
               named.empty() ? "-" : named.c_str(), res.all_true_named, res.any_true_named,
               res.extra_named, res.confounded, res.separated, res.separation_tried,
