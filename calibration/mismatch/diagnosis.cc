@@ -1883,9 +1883,9 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
     }
     const auto worst =
         std::max_element(all.begin(), all.end(), [&](const GrossReading& a, const GrossReading& b) {
-          return a.sigmas / gate[a.channel] < b.sigmas / gate[b.channel];
+          return a.sigmas / gate.at(a.channel) < b.sigmas / gate.at(b.channel);
         });
-    if (!(worst->sigmas > gate[worst->channel])) break;
+    if (!(worst->sigmas > gate.at(worst->channel))) break;
     out.push_back(*worst);
     if (out.size() > isolated) return {};  // structure, not a few wild readings
     PoseMeasurement& pm = rest.poses[static_cast<std::size_t>(worst->pose)];
@@ -2084,10 +2084,9 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     return *grid;
   };
   if (!found.empty()) d.confounded = separate(found, acc.trials, grid_of(), np, options);
-  if (d.accepted.empty() && options.follow_up_poses > 0) {
+  if (options.follow_up_poses > 0 && d.accepted.empty()) {
     d.follow_up = follow_up(d.screen, d.before.estimate.robot, grid_of, np, options);
-  } else if (!d.accepted.empty() && options.follow_up_poses > 0 && options.follow_up_beside_named &&
-             d.screen_after) {
+  } else if (options.follow_up_poses > 0 && options.follow_up_beside_named && d.screen_after) {
     d.follow_up = follow_up(*d.screen_after, d.before.estimate.robot, grid_of, np, options,
                             /*misfit_clause=*/false);
   }
