@@ -3,8 +3,10 @@
 //
 // Data come from the virtual robot's physics (sim/physics.hpp): the true robot differs from the
 // nominal one in the frame anchors (the standard calibration case) and in ONE hidden effect (or a
-// pair, or none), the encoders are homed with the nominal model, and run_lockstep commands the 25
-// designed poses with the NOMINAL model and reads the channels through the nominal reading models.
+// pair, or none), the encoders are homed with the nominal model, and run_lockstep commands the
+// designed poses (25 tilted up to 15 degrees as cdprd's default set; --poses and --max-angle-deg
+// for others) with the NOMINAL model and reads the channels through the nominal
+// reading models.
 // diagnose(nominal, recording) runs blind; the benchmark maps what it names (effect families) to
 // the effect that was switched on (kEffects below: the one mapping table) and counts.
 //
@@ -97,11 +99,25 @@ RobotModel physics_truth(const CalibratedModel& homed) {
   return t;
 }
 
-Robot make_robot(const std::string& which, bool quick) {
+// `design_estimate`: --estimate words the pose design also maximises the information about
+// (beside what the identification estimates), e.g. laser-direction for the candidate effects.
+Robot make_robot(const std::string& which, bool quick, int num_poses,
+                 const std::vector<std::string>& design_estimate, double max_angle_deg,
+                 double tension_margin) {
   Robot r;
   cdpr::PoseDesignOptions d;
   d.noise = bench_noise();
-  d.num_poses = 25;
+  d.num_poses = num_poses;
+  if (max_angle_deg > 0.0) d.max_angle = max_angle_deg * kDeg;
+  d.tension_margin = tension_margin;
+  for (const std::string& w : design_estimate) {
+    const cdpr::EstimateItem* item = cdpr::find_estimate_item(w);
+    if (item == nullptr) {
+      std::fprintf(stderr, "--design-estimate: unknown word '%s'\n", w.c_str());
+      std::exit(2);
+    }
+    item->set(d.identification, true);
+  }
   if (which == "mini") {
     const cdpr::scenario::Scenario s = cdpr::scenario::mini_config_scenario();
     r.name = "MINI";
@@ -1139,6 +1155,11 @@ int main(int argc, char** argv) {
   int folds = cdpr::DiagnosisOptions{}.cv_folds;  // 0: leave one pose out
   bool beside = cdpr::DiagnosisOptions{}.follow_up_beside_named;
   int first_seed = 0;  // seeds first_seed .. first_seed + seeds - 1
+  // The pose set of cdprd's defaults (MeasuringSettings: 25 poses tilted up to 15 degrees).
+  int num_poses = 25;
+  std::vector<std::string> design_estimate;
+  double max_angle_deg = 0.0;   // 0: PoseDesignOptions' default, 0.2618 rad
+  double tension_margin = 0.0;  // N, PoseDesignOptions::tension_margin
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--seeds" && i + 1 < argc) {
@@ -1161,6 +1182,14 @@ int main(int argc, char** argv) {
       first_seed = std::max(0, std::atoi(argv[++i]));
     } else if (a == "--follow-up-beside-named") {
       beside = true;
+    } else if (a == "--poses" && i + 1 < argc) {
+      num_poses = std::max(8, std::atoi(argv[++i]));
+    } else if (a == "--max-angle-deg" && i + 1 < argc) {
+      max_angle_deg = std::clamp(std::atof(argv[++i]), 1.0, 45.0);
+    } else if (a == "--tension-margin" && i + 1 < argc) {
+      tension_margin = std::max(0.0, std::atof(argv[++i]));
+    } else if (a == "--design-estimate" && i + 1 < argc) {
+      design_estimate = split(argv[++i]);
     } else if (a == "--folds" && i + 1 < argc) {
       folds = std::atoi(argv[++i]);
     } else {
@@ -1168,7 +1197,8 @@ int main(int argc, char** argv) {
                    "usage: mismatch_bench [--seeds N] [--quick] [--robot mini|large|both] "
                    "[--effects a,b,...] [--workers N] [--verbose] [--verdicts] "
                    "[--force-sensor-candidates on|off] [--folds K (0: leave one pose out)] "
-                   "[--follow-up-beside-named] [--first-seed S]\n"
+                   "[--follow-up-beside-named] [--first-seed S] [--poses N] "
+                   "[--design-estimate word,...] [--max-angle-deg A] [--tension-margin N]\n"
                    "  effects:");
       for (const Effect& e : effects()) std::fprintf(stderr, " %s", e.key.c_str());
       std::fprintf(stderr,
@@ -1220,9 +1250,10 @@ int main(int argc, char** argv) {
       seeds, quick ? ", quick" : "", workers,
       folds == 0 ? "leave-one-pose-out CV" : (std::to_string(folds) + "-fold CV").c_str());
   std::printf(
-      "noise: laser 1 mm, encoder 0.1 mm, force 1 N; 25 designed poses; lock-step physics "
-      "(cdpr-sim), %.0f s per pose\n",
-      kDwellS);
+      "noise: laser 1 mm, encoder 0.1 mm, force 1 N; %d designed poses tilted up to %.0f deg%s; "
+      "lock-step physics (cdpr-sim), %.0f s per pose\n",
+      num_poses, max_angle_deg > 0.0 ? max_angle_deg : cdpr::PoseDesignOptions{}.max_angle / kDeg,
+      design_estimate.empty() ? "" : " (design for more parameters)", kDwellS);
   std::printf("mapping (true effect -> families of diagnose() that count as naming it):\n");
   for (const Effect& e : effects()) {
     std::string f;
@@ -1241,7 +1272,7 @@ int main(int argc, char** argv) {
   if (robots != "mini") which.push_back("large");
   for (const std::string& w : which) {
     const auto t_robot = std::chrono::steady_clock::now();
-    const Robot r = make_robot(w, quick);
+    const Robot r = make_robot(w, quick, num_poses, design_estimate, max_angle_deg, tension_margin);
 
     // Magnitudes (pool over effects).
     std::vector<std::string> keys;

@@ -31,6 +31,54 @@ TEST(PoseDesign, DesignedSetIsFeasibleAndBeatsRandom) {
   EXPECT_LT((*cmp)[0].anchor_rms_std_m, (*cmp)[1].anchor_rms_std_m);
 }
 
+// The design's tension margin: with it every designed pose has a tension distribution inside the
+// narrowed limits; without it, a design tilted up to 25 degrees uses poses whose tensions come
+// closer to the limits than the margin (the poses that overloaded a cable of the virtual MINI).
+TEST(PoseDesign, TensionMarginKeepsEveryPoseAwayFromTheLimits) {
+  const scenario::Scenario s = scenario::mini_scenario();
+  PoseDesignOptions o;
+  o.points_per_axis = 3;
+  o.exchange_passes = 1;
+  o.num_poses = 12;
+  o.max_angle = 0.4363;
+  const double margin = 30.0;
+  RobotModel narrowed = s.nominal.robot;
+  for (CableModel& c : narrowed.cables) {
+    c.f_min += margin;
+    c.f_max -= margin;
+  }
+  const double f_ref = default_reference_tension(s.nominal.robot);
+  auto inside = [&](const std::vector<Pose>& poses) {
+    int n = 0;
+    for (const Pose& p : poses) n += simple_tension_distribution(narrowed, p, f_ref).ok() ? 1 : 0;
+    return n;
+  };
+  auto plain = design_poses(s.nominal, o);
+  ASSERT_TRUE(plain.ok()) << plain.status().to_string();
+  EXPECT_LT(inside(plain->poses), o.num_poses);
+  o.tension_margin = margin;
+  auto kept = design_poses(s.nominal, o);
+  ASSERT_TRUE(kept.ok()) << kept.status().to_string();
+  ASSERT_EQ(static_cast<int>(kept->poses.size()), o.num_poses);
+  EXPECT_EQ(inside(kept->poses), o.num_poses);
+  EXPECT_LT(kept->candidates, plain->candidates);
+}
+
+TEST(PoseDesign, RefusesAMarginThatLeavesNoTensionRange) {
+  const scenario::Scenario s = scenario::mini_scenario();
+  PoseDesignOptions o;
+  o.points_per_axis = 3;
+  o.num_poses = 5;
+  const double f_max = s.nominal.robot.cables[0].f_max;
+  o.tension_margin = f_max;
+  auto d = design_poses(s.nominal, o);
+  ASSERT_FALSE(d.ok());
+  EXPECT_EQ(d.status().code(), ErrorCode::kInvalidArgument);
+  EXPECT_NE(d.status().to_string().find("cable 1"), std::string::npos) << d.status().to_string();
+  o.tension_margin = -1.0;
+  EXPECT_EQ(design_poses(s.nominal, o).status().code(), ErrorCode::kInvalidArgument);
+}
+
 // log det of the information (poses profiled out) that `channels` give at `poses`.
 double log_det_information(const CalibratedModel& model, const std::vector<Pose>& poses,
                            const SensorNoise& noise, const SensorChannels& channels,

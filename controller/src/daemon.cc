@@ -752,6 +752,9 @@ Result<std::vector<Pose>> Daemon::plan_poses(const std::string& poses_csv) {
   } else {
     PoseDesignOptions o;
     o.num_poses = config_.measuring.poses;
+    o.max_angle = config_.measuring.max_angle;
+    // Candidates keep the planning margin, so that no designed pose is dropped below for it.
+    o.tension_margin = config_.motion.tension_margin;
     fit_design_box_to_robot(g->model, o);
     auto d = design_poses(CalibratedModel::from_robot(g->model), o);
     if (!d.ok()) return d.status();

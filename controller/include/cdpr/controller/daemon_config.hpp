@@ -56,12 +56,17 @@ struct TensionWatch {
 };
 
 struct MeasuringSettings {
-  int poses = 25;                  // designed poses (including home) when no pose file is given
-  std::string pose_file;           // pose list CSV (docs/recording-format.md); "" = pose design
-  int laser_samples = 20;          // readings per pose (median/MAD robust mean)
-  double laser_interval_s = -1.0;  // between laser readings; < 0: the laser's poll period
-  int average_cycles = 25;         // encoder and tension readings averaged per pose
-  double settle_window_s = 0.2;    // motion and tensions still for this long
+  int poses = 25;         // designed poses (including home) when no pose file is given
+  std::string pose_file;  // pose list CSV (docs/recording-format.md); "" = pose design
+  // rad: the designed poses' tilt about each platform axis (PoseDesignOptions::max_angle, 15
+  // degrees). More tilt carries more of the laser beam's direction, but 25 degrees overloaded a
+  // cable of the virtual MINI (docs/mismatch-benchmark.md, "The pose set"); cable-platform
+  // interference is not checked.
+  double max_angle = 0.2618;
+  int laser_samples = 20;                   // readings per pose (median/MAD robust mean)
+  double laser_interval_s = -1.0;           // between laser readings; < 0: the laser's poll period
+  int average_cycles = 25;                  // encoder and tension readings averaged per pose
+  double settle_window_s = 0.2;             // motion and tensions still for this long
   double settle_position_tolerance = 2e-6;  // m of cable: spread of each encoder in the window
   double settle_tension_tolerance = 1.0;    // N: spread of each tension in the window
   double settle_timeout_s = 10.0;

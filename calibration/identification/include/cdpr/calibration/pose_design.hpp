@@ -6,7 +6,8 @@
 //
 // Algorithm: candidate grid (positions on a grid over the box x a set of orientations: zero and
 // +-max_angle about each axis), filtered by the tension distribution (simulate.hpp
-// simple_tension_distribution, i.e. force_distribution.hpp's QP);
+// simple_tension_distribution, i.e. force_distribution.hpp's QP, within the cable limits narrowed
+// by tension_margin);
 // greedy D-optimal selection (log det of the column-normalised information, with a small ridge
 // until it is full rank), then Fedorov exchange passes (swap a selected pose for a candidate while
 // log det increases), optionally followed by exchanges for position accuracy over a test box
@@ -47,6 +48,11 @@ struct PoseDesignOptions {
   int points_per_axis = 5;
   double max_angle = 0.2618;                                            // rad (15 deg)
   double reference_tension = std::numeric_limits<double>::quiet_NaN();  // N; NaN: default
+  // N: a candidate needs a tension distribution within [f_min + margin, f_max - margin] of every
+  // cable. A pose at the edge of the NOMINAL model's workspace can be outside the true robot's:
+  // the true geometry's internal forces moved a cable of the virtual MINI 24 N past its f_max at
+  // a 25-degree tilt (docs/mismatch-benchmark.md, "The pose set"). 0: the limits themselves.
+  double tension_margin = 0.0;
   SensorNoise noise;
   // The channels the calibration will record (issue 18): the design maximises the information of
   // these (lengths and forces always) with `noise`. `identification` must not estimate the
