@@ -10,12 +10,18 @@
 namespace cdpr {
 namespace {
 
-TEST(PoseDesign, DesignedSetIsFeasibleAndBeatsRandom) {
-  scenario::Scenario s = scenario::mini_scenario();
+// A small design for tests: 3 grid points per axis, one exchange pass.
+PoseDesignOptions small_design(int num_poses) {
   PoseDesignOptions o;
   o.points_per_axis = 3;
   o.exchange_passes = 1;
-  o.num_poses = 10;
+  o.num_poses = num_poses;
+  return o;
+}
+
+TEST(PoseDesign, DesignedSetIsFeasibleAndBeatsRandom) {
+  scenario::Scenario s = scenario::mini_scenario();
+  const PoseDesignOptions o = small_design(10);
   auto d = design_poses(s.nominal, o);
   ASSERT_TRUE(d.ok()) << d.status().to_string();
   ASSERT_EQ(static_cast<int>(d->poses.size()), o.num_poses);
@@ -36,10 +42,7 @@ TEST(PoseDesign, DesignedSetIsFeasibleAndBeatsRandom) {
 // closer to the limits than the margin (the poses that overloaded a cable of the virtual MINI).
 TEST(PoseDesign, TensionMarginKeepsEveryPoseAwayFromTheLimits) {
   const scenario::Scenario s = scenario::mini_scenario();
-  PoseDesignOptions o;
-  o.points_per_axis = 3;
-  o.exchange_passes = 1;
-  o.num_poses = 12;
+  PoseDesignOptions o = small_design(12);
   o.max_angle = 0.4363;
   const double margin = 30.0;
   RobotModel narrowed = s.nominal.robot;
@@ -66,9 +69,7 @@ TEST(PoseDesign, TensionMarginKeepsEveryPoseAwayFromTheLimits) {
 
 TEST(PoseDesign, RefusesAMarginThatLeavesNoTensionRange) {
   const scenario::Scenario s = scenario::mini_scenario();
-  PoseDesignOptions o;
-  o.points_per_axis = 3;
-  o.num_poses = 5;
+  PoseDesignOptions o = small_design(5);
   const double f_max = s.nominal.robot.cables[0].f_max;
   o.tension_margin = f_max;
   auto d = design_poses(s.nominal, o);
