@@ -18,6 +18,7 @@
 
 #include "alloc_counter.hpp"
 #include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/simulate.hpp"
 #include "cdpr/can/virtual_bus.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
@@ -351,6 +352,43 @@ TEST_F(DaemonNative, AFirstStartKilledBeforeItActivatedTheNominalGeometryIsCompl
   auto active = daemon().store().active_version();
   ASSERT_TRUE(active.ok());
   EXPECT_EQ(*active, 1);
+}
+
+// The poses cdprd designs keep motion.tension_margin from the cable limits (the design narrows
+// the limits, so none is dropped afterwards). Tilted up to 25 degrees without a margin, the design
+// takes poses at the workspace edge, within the margin of a limit.
+TEST_F(DaemonNative, DesignedPosesKeepTheMotionTensionMargin) {
+  const double margin = 30.0;
+  RobotModel narrowed = cell_->nominal;
+  for (CableModel& c : narrowed.cables) {
+    c.f_min += margin;
+    c.f_max -= margin;
+  }
+  const double f_ref = default_reference_tension(cell_->nominal);
+  // Poses of a dry run whose tensions keep the margin, of how many.
+  auto keeping_margin = [&](const std::string& motion) {
+    testing::VirtualCell::Settings s;
+    s.measuring = "{poses: 25, max_angle: 0.4363}";
+    s.motion = motion;
+    start_daemon(s);
+    const Reply dry = request("calibrate", {{"dry_run", true}});
+    EXPECT_TRUE(dry.ok) << dry.message;
+    std::pair<int, int> n{0, 0};
+    if (!dry.ok) return n;
+    for (const auto& p : dry.result["poses"]) {
+      Pose pose;
+      pose.position = Eigen::Vector3d(p[0].get<double>(), p[1].get<double>(), p[2].get<double>());
+      pose.rpy = Eigen::Vector3d(p[3].get<double>(), p[4].get<double>(), p[5].get<double>());
+      n.first += simple_tension_distribution(narrowed, pose, f_ref).ok() ? 1 : 0;
+      ++n.second;
+    }
+    return n;
+  };
+  const auto plain = keeping_margin("{tension_margin: 0}");
+  EXPECT_LT(plain.first, plain.second);
+  const auto kept = keeping_margin("{tension_margin: 30}");
+  EXPECT_EQ(kept.second, 25);
+  EXPECT_EQ(kept.first, kept.second);
 }
 
 TEST_F(DaemonNative, RequestsWithBadArgumentsAreNamedErrors) {

@@ -39,6 +39,9 @@ struct CellSettings {
   std::string measuring =
       "{poses: 25, laser_samples: 5, laser_interval_s: 0.002, average_cycles: 25, "
       "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 3}";
+  std::string motion =
+      "{max_linear_velocity: 0.15, max_linear_acceleration: 0.5, max_linear_jerk: 5, "
+      "max_angular_velocity: 0.5, max_angular_acceleration: 2, max_angular_jerk: 20}";
   std::string identification = "{bootstrap: 30}";
   std::string acceptance = "{mode: manual}";
   std::string extra;
@@ -73,12 +76,9 @@ class VirtualCell {
            "\n"
            "identity: {vendor_id: 0x00CD9001, drive_product_code: 0x402, force_product_code: "
            "0x404}\n"
-           "motion: {max_linear_velocity: 0.15, max_linear_acceleration: 0.5, "
-           "max_linear_jerk: 5, max_angular_velocity: 0.5, max_angular_acceleration: 2, "
-           "max_angular_jerk: 20}\n"
-           "measuring: " +
-           s.measuring + "\nidentification: " + s.identification + "\nacceptance: " + s.acceptance +
-           "\n" + s.extra;
+           "motion: " +
+           s.motion + "\nmeasuring: " + s.measuring + "\nidentification: " + s.identification +
+           "\nacceptance: " + s.acceptance + "\n" + s.extra;
   }
 
   // The same from YAML lines: a `measuring:`, `identification:` or `acceptance:` line replaces
