@@ -145,6 +145,26 @@ std::optional<Pose> feasible_design_pose(const RobotModel& robot, const Pose& ca
   return candidate;
 }
 
+Result<RobotModel> narrow_tension_limits(const RobotModel& robot, double margin) {
+  if (!(std::isfinite(margin) && margin >= 0.0)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "tension_margin must be finite and >= 0 (got %g)", margin);
+  }
+  RobotModel narrowed = robot;
+  for (std::size_t i = 0; i < narrowed.cables.size(); ++i) {
+    CableModel& cable = narrowed.cables[i];
+    cable.f_min += margin;
+    cable.f_max -= margin;
+    if (cable.f_min >= cable.f_max) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "tension_margin %g N leaves cable %zu no tension range (f_min %g N, "
+                           "f_max %g N)",
+                           margin, i + 1, robot.cables[i].f_min, robot.cables[i].f_max);
+    }
+  }
+  return narrowed;
+}
+
 Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOptions& options) {
   if (options.num_poses < 2) {
     return Status(ErrorCode::kInvalidArgument, "pose design: at least 2 poses are needed");
@@ -158,27 +178,14 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
                            ? default_reference_tension(model.robot)
                            : options.reference_tension;
   // The candidates' feasibility is judged with the limits narrowed by the margin.
-  RobotModel narrowed = model.robot;
-  if (!(std::isfinite(options.tension_margin) && options.tension_margin >= 0.0)) {
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "pose design: tension_margin must be finite and >= 0 (got %g)",
-                         options.tension_margin);
-  }
-  for (std::size_t i = 0; i < narrowed.cables.size(); ++i) {
-    CableModel& cable = narrowed.cables[i];
-    cable.f_min += options.tension_margin;
-    cable.f_max -= options.tension_margin;
-    if (cable.f_min >= cable.f_max) {
-      return Status::error(ErrorCode::kInvalidArgument,
-                           "pose design: tension_margin %g N leaves cable %zu no tension range "
-                           "(f_min %g N, f_max %g N)",
-                           options.tension_margin, i + 1, model.robot.cables[i].f_min,
-                           model.robot.cables[i].f_max);
-    }
+  const Result<RobotModel> narrowed = narrow_tension_limits(model.robot, options.tension_margin);
+  if (!narrowed) {
+    return Status::error(narrowed.status().code(), "pose design: %s",
+                         std::string(narrowed.status().message()).c_str());
   }
   std::vector<Pose> cands{model.robot.home};  // index 0: home (the gauge pose)
   for (const Pose& grid_pose : candidate_grid(options)) {
-    const std::optional<Pose> p = feasible_design_pose(narrowed, grid_pose, f_ref);
+    const std::optional<Pose> p = feasible_design_pose(*narrowed, grid_pose, f_ref);
     if (!p) continue;
     const bool seen = std::any_of(cands.begin(), cands.end(), [&](const Pose& c) {
       return (p->vector() - c.vector()).norm() < 1e-12;

@@ -45,15 +45,13 @@ TEST(PoseDesign, TensionMarginKeepsEveryPoseAwayFromTheLimits) {
   PoseDesignOptions o = small_design(12);
   o.max_angle = 0.4363;
   const double margin = 30.0;
-  RobotModel narrowed = s.nominal.robot;
-  for (CableModel& c : narrowed.cables) {
-    c.f_min += margin;
-    c.f_max -= margin;
-  }
+  const Result<RobotModel> narrowed = narrow_tension_limits(s.nominal.robot, margin);
+  ASSERT_TRUE(narrowed.ok()) << narrowed.status().to_string();
+  EXPECT_DOUBLE_EQ(narrowed->cables[0].f_max, s.nominal.robot.cables[0].f_max - margin);
   const double f_ref = default_reference_tension(s.nominal.robot);
   auto inside = [&](const std::vector<Pose>& poses) {
     int n = 0;
-    for (const Pose& p : poses) n += simple_tension_distribution(narrowed, p, f_ref).ok() ? 1 : 0;
+    for (const Pose& p : poses) n += simple_tension_distribution(*narrowed, p, f_ref).ok() ? 1 : 0;
     return n;
   };
   auto plain = design_poses(s.nominal, o);

@@ -18,6 +18,7 @@
 
 #include "alloc_counter.hpp"
 #include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/can/virtual_bus.hpp"
 #include "cdpr/canopen/config.hpp"
@@ -358,12 +359,8 @@ TEST_F(DaemonNative, AFirstStartKilledBeforeItActivatedTheNominalGeometryIsCompl
 // the limits, so none is dropped afterwards). Tilted up to 25 degrees without a margin, the design
 // takes poses at the workspace edge, within the margin of a limit.
 TEST_F(DaemonNative, DesignedPosesKeepTheMotionTensionMargin) {
-  const double margin = 30.0;
-  RobotModel narrowed = cell_->nominal;
-  for (CableModel& c : narrowed.cables) {
-    c.f_min += margin;
-    c.f_max -= margin;
-  }
+  const Result<RobotModel> narrowed = narrow_tension_limits(cell_->nominal, 30.0);
+  ASSERT_TRUE(narrowed.ok()) << narrowed.status().to_string();
   const double f_ref = default_reference_tension(cell_->nominal);
   // Poses of a dry run whose tensions keep the margin, of how many.
   auto keeping_margin = [&](const std::string& motion) {
@@ -379,7 +376,7 @@ TEST_F(DaemonNative, DesignedPosesKeepTheMotionTensionMargin) {
       Pose pose;
       pose.position = Eigen::Vector3d(p[0].get<double>(), p[1].get<double>(), p[2].get<double>());
       pose.rpy = Eigen::Vector3d(p[3].get<double>(), p[4].get<double>(), p[5].get<double>());
-      n.first += simple_tension_distribution(narrowed, pose, f_ref).ok() ? 1 : 0;
+      n.first += simple_tension_distribution(*narrowed, pose, f_ref).ok() ? 1 : 0;
       ++n.second;
     }
     return n;

@@ -96,6 +96,11 @@ void fit_design_box_to_robot(const RobotModel& robot, PoseDesignOptions& options
 std::optional<Pose> feasible_design_pose(const RobotModel& robot, const Pose& candidate,
                                          double reference_tension);
 
+// `robot` with every cable's tension limits narrowed to [f_min + margin, f_max - margin] (what
+// design_poses judges its candidates with). kInvalidArgument for a negative or non-finite margin
+// and for one that leaves a cable no range (naming the cable, from 1).
+Result<RobotModel> narrow_tension_limits(const RobotModel& robot, double margin);
+
 Result<PoseDesign> design_poses(const CalibratedModel& model,
                                 const PoseDesignOptions& options = {});
 
