@@ -624,7 +624,12 @@ std::string diagnosis_text(const Diagnosis& d, const cdpr::RobotModel& nominal,
                            const cdpr::MeasurementSet& set) {
   cdpr::report::ReportContext c;
   c.title = "mismatch_bench";
-  return cdpr::report::diagnosis_text(d, nominal, set, c);
+  std::string text = cdpr::report::diagnosis_text(d, nominal, set, c);
+  if (d.screen_after) {
+    text += "\nThe last screen, on the model with the named effects (locate_mismatch):\n" +
+            d.screen_after->text();
+  }
+  return text;
 }
 
 struct RunResult {
