@@ -328,6 +328,45 @@ TEST_F(CdprFit, DesignedPosesStartAtHomeAndMoreNoisePredictsLessAccuracy) {
   EXPECT_GT(high.at("position_rms_m").get<double>(), low.at("position_rms_m").get<double>());
 }
 
+// --tension-margin keeps the design away from the tension limits (a tilted pose at the workspace
+// edge overloaded a cable of the true robot): fewer candidates qualify, the margin is reported,
+// and a margin that leaves a cable no tension range is refused naming the cable.
+TEST_F(CdprFit, DesignPosesTensionMarginNarrowsTheCandidatesOrIsRefused) {
+  auto design = [&](const std::string& margin) {
+    return fit({"design-poses", "--config", kNominal, "--count", "12", "--max-angle", "0.4363",
+                "--tension-margin", margin, "--out", path("margin_" + margin + ".csv"), "--json"});
+  };
+  const ProcessResult wide = design("0");
+  const ProcessResult kept = design("30");
+  ASSERT_EQ(wide.status, 0) << wide.err;
+  ASSERT_EQ(kept.status, 0) << kept.err;
+  const nlohmann::json jw = nlohmann::json::parse(wide.out), jk = nlohmann::json::parse(kept.out);
+  EXPECT_DOUBLE_EQ(jw.at("tension_margin_n").get<double>(), 0.0);
+  EXPECT_DOUBLE_EQ(jk.at("tension_margin_n").get<double>(), 30.0);
+  EXPECT_LT(jk.at("candidates").get<int>(), jw.at("candidates").get<int>());
+  EXPECT_EQ(jk.at("poses").size(), 12u);
+
+  auto nominal = cdpr::config::load_robot_config(kNominal);
+  ASSERT_TRUE(nominal.ok());
+  // Half the narrowest cable's range plus a little: that cable (the first such) has none left.
+  std::size_t narrowest = 0;
+  for (std::size_t i = 0; i < nominal->cables.size(); ++i) {
+    const auto& c = nominal->cables[i];
+    const auto& n = nominal->cables[narrowest];
+    if (c.f_max - c.f_min < n.f_max - n.f_min) narrowest = i;
+  }
+  const auto& cable = nominal->cables[narrowest];
+  const std::string margin = std::to_string(0.5 * (cable.f_max - cable.f_min) + 1.0);
+  const ProcessResult none = design(margin);
+  EXPECT_EQ(none.status, 1) << none.out;
+  EXPECT_THAT(none.err, HasSubstr("tension_margin"));
+  EXPECT_THAT(none.err, HasSubstr("cable " + std::to_string(narrowest + 1)));
+  EXPECT_FALSE(std::filesystem::exists(path("margin_" + margin + ".csv")));
+
+  const ProcessResult negative = design("-1");
+  EXPECT_EQ(negative.status, 2) << negative.err;
+}
+
 // The shipped robot end to end, as the benchmark and a real calibration see it: poses designed
 // on the nominal config, the TRUE robot (mini-measured.yaml) commanded through the nominal model
 // with elastic cables and encoders homed with it, default noise (laser 1 mm, encoder 0.1 mm,

@@ -231,6 +231,12 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
       ->check(CLI::Range(2, 20));
   dp->add_option("--max-angle", design.max_angle, "candidate orientations up to this angle, rad")
       ->capture_default_str();
+  dp->add_option("--tension-margin", design.tension_margin,
+                 "keep every pose's cable tensions this far inside [f_min, f_max], N (as cdprd's "
+                 "motion.tension_margin; a tilted pose at the workspace edge may overload the "
+                 "real robot, whose geometry is not the nominal one)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   dp->add_option("--noise-laser", design.noise.sigma_laser, "laser noise std dev, m")
       ->capture_default_str();
   dp->add_option("--noise-length", design.noise.sigma_length, "length noise std dev, m")

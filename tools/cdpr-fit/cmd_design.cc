@@ -92,6 +92,7 @@ Result<Output> design_poses(const DesignArgs& args) {
                    " candidate poses: the design takes minutes and gigabytes");
   }
   options.max_angle = args.max_angle;
+  options.tension_margin = args.tension_margin;
   options.noise = args.noise;
   CDPR_RETURN_IF_ERROR(plan_channels(args.channels, args.estimate, *model, args.config,
                                      &options.channels, &options.identification));
@@ -120,6 +121,8 @@ Result<Output> design_poses(const DesignArgs& args) {
               {"channels", channel_words(options.channels)},
               {"noise", noise_json(options.noise, options.channels)},
               {"candidates", design->candidates},
+              {"max_angle_rad", options.max_angle},
+              {"tension_margin_n", options.tension_margin},
               {"exchanges", design->exchanges},
               {"criterion", args.criterion},
               {"candidate_half_extent_m", to_json(Eigen::VectorXd(options.half_extent))},
@@ -135,7 +138,11 @@ Result<Output> design_poses(const DesignArgs& args) {
     << (options.channels.words() == "none" ? "" : ", " + options.channels.words());
   h << "\ncandidate box: +-" << fmt(options.half_extent.x(), 3) << " x "
     << fmt(options.half_extent.y(), 3) << " x " << fmt(options.half_extent.z(), 3)
-    << " m around home; criterion " << args.criterion;
+    << " m around home, tilted up to " << fmt(options.max_angle, 4) << " rad";
+  if (options.tension_margin > 0.0) {
+    h << ", tensions kept " << fmt(options.tension_margin, 3) << " N inside the limits";
+  }
+  h << "; criterion " << args.criterion;
   if (options.criterion == DesignCriterion::kPositionAccuracy) {
     h << " (predicted position RMS over the test cube " << fmt(1e3 * design->position_rms_m, 3)
       << " mm, D-optimal start " << fmt(1e3 * design->position_rms_d_optimal_m, 3) << " mm)";

@@ -96,6 +96,9 @@ struct DesignArgs {
   double test_half_extent = 0.156;      // m, test cube (ISO 9283 style) for position/--compare
   int points_per_axis = 5;
   double max_angle = 0.2618;  // rad
+  // N: every designed pose needs a tension distribution within [f_min + margin, f_max - margin]
+  // (PoseDesignOptions::tension_margin; cdprd passes its motion.tension_margin)
+  double tension_margin = 0.0;
   SensorNoise noise;
   // The channels the calibration will record besides lengths and tensions (issue 18): laser,
   // swivel, inclinometer, imu-yaw, or {"none"}. Empty: the laser when the config has one.
