@@ -1159,6 +1159,8 @@ int main(int argc, char** argv) {
   bool force_candidates = cdpr::MismatchOptions{}.force_sensor_candidates;
   int folds = cdpr::DiagnosisOptions{}.cv_folds;  // 0: leave one pose out
   bool beside = cdpr::DiagnosisOptions{}.follow_up_beside_named;
+  bool bic_rows = cdpr::DiagnosisOptions{}.bic_informing_rows;
+  bool polish = cdpr::DiagnosisOptions{}.polish_gauss_newton;
   int first_seed = 0;  // seeds first_seed .. first_seed + seeds - 1
   // The pose set of cdprd's defaults (MeasuringSettings: 25 poses tilted up to 15 degrees).
   int num_poses = 25;
@@ -1185,6 +1187,14 @@ int main(int argc, char** argv) {
       workers = std::max(1, std::atoi(argv[++i]));
     } else if (a == "--first-seed" && i + 1 < argc) {
       first_seed = std::max(0, std::atoi(argv[++i]));
+    } else if (a == "--bic-informing-rows") {
+      bic_rows = true;
+    } else if (a == "--bic-all-rows") {
+      bic_rows = false;
+    } else if (a == "--polish") {
+      polish = true;
+    } else if (a == "--no-polish") {
+      polish = false;
     } else if (a == "--follow-up-beside-named") {
       beside = true;
     } else if (a == "--poses" && i + 1 < argc) {
@@ -1198,13 +1208,15 @@ int main(int argc, char** argv) {
     } else if (a == "--folds" && i + 1 < argc) {
       folds = std::atoi(argv[++i]);
     } else {
-      std::fprintf(stderr,
-                   "usage: mismatch_bench [--seeds N] [--quick] [--robot mini|large|both] "
-                   "[--effects a,b,...] [--workers N] [--verbose] [--verdicts] "
-                   "[--force-sensor-candidates on|off] [--folds K (0: leave one pose out)] "
-                   "[--follow-up-beside-named] [--first-seed S] [--poses N] "
-                   "[--design-estimate word,...] [--max-angle-deg A] [--tension-margin N]\n"
-                   "  effects:");
+      std::fprintf(
+          stderr,
+          "usage: mismatch_bench [--seeds N] [--quick] [--robot mini|large|both] "
+          "[--effects a,b,...] [--workers N] [--verbose] [--verdicts] "
+          "[--force-sensor-candidates on|off] [--folds K (0: leave one pose out)] "
+          "[--follow-up-beside-named] [--bic-informing-rows|--bic-all-rows] [--polish|--no-polish] "
+          "[--first-seed S] [--poses N] "
+          "[--design-estimate word,...] [--max-angle-deg A] [--tension-margin N]\n"
+          "  effects:");
       for (const Effect& e : effects()) std::fprintf(stderr, " %s", e.key.c_str());
       std::fprintf(stderr,
                    " null hooke+drum encoder+force_gain sag+hooke force_gain+creep sag+laser_tilt "
@@ -1251,9 +1263,12 @@ int main(int argc, char** argv) {
   }
 
   std::printf(
-      "cdpr concealed-effect benchmark of the mismatch locator (seeds %d%s, %d workers, %s)\n",
+      "cdpr concealed-effect benchmark of the mismatch locator (seeds %d%s, %d workers, %s, BIC "
+      "over %s%s)\n",
       seeds, quick ? ", quick" : "", workers,
-      folds == 0 ? "leave-one-pose-out CV" : (std::to_string(folds) + "-fold CV").c_str());
+      folds == 0 ? "leave-one-pose-out CV" : (std::to_string(folds) + "-fold CV").c_str(),
+      bic_rows ? "the readings each effect acts on" : "all readings",
+      polish ? ", Gauss-Newton effects refitted beside later ones" : "");
   std::printf(
       "noise: laser 1 mm, encoder 0.1 mm, force 1 N; %d designed poses tilted up to %.0f deg%s; "
       "lock-step physics (cdpr-sim), %.0f s per pose\n",
@@ -1271,6 +1286,8 @@ int main(int argc, char** argv) {
   dopt.screen.force_sensor_candidates = force_candidates;
   dopt.cv_folds = folds;
   dopt.follow_up_beside_named = beside;
+  dopt.bic_informing_rows = bic_rows;
+  dopt.polish_gauss_newton = polish;
   const auto t_all = std::chrono::steady_clock::now();
   std::vector<std::string> which;
   if (robots != "large") which.push_back("mini");

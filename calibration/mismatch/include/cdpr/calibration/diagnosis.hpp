@@ -36,6 +36,15 @@ struct DiagnosisOptions {
   // screen.confound_threshold) are reported as "A or B" only when their full fits differ by less
   // than this in BIC; a larger difference is very strong evidence for the better one.
   double decisive_bic = 10.0;
+  // The sample size of an effect's BIC penalty (k ln n): false, every reading of the recording;
+  // true, the readings its columns act on (the laser's beam direction: the laser readings only).
+  // Schwarz's penalty is the log of the information one parameter gains from the data, which grows
+  // with the readings that carry it, not with readings of other channels.
+  bool bic_informing_rows = false;
+  // Once a further effect is accepted beside Gauss-Newton effects (creep, drifts, force gains:
+  // moved into the readings), their coefficients are refitted beside it (polish_gauss_newton in
+  // diagnosis.cc); false keeps the coefficients each was accepted with (before session 16).
+  bool polish_gauss_newton = true;
   int separating_poses = 6;                   // extra poses proposed for each confounded pair
   double separating_half_extent_scale = 1.0;  // of the extra-pose grid (the visited region)
   // With no effect named, the candidate with the lowest screen p-value is a suspect when its
