@@ -615,6 +615,30 @@ CvRms state_cv(const RefitContext& ctx, const State& st) {
   return cv_rms(st.design, &extra, ctx.folds.fold, ctx.folds.K);
 }
 
+// The least-squares step of an effect's columns X on the residual of design `at`, the
+// identification's Jacobian projected out; rank 0 when the data fix none of them (no step).
+struct GaussNewtonStep {
+  Eigen::VectorXd step;
+  Eigen::MatrixXd Ai;  // pseudo-inverse of the projected information of the columns
+  int rank = 0;
+};
+GaussNewtonStep gauss_newton_step(const MismatchDesign& at, const Eigen::MatrixXd& X,
+                                  double rank_tolerance) {
+  GaussNewtonStep out;
+  const auto k = X.cols();
+  std::vector<const Eigen::MatrixXd*> bl{&X};
+  const PoseGrams g = pose_grams(at, bl, true, false);
+  Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
+  for (const auto& Mj : g.M) M += Mj;
+  const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
+  out.rank =
+      projected_rank(S.topLeftCorner(k, k), M.diagonal().segment(g.geometry, k), rank_tolerance);
+  if (out.rank == 0) return out;
+  out.Ai = pinv_sym(S.topLeftCorner(k, k), 1e-9);
+  out.step = out.Ai * S.block(0, k, k, 1);
+  return out;
+}
+
 constexpr int kGaussNewtonIterations = 8;
 constexpr double kDevianceSettled = 0.01;  // chi^2: a Gauss-Newton refit has converged
 
@@ -777,18 +801,11 @@ std::optional<State> refit_gauss_newton(const RefitContext& ctx, const State& cu
   std::optional<State> best;
   double best_dev = std::numeric_limits<double>::infinity();
   for (int it = 0; it < kGaussNewtonIterations; ++it) {
-    std::vector<const Eigen::MatrixXd*> bl{&cols->X};
-    const PoseGrams g = pose_grams(*at, bl, true, false);
-    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
-    for (const auto& Mj : g.M) M += Mj;
-    const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
-    const int r = projected_rank(S.topLeftCorner(k, k), M.diagonal().segment(g.geometry, k),
-                                 ctx.options.screen.rank_tolerance);
-    if (r == 0) break;
-    if (it == 0) rank = r;
-    Ai = pinv_sym(S.topLeftCorner(k, k), 1e-9);
-    Eigen::VectorXd step = Ai * S.block(0, k, k, 1);
-    theta += step;
+    GaussNewtonStep gn = gauss_newton_step(*at, cols->X, ctx.options.screen.rank_tolerance);
+    if (gn.rank == 0) break;
+    if (it == 0) rank = gn.rank;
+    Ai = std::move(gn.Ai);
+    theta += gn.step;
     MeasurementSet corrected;
     if (!corrected_set(cur.set, *at, *cols, theta, corrected)) break;
     const std::optional<bool> settled =
@@ -851,19 +868,11 @@ void polish_gauss_newton(const RefitContext& ctx, State& st) {
       if (effect == nullptr || effect->refit == EffectRefit::kCatenary) continue;
       const CandidateColumns* cols = find_columns(st.design, st.gn_ids[e]);
       if (cols == nullptr || cols->X.cols() != st.gn_theta[e].size()) continue;
-      const int k = static_cast<int>(cols->X.cols());
-      std::vector<const Eigen::MatrixXd*> bl{&cols->X};
-      const PoseGrams g = pose_grams(st.design, bl, true, false);
-      Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
-      for (const auto& Mj : g.M) M += Mj;
-      const Eigen::MatrixXd S = reduce_geometry(M, g.geometry);
-      if (projected_rank(S.topLeftCorner(k, k), M.diagonal().segment(g.geometry, k),
-                         ctx.options.screen.rank_tolerance) == 0) {
-        continue;
-      }
-      const Eigen::VectorXd step = pinv_sym(S.topLeftCorner(k, k), 1e-9) * S.block(0, k, k, 1);
+      const GaussNewtonStep gn =
+          gauss_newton_step(st.design, cols->X, ctx.options.screen.rank_tolerance);
+      if (gn.rank == 0) continue;
       MeasurementSet corrected;
-      if (!corrected_set(st.set, st.design, *cols, step, corrected)) continue;
+      if (!corrected_set(st.set, st.design, *cols, gn.step, corrected)) continue;
       auto rep = identify(st.report.estimate, corrected, st.opt);
       if (!rep) continue;
       auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, st.opt,
@@ -874,7 +883,7 @@ void polish_gauss_newton(const RefitContext& ctx, State& st) {
       st.set = std::move(corrected);
       st.report = std::move(*rep);
       st.design = std::move(*des);
-      st.gn_theta[e] += step;
+      st.gn_theta[e] += gn.step;
       dev = d;
       improved = moved = true;
     }
@@ -1064,19 +1073,17 @@ bool confounded_clash(const std::vector<ConfoundedPair>& pairs, const std::strin
 struct JointFit {
   State state;
   std::vector<EffectFit> fits;
-  int parameters = 0;    // the effects' extra parameters together
-  double penalty = 0.0;  // their BIC penalty together
+  double penalty = 0.0;  // the BIC penalty of the effects' extra parameters together
 };
 std::optional<JointFit> joint_refit(const RefitContext& ctx, const State& standard,
                                     const std::vector<std::string>& ids) {
-  JointFit out{standard, {}, 0, 0.0};
+  JointFit out{standard, {}, 0.0};
   for (const std::string& id : ids) {
     EffectFit f;
     auto nx = refit(ctx, out.state, id, f);
     if (!nx) return std::nullopt;
     out.state = std::move(*nx);
     if (ctx.options.polish_gauss_newton && !out.fits.empty()) polish_gauss_newton(ctx, out.state);
-    out.parameters += f.extra_parameters;
     out.penalty += f.extra_parameters * ctx.log_size(id);
     f.accepted = true;
     out.fits.push_back(std::move(f));
