@@ -65,8 +65,14 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 
 using cdpr::bench::must;
 
+// --laser-sigma-mm: the laser's noise per pose (the product averages measuring.laser_samples
+// readings per pose); 0 keeps mini_noise()'s 1 mm.
+double g_laser_sigma = 0.0;
+
 cdpr::SensorNoise bench_noise() {
-  return cdpr::bench::mini_noise();
+  cdpr::SensorNoise n = cdpr::bench::mini_noise();
+  if (g_laser_sigma > 0.0) n.sigma_laser = g_laser_sigma;
+  return n;
 }
 
 // ------------------------------------------------------------------------------------------------
@@ -704,12 +710,19 @@ void score(RunResult& out, const std::vector<std::string>& families, const Case&
   for (const auto& k : required) out.all_true_named = out.all_true_named && hit.count(k) > 0;
 }
 
+// --noise-free: the recordings of every run carry no sensor noise (the stated noise still weights
+// the fit), to check that the model with the true effects represents the data exactly.
+bool g_noise_free = false;
+// --follow-up-full-rerun clears it: the re-run after a suspect's follow-up poses beside named
+// effects screens the whole library instead of the named effects' and the suspect's groups.
+bool g_confirmatory_follow_up = true;
+
 RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::DiagnosisOptions& dopt) {
   RunResult out;
   const auto t0 = std::chrono::steady_clock::now();
   std::vector<Component> parts;
   for (const auto& p : c.parts) parts.push_back(p);
-  auto t = make_truth(r, parts, /*noise=*/true);
+  auto t = make_truth(r, parts, /*noise=*/!g_noise_free);
   if (!t.ok()) {
     out.error = t.status().to_string();
     return out;
@@ -779,11 +792,15 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
   };
   // The follow-up poses appended to `base`, measured (same truth, same noise seed) and diagnosed
   // once more (no further follow-up): the re-run's verdict and naming replace the run's.
-  auto run_follow_up = [&](std::vector<Pose> base, const cdpr::FollowUp& fu) {
+  // Beside named effects the re-run is confirmatory (cdpr::follow_up_groups) unless
+  // --follow-up-full-rerun.
+  auto run_follow_up = [&](std::vector<Pose> base, const Diagnosis& first) {
+    const cdpr::FollowUp& fu = *first.follow_up;
     base.insert(base.end(), fu.poses.begin(), fu.poses.end());
     auto set2 = record(r, *t, base, noise_seed);
     cdpr::DiagnosisOptions once = dopt;
     once.follow_up_poses = 0;
+    if (g_confirmatory_follow_up) once.screen.only_groups = cdpr::follow_up_groups(first);
     auto d2 = set2.ok()
                   ? cdpr::diagnose(r.nominal, *set2, nullptr, cdpr::IdentificationOptions{}, once)
                   : cdpr::Result<Diagnosis>(set2.status());
@@ -841,7 +858,7 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     // A second round (measuring.extra_pose_rounds 2): the re-run's suspect beside the named
     // effects gets its follow-up poses.
     if (dopt.follow_up_beside_named && d2->follow_up && !d2->follow_up->poses.empty() &&
-        run_follow_up(more, *d2->follow_up)) {
+        run_follow_up(more, *d2)) {
       out.separated = out.any_true_named && !out.extra_named;
     }
     break;
@@ -858,7 +875,7 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
   // and naming replace the first ones, as the operator would do. One round only; a run whose
   // separating poses were already measured keeps that re-run.
   if (!out.separation_tried && d->follow_up && !d->follow_up->poses.empty()) {
-    run_follow_up(r.poses, *d->follow_up);
+    run_follow_up(r.poses, *d);
   }
   out.seconds = seconds_since(t0);
   return out;
@@ -1159,6 +1176,7 @@ int main(int argc, char** argv) {
   bool force_candidates = cdpr::MismatchOptions{}.force_sensor_candidates;
   int folds = cdpr::DiagnosisOptions{}.cv_folds;  // 0: leave one pose out
   bool beside = cdpr::DiagnosisOptions{}.follow_up_beside_named;
+  bool skip_confounded = cdpr::DiagnosisOptions{}.follow_up_skips_confounded_with_named;
   bool bic_rows = cdpr::DiagnosisOptions{}.bic_informing_rows;
   bool polish = cdpr::DiagnosisOptions{}.polish_gauss_newton;
   int first_seed = 0;  // seeds first_seed .. first_seed + seeds - 1
@@ -1197,6 +1215,14 @@ int main(int argc, char** argv) {
       polish = false;
     } else if (a == "--follow-up-beside-named") {
       beside = true;
+    } else if (a == "--follow-up-confounded-too") {
+      skip_confounded = false;
+    } else if (a == "--follow-up-full-rerun") {
+      g_confirmatory_follow_up = false;
+    } else if (a == "--laser-sigma-mm" && i + 1 < argc) {
+      g_laser_sigma = std::clamp(std::atof(argv[++i]), 0.001, 100.0) * 1e-3;
+    } else if (a == "--noise-free") {
+      g_noise_free = true;
     } else if (a == "--poses" && i + 1 < argc) {
       num_poses = std::max(8, std::atoi(argv[++i]));
     } else if (a == "--max-angle-deg" && i + 1 < argc) {
@@ -1213,8 +1239,9 @@ int main(int argc, char** argv) {
           "usage: mismatch_bench [--seeds N] [--quick] [--robot mini|large|both] "
           "[--effects a,b,...] [--workers N] [--verbose] [--verdicts] "
           "[--force-sensor-candidates on|off] [--folds K (0: leave one pose out)] "
-          "[--follow-up-beside-named] [--bic-informing-rows|--bic-all-rows] [--polish|--no-polish] "
-          "[--first-seed S] [--poses N] "
+          "[--follow-up-beside-named] [--follow-up-confounded-too] [--follow-up-full-rerun] "
+          "[--bic-informing-rows|--bic-all-rows] [--polish|--no-polish] "
+          "[--first-seed S] [--poses N] [--noise-free] [--laser-sigma-mm S] "
           "[--design-estimate word,...] [--max-angle-deg A] [--tension-margin N]\n"
           "  effects:");
       for (const Effect& e : effects()) std::fprintf(stderr, " %s", e.key.c_str());
@@ -1264,15 +1291,26 @@ int main(int argc, char** argv) {
 
   std::printf(
       "cdpr concealed-effect benchmark of the mismatch locator (seeds %d%s, %d workers, %s, BIC "
-      "over %s%s)\n",
+      "over %s%s%s)\n",
       seeds, quick ? ", quick" : "", workers,
       folds == 0 ? "leave-one-pose-out CV" : (std::to_string(folds) + "-fold CV").c_str(),
       bic_rows ? "the readings each effect acts on" : "all readings",
-      polish ? ", Gauss-Newton effects refitted beside later ones" : "");
+      polish ? ", Gauss-Newton effects refitted beside later ones" : "",
+      !beside ? ""
+      : skip_confounded
+          ? (g_confirmatory_follow_up
+                 ? ", follow-up poses beside named effects (not for a suspect confounded with one; "
+                   "confirmatory re-run)"
+                 : ", follow-up poses beside named effects (not for a suspect confounded with one; "
+                   "full re-run)")
+          : ", follow-up poses beside named effects (any suspect)");
   std::printf(
-      "noise: laser 1 mm, encoder 0.1 mm, force 1 N; %d designed poses tilted up to %.0f deg%s; "
+      "noise%s: laser %.3g mm, encoder 0.1 mm, force 1 N; %d designed poses tilted up to %.0f "
+      "deg%s; "
       "lock-step physics (cdpr-sim), %.0f s per pose\n",
-      num_poses, max_angle_deg > 0.0 ? max_angle_deg : cdpr::PoseDesignOptions{}.max_angle / kDeg,
+      g_noise_free ? " (stated; the recordings are noise-free)" : "",
+      bench_noise().sigma_laser * 1e3, num_poses,
+      max_angle_deg > 0.0 ? max_angle_deg : cdpr::PoseDesignOptions{}.max_angle / kDeg,
       design_estimate.empty() ? "" : " (design for more parameters)", kDwellS);
   std::printf("mapping (true effect -> families of diagnose() that count as naming it):\n");
   for (const Effect& e : effects()) {
@@ -1286,6 +1324,7 @@ int main(int argc, char** argv) {
   dopt.screen.force_sensor_candidates = force_candidates;
   dopt.cv_folds = folds;
   dopt.follow_up_beside_named = beside;
+  dopt.follow_up_skips_confounded_with_named = skip_confounded;
   dopt.bic_informing_rows = bic_rows;
   dopt.polish_gauss_newton = polish;
   const auto t_all = std::chrono::steady_clock::now();

@@ -1655,13 +1655,16 @@ std::vector<ConfoundedFinding> separate(const std::vector<ConfoundedPair>& found
 // whatever its corrected p-value.
 std::optional<FollowUp> follow_up(const MismatchSummary& screen, const RobotModel& estimate,
                                   const std::function<const ExtraPoseGrid&()>& grid_of, int np,
-                                  const DiagnosisOptions& options, bool misfit_clause = true) {
+                                  const DiagnosisOptions& options, bool misfit_clause = true,
+                                  const std::vector<std::string>& not_suspects = {}) {
   const double alpha = options.screen.alpha;
   {
     const bool unexplained_misfit = misfit_clause && screen.p_value < alpha;
     const CandidateScreen* suspect = nullptr;
     for (const auto& cs : screen.candidates) {
       if (cs.modelled || cs.rank == 0) continue;
+      if (std::find(not_suspects.begin(), not_suspects.end(), cs.id) != not_suspects.end())
+        continue;
       if (proxy_for_structure(screen, cs.id, options.screen_gate_p)) continue;
       if (!(cs.p_adjusted < options.suspect_p) && !unexplained_misfit) continue;
       if (suspect == nullptr || cs.p_value < suspect->p_value) suspect = &cs;
@@ -2210,8 +2213,19 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   if (options.follow_up_poses > 0 && d.accepted.empty()) {
     d.follow_up = follow_up(d.screen, d.before.estimate.robot, grid_of, np, options);
   } else if (options.follow_up_poses > 0 && options.follow_up_beside_named && d.screen_after) {
+    // Candidates confounded with a named effect on the first screen are not suspects here
+    // (DiagnosisOptions::follow_up_skips_confounded_with_named).
+    std::vector<std::string> not_suspects;
+    if (options.follow_up_skips_confounded_with_named) {
+      for (const EffectFit& f : d.accepted) {
+        for (const ConfoundedPair& cp : d.screen.confounded) {
+          if (cp.first == f.id) not_suspects.push_back(cp.second);
+          if (cp.second == f.id) not_suspects.push_back(cp.first);
+        }
+      }
+    }
     d.follow_up = follow_up(*d.screen_after, d.before.estimate.robot, grid_of, np, options,
-                            /*misfit_clause=*/false);
+                            /*misfit_clause=*/false, not_suspects);
   }
   // A suspect beside named effects (the second round's screen) gets no follow-up poses unless
   // follow_up_beside_named: measured (20 more poses) and diagnosed again, they cost more than they
@@ -2225,6 +2239,23 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
                                          validation, identification, nl));
   state_verdict(d, alpha);
   return d;
+}
+
+std::vector<std::string> follow_up_groups(const Diagnosis& d) {
+  std::vector<std::string> groups;
+  if (!d.follow_up || d.accepted.empty()) return groups;
+  auto add = [&](const std::string& family) {
+    const std::string g = selection_group(family);
+    if (std::find(groups.begin(), groups.end(), g) == groups.end()) groups.push_back(g);
+  };
+  for (const EffectFit& f : d.accepted) add(f.family);
+  if (const EffectDescriptor* e = find_effect(d.follow_up->suspect)) add(std::string(e->family));
+  // Separating poses measured in the same round decide their pair: both sides stay screened.
+  for (const ConfoundedFinding& cf : d.confounded) {
+    add(cf.first_fit.family);
+    add(cf.second_fit.family);
+  }
+  return groups;
 }
 
 }  // namespace cdpr

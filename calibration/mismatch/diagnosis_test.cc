@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -10,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "cdpr/calibration/effect_library.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
@@ -318,6 +320,62 @@ TEST(Diagnosis, SuspectWithoutANamedEffectGetsFeasibleFollowUpPosesThatAddInform
   auto off = diagnose(d.s.nominal, sim.set, nullptr, {}, o);
   ASSERT_TRUE(off.ok());
   EXPECT_FALSE(off->follow_up.has_value());
+}
+
+// Beside named effects (follow_up_beside_named), a candidate confounded on the first screen with a
+// named effect is not a suspect (follow_up_skips_confounded_with_named): its directions mostly
+// carry what the named effect's fit leaves. follow_up_groups() then lists what the confirmatory
+// re-run screens: the named effects', the suspect's and the confounded pairs' groups.
+TEST(Diagnosis, SuspectBesideNamedEffectsIsNotOneConfoundedWithThem) {
+  const ElasticCase ec;
+  DiagnosisOptions o = ec.o;
+  o.follow_up_beside_named = true;
+  o.suspect_p = 2.0;  // every candidate below it: the lowest p-value that is allowed is the suspect
+  auto skip = diagnose(ec.d.s.nominal, ec.sim.set, nullptr, {}, o);
+  ASSERT_TRUE(skip.ok()) << skip.status().to_string();
+  SCOPED_TRACE(trace(*skip));
+  ASSERT_FALSE(skip->accepted.empty());
+  ASSERT_TRUE(skip->follow_up.has_value());
+  ASSERT_TRUE(skip->screen_after.has_value());
+  auto confounded_with_named = [&](const std::string& id) {
+    for (const EffectFit& f : skip->accepted) {
+      for (const ConfoundedPair& cp : skip->screen.confounded) {
+        if ((cp.first == f.id && cp.second == id) || (cp.second == f.id && cp.first == id)) {
+          return true;
+        }
+      }
+    }
+    return false;
+  };
+  EXPECT_FALSE(confounded_with_named(skip->follow_up->suspect)) << skip->follow_up->suspect;
+
+  // Allowed, the suspect is the lowest p-value whatever its confounding; here that is one
+  // confounded with the named elasticity (winch compliance or a force gain).
+  o.follow_up_skips_confounded_with_named = false;
+  auto any = diagnose(ec.d.s.nominal, ec.sim.set, nullptr, {}, o);
+  ASSERT_TRUE(any.ok()) << any.status().to_string();
+  ASSERT_TRUE(any->follow_up.has_value());
+  EXPECT_LE(any->follow_up->p_value, skip->follow_up->p_value);
+  EXPECT_TRUE(confounded_with_named(any->follow_up->suspect)) << any->follow_up->suspect;
+
+  // The confirmatory re-run's groups.
+  const std::vector<std::string> groups = follow_up_groups(*skip);
+  auto listed = [&](const std::string& family) {
+    return std::find(groups.begin(), groups.end(), selection_group(family)) != groups.end();
+  };
+  for (const EffectFit& f : skip->accepted) EXPECT_TRUE(listed(f.family)) << f.family;
+  EXPECT_TRUE(listed(std::string(find_effect(skip->follow_up->suspect)->family)));
+  for (const ConfoundedFinding& cf : skip->confounded) {
+    EXPECT_TRUE(listed(cf.first_fit.family) && listed(cf.second_fit.family)) << cf.first;
+  }
+  EXPECT_LT(groups.size(), skip->screen.candidates.size());
+  // Nothing named (or no follow-up): a full re-run, no groups.
+  Diagnosis nothing = *skip;
+  nothing.accepted.clear();
+  EXPECT_TRUE(follow_up_groups(nothing).empty());
+  nothing = *skip;
+  nothing.follow_up.reset();
+  EXPECT_TRUE(follow_up_groups(nothing).empty());
 }
 
 TEST(Diagnosis, CorrelatedCandidateThatFitsDecisivelyWorseIsNotReportedAsConfounded) {

@@ -680,6 +680,14 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
     if (c.X.norm() > 0) lib.push_back(std::move(c));
   }
 
+  // A confirmatory screen (MismatchOptions::only_groups): the listed selection groups only.
+  if (!mopt.only_groups.empty()) {
+    std::erase_if(lib, [&](const Candidate& c) {
+      return std::find(mopt.only_groups.begin(), mopt.only_groups.end(),
+                       selection_group(c.family)) == mopt.only_groups.end();
+    });
+  }
+
   DesignData D;
   D.rows = std::move(rows);
   D.si = std::move(si);

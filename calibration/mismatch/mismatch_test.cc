@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "cdpr/calibration/catenary.hpp"
+#include "cdpr/calibration/effect_library.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
@@ -132,6 +133,43 @@ TEST(Mismatch, ConcealedHookeElasticityIsLocatedAndNamed) {
   ASSERT_NE(off, nullptr);
   EXPECT_TRUE(off->modelled);
   EXPECT_FALSE(off->significant);
+}
+
+// MismatchOptions::only_groups screens the listed selection groups only (the confirmatory re-run
+// after follow-up poses): the candidates of other groups are not in the library at all, so
+// Holm's correction runs over fewer of them and the kept ones' raw statistics are unchanged.
+TEST(Mismatch, OnlyGroupsScreensTheListedSelectionGroupsAlone) {
+  const RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim = simulate(d, 3);
+  conceal_hooke(d, sim, 1.0e5);
+  auto all = identify_and_locate(d, sim.set);
+  ASSERT_TRUE(all.ok()) << all.status().to_string();
+  MismatchOptions mo;
+  mo.only_groups = {selection_group("elasticity"), selection_group("laser mounting")};
+  auto some = identify_and_locate(d, sim.set, mo);
+  ASSERT_TRUE(some.ok()) << some.status().to_string();
+  SCOPED_TRACE(some->text());
+  ASSERT_FALSE(some->candidates.empty());
+  int kept = 0;
+  for (const CandidateScreen& c : all->candidates) {
+    const CandidateScreen* k = some->find(c.id);
+    const std::string g = selection_group(find_effect(c.id)->family.data());
+    const bool listed = g == mo.only_groups[0] || g == mo.only_groups[1];
+    EXPECT_EQ(k != nullptr, listed) << c.id;
+    if (k == nullptr) continue;
+    ++kept;
+    EXPECT_NEAR(k->statistic, c.statistic, 1e-9 * (1.0 + c.statistic)) << c.id;
+    EXPECT_NEAR(k->p_value, c.p_value, 1e-9) << c.id;
+    EXPECT_LE(k->p_adjusted, c.p_adjusted + 1e-12) << c.id;
+  }
+  EXPECT_LT(kept, static_cast<int>(all->candidates.size()));
+  ASSERT_NE(some->best(), nullptr);
+  EXPECT_EQ(some->best()->id, "hooke_shared");
+  // A group that no candidate has leaves an empty library, not an error.
+  mo.only_groups = {"no such group"};
+  auto none = identify_and_locate(d, sim.set, mo);
+  ASSERT_TRUE(none.ok()) << none.status().to_string();
+  EXPECT_TRUE(none->candidates.empty());
 }
 
 TEST(Mismatch, ConcealedDrumScaleErrorIsNamed) {

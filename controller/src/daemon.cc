@@ -1051,6 +1051,9 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   std::vector<bool> left_out;
   std::vector<RemeasuredPose> remeasured;
   int remeasure_round = 0;
+  // After the follow-up poses of a suspect beside named effects, the next diagnosis is
+  // confirmatory (follow_up_groups): it decides the suspect beside the named effects.
+  std::vector<std::string> confirm_groups;
   for (int round = 0;;) {
     auto read = recording::read_recording(rec_path);
     if (!read.ok()) return fail(read.status());
@@ -1075,6 +1078,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
     DiagnosisOptions dopt;
     dopt.bootstrap_samples = config_.identification.bootstrap;
     dopt.cv_folds = config_.identification.folds;
+    dopt.screen.only_groups = confirm_groups;
     diagnosis = diagnose(initial, set, nullptr, config_.identification.options, dopt);
     if (!diagnosis.ok()) return fail(diagnosis.status());
     if (!diagnosis->gross_readings.empty() && remeasure_round < ms.remeasure_rounds) {
@@ -1117,6 +1121,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
       continue;
     }
     if (round++ >= ms.extra_pose_rounds) break;
+    confirm_groups.clear();
     std::vector<Pose> extra;
     std::vector<double> pretensions;
     for (const ConfoundedFinding& cf : diagnosis->confounded) {
@@ -1124,11 +1129,14 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
       pretensions.insert(pretensions.end(), cf.separating_pretensions.begin(),
                          cf.separating_pretensions.end());
     }
-    if (diagnosis->accepted.empty() && diagnosis->follow_up) {
+    // A suspect's follow-up poses (with nothing named; beside named effects when
+    // DiagnosisOptions::follow_up_beside_named proposed them).
+    if (diagnosis->follow_up) {
       extra.insert(extra.end(), diagnosis->follow_up->poses.begin(),
                    diagnosis->follow_up->poses.end());
       pretensions.insert(pretensions.end(), diagnosis->follow_up->pretensions.begin(),
                          diagnosis->follow_up->pretensions.end());
+      confirm_groups = follow_up_groups(*diagnosis);
     }
     if (extra.empty()) break;
     spdlog::info("calibration {}: the mismatch locator asks for {} extra poses", id, extra.size());

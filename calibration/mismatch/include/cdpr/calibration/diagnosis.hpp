@@ -62,6 +62,12 @@ struct DiagnosisOptions {
   // suspect when its corrected p-value is below suspect_p (the misfit clause above does not
   // apply there); its follow-up poses are proposed like those of a suspect with nothing named.
   bool follow_up_beside_named = false;
+  // Beside named effects, a candidate confounded on the first screen (MismatchSummary::confounded)
+  // with a named effect is not a suspect: what the second screen sees in its directions is
+  // mostly the named effect's own residue, and 20 poses aimed at it lifted absent effects over the
+  // gates (session 14). A suspect of another channel or family (the laser's beam direction beside
+  // the cables' effects) still gets its follow-up poses.
+  bool follow_up_skips_confounded_with_named = true;
   // The first accepted effect must also be seen by the linear screen: its screen p-value
   // (after Holm's correction over the library) below this. On noise, a nonlinear refit can reach a
   // far minimum whose likelihood ratio overstates its significance (chi^2 with the nominal degrees
@@ -237,5 +243,13 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
                            const MeasurementSet* validation,
                            const IdentificationOptions& identification = {},
                            const DiagnosisOptions& options = {});
+
+// The selection groups (selection_group()) a confirmatory re-run after the follow-up poses of a
+// suspect BESIDE named effects screens (MismatchOptions::only_groups): the named effects', the
+// suspect's and both sides of each confounded pair (its separating poses are measured in the same
+// round). The poses were chosen to decide that suspect; a full re-run on the longer recording
+// also lifted absent effects over the gates (docs/mismatch-benchmark.md, session 17). Empty when
+// `d` has no follow-up or names nothing (a suspect with nothing named gets a full re-run).
+std::vector<std::string> follow_up_groups(const Diagnosis& d);
 
 }  // namespace cdpr

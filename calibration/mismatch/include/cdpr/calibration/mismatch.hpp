@@ -90,6 +90,11 @@ struct MismatchOptions {
   // candidate leaves). Any candidate explains it also when the test, against the noise left once
   // the candidate and every selected structure are fitted, is no longer significant.
   double structure_coverage = 0.8;
+  // Not empty: only the candidates of these selection groups (selection_group()) are screened, a
+  // confirmatory screen. The re-run after follow-up poses for a suspect beside named effects uses
+  // it (DiagnosisOptions::follow_up_confirms): the poses were measured to decide the suspect, so
+  // the re-run decides it beside the named effects and names nothing new besides.
+  std::vector<std::string> only_groups;
 };
 
 // The direction of each cable's last move at each pose (poses x cables): +1 when the cable was
