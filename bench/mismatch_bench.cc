@@ -1220,7 +1220,14 @@ int main(int argc, char** argv) {
     } else if (a == "--follow-up-full-rerun") {
       g_confirmatory_follow_up = false;
     } else if (a == "--laser-sigma-mm" && i + 1 < argc) {
-      g_laser_sigma = std::clamp(std::atof(argv[++i]), 0.001, 100.0) * 1e-3;
+      char* end = nullptr;
+      const double mm = std::strtod(argv[++i], &end);
+      if (end == argv[i] || *end != '\0' || !(mm > 0.0 && mm <= 100.0)) {
+        std::fprintf(stderr, "--laser-sigma-mm needs a noise in mm in (0, 100], got '%s'\n",
+                     argv[i]);
+        return 2;
+      }
+      g_laser_sigma = mm * 1e-3;
     } else if (a == "--noise-free") {
       g_noise_free = true;
     } else if (a == "--poses" && i + 1 < argc) {
@@ -1297,13 +1304,10 @@ int main(int argc, char** argv) {
       bic_rows ? "the readings each effect acts on" : "all readings",
       polish ? ", Gauss-Newton effects refitted beside later ones" : "",
       !beside ? ""
-      : skip_confounded
-          ? (g_confirmatory_follow_up
-                 ? ", follow-up poses beside named effects (not for a suspect confounded with one; "
-                   "confirmatory re-run)"
-                 : ", follow-up poses beside named effects (not for a suspect confounded with one; "
-                   "full re-run)")
-          : ", follow-up poses beside named effects (any suspect)");
+              : (std::string(", follow-up poses beside named effects (") +
+                 (skip_confounded ? "not for a suspect confounded with one" : "any suspect") +
+                 (g_confirmatory_follow_up ? "; confirmatory re-run)" : "; full re-run)"))
+                    .c_str());
   std::printf(
       "noise%s: laser %.3g mm, encoder 0.1 mm, force 1 N; %d designed poses tilted up to %.0f "
       "deg%s; "
