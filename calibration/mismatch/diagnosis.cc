@@ -212,7 +212,10 @@ std::vector<int> forward_select(const Eigen::MatrixXd& S, const SelectionInput& 
         A(u, v) = S(cols[static_cast<std::size_t>(u)], cols[static_cast<std::size_t>(v)]);
       }
     }
-    return rss0 - b.dot(pinv_sym(A, 1e-9) * b);
+    // Named, not inlined into the dot product: GCC 12 at -O2 reports a use-after-free in Eigen's
+    // temporary there (-Werror=use-after-free, a false positive).
+    const Eigen::VectorXd x = pinv_sym(A, 1e-9) * b;
+    return rss0 - b.dot(x);
   };
   for (int step = 0; step < in.max_effects; ++step) {
     struct Option {
@@ -583,7 +586,86 @@ struct State {
   std::vector<std::string> gn_ids;  // Gauss-Newton effects (columns in `design`)
   std::vector<Eigen::VectorXd> gn_theta;
   CvRms cv;
+  // The catenary's correction that `set` carries (empty without sag): what refit_catenary moved
+  // into the lengths and the external wrench, so that it can be taken out and recomputed at a
+  // later estimate (polish_gauss_newton).
+  std::vector<Eigen::VectorXd> catenary_lengths;
+  std::vector<Eigen::Matrix<double, 6, 1>> catenary_wrenches;
 };
+
+// `set` with the catenary's correction of `st` taken out (the readings before refit_catenary,
+// with the later Gauss-Newton effects' corrections kept).
+MeasurementSet without_catenary(const State& st) {
+  MeasurementSet out = st.set;
+  for (std::size_t j = 0; j < out.poses.size() && j < st.catenary_lengths.size(); ++j) {
+    PoseMeasurement& pm = out.poses[j];
+    pm.cable_lengths -= st.catenary_lengths[j];
+    pm.external_wrench -= st.catenary_wrenches[j];
+    pm.extra_compliance.resize(0);
+  }
+  return out;
+}
+
+// The recording's tension readings as the fit of `rep` reads them: with the force sensor gain
+// and offset corrections it estimated (true_tension in identification.cc: T = (reading - c /
+// g_initial) / (1 + g), g_initial the gain of the model the fit started from). The catenary
+// depends on the true tension (the arc ~1/T^2): with 2 % gain errors the raw readings put ~4 % of
+// the sag in the wrong place.
+MeasurementSet fitted_tensions(const IdentificationReport& rep, const MeasurementSet& set) {
+  const int m = rep.estimate.robot.num_cables();
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(m), c = Eigen::VectorXd::Zero(m);
+  bool any = false;
+  for (const ParameterEstimate& p : rep.parameters) {
+    if (p.id.kind != ParameterKind::kForceGain && p.id.kind != ParameterKind::kForceOffset)
+      continue;
+    Eigen::VectorXd& v = p.id.kind == ParameterKind::kForceGain ? g : c;
+    if (p.id.index < 0) {
+      v.setConstant(p.value);
+    } else if (p.id.index < m) {
+      v(p.id.index) = p.value;
+    }
+    any = true;
+  }
+  if (!any) return set;
+  MeasurementSet out = set;
+  for (PoseMeasurement& pm : out.poses) {
+    if (pm.tensions.size() != m) continue;
+    for (int i = 0; i < m; ++i) {
+      const double gain = rep.estimate.robot.force_sensors[static_cast<std::size_t>(i)].gain;
+      const double initial_gain = gain / (1.0 + g(i));
+      pm.tensions(i) = (pm.tensions(i) - c(i) / initial_gain) / (1.0 + g(i));
+    }
+  }
+  return out;
+}
+
+// `set`'s tension readings, made with the force sensors of `made_with`, as `read_with`'s sensors
+// read the same raw values (raw = gain F + offset).
+MeasurementSet tensions_read_with(const MeasurementSet& set, const RobotModel& made_with,
+                                  const RobotModel& read_with) {
+  MeasurementSet out = set;
+  const auto m = made_with.force_sensors.size();
+  if (read_with.force_sensors.size() != m) return out;
+  for (PoseMeasurement& pm : out.poses) {
+    if (static_cast<std::size_t>(pm.tensions.size()) != m) continue;
+    for (std::size_t i = 0; i < m; ++i) {
+      const ForceSensorModel& a = made_with.force_sensors[i];
+      const ForceSensorModel& b = read_with.force_sensors[i];
+      const auto k = static_cast<Eigen::Index>(i);
+      pm.tensions(k) = (a.gain * pm.tensions(k) + a.offset - b.offset) / b.gain;
+    }
+  }
+  return out;
+}
+
+// The design of a state: its readings with the tensions as its fit reads them (the columns of the
+// effects that follow the tension, creep, compliance, nonlinear elasticity, then use the corrected
+// tension once a force sensor gain or offset is estimated).
+Result<MismatchDesign> state_design(const IdentificationReport& rep, const MeasurementSet& set,
+                                    const IdentificationOptions& opt, const MismatchOptions& mopt) {
+  return mismatch_design(rep.estimate, fitted_tensions(rep, set), rep.poses, &rep.residuals, opt,
+                         mopt);
+}
 
 // What the refits of one diagnosis share.
 struct RefitContext {
@@ -596,12 +678,28 @@ struct RefitContext {
   double logn = 0.0;      // log of the number of residuals
   double log_det0 = 0.0;  // the standard fit's log det: deviances are relative to it
   std::map<std::string, double> log_sizes;  // per candidate: log of its BIC sample size
+  // The model the recording's tension readings were made with (their force sensor calibration).
+  const CalibratedModel& nominal;
 
   double log_size(const std::string& id) const {
     const auto it = log_sizes.find(id);
     return it == log_sizes.end() ? logn : it->second;
   }
 };
+
+// identify() of a refit, started from an earlier state's estimate `from`. The recording's tension
+// readings were made with the nominal force sensor calibration, and identify() reads a tension as
+// made with its initial model's calibration (true_tension in identification.cc): the initial model
+// keeps the nominal's force sensors, so that an estimated gain or offset is relative to the
+// readings and is not applied twice (started from an estimate with a 2 % gain, the next refit's
+// model carried 4 %).
+Result<IdentificationReport> identify_from(const RefitContext& ctx, const CalibratedModel& from,
+                                           const MeasurementSet& set,
+                                           const IdentificationOptions& opt) {
+  CalibratedModel initial = from;
+  initial.robot.force_sensors = ctx.nominal.robot.force_sensors;
+  return identify(initial, set, opt);
+}
 
 CvRms state_cv(const RefitContext& ctx, const State& st) {
   Eigen::MatrixXd extra(st.design.num_rows(), 0);
@@ -649,10 +747,10 @@ std::optional<bool> keep_gauss_newton_step(const RefitContext& ctx, const State&
                                            const std::string& id, MeasurementSet&& corrected,
                                            const Eigen::VectorXd& theta, std::optional<State>& best,
                                            double& best_dev) {
-  auto rep = identify(best ? best->report.estimate : cur.report.estimate, corrected, cur.opt);
+  auto rep =
+      identify_from(ctx, best ? best->report.estimate : cur.report.estimate, corrected, cur.opt);
   if (!rep) return std::nullopt;
-  auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, cur.opt,
-                             ctx.options.screen);
+  auto des = state_design(*rep, corrected, cur.opt, ctx.options.screen);
   if (!des) return std::nullopt;
   const double dev = rep->chi2 + rep->log_det_covariance;
   // Deviances are chi^2 units with an offset (the log det of the covariance, in SI units) that
@@ -660,9 +758,15 @@ std::optional<bool> keep_gauss_newton_step(const RefitContext& ctx, const State&
   // creep stopped ~100 chi^2 short of its optimum, and every later refit gained that back.)
   const bool settled = best && best_dev - dev < kDevianceSettled;
   if (dev < best_dev) {
-    best = State{
-        cur.opt, std::move(corrected), std::move(*rep), std::move(*des), cur.gn_ids, cur.gn_theta,
-        {}};
+    best = State{cur.opt,
+                 std::move(corrected),
+                 std::move(*rep),
+                 std::move(*des),
+                 cur.gn_ids,
+                 cur.gn_theta,
+                 {},
+                 cur.catenary_lengths,
+                 cur.catenary_wrenches};
     best->gn_ids.push_back(id);
     best->gn_theta.push_back(theta);
     best_dev = dev;
@@ -678,13 +782,13 @@ std::optional<State> refit_by_identification(const RefitContext& ctx, const Stat
                                              const EffectDescriptor& effect, EffectFit& fit) {
   IdentificationOptions opt = cur.opt;
   effect.estimate(opt);
-  auto rep = identify(cur.report.estimate, cur.set, opt);
+  auto rep = identify_from(ctx, cur.report.estimate, cur.set, opt);
   if (effect.alternative != nullptr) {
     // A reduced set of the effect's parameters (the laser mounting: the beam direction
     // alone), kept when it fits with the lower BIC or the full set cannot be fitted.
     IdentificationOptions dir = opt;
     effect.alternative(dir);
-    auto rep_dir = identify(cur.report.estimate, cur.set, dir);
+    auto rep_dir = identify_from(ctx, cur.report.estimate, cur.set, dir);
     auto bic = [&](const IdentificationReport& r) {
       return r.chi2 + r.log_det_covariance +
              static_cast<double>(r.parameters.size()) * ctx.log_size(std::string(effect.id));
@@ -695,10 +799,10 @@ std::optional<State> refit_by_identification(const RefitContext& ctx, const Stat
     }
   }
   if (rep && rep->converged) {
-    auto des = mismatch_design(rep->estimate, cur.set, rep->poses, &rep->residuals, opt,
-                               ctx.options.screen);
+    auto des = state_design(*rep, cur.set, opt, ctx.options.screen);
     if (des) {
-      State next{opt, cur.set, std::move(*rep), std::move(*des), cur.gn_ids, cur.gn_theta, {}};
+      State next{opt,          cur.set, std::move(*rep),      std::move(*des),      cur.gn_ids,
+                 cur.gn_theta, {},      cur.catenary_lengths, cur.catenary_wrenches};
       fit.extra_parameters =
           static_cast<int>(next.report.parameters.size() - cur.report.parameters.size());
       std::set<std::string> old;
@@ -714,25 +818,29 @@ std::optional<State> refit_by_identification(const RefitContext& ctx, const Stat
   return std::nullopt;
 }
 
-// kCatenary: sag.
+// kCatenary: sag. `cur.set` holds the readings without the catenary's correction; `mu0` > 0 when
+// the residuals of `cur` have the effect at mu0 moved out (a refresh at a later estimate, from
+// polish_gauss_newton).
 std::optional<State> refit_catenary(const RefitContext& ctx, const State& cur,
-                                    const std::string& id, EffectFit& fit) {
+                                    const std::string& id, EffectFit& fit, double mu0 = 0.0) {
   const int m = ctx.m;
   // Sag, one parameter: the cables' mass per length mu, fitted by Gauss-Newton on the exact
   // catenary effect (sag_effect, mismatch.hpp) rather than on the first-order columns: the
   // small-sag arc is wrong by its square for a heavy cable at low tension (100 g/m at 50 N
   // over 8 m: ~0.2 mm), and the linear columns left a structured remainder that other
-  // candidates took. mu >= 0; the derivative by a forward difference.
-  double mu = 0.0, info = 0.0;
+  // candidates took. mu >= 0; the derivative by a forward difference. The catenary is evaluated
+  // at the tensions the fit reads (fitted_tensions) and at its EA.
+  double mu = std::max(0.0, mu0), info = 0.0;
   std::optional<State> best;
   double best_dev = std::numeric_limits<double>::infinity();
   const State* base = &cur;
   for (int it = 0; it < 6; ++it) {
     const double h = std::max(1e-4, 0.02 * mu);
+    const MeasurementSet seen = fitted_tensions(base->report, cur.set);
     auto e0 =
-        sag_effect(base->report.estimate, cur.set, base->report.poses, base->design, cur.opt, mu);
-    auto e1 = sag_effect(base->report.estimate, cur.set, base->report.poses, base->design, cur.opt,
-                         mu + h);
+        sag_effect(base->report.estimate, seen, base->report.poses, base->design, cur.opt, mu);
+    auto e1 =
+        sag_effect(base->report.estimate, seen, base->report.poses, base->design, cur.opt, mu + h);
     if (!e0 || !e1) break;
     // The residuals of `base` have the effect at mu (at the previous estimate) moved out:
     // the step fits what is left with the derivative of the effect.
@@ -746,7 +854,7 @@ std::optional<State> refit_catenary(const RefitContext& ctx, const State& cur,
     const double next_mu = std::max(0.0, mu + S(0, 1) / S(0, 0));
     if (!(next_mu > 0.0)) break;
     Eigen::VectorXd comp;
-    auto e = sag_effect(base->report.estimate, cur.set, base->report.poses, base->design, cur.opt,
+    auto e = sag_effect(base->report.estimate, seen, base->report.poses, base->design, cur.opt,
                         next_mu, &comp);
     if (!e) break;
     CandidateColumns per_unit = *e;
@@ -774,6 +882,14 @@ std::optional<State> refit_catenary(const RefitContext& ctx, const State& cur,
   }
   if (!best) return std::nullopt;
   State next = std::move(*best);
+  // The correction the readings now carry, for a later refresh.
+  next.catenary_lengths.assign(next.set.poses.size(), Eigen::VectorXd());
+  next.catenary_wrenches.assign(next.set.poses.size(), Eigen::Matrix<double, 6, 1>::Zero());
+  for (std::size_t j = 0; j < next.set.poses.size(); ++j) {
+    next.catenary_lengths[j] = next.set.poses[j].cable_lengths - cur.set.poses[j].cable_lengths;
+    next.catenary_wrenches[j] =
+        next.set.poses[j].external_wrench - cur.set.poses[j].external_wrench;
+  }
   fit.extra_parameters = 1;
   const double scale = std::sqrt(std::max(1.0, next.report.chi2 / std::max(1, ctx.dof - 1)));
   const double mu_fit = next.gn_theta.back()(0);
@@ -848,6 +964,39 @@ double bic_penalty(const RefitContext& ctx, const std::vector<EffectFit>& effect
   return p;
 }
 
+// The catenary of a state recomputed at its estimate: the correction refit_catenary moved into the
+// readings was computed at the tensions and EA of its own fit, and an effect added after it (force
+// sensor gains, the cables' EA) changes both (LARGE sag + Hooke + force gain, noise-free: chi^2 94
+// left over 188 dof with the stale correction). Its readings taken back, the mass per length is
+// refitted from its value at the state's estimate; kept when the deviance falls (`dev` updated).
+bool refresh_catenary(const RefitContext& ctx, State& st, double& dev) {
+  std::size_t e = st.gn_ids.size();
+  for (std::size_t q = 0; q < st.gn_ids.size(); ++q) {
+    const EffectDescriptor* effect = find_effect(st.gn_ids[q]);
+    if (effect != nullptr && effect->refit == EffectRefit::kCatenary) e = q;
+  }
+  if (e == st.gn_ids.size() || st.catenary_lengths.size() != st.set.poses.size() ||
+      st.gn_theta[e].size() != 1) {
+    return false;
+  }
+  const std::string id = st.gn_ids[e];
+  const double mu = st.gn_theta[e](0);
+  State pre = st;
+  pre.set = without_catenary(st);
+  pre.catenary_lengths.clear();
+  pre.catenary_wrenches.clear();
+  pre.gn_ids.erase(pre.gn_ids.begin() + static_cast<std::ptrdiff_t>(e));
+  pre.gn_theta.erase(pre.gn_theta.begin() + static_cast<std::ptrdiff_t>(e));
+  EffectFit unused;
+  std::optional<State> next = refit_catenary(ctx, pre, id, unused, mu);
+  if (!next) return false;
+  const double d = deviance(ctx, *next);
+  if (!(d < dev - kDevianceSettled)) return false;
+  st = std::move(*next);
+  dev = d;
+  return true;
+}
+
 // The Gauss-Newton effects of a state refitted beside the effects that came after them: added
 // in turn, an earlier effect keeps the coefficients it was fitted with alone, and the later ones
 // (the drum scales beside creep, estimated by identify()) move the optimum. Each pass takes every
@@ -856,7 +1005,8 @@ double bic_penalty(const RefitContext& ctx, const std::vector<EffectFit>& effect
 // identification, kept while the deviance falls. (LARGE creep + drum scale: creep fitted first
 // left ~10^2 chi^2 along its own column; the second screen found creep at p 1e-27 beside itself,
 // and every further candidate gained that back, rejected only by the cross-validation.) The
-// catenary keeps its own fit (its correction also changes the length sigmas).
+// catenary keeps its own fit (its correction also changes the length sigmas): each pass recomputes
+// it at the state's estimate (refresh_catenary).
 void polish_gauss_newton(const RefitContext& ctx, State& st) {
   if (st.gn_ids.empty()) return;
   double dev = deviance(ctx, st);
@@ -873,10 +1023,9 @@ void polish_gauss_newton(const RefitContext& ctx, State& st) {
       if (gn.rank == 0) continue;
       MeasurementSet corrected;
       if (!corrected_set(st.set, st.design, *cols, gn.step, corrected)) continue;
-      auto rep = identify(st.report.estimate, corrected, st.opt);
+      auto rep = identify_from(ctx, st.report.estimate, corrected, st.opt);
       if (!rep) continue;
-      auto des = mismatch_design(rep->estimate, corrected, rep->poses, &rep->residuals, st.opt,
-                                 ctx.options.screen);
+      auto des = state_design(*rep, corrected, st.opt, ctx.options.screen);
       if (!des) continue;
       const double d = rep->chi2 + rep->log_det_covariance - ctx.log_det0;
       if (!(d < dev - kDevianceSettled)) continue;
@@ -887,6 +1036,7 @@ void polish_gauss_newton(const RefitContext& ctx, State& st) {
       dev = d;
       improved = moved = true;
     }
+    if (refresh_catenary(ctx, st, dev)) improved = moved = true;
     if (!improved) break;
   }
   if (moved) st.cv = state_cv(ctx, st);
@@ -907,6 +1057,32 @@ void refresh_gauss_newton_parameters(const State& st, std::vector<EffectFit>& fi
         for (EffectParameter& p : f.parameters) {
           if (p.name == name) p = describe_coefficient(id, q, k, theta(q), p.std_dev);
         }
+      }
+    }
+  }
+}
+
+// The accepted effects estimated by identify() (elasticity, drum scales, force sensor gains, ...)
+// as the model of `st` has them: the values and deviations of its identification, refitted beside
+// every effect accepted after them (the model written, d.model_after, is this one; the trial that
+// accepted an effect had the value before the later ones were in).
+void refresh_identified_parameters(const State& st, std::vector<EffectFit>& fits) {
+  for (EffectFit& f : fits) {
+    const EffectDescriptor* effect = find_effect(f.id);
+    if (effect == nullptr || effect->refit != EffectRefit::kIdentification) continue;
+    for (const ParameterEstimate& p : st.report.parameters) {
+      // The model the identification started from: EA is reported as EA0 (1 + e).
+      CalibratedModel initial = st.report.estimate;
+      if (p.id.kind == ParameterKind::kStiffness) {
+        for (std::size_t i = 0; i < initial.robot.cables.size(); ++i) {
+          if (p.id.index < 0 || static_cast<std::size_t>(p.id.index) == i) {
+            initial.robot.cables[i].ea /= 1.0 + p.value;
+          }
+        }
+      }
+      const EffectParameter now = describe_parameter(p, initial);
+      for (EffectParameter& e : f.parameters) {
+        if (e.name == now.name) e = now;
       }
     }
   }
@@ -1242,11 +1418,23 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
         if (cc == nullptr || ids_taken.count(id) ||
             proxy_for_structure(screen, id, options.screen_gate_p))
           continue;
+        // A member of the replaced effect's own selection group with no more columns (Hooke for
+        // nonlinear elasticity) may come in beside an effect that the replaced one was as
+        // confounded with: the set is no more confounded than before, and no richer. (A richer
+        // member let in so named nonlinear elasticity for LARGE's Hooke beside sag, seed 5.)
+        const std::string& replaced = out.accepted[pos].id;
+        const CandidateColumns* rc = find_columns(ctx.design0, replaced);
+        const bool same_group =
+            rc != nullptr &&
+            selection_group(out.accepted[pos].family) == selection_group(cc->family) &&
+            cc->X.cols() <= rc->X.cols();
         bool clash = false;
         for (std::size_t q = 0; q < out.accepted.size(); ++q) {
           if (q == pos) continue;
+          const std::string& other = out.accepted[q].id;
           clash = clash || selection_group(out.accepted[q].family) == selection_group(cc->family) ||
-                  confounded_clash(pairs, out.accepted[q].id, id);
+                  (confounded_clash(pairs, other, id) &&
+                   !(same_group && confounded_clash(pairs, other, replaced)));
         }
         if (clash) continue;
         std::vector<std::string> ids;
@@ -1724,6 +1912,7 @@ void state_gross_readings(Diagnosis& d) {
 // recording) and the per-channel RMS.
 Status model_the_effects(Diagnosis& d, const State& current, const CvRms& cv_before, int K,
                          bool leave_one_out, const MeasurementSet* validation,
+                         const CalibratedModel& nominal,
                          const IdentificationOptions& identification, int nl) {
   d.held_out_source = validation != nullptr ? "validation recording"
                       : leave_one_out       ? "leave-one-pose-out cross-validation"
@@ -1755,7 +1944,11 @@ Status model_the_effects(Diagnosis& d, const State& current, const CvRms& cv_bef
     fixed.estimate_laser_plane = false;
     fixed.gauge = Gauge::kNone;
     fixed.compute_covariance = false;
-    auto vb = identify(d.before.estimate, *validation, fixed);
+    // The validation's tensions were read with the nominal's force sensors; identify() reads them
+    // with its initial model's (which carries the gains and offsets estimated, if any).
+    auto vb =
+        identify(d.before.estimate,
+                 tensions_read_with(*validation, nominal.robot, d.before.estimate.robot), fixed);
     if (!vb) {
       Status st = vb.status();
       st.prepend("diagnose: re-locating the validation poses: ");
@@ -1764,7 +1957,9 @@ Status model_the_effects(Diagnosis& d, const State& current, const CvRms& cv_bef
     d.held_out_rms_before = vb->rms_length_m;
     d.held_out_rms_after = vb->rms_length_m;
     if (d.after) {
-      auto va = identify(d.model_after, *validation, fixed);
+      auto va =
+          identify(d.model_after,
+                   tensions_read_with(*validation, nominal.robot, d.model_after.robot), fixed);
       if (va) d.held_out_rms_after = va->rms_length_m;
     }
   }
@@ -1954,7 +2149,9 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
   // bound. Both starts, the lower robust cost kept.
   auto robust_fit = [&](const MeasurementSet& s) -> Result<IdentificationReport> {
     auto a = identify(nominal, s, robust);
-    auto b = identify(standard.estimate, s, robust);
+    CalibratedModel from_standard = standard.estimate;
+    from_standard.robot.force_sensors = nominal.robot.force_sensors;  // identify_from
+    auto b = identify(from_standard, s, robust);
     if (!a.ok() || (b.ok() && b->final_cost < a->final_cost)) return b;
     return a;
   };
@@ -2161,8 +2358,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   if (!screen) return screen.status();
   d.screen = std::move(*screen);
   d.model_after = d.before.estimate;
-  auto design0 = mismatch_design(d.before.estimate, set, d.before.poses, &d.before.residuals,
-                                 identification, options.screen);
+  auto design0 = state_design(d.before, set, identification, options.screen);
   if (!design0) return design0.status();
   const MismatchDesign& D0 = *design0;
   const int n = D0.num_rows();
@@ -2181,8 +2377,9 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
                          m,
                          std::log(static_cast<double>(n)),
                          d.before.log_det_covariance,
-                         bic_log_sizes(D0, options.bic_informing_rows)};
-  const State standard{identification, set, d.before, D0, {}, {}, cv_before};
+                         bic_log_sizes(D0, options.bic_informing_rows),
+                         nominal};
+  const State standard{identification, set, d.before, D0, {}, {}, cv_before, {}, {}};
 
   // Stages 2 and 3, refits and acceptance.
   Acceptance acc = accept_effects(ctx, standard, d.screen);
@@ -2199,6 +2396,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   // Stage 4, naming: the pairs this recording cannot tell apart.
   const std::vector<ConfoundedPair> found = confounded_pairs(ctx, standard, d.screen, acc);
   if (options.polish_gauss_newton) refresh_gauss_newton_parameters(acc.current, acc.accepted);
+  refresh_identified_parameters(acc.current, acc.accepted);
   d.accepted = std::move(acc.accepted);
   d.candidates = std::move(acc.candidates);
 
@@ -2238,7 +2436,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
 
   // Stage 6, the model with the accepted effects; stage 7, the verdict.
   CDPR_RETURN_IF_ERROR(model_the_effects(d, acc.current, cv_before, K, options.cv_folds == 0,
-                                         validation, identification, nl));
+                                         validation, nominal, identification, nl));
   state_verdict(d, alpha);
   return d;
 }

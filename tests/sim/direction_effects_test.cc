@@ -39,26 +39,36 @@ struct Mini {
   std::vector<Pose> poses;
 };
 
+// A robot as the benchmark (bench/mismatch_bench.cc) has it: the scenario's nominal model, its
+// truth with the encoders homed, 25 designed poses in a box of `half_extent`.
+Mini designed_robot(const scenario::Scenario& s, const Eigen::Vector3d& half_extent) {
+  Mini r;
+  r.nominal = s.nominal;
+  r.truth = s.truth.robot;
+  for (int i = 0; i < r.truth.num_cables(); ++i) {
+    r.truth.winches[static_cast<std::size_t>(i)].length_offset +=
+        s.truth.readings.length_offsets(i);
+  }
+  PoseDesignOptions d;
+  d.noise = stated_noise();
+  d.num_poses = 25;
+  d.half_extent = half_extent;
+  d.exchange_passes = 1;
+  Result<PoseDesign> design = design_poses(r.nominal, d);
+  EXPECT_TRUE(design.ok()) << design.status().to_string();
+  if (design.ok()) r.poses = design->poses;
+  return r;
+}
+
 const Mini& mini() {
-  static const Mini m = [] {
-    Mini r;
-    const scenario::Scenario s = scenario::mini_config_scenario();
-    r.nominal = s.nominal;
-    r.truth = s.truth.robot;
-    for (int i = 0; i < r.truth.num_cables(); ++i) {
-      r.truth.winches[static_cast<std::size_t>(i)].length_offset +=
-          s.truth.readings.length_offsets(i);
-    }
-    PoseDesignOptions d;
-    d.noise = stated_noise();
-    d.num_poses = 25;
-    d.half_extent = Eigen::Vector3d::Constant(0.156);
-    d.exchange_passes = 1;
-    Result<PoseDesign> design = design_poses(r.nominal, d);
-    EXPECT_TRUE(design.ok()) << design.status().to_string();
-    if (design.ok()) r.poses = design->poses;
-    return r;
-  }();
+  static const Mini m =
+      designed_robot(scenario::mini_config_scenario(), Eigen::Vector3d::Constant(0.156));
+  return m;
+}
+
+// The benchmark's 17 m frame (LARGE).
+const Mini& large() {
+  static const Mini m = designed_robot(scenario::large_scenario(), Eigen::Vector3d(4.0, 2.8, 1.0));
   return m;
 }
 
@@ -69,11 +79,10 @@ std::vector<double> on_cables_2_and_5(double v) {
 
 using Hide = std::function<void(sim::HiddenEffects&, RobotModel&)>;
 
-// A recording of MINI at `poses` (in that order, 20 s each) with the hidden effects that `hide`
-// sets (it may also change the truth).
+// A recording of `m` (MINI unless given) at `poses` (in that order, 20 s each) with the hidden
+// effects that `hide` sets (it may also change the truth).
 MeasurementSet record_poses(const Hide& hide, bool noise, std::uint64_t seed,
-                            const std::vector<Pose>& poses) {
-  const Mini& m = mini();
+                            const std::vector<Pose>& poses, const Mini& m = mini()) {
   sim::Scenario s;
   s.name = "direction effects";
   RobotModel base = m.truth;
@@ -569,6 +578,48 @@ TEST(LaserMounting, ATiltedMountIsTestedOnTheBeamDirectionsAlone) {
   // 5 of 6: with seed 1002 the mounting's origin directions also take some of the noise.
   EXPECT_GE(stronger, 5) << "of 6 seeds, the beam direction's test was the stronger one in "
                          << stronger;
+}
+
+// LARGE (the benchmark's 17 m frame) with heavy cables (100 g/m), the true EA 25 % below the
+// nominal and force sensor gain errors, noise-free: the method's first check, the model with the
+// named effects represents the simulated ones exactly. The catenary depends on the true tension
+// (its arc ~1/T^2) and on the EA, so a catenary moved into the readings before the gains or the EA
+// were in is wrong once they are (refresh_catenary in diagnosis.cc recomputes it at every later
+// acceptance); and nonlinear elasticity, taken greedily first for the elasticity, comes back to
+// Hooke by a swap within the elasticity group though both are confounded with the gains. Before
+// (session 17): nonlinear elasticity + sag + gains left chi^2 94 over 188 degrees of freedom.
+TEST(CompoundEffects, NoiseFreeSagBesideElasticityAndForceGainsIsRepresentedExactly) {
+  const Mini& robot = large();
+  const double ea = 0.75 * robot.truth.cables[0].ea;
+  const MeasurementSet set = record_poses(
+      [&](sim::HiddenEffects& e, RobotModel& truth) {
+        e.sag = true;
+        for (auto& c : truth.cables) c.mass_per_length = 0.10;
+        e.hooke_ea.values = {ea};
+        e.force_gain_error.values = force_gains();
+      },
+      false, 1, robot.poses, robot);
+  DiagnosisOptions o = options(true);
+  o.separating_poses = 0;  // the first diagnosis is the one checked
+  Result<Diagnosis> d = diagnose(robot.nominal, set, nullptr, {}, o);
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  ASSERT_EQ(d->verdict, Diagnosis::Verdict::kMismatchNamed) << d->headline;
+  const EffectFit* sag = accepted(*d, "sag");
+  const EffectFit* elastic = accepted(*d, "elasticity");
+  const EffectFit* gains = accepted(*d, "force sensor gain");
+  ASSERT_NE(sag, nullptr) << d->headline;
+  ASSERT_NE(elastic, nullptr) << d->headline;
+  ASSERT_NE(gains, nullptr) << d->headline;
+  EXPECT_EQ(d->accepted.size(), 3u) << d->headline;
+  EXPECT_NEAR(parameter(*sag, "mass_per_length"), 0.10, 0.002);
+  EXPECT_NEAR(parameter(*elastic, "EA"), ea, 0.002 * ea);
+  const std::vector<double> truth = force_gains();
+  for (std::size_t i = 0; i < truth.size(); ++i) {
+    EXPECT_NEAR(parameter(*gains, "force_gain_" + std::to_string(i + 1)), truth[i], 0.001)
+        << "cable " << i + 1;
+  }
+  ASSERT_TRUE(d->after.has_value());
+  EXPECT_LT(d->after->chi2, 1.0) << "over " << d->after->dof << " degrees of freedom";
 }
 
 }  // namespace

@@ -42,8 +42,9 @@ struct DiagnosisOptions {
   // with the readings that carry it, not with readings of other channels.
   bool bic_informing_rows = false;
   // Once a further effect is accepted beside Gauss-Newton effects (creep, drifts, force gains:
-  // moved into the readings), their coefficients are refitted beside it (polish_gauss_newton in
-  // diagnosis.cc); false keeps the coefficients each was accepted with (before session 16).
+  // moved into the readings), their coefficients are refitted beside it, and the sag's catenary is
+  // recomputed at the new estimate (polish_gauss_newton, refresh_catenary in diagnosis.cc); false
+  // keeps the coefficients and the catenary each was accepted with (before sessions 16 and 18).
   bool polish_gauss_newton = true;
   int separating_poses = 6;                   // extra poses proposed for each confounded pair
   double separating_half_extent_scale = 1.0;  // of the extra-pose grid (the visited region)
@@ -146,6 +147,9 @@ struct EffectFit {
   // round, on the residual the effects accepted before it leave.
   int round = 1;
   bool modelled_in_config = false;  // the calibrated config can carry it (else: report only)
+  // Of an accepted effect (Diagnosis::accepted): the values of the model after (refitted beside
+  // every effect accepted with it; the deviations of the Gauss-Newton coefficients stay the
+  // accepting trial's); of a candidate: its trial's.
   std::vector<EffectParameter> parameters;
 };
 
