@@ -606,41 +606,12 @@ MeasurementSet without_catenary(const State& st) {
   return out;
 }
 
-// The recording's tension readings as the fit of `rep` reads them: with the force sensor gain
-// and offset corrections it estimated (true_tension in identification.cc: T = (reading - c /
-// g_initial) / (1 + g), g_initial the gain of the model the fit started from). The catenary
-// depends on the true tension (the arc ~1/T^2): with 2 % gain errors the raw readings put ~4 % of
-// the sag in the wrong place.
-MeasurementSet fitted_tensions(const IdentificationReport& rep, const MeasurementSet& set) {
-  const int m = rep.estimate.robot.num_cables();
-  Eigen::VectorXd g = Eigen::VectorXd::Zero(m), c = Eigen::VectorXd::Zero(m);
-  bool any = false;
-  for (const ParameterEstimate& p : rep.parameters) {
-    if (p.id.kind != ParameterKind::kForceGain && p.id.kind != ParameterKind::kForceOffset)
-      continue;
-    Eigen::VectorXd& v = p.id.kind == ParameterKind::kForceGain ? g : c;
-    if (p.id.index < 0) {
-      v.setConstant(p.value);
-    } else if (p.id.index < m) {
-      v(p.id.index) = p.value;
-    }
-    any = true;
-  }
-  if (!any) return set;
-  MeasurementSet out = set;
-  for (PoseMeasurement& pm : out.poses) {
-    if (pm.tensions.size() != m) continue;
-    for (int i = 0; i < m; ++i) {
-      const double gain = rep.estimate.robot.force_sensors[static_cast<std::size_t>(i)].gain;
-      const double initial_gain = gain / (1.0 + g(i));
-      pm.tensions(i) = (pm.tensions(i) - c(i) / initial_gain) / (1.0 + g(i));
-    }
-  }
-  return out;
-}
-
 // `set`'s tension readings, made with the force sensors of `made_with`, as `read_with`'s sensors
-// read the same raw values (raw = gain F + offset).
+// read the same raw values (raw = gain F + offset). With `made_with` the nominal and `read_with` an
+// identification's estimate (gain g0 (1 + g), offset o0 + c), this is the tension the fit reads
+// (true_tension in identification.cc): the catenary depends on the true tension (the arc ~1/T^2),
+// and with 2 % gain errors the raw readings put ~4 % of the sag in the wrong place. A cable whose
+// sensors are the same keeps its readings as they are.
 MeasurementSet tensions_read_with(const MeasurementSet& set, const RobotModel& made_with,
                                   const RobotModel& read_with) {
   MeasurementSet out = set;
@@ -651,6 +622,7 @@ MeasurementSet tensions_read_with(const MeasurementSet& set, const RobotModel& m
     for (std::size_t i = 0; i < m; ++i) {
       const ForceSensorModel& a = made_with.force_sensors[i];
       const ForceSensorModel& b = read_with.force_sensors[i];
+      if (a.gain == b.gain && a.offset == b.offset) continue;
       const auto k = static_cast<Eigen::Index>(i);
       pm.tensions(k) = (a.gain * pm.tensions(k) + a.offset - b.offset) / b.gain;
     }
@@ -658,13 +630,15 @@ MeasurementSet tensions_read_with(const MeasurementSet& set, const RobotModel& m
   return out;
 }
 
-// The design of a state: its readings with the tensions as its fit reads them (the columns of the
-// effects that follow the tension, creep, compliance, nonlinear elasticity, then use the corrected
-// tension once a force sensor gain or offset is estimated).
-Result<MismatchDesign> state_design(const IdentificationReport& rep, const MeasurementSet& set,
-                                    const IdentificationOptions& opt, const MismatchOptions& mopt) {
-  return mismatch_design(rep.estimate, fitted_tensions(rep, set), rep.poses, &rep.residuals, opt,
-                         mopt);
+// The design of a state: its readings (made with the force sensors of `nominal`) with the tensions
+// as its fit reads them (the columns of the effects that follow the tension, creep, compliance,
+// nonlinear elasticity, then use the corrected tension once a force sensor gain or offset is
+// estimated).
+Result<MismatchDesign> state_design(const CalibratedModel& nominal, const IdentificationReport& rep,
+                                    const MeasurementSet& set, const IdentificationOptions& opt,
+                                    const MismatchOptions& mopt) {
+  return mismatch_design(rep.estimate, tensions_read_with(set, nominal.robot, rep.estimate.robot),
+                         rep.poses, &rep.residuals, opt, mopt);
 }
 
 // What the refits of one diagnosis share.
@@ -693,11 +667,11 @@ struct RefitContext {
 // keeps the nominal's force sensors, so that an estimated gain or offset is relative to the
 // readings and is not applied twice (started from an estimate with a 2 % gain, the next refit's
 // model carried 4 %).
-Result<IdentificationReport> identify_from(const RefitContext& ctx, const CalibratedModel& from,
-                                           const MeasurementSet& set,
+Result<IdentificationReport> identify_from(const CalibratedModel& nominal,
+                                           const CalibratedModel& from, const MeasurementSet& set,
                                            const IdentificationOptions& opt) {
   CalibratedModel initial = from;
-  initial.robot.force_sensors = ctx.nominal.robot.force_sensors;
+  initial.robot.force_sensors = nominal.robot.force_sensors;
   return identify(initial, set, opt);
 }
 
@@ -747,10 +721,10 @@ std::optional<bool> keep_gauss_newton_step(const RefitContext& ctx, const State&
                                            const std::string& id, MeasurementSet&& corrected,
                                            const Eigen::VectorXd& theta, std::optional<State>& best,
                                            double& best_dev) {
-  auto rep =
-      identify_from(ctx, best ? best->report.estimate : cur.report.estimate, corrected, cur.opt);
+  auto rep = identify_from(ctx.nominal, best ? best->report.estimate : cur.report.estimate,
+                           corrected, cur.opt);
   if (!rep) return std::nullopt;
-  auto des = state_design(*rep, corrected, cur.opt, ctx.options.screen);
+  auto des = state_design(ctx.nominal, *rep, corrected, cur.opt, ctx.options.screen);
   if (!des) return std::nullopt;
   const double dev = rep->chi2 + rep->log_det_covariance;
   // Deviances are chi^2 units with an offset (the log det of the covariance, in SI units) that
@@ -782,13 +756,13 @@ std::optional<State> refit_by_identification(const RefitContext& ctx, const Stat
                                              const EffectDescriptor& effect, EffectFit& fit) {
   IdentificationOptions opt = cur.opt;
   effect.estimate(opt);
-  auto rep = identify_from(ctx, cur.report.estimate, cur.set, opt);
+  auto rep = identify_from(ctx.nominal, cur.report.estimate, cur.set, opt);
   if (effect.alternative != nullptr) {
     // A reduced set of the effect's parameters (the laser mounting: the beam direction
     // alone), kept when it fits with the lower BIC or the full set cannot be fitted.
     IdentificationOptions dir = opt;
     effect.alternative(dir);
-    auto rep_dir = identify_from(ctx, cur.report.estimate, cur.set, dir);
+    auto rep_dir = identify_from(ctx.nominal, cur.report.estimate, cur.set, dir);
     auto bic = [&](const IdentificationReport& r) {
       return r.chi2 + r.log_det_covariance +
              static_cast<double>(r.parameters.size()) * ctx.log_size(std::string(effect.id));
@@ -799,7 +773,7 @@ std::optional<State> refit_by_identification(const RefitContext& ctx, const Stat
     }
   }
   if (rep && rep->converged) {
-    auto des = state_design(*rep, cur.set, opt, ctx.options.screen);
+    auto des = state_design(ctx.nominal, *rep, cur.set, opt, ctx.options.screen);
     if (des) {
       State next{opt,          cur.set, std::move(*rep),      std::move(*des),      cur.gn_ids,
                  cur.gn_theta, {},      cur.catenary_lengths, cur.catenary_wrenches};
@@ -829,14 +803,15 @@ std::optional<State> refit_catenary(const RefitContext& ctx, const State& cur,
   // small-sag arc is wrong by its square for a heavy cable at low tension (100 g/m at 50 N
   // over 8 m: ~0.2 mm), and the linear columns left a structured remainder that other
   // candidates took. mu >= 0; the derivative by a forward difference. The catenary is evaluated
-  // at the tensions the fit reads (fitted_tensions) and at its EA.
+  // at the tensions the fit reads (tensions_read_with) and at its EA.
   double mu = std::max(0.0, mu0), info = 0.0;
   std::optional<State> best;
   double best_dev = std::numeric_limits<double>::infinity();
   const State* base = &cur;
   for (int it = 0; it < 6; ++it) {
     const double h = std::max(1e-4, 0.02 * mu);
-    const MeasurementSet seen = fitted_tensions(base->report, cur.set);
+    const MeasurementSet seen =
+        tensions_read_with(cur.set, ctx.nominal.robot, base->report.estimate.robot);
     auto e0 =
         sag_effect(base->report.estimate, seen, base->report.poses, base->design, cur.opt, mu);
     auto e1 =
@@ -1023,9 +998,9 @@ void polish_gauss_newton(const RefitContext& ctx, State& st) {
       if (gn.rank == 0) continue;
       MeasurementSet corrected;
       if (!corrected_set(st.set, st.design, *cols, gn.step, corrected)) continue;
-      auto rep = identify_from(ctx, st.report.estimate, corrected, st.opt);
+      auto rep = identify_from(ctx.nominal, st.report.estimate, corrected, st.opt);
       if (!rep) continue;
-      auto des = state_design(*rep, corrected, st.opt, ctx.options.screen);
+      auto des = state_design(ctx.nominal, *rep, corrected, st.opt, ctx.options.screen);
       if (!des) continue;
       const double d = rep->chi2 + rep->log_det_covariance - ctx.log_det0;
       if (!(d < dev - kDevianceSettled)) continue;
@@ -1067,19 +1042,21 @@ void refresh_gauss_newton_parameters(const State& st, std::vector<EffectFit>& fi
 // every effect accepted after them (the model written, d.model_after, is this one; the trial that
 // accepted an effect had the value before the later ones were in).
 void refresh_identified_parameters(const State& st, std::vector<EffectFit>& fits) {
+  // The model the identification started from, as describe_parameter reads it: EA is reported as
+  // EA0 (1 + e).
+  CalibratedModel initial = st.report.estimate;
+  for (const ParameterEstimate& p : st.report.parameters) {
+    if (p.id.kind != ParameterKind::kStiffness) continue;
+    for (std::size_t i = 0; i < initial.robot.cables.size(); ++i) {
+      if (p.id.index < 0 || static_cast<std::size_t>(p.id.index) == i) {
+        initial.robot.cables[i].ea /= 1.0 + p.value;
+      }
+    }
+  }
   for (EffectFit& f : fits) {
     const EffectDescriptor* effect = find_effect(f.id);
     if (effect == nullptr || effect->refit != EffectRefit::kIdentification) continue;
     for (const ParameterEstimate& p : st.report.parameters) {
-      // The model the identification started from: EA is reported as EA0 (1 + e).
-      CalibratedModel initial = st.report.estimate;
-      if (p.id.kind == ParameterKind::kStiffness) {
-        for (std::size_t i = 0; i < initial.robot.cables.size(); ++i) {
-          if (p.id.index < 0 || static_cast<std::size_t>(p.id.index) == i) {
-            initial.robot.cables[i].ea /= 1.0 + p.value;
-          }
-        }
-      }
       const EffectParameter now = describe_parameter(p, initial);
       for (EffectParameter& e : f.parameters) {
         if (e.name == now.name) e = now;
@@ -2149,9 +2126,7 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
   // bound. Both starts, the lower robust cost kept.
   auto robust_fit = [&](const MeasurementSet& s) -> Result<IdentificationReport> {
     auto a = identify(nominal, s, robust);
-    CalibratedModel from_standard = standard.estimate;
-    from_standard.robot.force_sensors = nominal.robot.force_sensors;  // identify_from
-    auto b = identify(from_standard, s, robust);
+    auto b = identify_from(nominal, standard.estimate, s, robust);
     if (!a.ok() || (b.ok() && b->final_cost < a->final_cost)) return b;
     return a;
   };
@@ -2358,7 +2333,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   if (!screen) return screen.status();
   d.screen = std::move(*screen);
   d.model_after = d.before.estimate;
-  auto design0 = state_design(d.before, set, identification, options.screen);
+  auto design0 = state_design(nominal, d.before, set, identification, options.screen);
   if (!design0) return design0.status();
   const MismatchDesign& D0 = *design0;
   const int n = D0.num_rows();
