@@ -1179,6 +1179,8 @@ int main(int argc, char** argv) {
   bool skip_confounded = cdpr::DiagnosisOptions{}.follow_up_skips_confounded_with_named;
   bool bic_rows = cdpr::DiagnosisOptions{}.bic_informing_rows;
   bool polish = cdpr::DiagnosisOptions{}.polish_gauss_newton;
+  bool gn_force_noise = cdpr::DiagnosisOptions{}.gauss_newton_force_noise;
+  double refinement_gate = cdpr::DiagnosisOptions{}.refinement_gate_p;
   int first_seed = 0;  // seeds first_seed .. first_seed + seeds - 1
   // The pose set of cdprd's defaults (MeasuringSettings: 25 poses tilted up to 15 degrees).
   int num_poses = 25;
@@ -1213,6 +1215,12 @@ int main(int argc, char** argv) {
       polish = true;
     } else if (a == "--no-polish") {
       polish = false;
+    } else if (a == "--gn-force-noise") {
+      gn_force_noise = true;
+    } else if (a == "--no-gn-force-noise") {
+      gn_force_noise = false;
+    } else if (a == "--refinement-gate-p" && i + 1 < argc) {
+      refinement_gate = std::max(0.0, std::atof(argv[++i]));
     } else if (a == "--follow-up-beside-named") {
       beside = true;
     } else if (a == "--follow-up-confounded-too") {
@@ -1248,6 +1256,7 @@ int main(int argc, char** argv) {
           "[--force-sensor-candidates on|off] [--folds K (0: leave one pose out)] "
           "[--follow-up-beside-named] [--follow-up-confounded-too] [--follow-up-full-rerun] "
           "[--bic-informing-rows|--bic-all-rows] [--polish|--no-polish] "
+          "[--gn-force-noise|--no-gn-force-noise] [--refinement-gate-p P (0: off)] "
           "[--first-seed S] [--poses N] [--noise-free] [--laser-sigma-mm S] "
           "[--design-estimate word,...] [--max-angle-deg A] [--tension-margin N]\n"
           "  effects:");
@@ -1298,11 +1307,13 @@ int main(int argc, char** argv) {
 
   std::printf(
       "cdpr concealed-effect benchmark of the mismatch locator (seeds %d%s, %d workers, %s, BIC "
-      "over %s%s%s)\n",
+      "over %s%s%s%s%s)\n",
       seeds, quick ? ", quick" : "", workers,
       folds == 0 ? "leave-one-pose-out CV" : (std::to_string(folds) + "-fold CV").c_str(),
       bic_rows ? "the readings each effect acts on" : "all readings",
       polish ? ", Gauss-Newton effects refitted beside later ones" : "",
+      gn_force_noise ? ", their force noise in the length sigmas" : "",
+      refinement_gate > 0.0 ? "" : ", refinements not gated",
       !beside ? ""
               : (std::string(", follow-up poses beside named effects (") +
                  (skip_confounded ? "not for a suspect confounded with one" : "any suspect") +
@@ -1331,6 +1342,8 @@ int main(int argc, char** argv) {
   dopt.follow_up_skips_confounded_with_named = skip_confounded;
   dopt.bic_informing_rows = bic_rows;
   dopt.polish_gauss_newton = polish;
+  dopt.gauss_newton_force_noise = gn_force_noise;
+  dopt.refinement_gate_p = refinement_gate;
   const auto t_all = std::chrono::steady_clock::now();
   std::vector<std::string> which;
   if (robots != "large") which.push_back("mini");

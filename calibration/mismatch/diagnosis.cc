@@ -330,14 +330,21 @@ CvRms cv_rms(const MismatchDesign& d, const Eigen::MatrixXd* extra, const std::v
 
 // Moves a fitted effect into the data: sigma * (X theta) added to the length and laser readings
 // (both residuals are (model - reading) / sigma), and the effect on the equilibrium rows, in SI
-// (CandidateColumns::si), taken off the pose's external wrench. False when the effect acts on
+// (CandidateColumns::si), taken off the pose's external wrench. With `force_noise`, an effect that
+// follows the tension readings (CandidateColumns::dtension) adds its derivative by them to the
+// lengths' extra compliance, so that the length sigmas carry the force noise the corrected
+// readings now hold (DiagnosisOptions::gauss_newton_force_noise). False when the effect acts on
 // rows that cannot take it (equilibrium rows without SI columns, reference-pose rows).
 bool corrected_set(const MeasurementSet& set, const MismatchDesign& d, const CandidateColumns& c,
-                   const Eigen::VectorXd& theta, MeasurementSet& out) {
+                   const Eigen::VectorXd& theta, bool force_noise, MeasurementSet& out) {
   out = set;
   const Eigen::VectorXd v = c.X * theta;
   const bool have_si = c.si.rows() == c.X.rows() && c.si.cols() == c.X.cols();
   const Eigen::VectorXd v_si = have_si ? Eigen::VectorXd(c.si * theta) : Eigen::VectorXd();
+  const bool have_slope =
+      force_noise && c.dtension.rows() == c.X.rows() && c.dtension.cols() == c.X.cols();
+  const Eigen::VectorXd slope =
+      have_slope ? Eigen::VectorXd(c.dtension * theta) : Eigen::VectorXd();
   const double scale = v.cwiseAbs().maxCoeff();
   for (int k = 0; k < d.num_rows(); ++k) {
     const auto uk = static_cast<std::size_t>(k);
@@ -345,6 +352,12 @@ bool corrected_set(const MeasurementSet& set, const MismatchDesign& d, const Can
     switch (d.kind[uk]) {
       case ResidualKind::kLength:
         pm.cable_lengths(d.index[uk]) += d.sigma_length(k) * v(k);
+        if (have_slope && slope(k) != 0.0) {
+          if (pm.extra_compliance.size() != pm.cable_lengths.size()) {
+            pm.extra_compliance = Eigen::VectorXd::Zero(pm.cable_lengths.size());
+          }
+          pm.extra_compliance(d.index[uk]) += d.sigma_length(k) * slope(k);
+        }
         break;
       case ResidualKind::kLaser:
         pm.laser_distances(d.index[uk]) += set.noise.sigma_laser * v(k);
@@ -591,7 +604,34 @@ struct State {
   // later estimate (polish_gauss_newton).
   std::vector<Eigen::VectorXd> catenary_lengths;
   std::vector<Eigen::Matrix<double, 6, 1>> catenary_wrenches;
+  // Its share of the lengths' extra compliance (per pose, size m), beside the Gauss-Newton
+  // effects' (corrected_set).
+  std::vector<Eigen::VectorXd> catenary_compliance;
 };
+
+// A state refitted from `cur`: its own options, readings and fit, `cur`'s Gauss-Newton effects and
+// catenary correction (the cross-validation left to the caller).
+State successor(const State& cur, IdentificationOptions opt, MeasurementSet set,
+                IdentificationReport report, MismatchDesign design) {
+  State next;
+  next.opt = std::move(opt);
+  next.set = std::move(set);
+  next.report = std::move(report);
+  next.design = std::move(design);
+  next.gn_ids = cur.gn_ids;
+  next.gn_theta = cur.gn_theta;
+  next.catenary_lengths = cur.catenary_lengths;
+  next.catenary_wrenches = cur.catenary_wrenches;
+  next.catenary_compliance = cur.catenary_compliance;
+  return next;
+}
+
+// `a` - `b` of two extra compliances (PoseMeasurement::extra_compliance; empty = zero).
+Eigen::VectorXd compliance_difference(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
+  if (b.size() == 0) return a;
+  if (a.size() == 0) return -b;
+  return a - b;
+}
 
 // `set` with the catenary's correction of `st` taken out (the readings before refit_catenary,
 // with the later Gauss-Newton effects' corrections kept).
@@ -601,7 +641,9 @@ MeasurementSet without_catenary(const State& st) {
     PoseMeasurement& pm = out.poses[j];
     pm.cable_lengths -= st.catenary_lengths[j];
     pm.external_wrench -= st.catenary_wrenches[j];
-    pm.extra_compliance.resize(0);
+    if (j < st.catenary_compliance.size()) {
+      pm.extra_compliance = compliance_difference(pm.extra_compliance, st.catenary_compliance[j]);
+    }
   }
   return out;
 }
@@ -732,15 +774,7 @@ std::optional<bool> keep_gauss_newton_step(const RefitContext& ctx, const State&
   // creep stopped ~100 chi^2 short of its optimum, and every later refit gained that back.)
   const bool settled = best && best_dev - dev < kDevianceSettled;
   if (dev < best_dev) {
-    best = State{cur.opt,
-                 std::move(corrected),
-                 std::move(*rep),
-                 std::move(*des),
-                 cur.gn_ids,
-                 cur.gn_theta,
-                 {},
-                 cur.catenary_lengths,
-                 cur.catenary_wrenches};
+    best = successor(cur, cur.opt, std::move(corrected), std::move(*rep), std::move(*des));
     best->gn_ids.push_back(id);
     best->gn_theta.push_back(theta);
     best_dev = dev;
@@ -775,8 +809,7 @@ std::optional<State> refit_by_identification(const RefitContext& ctx, const Stat
   if (rep && rep->converged) {
     auto des = state_design(ctx.nominal, *rep, cur.set, opt, ctx.options.screen);
     if (des) {
-      State next{opt,          cur.set, std::move(*rep),      std::move(*des),      cur.gn_ids,
-                 cur.gn_theta, {},      cur.catenary_lengths, cur.catenary_wrenches};
+      State next = successor(cur, opt, cur.set, std::move(*rep), std::move(*des));
       fit.extra_parameters =
           static_cast<int>(next.report.parameters.size() - cur.report.parameters.size());
       std::set<std::string> old;
@@ -837,7 +870,7 @@ std::optional<State> refit_catenary(const RefitContext& ctx, const State& cur,
     per_unit.si /= next_mu;
     const Eigen::VectorXd theta = Eigen::VectorXd::Constant(1, next_mu);
     MeasurementSet corrected;
-    if (!corrected_set(cur.set, base->design, per_unit, theta, corrected)) break;
+    if (!corrected_set(cur.set, base->design, per_unit, theta, false, corrected)) break;
     // The corrected lengths depend on the tension readings through the sag: their sigma
     // carries that part of the force noise too (else chi^2 grows with the sag's steepness
     // at low tension, ~0.5 mm per N at 40 N on LARGE).
@@ -846,7 +879,7 @@ std::optional<State> refit_catenary(const RefitContext& ctx, const State& cur,
       if (base->design.kind[uk] != ResidualKind::kLength) continue;
       PoseMeasurement& pm = corrected.poses[static_cast<std::size_t>(base->design.pose[uk])];
       if (pm.extra_compliance.size() != m) pm.extra_compliance = Eigen::VectorXd::Zero(m);
-      pm.extra_compliance(base->design.index[uk]) = comp(k);
+      pm.extra_compliance(base->design.index[uk]) += comp(k);
     }
     const std::optional<bool> settled =
         keep_gauss_newton_step(ctx, cur, id, std::move(corrected), theta, best, best_dev);
@@ -860,10 +893,13 @@ std::optional<State> refit_catenary(const RefitContext& ctx, const State& cur,
   // The correction the readings now carry, for a later refresh.
   next.catenary_lengths.assign(next.set.poses.size(), Eigen::VectorXd());
   next.catenary_wrenches.assign(next.set.poses.size(), Eigen::Matrix<double, 6, 1>::Zero());
+  next.catenary_compliance.assign(next.set.poses.size(), Eigen::VectorXd());
   for (std::size_t j = 0; j < next.set.poses.size(); ++j) {
     next.catenary_lengths[j] = next.set.poses[j].cable_lengths - cur.set.poses[j].cable_lengths;
     next.catenary_wrenches[j] =
         next.set.poses[j].external_wrench - cur.set.poses[j].external_wrench;
+    next.catenary_compliance[j] = compliance_difference(next.set.poses[j].extra_compliance,
+                                                        cur.set.poses[j].extra_compliance);
   }
   fit.extra_parameters = 1;
   const double scale = std::sqrt(std::max(1.0, next.report.chi2 / std::max(1, ctx.dof - 1)));
@@ -898,7 +934,10 @@ std::optional<State> refit_gauss_newton(const RefitContext& ctx, const State& cu
     Ai = std::move(gn.Ai);
     theta += gn.step;
     MeasurementSet corrected;
-    if (!corrected_set(cur.set, *at, *cols, theta, corrected)) break;
+    if (!corrected_set(cur.set, *at, *cols, theta, ctx.options.gauss_newton_force_noise,
+                       corrected)) {
+      break;
+    }
     const std::optional<bool> settled =
         keep_gauss_newton_step(ctx, cur, id, std::move(corrected), theta, best, best_dev);
     if (!settled) break;
@@ -960,6 +999,7 @@ bool refresh_catenary(const RefitContext& ctx, State& st, double& dev) {
   pre.set = without_catenary(st);
   pre.catenary_lengths.clear();
   pre.catenary_wrenches.clear();
+  pre.catenary_compliance.clear();
   pre.gn_ids.erase(pre.gn_ids.begin() + static_cast<std::ptrdiff_t>(e));
   pre.gn_theta.erase(pre.gn_theta.begin() + static_cast<std::ptrdiff_t>(e));
   EffectFit unused;
@@ -997,7 +1037,10 @@ void polish_gauss_newton(const RefitContext& ctx, State& st) {
           gauss_newton_step(st.design, cols->X, ctx.options.screen.rank_tolerance);
       if (gn.rank == 0) continue;
       MeasurementSet corrected;
-      if (!corrected_set(st.set, st.design, *cols, gn.step, corrected)) continue;
+      if (!corrected_set(st.set, st.design, *cols, gn.step, ctx.options.gauss_newton_force_noise,
+                         corrected)) {
+        continue;
+      }
       auto rep = identify_from(ctx.nominal, st.report.estimate, corrected, st.opt);
       if (!rep) continue;
       auto des = state_design(ctx.nominal, *rep, corrected, st.opt, ctx.options.screen);
@@ -1267,6 +1310,51 @@ struct Acceptance {
   std::map<std::vector<std::string>, double> joint_bics;
 };
 
+// A refinement (an accepted effect whose selection group holds a simpler family: nonlinear
+// elasticity beside Hooke's) is named only when what it adds passes the gate of naming an effect:
+// the set refitted jointly with the simpler member in its place, the likelihood ratio of the
+// refinement's extra parameters, Bonferroni over the library, below
+// DiagnosisOptions::refinement_gate_p; else the simpler member takes its place. (The paths' joint
+// BIC charges one curvature parameter log n, ~6: LARGE's Hooke beside sag, seed 5, was named
+// nonlinear elasticity at a deviance gain of 7.6.)
+void keep_refinements_that_pass(const RefitContext& ctx, const State& standard,
+                                const MismatchSummary& screen, Acceptance& acc) {
+  if (!(ctx.options.refinement_gate_p > 0.0)) return;
+  const double library = static_cast<double>(std::max<std::size_t>(1, screen.candidates.size()));
+  for (std::size_t pos = 0; pos < acc.accepted.size(); ++pos) {
+    const EffectFit& rich = acc.accepted[pos];
+    const std::string group = selection_group(rich.family);
+    const CandidateColumns* rc = find_columns(ctx.design0, rich.id);
+    if (rc == nullptr || rich.family == group) continue;  // not a refinement
+    // The simplest member of the group's own family (Hooke's shared EA for nonlinear elasticity;
+    // not EA per cable, which nonlinear elasticity does not nest).
+    const CandidateColumns* simple = nullptr;
+    for (const CandidateColumns& c : ctx.design0.candidates) {
+      if (c.family != group || c.X.cols() >= rc->X.cols() ||
+          (simple != nullptr && c.X.cols() >= simple->X.cols())) {
+        continue;
+      }
+      simple = &c;
+    }
+    if (simple == nullptr) continue;
+    std::vector<std::string> ids;
+    for (const EffectFit& f : acc.accepted) ids.push_back(f.id == rich.id ? simple->id : f.id);
+    auto joint = joint_refit(ctx, standard, ids);
+    if (!joint) continue;
+    acc.joint_bics[ids] = joint_bic(ctx, joint->state, joint->penalty);
+    const int dk = rich.extra_parameters - joint->fits[pos].extra_parameters;
+    const double gain = deviance(ctx, joint->state) - deviance(ctx, acc.current);
+    if (dk <= 0 ||
+        chi2_upper_tail(std::max(0.0, gain), dk) * library < ctx.options.refinement_gate_p) {
+      continue;
+    }
+    acc.current = std::move(joint->state);
+    acc.accepted = std::move(joint->fits);
+    acc.ids_taken.clear();
+    for (const EffectFit& f : acc.accepted) acc.ids_taken.insert(f.id);
+  }
+}
+
 Acceptance accept_effects(const RefitContext& ctx, const State& standard,
                           const MismatchSummary& screen) {
   const DiagnosisOptions& options = ctx.options;
@@ -1440,6 +1528,8 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
       families_taken.insert(selection_group(f.family));
     }
   }
+  out.current = std::move(current);
+  keep_refinements_that_pass(ctx, standard, screen, out);
   for (auto& c : out.candidates) {
     c.accepted = false;
     for (const auto& f : out.accepted) {
@@ -1452,7 +1542,6 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
     if (!listed) out.candidates.push_back(f);
   }
   order_candidates(out.candidates);
-  out.current = std::move(current);
   return out;
 }
 
@@ -2354,7 +2443,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
                          d.before.log_det_covariance,
                          bic_log_sizes(D0, options.bic_informing_rows),
                          nominal};
-  const State standard{identification, set, d.before, D0, {}, {}, cv_before, {}, {}};
+  const State standard{identification, set, d.before, D0, {}, {}, cv_before, {}, {}, {}};
 
   // Stages 2 and 3, refits and acceptance.
   Acceptance acc = accept_effects(ctx, standard, d.screen);

@@ -21,6 +21,7 @@
 namespace cdpr {
 namespace {
 
+using testing::conceal_elongation;
 using testing::conceal_hooke;
 using testing::rigid_mini;
 using testing::RigidMini;
@@ -143,6 +144,63 @@ TEST(Diagnosis, AStrongEffectIsNotTakenForWildReadings) {
   DiagnosisOptions rest_only;
   rest_only.gross_share = 1e9;
   EXPECT_TRUE(find_gross_readings(d.s.nominal, sim.set, *standard, {}, rest_only).empty());
+}
+
+// The normalisation of a trial's deviance (its log det part): deviance - chi^2.
+double normalisation(const Diagnosis& d, const std::string& id) {
+  for (const auto& f : d.candidates) {
+    if (f.id == id) return f.deviance_after - f.chi2_after;
+  }
+  return std::numeric_limits<double>::quiet_NaN();
+}
+
+TEST(Diagnosis, NonlinearElasticityMovedIntoTheLengthsCarriesTheForceNoiseOfTheIdentifiedEa) {
+  // Elasticity fitted as an identified EA widens each length sigma by the force noise through
+  // L / EA; fitted as nonlinear elasticity moved into the lengths (Gauss-Newton), the same
+  // stretch must widen them alike, else the log det alone favours the nonlinear form.
+  const RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim = simulate(d, 3);
+  conceal_hooke(d, sim, 5.0e4);
+  DiagnosisOptions carried = quick_options();
+  carried.gauss_newton_force_noise = true;
+  DiagnosisOptions left = carried;
+  left.gauss_newton_force_noise = false;
+  auto with = diagnose(d.s.nominal, sim.set, nullptr, {}, carried);
+  auto without = diagnose(d.s.nominal, sim.set, nullptr, {}, left);
+  ASSERT_TRUE(with.ok() && without.ok());
+  const double hooke = normalisation(*with, "hooke_shared");
+  const double nonlinear = normalisation(*with, "nonlinear_elasticity_shared");
+  const double nonlinear_left = normalisation(*without, "nonlinear_elasticity_shared");
+  ASSERT_TRUE(std::isfinite(hooke) && std::isfinite(nonlinear) && std::isfinite(nonlinear_left));
+  std::printf("log det part: EA %.3f, nonlinear %.3f (force noise left out: %.3f)\n", hooke,
+              nonlinear, nonlinear_left);
+  EXPECT_LT(std::abs(nonlinear - hooke), 0.5);
+  EXPECT_GT(hooke - nonlinear_left, 2.0);
+}
+
+TEST(Diagnosis, RefinementIsNamedOnlyWhenWhatItAddsPassesTheNamingGate) {
+  // A clearly nonlinear elongation (F / EA + k2 F^2) L: the curvature passes the gate and is named;
+  // with a gate no curvature passes, the simpler member of its group (Hooke's EA) is named
+  // instead, never both and never nothing.
+  const RigidMini d = rigid_mini(25);
+  SimulatedMeasurements sim = simulate(d, 4);
+  constexpr double kEa = 5.0e4;
+  constexpr double kCurvature = 6e-8;  // 1/N^2: +30 % of the stretch at 100 N
+  conceal_elongation(d, sim, [&](double f) { return f / (kEa + f) + kCurvature * f * f; });
+  DiagnosisOptions gated = quick_options();
+  DiagnosisOptions closed = gated;
+  closed.refinement_gate_p = 1e-300;
+  auto named = diagnose(d.s.nominal, sim.set, nullptr, {}, gated);
+  auto simpler = diagnose(d.s.nominal, sim.set, nullptr, {}, closed);
+  ASSERT_TRUE(named.ok() && simpler.ok());
+  {
+    SCOPED_TRACE(trace(*named));
+    EXPECT_NE(accepted(*named, "nonlinear_elasticity_shared"), nullptr);
+    EXPECT_EQ(accepted(*named, "hooke_shared"), nullptr);
+  }
+  SCOPED_TRACE(trace(*simpler));
+  EXPECT_EQ(accepted(*simpler, "nonlinear_elasticity_shared"), nullptr);
+  EXPECT_NE(accepted(*simpler, "hooke_shared"), nullptr);
 }
 
 TEST(Diagnosis, ConcealedHookeElasticityIsNamedModelledAndPredictsBetter) {

@@ -507,12 +507,16 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   std::vector<Candidate> lib;
   auto candidate = [](const char* id, Eigen::MatrixXd X, Eigen::MatrixXd x_si) {
     const EffectDescriptor* e = find_effect(id);
-    return Candidate{id, std::string(e->name), std::string(e->family), std::move(X),
-                     std::move(x_si)};
+    return Candidate{id,           std::string(e->name), std::string(e->family),
+                     std::move(X), std::move(x_si),      {}};
   };
-  auto per_length_row = [&](const char* id, bool per_cable, auto value) {
+  // `slope`: the value's derivative by the row's tension reading (CandidateColumns::dtension;
+  // `none` for a value that does not follow it).
+  auto none = [](int) { return 0.0; };
+  auto per_length_row = [&](const char* id, bool per_cable, auto value, auto slope) {
     Candidate c = candidate(id, Eigen::MatrixXd::Zero(n, per_cable ? m : 1), {});
-    bool any = false;
+    c.dtension = Eigen::MatrixXd::Zero(n, per_cable ? m : 1);
+    bool any = false, follows = false;
     for (int k = 0; k < n; ++k) {
       const Row& row = rows[static_cast<std::size_t>(k)];
       if (row.kind != RowKind::kLength) continue;
@@ -520,27 +524,37 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
       if (!std::isfinite(v)) continue;
       c.X(k, per_cable ? row.index : 0) = v / sigma_len(k);
       any = any || v != 0.0;
+      const double s = slope(k);
+      if (!std::isfinite(s)) continue;
+      c.dtension(k, per_cable ? row.index : 0) = s / sigma_len(k);
+      follows = follows || s != 0.0;
     }
+    if (!follows) c.dtension.resize(0, 0);
     if (any) lib.push_back(std::move(c));
   };
   const bool have_time = time.array().isFinite().count() > 0;
   auto fl = [&](int k) { return tension(k) * loaded(k); };
+  auto load_len = [&](int k) { return loaded(k); };
   auto f = [&](int k) { return tension(k); };
-  per_length_row("hooke_shared", false, fl);
-  per_length_row("hooke_per_cable", true, fl);
-  per_length_row("compliance_shared", false, f);
-  per_length_row("compliance_per_cable", true, f);
-  per_length_row("encoder_offset_per_cable", true, [](int) { return 1.0; });
+  auto one = [](int) { return 1.0; };
+  per_length_row("hooke_shared", false, fl, load_len);
+  per_length_row("hooke_per_cable", true, fl, load_len);
+  per_length_row("compliance_shared", false, f, one);
+  per_length_row("compliance_per_cable", true, f, one);
+  per_length_row("encoder_offset_per_cable", true, one, none);
   if (have_time) {
-    per_length_row("encoder_drift_per_cable", true, [&](int k) { return time(k); });
+    per_length_row(
+        "encoder_drift_per_cable", true, [&](int k) { return time(k); }, none);
     // Creep of a polymer cable under load, time-hardening logarithmic law: the compliance grows
     // by c ln(1 + t / tau) with t the time since the recording (and the load) started. Once t is
     // several tau the shape is ln(t) whatever tau is, and a constant part is elasticity's, so one
     // tau (typical of primary creep of polymer fibre ropes) serves as the regressor.
-    per_length_row("creep_shared", false, [&](int k) {
-      return fl(k) * std::log1p(std::max(time(k), 0.0) / kCreepTimeConstant);
-    });
-    per_length_row("transmission_drift_shared", false, [&](int k) { return time(k) * reading(k); });
+    auto log_time = [&](int k) { return std::log1p(std::max(time(k), 0.0) / kCreepTimeConstant); };
+    per_length_row(
+        "creep_shared", false, [&](int k) { return fl(k) * log_time(k); },
+        [&](int k) { return loaded(k) * log_time(k); });
+    per_length_row(
+        "transmission_drift_shared", false, [&](int k) { return time(k) * reading(k); }, none);
   }
   // Sag of a heavy cable (mass per length mu), to first order in the sag. The encoder pays out
   // the arc, longer than the chord by (mu g)^2 Lh^2 L / (24 F^2) (column 0; its coefficient in
@@ -596,12 +610,15 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   // linear part moves with the curvature instead of being a second effect.
   {
     Candidate c = candidate("nonlinear_elasticity_shared", Eigen::MatrixXd::Zero(n, 2), {});
+    c.dtension = Eigen::MatrixXd::Zero(n, 2);
     bool any = false;
     for (int k = 0; k < n; ++k) {
       if (rows[static_cast<std::size_t>(k)].kind != RowKind::kLength) continue;
       if (!std::isfinite(fl(k))) continue;
       c.X(k, 0) = fl(k) / sigma_len(k);
       c.X(k, 1) = tension(k) * fl(k) / sigma_len(k);
+      c.dtension(k, 0) = loaded(k) / sigma_len(k);
+      c.dtension(k, 1) = 2.0 * fl(k) / sigma_len(k);
       any = any || fl(k) != 0.0;
     }
     if (any) lib.push_back(std::move(c));

@@ -321,6 +321,50 @@ TEST(Mismatch, DesignExposesTheScreensResidualsAndCandidateColumns) {
   }
 }
 
+TEST(Mismatch, TensionSlopeOfTheColumnsIsTheirChangeWithTheTensionReadings) {
+  const Fitted f = fitted_rigid_mini(6);
+  ASSERT_TRUE(f.ok());
+  const auto& [d, sim, opt, rep, des] = f;
+  // Every tension reading raised by dF: a column that follows its cable's own reading changes by
+  // dtension dF (exactly: the columns are at most quadratic in the tension), the others not at all.
+  // (A cable below the slack threshold keeps its reading: raised over it, it would gain a row.)
+  const double dF = 0.5;
+  const double slack = slack_threshold(opt, sim.set.noise);
+  MeasurementSet raised = sim.set;
+  for (PoseMeasurement& pm : raised.poses) {
+    for (Eigen::Index i = 0; i < pm.tensions.size(); ++i) {
+      if (pm.tensions(i) >= slack) pm.tensions(i) += dF;
+    }
+  }
+  auto bare = mismatch_design(rep->estimate, sim.set, rep->poses, nullptr, opt);
+  auto up = mismatch_design(rep->estimate, raised, rep->poses, nullptr, opt);
+  ASSERT_TRUE(bare.ok() && up.ok());
+  ASSERT_EQ(bare->candidates.size(), up->candidates.size());
+  int following = 0;
+  for (std::size_t c = 0; c < bare->candidates.size(); ++c) {
+    const CandidateColumns& a = bare->candidates[c];
+    const CandidateColumns& b = up->candidates[c];
+    ASSERT_EQ(a.id, b.id);
+    if (find_effect(a.id)->columns != EffectColumns::kLengthRows) continue;
+    ASSERT_EQ(a.X.rows(), b.X.rows()) << a.id;
+    ASSERT_EQ(a.X.cols(), b.X.cols()) << a.id;
+    const Eigen::MatrixXd change = b.X - a.X;
+    if (a.dtension.size() == 0) {
+      EXPECT_EQ(change.norm(), 0.0) << a.id;
+      continue;
+    }
+    ++following;
+    ASSERT_EQ(a.dtension.rows(), a.X.rows()) << a.id;
+    ASSERT_EQ(a.dtension.cols(), a.X.cols()) << a.id;
+    // Secant of a quadratic: the slope at F + dF / 2.
+    const Eigen::MatrixXd secant = 0.5 * (a.dtension + b.dtension) * dF;
+    EXPECT_LT((change - secant).norm(), 1e-9 * change.norm()) << a.id;
+    EXPECT_GT(change.norm(), 0.0) << a.id;
+  }
+  // Elasticity (shared and per cable), compliance (shared and per winch), nonlinear elasticity.
+  EXPECT_GE(following, 5);
+}
+
 TEST(Mismatch, LastMoveDirectionFollowsTheLengthReadingsAndIgnoresMovesWithinTheDeadband) {
   MeasurementSet set;
   set.noise.sigma_length = 1e-4;  // deadband 5 sigma = 0.5 mm

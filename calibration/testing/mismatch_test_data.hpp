@@ -43,19 +43,24 @@ inline SimulatedMeasurements simulate(const RigidMini& d, std::uint64_t seed) {
   return sim.ok() ? *sim : SimulatedMeasurements{};
 }
 
-// Hooke elongation F L / (EA + F) of the whole loaded cable, hidden in the readings (the encoder
-// pays out the unstretched length, which is shorter than the geometry by the elongation).
-inline void conceal_hooke(const RigidMini& d, SimulatedMeasurements& sim, double ea) {
+// An elongation strain(F) L of the whole loaded cable, hidden in the readings (the encoder pays
+// out the unstretched length, which is shorter than the geometry by the elongation).
+template <typename Strain>
+void conceal_elongation(const RigidMini& d, SimulatedMeasurements& sim, Strain strain) {
   KinematicsData kin(d.s.truth.robot);
   for (std::size_t j = 0; j < sim.set.poses.size(); ++j) {
     ASSERT_TRUE(inverse_kinematics(d.s.truth.robot, sim.true_poses[j], kin));
     for (int i = 0; i < d.s.truth.robot.num_cables(); ++i) {
-      const double f = sim.true_tensions[j](i);
       const double loaded =
           loaded_length(d.s.truth.robot.cables[static_cast<std::size_t>(i)], kin.lengths(i));
-      sim.set.poses[j].cable_lengths(i) -= f * loaded / (ea + f);
+      sim.set.poses[j].cable_lengths(i) -= strain(sim.true_tensions[j](i)) * loaded;
     }
   }
+}
+
+// Hooke elongation F L / (EA + F).
+inline void conceal_hooke(const RigidMini& d, SimulatedMeasurements& sim, double ea) {
+  conceal_elongation(d, sim, [ea](double f) { return f / (ea + f); });
 }
 
 }  // namespace cdpr::testing

@@ -46,6 +46,19 @@ struct DiagnosisOptions {
   // recomputed at the new estimate (polish_gauss_newton, refresh_catenary in diagnosis.cc); false
   // keeps the coefficients and the catenary each was accepted with (before sessions 16 and 18).
   bool polish_gauss_newton = true;
+  // A Gauss-Newton effect that follows the tension readings (nonlinear elasticity, compliance,
+  // creep) moved into the lengths makes them depend on the readings: true adds its derivative by
+  // the tension to the lengths' extra compliance (PoseMeasurement::extra_compliance), so that
+  // their sigma carries the force noise as the identification's own elasticity does. False (as
+  // before session 20) leaves the sigma at the model's compliance: the log det of the deviance
+  // then favours such an effect over the identified EA it competes with.
+  bool gauss_newton_force_noise = false;
+  // A refinement named in place of the simpler family of its selection group (nonlinear
+  // elasticity for Hooke's) must pass the gate of naming an effect on what it adds: the
+  // likelihood ratio of its extra parameters against the accepted set with the simpler member in
+  // its place, Bonferroni over the library, below this; else the simpler member is named.
+  // 0: off (the forward paths' joint BIC alone decides, as before session 20).
+  double refinement_gate_p = 0.05;
   int separating_poses = 6;                   // extra poses proposed for each confounded pair
   double separating_half_extent_scale = 1.0;  // of the extra-pose grid (the visited region)
   // With no effect named, the candidate with the lowest screen p-value is a suspect when its

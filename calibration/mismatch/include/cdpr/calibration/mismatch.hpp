@@ -225,6 +225,11 @@ struct CandidateColumns {
   // wrench, world axes, on the six equilibrium rows of a pose) for a candidate that acts on the
   // equilibrium rows (so that a fitted effect can be moved into the data); else empty.
   Eigen::MatrixXd si;
+  // For a candidate whose columns follow each cable's own tension reading (elasticity, compliance,
+  // creep, nonlinear elasticity): the derivative of X by that reading on the length rows (whitened,
+  // per N; 0 elsewhere), so that a fitted effect moved into the lengths also carries how the force
+  // noise reaches them (PoseMeasurement::extra_compliance). Empty for the others.
+  Eigen::MatrixXd dtension;
 };
 
 struct MismatchDesign {
