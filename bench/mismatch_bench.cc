@@ -38,6 +38,7 @@
 #include "cdpr/calibration/diagnosis.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/pose_design.hpp"
+#include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/calibration/winch.hpp"
 #include "cdpr/recording/recording.hpp"
@@ -68,6 +69,11 @@ using cdpr::bench::must;
 // --laser-sigma-mm: the laser's noise per pose (the product averages measuring.laser_samples
 // readings per pose); 0 keeps mini_noise()'s 1 mm.
 double g_laser_sigma = 0.0;
+// --design-emphasis W: PoseDesignOptions::emphasis_weight (the laser's beam direction's weight
+// in the pose design); negative: the product's default.
+double g_design_emphasis = -1.0;
+// --angle-steps N: PoseDesignOptions::angle_steps (0: the product's default).
+int g_angle_steps = 0;
 
 cdpr::SensorNoise bench_noise() {
   cdpr::SensorNoise n = cdpr::bench::mini_noise();
@@ -124,6 +130,8 @@ Robot make_robot(const std::string& which, bool quick, int num_poses,
     }
     item->set(d.identification, true);
   }
+  if (g_design_emphasis >= 0.0) d.emphasis_weight = g_design_emphasis;
+  if (g_angle_steps > 0) d.angle_steps = g_angle_steps;
   if (which == "mini") {
     const cdpr::scenario::Scenario s = cdpr::scenario::mini_config_scenario();
     r.name = "MINI";
@@ -157,6 +165,16 @@ Robot make_robot(const std::string& which, bool quick, int num_poses,
   r.recording_s = kDwellS * static_cast<double>(r.poses.size());
   std::printf("[%s] pose design: %zu poses from %d candidates, %.1f s\n", r.name.c_str(),
               r.poses.size(), design.candidates, seconds_since(t0));
+  {
+    cdpr::PredictedAccuracyOptions po;
+    po.box.center = r.nominal.robot.home.position;
+    po.box.half_extent = d.half_extent;
+    const auto pa = cdpr::predict_accuracy(r.nominal, r.poses, bench_noise(), po);
+    if (pa.ok()) {
+      std::printf("[%s] predicted: anchors %.3f mm RMS std, position %.3f mm RMS over the box\n",
+                  r.name.c_str(), 1e3 * pa->anchor_rms_std_m, 1e3 * pa->position_rms_m);
+    }
+  }
   return r;
 }
 
@@ -1244,6 +1262,10 @@ int main(int argc, char** argv) {
       max_angle_deg = std::clamp(std::atof(argv[++i]), 1.0, 45.0);
     } else if (a == "--tension-margin" && i + 1 < argc) {
       tension_margin = std::max(0.0, std::atof(argv[++i]));
+    } else if (a == "--angle-steps" && i + 1 < argc) {
+      g_angle_steps = std::clamp(std::atoi(argv[++i]), 1, 10);
+    } else if (a == "--design-emphasis" && i + 1 < argc) {
+      g_design_emphasis = std::max(0.0, std::atof(argv[++i]));
     } else if (a == "--design-estimate" && i + 1 < argc) {
       design_estimate = split(argv[++i]);
     } else if (a == "--folds" && i + 1 < argc) {
@@ -1258,7 +1280,8 @@ int main(int argc, char** argv) {
           "[--bic-informing-rows|--bic-all-rows] [--polish|--no-polish] "
           "[--gn-force-noise|--no-gn-force-noise] [--refinement-gate-p P (0: off)] "
           "[--first-seed S] [--poses N] [--noise-free] [--laser-sigma-mm S] "
-          "[--design-estimate word,...] [--max-angle-deg A] [--tension-margin N]\n"
+          "[--design-estimate word,...] [--design-emphasis W] [--angle-steps N] [--max-angle-deg "
+          "A] [--tension-margin N]\n"
           "  effects:");
       for (const Effect& e : effects()) std::fprintf(stderr, " %s", e.key.c_str());
       std::fprintf(stderr,

@@ -106,6 +106,13 @@ const EstimateItem* find_estimate_item(std::string_view word) {
   return nullptr;
 }
 
+const EstimateItem* estimate_item_of(ParameterKind kind) {
+  for (const EstimateItem& item : estimate_items()) {
+    if (item.kinds.size() == 1 && item.kinds[0] == kind) return &item;
+  }
+  return nullptr;
+}
+
 std::string parameter_name(const ParameterId& id) {
   static const char* const xyz[] = {"x", "y", "z"};
   static const char* const uv[] = {"u", "v"};

@@ -98,6 +98,10 @@ TEST(ParameterId, EachEstimateWordSwitchesOnItsKinds) {
     EXPECT_FALSE(item.is_set(o));
   }
   EXPECT_EQ(find_estimate_item("no-such-item"), nullptr);
+  // The word that estimates one kind alone (what the pose design's emphasis switches on).
+  ASSERT_NE(estimate_item_of(ParameterKind::kLaserDirection), nullptr);
+  EXPECT_EQ(estimate_item_of(ParameterKind::kLaserDirection)->word, "laser-direction");
+  EXPECT_EQ(estimate_item_of(ParameterKind::kHomePose), nullptr);
   // Switched on in an identification, a word's kinds are among the estimates.
   const scenario::Scenario s = scenario::mini_scenario();
   ASSERT_GT(mini_recording().num_poses(), 0);

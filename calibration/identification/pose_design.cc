@@ -21,17 +21,29 @@ double log_det(const Eigen::MatrixXd& M) {
   return 2.0 * llt.matrixL().toDenseMatrix().diagonal().array().log().sum();
 }
 
+// log det of the information about `keep` with `others` profiled out (the Schur complement);
+// -infinity when a block is not positive definite.
+double profiled_log_det(const Eigen::MatrixXd& X, const std::vector<int>& keep,
+                        const std::vector<int>& others) {
+  const Eigen::LLT<Eigen::MatrixXd> llt(X(others, others));
+  if (llt.info() != Eigen::Success) return -std::numeric_limits<double>::infinity();
+  return log_det(X(keep, keep) - X(keep, others) * llt.solve(X(others, keep)));
+}
+
 double pose_distance(const Pose& a, const Pose& b, double w) {
   return (a.position - b.position).norm() + w * (a.rpy - b.rpy).norm();
 }
 
 std::vector<Pose> candidate_grid(const PoseDesignOptions& o) {
   std::vector<Eigen::Vector3d> orientations{Eigen::Vector3d::Zero()};
+  const int steps = std::max(1, o.angle_steps);
   for (int k = 0; k < 3; ++k) {
-    for (double s : {-1.0, 1.0}) {
-      Eigen::Vector3d r = Eigen::Vector3d::Zero();
-      r(k) = s * o.max_angle;
-      orientations.push_back(r);
+    for (int j = steps; j >= 1; --j) {
+      for (double s : {-1.0, 1.0}) {
+        Eigen::Vector3d r = Eigen::Vector3d::Zero();
+        r(k) = s * o.max_angle * j / steps;
+        orientations.push_back(r);
+      }
     }
   }
   AccuracyBox box;
@@ -204,7 +216,32 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
   so.use_channels(options.channels);
   auto sim = simulate_measurements(model, cands, options.noise, 0, so);
   if (!sim) return sim.status();
-  auto gi = geometry_information(model, sim->set, cands, options.identification);
+  // The emphasised kinds the calibration does not estimate are added to the information the design
+  // judges (those the recorded channels cannot observe are left out), and kept out of log_det.
+  IdentificationOptions judged = options.identification;
+  std::vector<ParameterKind> emphasised, added;
+  if (options.emphasis_weight > 0.0) {
+    for (ParameterKind kind : options.emphasis) {
+      const EstimateItem* item = estimate_item_of(kind);
+      if (item == nullptr) {
+        return Status::error(ErrorCode::kInvalidArgument,
+                             "pose design: emphasis on a parameter kind no --estimate word "
+                             "estimates alone (%s)",
+                             parameter_name(ParameterId{kind, 0, -1}).c_str());
+      }
+      if (item->is_set(judged)) {
+        emphasised.push_back(kind);
+        continue;
+      }
+      IdentificationOptions with = judged;
+      item->set(with, true);
+      if (!check_estimates_for_channels(model.robot, options.channels, with).ok()) continue;
+      judged = with;
+      emphasised.push_back(kind);
+      added.push_back(kind);
+    }
+  }
+  auto gi = geometry_information(model, sim->set, cands, judged);
   if (!gi) return gi.status();
   const int P = static_cast<int>(gi->information.rows());
   // Column scaling from the whole candidate set.
@@ -218,6 +255,24 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
   }
   const double ridge = 1e-9;
   const Eigen::MatrixXd R = ridge * Eigen::MatrixXd::Identity(P, P);
+  // The criterion: log det of the information, plus emphasis_weight x the log det of the
+  // emphasised parameters' information with the others profiled out (a compound D / Ds design).
+  std::vector<int> emph, rest, estimated;
+  for (int q = 0; q < P; ++q) {
+    const ParameterKind kind = gi->ids[static_cast<std::size_t>(q)].kind;
+    auto in = [kind](const std::vector<ParameterKind>& v) {
+      return std::find(v.begin(), v.end(), kind) != v.end();
+    };
+    (in(emphasised) ? emph : rest).push_back(q);
+    if (!in(added)) estimated.push_back(q);
+  }
+  const bool compound = !emph.empty() && !rest.empty();
+  auto design_value = [&](const Eigen::MatrixXd& X) {
+    const double full = log_det(X);
+    if (!compound || !std::isfinite(full)) return full;
+    const double ds = profiled_log_det(X, emph, rest);
+    return std::isfinite(ds) ? full + options.emphasis_weight * ds : full;
+  };
   std::vector<int> sel;
   Eigen::MatrixXd M = S[0] + R;
   Eigen::VectorXi chosen = Eigen::VectorXi::Zero(static_cast<Eigen::Index>(cands.size()));
@@ -226,7 +281,7 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
     double bv = -std::numeric_limits<double>::infinity();
     for (int c = 1; c <= C; ++c) {
       if (chosen(c)) continue;
-      const double v = log_det(M + S[static_cast<std::size_t>(c)]);
+      const double v = design_value(M + S[static_cast<std::size_t>(c)]);
       if (v > bv) {
         bv = v;
         best = c;
@@ -274,7 +329,7 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
     }
     return current;
   };
-  exchange([](const Eigen::MatrixXd& X) { return log_det(X); }, 1e-9);
+  exchange(design_value, 1e-9);
   if (options.criterion == DesignCriterion::kPositionAccuracy) {
     auto W = position_weight(model, options, f_ref, *gi);
     if (!W) return W.status();
@@ -285,7 +340,10 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
       out.position_rms_m = std::sqrt(std::max(0.0, -exchange(neg_i, 1e-9)));
     }
   }
-  out.log_det = log_det(M - R);
+  const Eigen::MatrixXd F = M - R;
+  out.log_det = log_det(F(estimated, estimated));
+  out.emphasis_log_det = compound ? profiled_log_det(F, emph, rest) : 0.0;
+  out.emphasised = emphasised;
   std::vector<Pose> poses{cands[0]};
   for (int c : sel) poses.push_back(cands[static_cast<std::size_t>(c)]);
   out.poses = order_path(poses, options.angle_weight, &out.path_length);

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
 
 #include "cdpr/calibration/simulate.hpp"
 #include "testing/identification_scenario.hpp"
@@ -141,6 +143,100 @@ TEST(PoseDesign, DesignedForTheChannelsBeatsTheLaserDesignOnThem) {
   EXPECT_LT(ps->position_rms_m, pl->position_rms_m);
   // The design's own prediction is predict_accuracy's figure (up to the design's ridge).
   EXPECT_NEAR(ps_design->position_rms_m / ps->position_rms_m, 1.0, 1e-3);
+}
+
+// The smallest eigenvalue of the information about the laser's beam direction (u, v) with every
+// parameter `identification` estimates and the poses profiled out: what a recording at `poses`
+// says about a tilted laser mount in its least informed direction (1 / rad^2).
+double beam_direction_information(const CalibratedModel& model, const std::vector<Pose>& poses,
+                                  const PoseDesignOptions& o) {
+  SimulationOptions so;
+  so.add_noise = false;
+  so.use_channels(o.channels);
+  auto sim = simulate_measurements(model, poses, o.noise, 0, so);
+  EXPECT_TRUE(sim.ok()) << sim.status().to_string();
+  if (!sim.ok()) return 0.0;
+  IdentificationOptions with = o.identification;
+  with.estimate_laser_direction = true;
+  auto gi = geometry_information(model, sim->set, poses, with);
+  EXPECT_TRUE(gi.ok()) << gi.status().to_string();
+  if (!gi.ok()) return 0.0;
+  std::vector<int> beam, rest;
+  for (int q = 0; q < static_cast<int>(gi->ids.size()); ++q) {
+    (gi->ids[static_cast<std::size_t>(q)].kind == ParameterKind::kLaserDirection ? beam : rest)
+        .push_back(q);
+  }
+  const Eigen::MatrixXd& F = gi->information;
+  const Eigen::MatrixXd S =
+      F(beam, beam) - F(beam, rest) * F(rest, rest).ldlt().solve(F(rest, beam));
+  return Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(S).eigenvalues()(0);
+}
+
+// MINI cannot pitch 15 degrees anywhere in its box, so with the full angle alone (angle_steps 1,
+// the default) no designed pose is pitched, and the beam direction's component that only a pitch
+// shows has no information at all. With half tilts (angle_steps 2) and the beam direction
+// emphasised (a tilted laser mount, which the mismatch locator tests and the calibration does not
+// estimate) both components are informed, while the calibration's predicted accuracy (the anchors'
+// RMS bound, the position error over the box) stays within 3 % of the plain D-optimal design's
+// (measured: the smallest eigenvalue 11.5 times the half-tilt plain design's, anchors 1.276 mm
+// against 1.277 mm, position 0.464 mm against 0.471 mm). Without the laser the emphasis is left
+// out.
+TEST(PoseDesign, EmphasisedBeamDirectionIsSeenAtLittleCostToTheCalibration) {
+  const scenario::Scenario s = scenario::mini_config_scenario();
+  PoseDesignOptions full_angle_only;
+  full_angle_only.exchange_passes = 1;
+  ASSERT_EQ(full_angle_only.angle_steps, 1);
+  ASSERT_EQ(full_angle_only.emphasis_weight, 0.0);
+  PoseDesignOptions plain = full_angle_only;
+  plain.angle_steps = 2;
+  PoseDesignOptions emphasised = plain;
+  emphasised.emphasis_weight = 3.0;
+  auto de = design_poses(s.nominal, emphasised);
+  auto dp = design_poses(s.nominal, plain);
+  auto d1 = design_poses(s.nominal, full_angle_only);
+  ASSERT_TRUE(de.ok() && dp.ok() && d1.ok());
+  EXPECT_TRUE(dp->emphasised.empty());
+  ASSERT_EQ(de->emphasised, std::vector<ParameterKind>{ParameterKind::kLaserDirection});
+  auto pitched = [](const std::vector<Pose>& poses) {
+    return std::count_if(poses.begin(), poses.end(),
+                         [](const Pose& p) { return std::abs(p.rpy.y()) > 1e-6; });
+  };
+  EXPECT_EQ(pitched(d1->poses), 0);
+  EXPECT_GT(pitched(de->poses), 0);
+  const double beam_full_angle = beam_direction_information(s.nominal, d1->poses, plain);
+  const double beam_plain = beam_direction_information(s.nominal, dp->poses, plain);
+  const double beam_emphasised = beam_direction_information(s.nominal, de->poses, plain);
+  EXPECT_LT(beam_full_angle, 1e-6 * beam_emphasised);  // measured 0
+  EXPECT_GT(beam_emphasised, 5.0 * beam_plain);        // measured 11.5
+
+  PredictedAccuracyOptions po;
+  po.box.half_extent = plain.half_extent;
+  auto pe = predict_accuracy(s.nominal, de->poses, plain.noise, po);
+  auto pp = predict_accuracy(s.nominal, dp->poses, plain.noise, po);
+  ASSERT_TRUE(pe.ok() && pp.ok());
+  EXPECT_LT(pe->anchor_rms_std_m, 1.03 * pp->anchor_rms_std_m);
+  EXPECT_LT(pe->position_rms_m, 1.03 * pp->position_rms_m);
+
+  PoseDesignOptions no_laser = small_design(15);
+  no_laser.channels.laser = false;
+  fit_estimates_to_channels(no_laser.channels, &no_laser.identification);
+  PoseDesignOptions no_laser_emphasised = no_laser;
+  no_laser_emphasised.emphasis_weight = 3.0;
+  auto dn = design_poses(s.nominal, no_laser_emphasised);
+  auto dnp = design_poses(s.nominal, no_laser);
+  ASSERT_TRUE(dn.ok() && dnp.ok()) << dn.status().to_string();
+  EXPECT_TRUE(dn->emphasised.empty());
+  ASSERT_EQ(dn->poses.size(), dnp->poses.size());
+  for (std::size_t k = 0; k < dn->poses.size(); ++k) {
+    EXPECT_EQ((dn->poses[k].vector() - dnp->poses[k].vector()).norm(), 0.0) << "pose " << k;
+  }
+
+  PoseDesignOptions bad = small_design(5);
+  bad.emphasis = {ParameterKind::kHomePose};
+  bad.emphasis_weight = 1.0;
+  auto db = design_poses(s.nominal, bad);
+  ASSERT_FALSE(db.ok());
+  EXPECT_EQ(db.status().code(), ErrorCode::kInvalidArgument);
 }
 
 TEST(PoseDesign, RefusesLaserParametersWithoutTheLaser) {

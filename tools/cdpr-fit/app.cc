@@ -224,13 +224,25 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
                  "half side of the test cube for --criterion position and --compare, m")
       ->capture_default_str()
       ->check(CLI::PositiveNumber);
-  dp->add_option("--points-per-axis", design.points_per_axis,
-                 "candidate grid points per axis (7 orientations each; above 12 the design takes "
-                 "minutes and a warning says so)")
+  dp->add_option(
+        "--points-per-axis", design.points_per_axis,
+        "candidate grid points per axis (1 + 6 x --angle-steps orientations each; above 12 "
+        "the design takes minutes and a warning says so)")
       ->capture_default_str()
       ->check(CLI::Range(2, 20));
   dp->add_option("--max-angle", design.max_angle, "candidate orientations up to this angle, rad")
       ->capture_default_str();
+  dp->add_option(
+        "--angle-steps", design.angle_steps,
+        "candidate tilts about each axis: max-angle x j / N, j = 1..N (a robot that cannot "
+        "tilt the full angle about one axis still tilts part of it)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 6));
+  dp->add_option("--emphasis-weight", design.emphasis_weight,
+                 "weight of the laser's beam direction (a tilted mount, which diagnose tests) in "
+                 "the design, beside the estimated parameters; 0: plain D-optimal")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   dp->add_option("--tension-margin", design.tension_margin,
                  "keep every pose's cable tensions this far inside [f_min, f_max], N (as cdprd's "
                  "motion.tension_margin; a tilted pose at the workspace edge may overload the "

@@ -65,6 +65,15 @@ nlohmann::json noise_json(const SensorNoise& n, const SensorChannels& c) {
   return j;
 }
 
+// The --estimate words of the emphasised parameter kinds ("laser-direction").
+std::vector<std::string> emphasis_words(const std::vector<ParameterKind>& kinds) {
+  std::vector<std::string> out;
+  for (ParameterKind kind : kinds) {
+    if (const EstimateItem* e = estimate_item_of(kind)) out.emplace_back(e->word);
+  }
+  return out;
+}
+
 }  // namespace
 
 Result<Output> design_poses(const DesignArgs& args) {
@@ -86,12 +95,15 @@ Result<Output> design_poses(const DesignArgs& args) {
   options.points_per_axis = args.points_per_axis;
   options.progress = console().progress;
   if (args.points_per_axis > kSlowPointsPerAxis) {
-    const long candidates = 7L * args.points_per_axis * args.points_per_axis * args.points_per_axis;
+    const long candidates = (1L + 6L * args.angle_steps) * args.points_per_axis *
+                            args.points_per_axis * args.points_per_axis;
     console().warn("--points-per-axis " + std::to_string(args.points_per_axis) + " gives " +
                    std::to_string(candidates) +
                    " candidate poses: the design takes minutes and gigabytes");
   }
   options.max_angle = args.max_angle;
+  options.angle_steps = args.angle_steps;
+  options.emphasis_weight = args.emphasis_weight;
   options.tension_margin = args.tension_margin;
   options.noise = args.noise;
   CDPR_RETURN_IF_ERROR(plan_channels(args.channels, args.estimate, *model, args.config,
@@ -122,6 +134,10 @@ Result<Output> design_poses(const DesignArgs& args) {
               {"noise", noise_json(options.noise, options.channels)},
               {"candidates", design->candidates},
               {"max_angle_rad", options.max_angle},
+              {"angle_steps", options.angle_steps},
+              {"emphasis", emphasis_words(design->emphasised)},
+              {"emphasis_weight", options.emphasis_weight},
+              {"emphasis_log_det", design->emphasis_log_det},
               {"tension_margin_n", options.tension_margin},
               {"exchanges", design->exchanges},
               {"criterion", args.criterion},
@@ -134,6 +150,10 @@ Result<Output> design_poses(const DesignArgs& args) {
     << design->candidates << " feasible candidates, " << design->exchanges << " exchanges, log det "
     << fmt(design->log_det, 6) << ", path " << fmt(design->path_length, 4) << " m)\nestimating:";
   for (const std::string& e : estimated_items(options.identification)) h << " " << e;
+  for (const std::string& e : emphasis_words(design->emphasised)) {
+    h << "\nalso designed to see: " << e << " (weight " << fmt(options.emphasis_weight, 3)
+      << ", log det " << fmt(design->emphasis_log_det, 4) << ")";
+  }
   h << "\nchannels: lengths, tensions"
     << (options.channels.words() == "none" ? "" : ", " + options.channels.words());
   h << "\ncandidate box: +-" << fmt(options.half_extent.x(), 3) << " x "

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/robot_model.hpp"
 #include "cdpr/status.hpp"
 
@@ -95,7 +96,11 @@ struct DesignArgs {
   std::string criterion = "d-optimal";  // or "position": position accuracy over the test cube
   double test_half_extent = 0.156;      // m, test cube (ISO 9283 style) for position/--compare
   int points_per_axis = 5;
-  double max_angle = 0.2618;  // rad
+  double max_angle = 0.2618;                          // rad
+  int angle_steps = PoseDesignOptions{}.angle_steps;  // tilts max_angle x j / angle_steps
+  // Weight of the laser's beam direction in the design (PoseDesignOptions::emphasis_weight);
+  // 0: plain D-optimal on the estimated parameters.
+  double emphasis_weight = PoseDesignOptions{}.emphasis_weight;
   // N: every designed pose needs a tension distribution within [f_min + margin, f_max - margin]
   // (PoseDesignOptions::tension_margin; cdprd passes its motion.tension_margin)
   double tension_margin = 0.0;

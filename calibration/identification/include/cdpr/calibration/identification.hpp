@@ -222,6 +222,9 @@ struct EstimateItem {
 };
 const std::vector<EstimateItem>& estimate_items();
 const EstimateItem* find_estimate_item(std::string_view word);  // nullptr: not a word of the table
+// The word that estimates `kind` and nothing else ("laser-direction" for kLaserDirection);
+// nullptr when no word does.
+const EstimateItem* estimate_item_of(ParameterKind kind);
 
 struct ParameterEstimate {
   ParameterId id;
