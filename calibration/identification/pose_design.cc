@@ -36,7 +36,7 @@ double pose_distance(const Pose& a, const Pose& b, double w) {
 
 std::vector<Pose> candidate_grid(const PoseDesignOptions& o) {
   std::vector<Eigen::Vector3d> orientations{Eigen::Vector3d::Zero()};
-  const int steps = std::max(1, o.angle_steps);
+  const int steps = o.angle_steps;  // >= 1, checked by design_poses
   for (int k = 0; k < 3; ++k) {
     for (int j = steps; j >= 1; --j) {
       for (double s : {-1.0, 1.0}) {
@@ -180,6 +180,16 @@ Result<RobotModel> narrow_tension_limits(const RobotModel& robot, double margin)
 Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOptions& options) {
   if (options.num_poses < 2) {
     return Status(ErrorCode::kInvalidArgument, "pose design: at least 2 poses are needed");
+  }
+  if (options.angle_steps < 1) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "pose design: angle_steps must be at least 1, got %d",
+                         options.angle_steps);
+  }
+  if (!(options.emphasis_weight >= 0.0) || !std::isfinite(options.emphasis_weight)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "pose design: emphasis_weight must be finite and >= 0, got %g",
+                         options.emphasis_weight);
   }
   if (Status s =
           check_estimates_for_channels(model.robot, options.channels, options.identification);

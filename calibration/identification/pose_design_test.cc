@@ -237,6 +237,17 @@ TEST(PoseDesign, EmphasisedBeamDirectionIsSeenAtLittleCostToTheCalibration) {
   auto db = design_poses(s.nominal, bad);
   ASSERT_FALSE(db.ok());
   EXPECT_EQ(db.status().code(), ErrorCode::kInvalidArgument);
+  PoseDesignOptions no_steps = small_design(5);
+  no_steps.angle_steps = 0;
+  auto dz = design_poses(s.nominal, no_steps);
+  ASSERT_FALSE(dz.ok());
+  EXPECT_EQ(dz.status().code(), ErrorCode::kInvalidArgument);
+  EXPECT_NE(dz.status().to_string().find("angle_steps"), std::string::npos);
+  PoseDesignOptions negative = small_design(5);
+  negative.emphasis_weight = -1.0;
+  auto dw = design_poses(s.nominal, negative);
+  ASSERT_FALSE(dw.ok());
+  EXPECT_NE(dw.status().to_string().find("emphasis_weight"), std::string::npos);
 }
 
 TEST(PoseDesign, RefusesLaserParametersWithoutTheLaser) {

@@ -122,6 +122,7 @@ Result<Output> design_poses(const DesignArgs& args) {
                         ? "cdpr-fit design-poses (position accuracy, home first)"
                         : "cdpr-fit design-poses (D-optimal, home first)");
   list.poses = design->poses;
+  const std::vector<std::string> emphasised = emphasis_words(design->emphasised);
   CDPR_RETURN_IF_ERROR(recording::write_pose_list(list, args.out));
 
   Output out;
@@ -135,7 +136,7 @@ Result<Output> design_poses(const DesignArgs& args) {
               {"candidates", design->candidates},
               {"max_angle_rad", options.max_angle},
               {"angle_steps", options.angle_steps},
-              {"emphasis", emphasis_words(design->emphasised)},
+              {"emphasis", emphasised},
               {"emphasis_weight", options.emphasis_weight},
               {"emphasis_log_det", design->emphasis_log_det},
               {"tension_margin_n", options.tension_margin},
@@ -150,7 +151,7 @@ Result<Output> design_poses(const DesignArgs& args) {
     << design->candidates << " feasible candidates, " << design->exchanges << " exchanges, log det "
     << fmt(design->log_det, 6) << ", path " << fmt(design->path_length, 4) << " m)\nestimating:";
   for (const std::string& e : estimated_items(options.identification)) h << " " << e;
-  for (const std::string& e : emphasis_words(design->emphasised)) {
+  for (const std::string& e : emphasised) {
     h << "\nalso designed to see: " << e << " (weight " << fmt(options.emphasis_weight, 3)
       << ", log det " << fmt(design->emphasis_log_det, 4) << ")";
   }

@@ -96,7 +96,7 @@ struct DesignArgs {
   std::string criterion = "d-optimal";  // or "position": position accuracy over the test cube
   double test_half_extent = 0.156;      // m, test cube (ISO 9283 style) for position/--compare
   int points_per_axis = 5;
-  double max_angle = 0.2618;                          // rad
+  double max_angle = PoseDesignOptions{}.max_angle;   // rad
   int angle_steps = PoseDesignOptions{}.angle_steps;  // tilts max_angle x j / angle_steps
   // Weight of the laser's beam direction in the design (PoseDesignOptions::emphasis_weight);
   // 0: plain D-optimal on the estimated parameters.

@@ -54,6 +54,7 @@ struct PoseDesignOptions {
   // pitched and the component of the laser's beam direction that only a pitch shows is invisible. 1
   // (the full angle only) is the default: 2 with the beam direction emphasised (below) names a
   // laser tilt more often but is not yet safe for cdprd (docs/mismatch-benchmark.md, "Session 21").
+  // Below 1: kInvalidArgument (as a negative or non-finite emphasis_weight).
   int angle_steps = 1;
   double reference_tension = std::numeric_limits<double>::quiet_NaN();  // N; NaN: default
   // N: a candidate needs a tension distribution within [f_min + margin, f_max - margin] of every
