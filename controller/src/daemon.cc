@@ -753,8 +753,10 @@ Result<std::vector<Pose>> Daemon::plan_poses(const std::string& poses_csv) {
     PoseDesignOptions o;
     o.num_poses = config_.measuring.poses;
     o.max_angle = config_.measuring.max_angle;
-    // Candidates keep the planning margin, so that no designed pose is dropped below for it.
-    o.tension_margin = config_.motion.tension_margin;
+    // Candidates keep the design margin, at least the planning margin so that no designed pose is
+    // dropped below for it.
+    o.tension_margin =
+        std::max(config_.measuring.design_tension_margin, config_.motion.tension_margin);
     fit_design_box_to_robot(g->model, o);
     auto d = design_poses(CalibratedModel::from_robot(g->model), o);
     if (!d.ok()) return d.status();
@@ -1020,6 +1022,14 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
                {"remaining_s", remaining},
                {"tensions", tensions},
                {"laser_m", row.lasers.size() > 0 ? json(row.lasers(0)) : json(nullptr)}});
+    }
+    // Back to where the calibration started (home for a designed set) while the worker
+    // identifies and the result awaits the operator: a designed pose sits near the tension
+    // limits of the geometry that is about to change, and a hot swap there (accept, reject's
+    // rollback later) may leave one geometry no feasible tension distribution or a cable slack.
+    if (Status s = move_to(poses.front(), std::numeric_limits<double>::quiet_NaN(), true);
+        !s.ok()) {
+      return s.prepend("back to the first pose: ");
     }
     return Status::success();
   };

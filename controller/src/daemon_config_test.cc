@@ -17,7 +17,8 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
       "identity: {vendor_id: 0x00CD9001}\n"
       "motion: {max_linear_velocity: 0.2}\n"
       "tension_watch: {stuck_raw_units: 10, stuck_confirm_s: 0.5}\n"
-      "measuring: {poses: 30, max_angle: 0.4363, laser_samples: 10, remeasure_rounds: 2}\n"
+      "measuring: {poses: 30, max_angle: 0.4363, design_tension_margin: 15, laser_samples: 10, "
+      "remeasure_rounds: 2}\n"
       "identification: {length_scales: true, diagnose: false}\n"
       "acceptance: {mode: auto, max_anchor_change_m: 0.01}\n"
       "control: {socket: /run/x.sock, group: cdpr}\n",
@@ -37,6 +38,7 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
   EXPECT_EQ(c->measuring.poses, 30);
   EXPECT_EQ(c->measuring.remeasure_rounds, 2);
   EXPECT_DOUBLE_EQ(c->measuring.max_angle, 0.4363);
+  EXPECT_DOUBLE_EQ(c->measuring.design_tension_margin, 15.0);
   EXPECT_TRUE(c->identification.options.estimate_length_scales);
   EXPECT_FALSE(c->identification.diagnose);
   EXPECT_EQ(c->acceptance.mode, AcceptanceMode::kAuto);
@@ -92,6 +94,12 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
   ASSERT_FALSE(tilt.ok());
   EXPECT_NE(tilt.status().to_string().find("measuring.max_angle"), std::string::npos)
       << tilt.status().to_string();
+
+  auto margin = parse_daemon_config(
+      "robot: r\ncanopen: n\nmeasuring: {design_tension_margin: -1}\n", "d.yaml");
+  ASSERT_FALSE(margin.ok());
+  EXPECT_NE(margin.status().to_string().find("measuring.design_tension_margin"), std::string::npos)
+      << margin.status().to_string();
 
   auto bad_yaml = parse_daemon_config("robot: [unclosed\n", "d.yaml");
   ASSERT_FALSE(bad_yaml.ok());

@@ -249,6 +249,9 @@ TEST_F(DaemonNative, RejectKeepsTheGeometryRestartKeepsTheAcceptedOneAndRollback
   start_daemon(quick());
   const int v1 = daemon().status()["geometry_version"].get<int>();
   ASSERT_GT(calibrate(), 0);
+  // The result awaits the operator with the platform back at the first (home) pose, not at the
+  // last designed one near the tension limits, where a hot swap might find no feasible tensions.
+  EXPECT_LT((daemon().rt().snapshot().pose().position - cell_->nominal.home.position).norm(), 1e-9);
   ASSERT_TRUE(request("reject").ok);
   run_until([&] { return daemon().state() == DaemonState::kHolding; }, 5.0);
   EXPECT_EQ(daemon().status()["geometry_version"], v1);
@@ -355,17 +358,18 @@ TEST_F(DaemonNative, AFirstStartKilledBeforeItActivatedTheNominalGeometryIsCompl
   EXPECT_EQ(*active, 1);
 }
 
-// The poses cdprd designs keep motion.tension_margin from the cable limits (the design narrows
-// the limits, so none is dropped afterwards). Tilted up to 25 degrees without a margin, the design
-// takes poses at the workspace edge, within the margin of a limit.
-TEST_F(DaemonNative, DesignedPosesKeepTheMotionTensionMargin) {
+// The poses cdprd designs keep measuring.design_tension_margin, and at least
+// motion.tension_margin, from the cable limits (the design narrows the limits, so none is dropped
+// afterwards). Tilted up to 25 degrees without a margin, the design takes poses at the workspace
+// edge, within the margin of a limit.
+TEST_F(DaemonNative, DesignedPosesKeepTheDesignAndTheMotionTensionMargin) {
   const Result<RobotModel> narrowed = narrow_tension_limits(cell_->nominal, 30.0);
   ASSERT_TRUE(narrowed.ok()) << narrowed.status().to_string();
   const double f_ref = default_reference_tension(cell_->nominal);
   // Poses of a dry run whose tensions keep the margin, of how many.
-  auto keeping_margin = [&](const std::string& motion) {
+  auto keeping_margin = [&](const std::string& design_margin, const std::string& motion) {
     testing::VirtualCell::Settings s;
-    s.measuring = "{poses: 25, max_angle: 0.4363}";
+    s.measuring = "{poses: 25, max_angle: 0.4363, design_tension_margin: " + design_margin + "}";
     s.motion = motion;
     start_daemon(s);
     const Reply dry = request("calibrate", {{"dry_run", true}});
@@ -381,11 +385,14 @@ TEST_F(DaemonNative, DesignedPosesKeepTheMotionTensionMargin) {
     }
     return n;
   };
-  const auto plain = keeping_margin("{tension_margin: 0}");
+  const auto plain = keeping_margin("0", "{tension_margin: 0}");
   EXPECT_LT(plain.first, plain.second);
-  const auto kept = keeping_margin("{tension_margin: 30}");
-  EXPECT_EQ(kept.second, 25);
-  EXPECT_EQ(kept.first, kept.second);
+  const auto kept_for_motion = keeping_margin("0", "{tension_margin: 30}");
+  EXPECT_EQ(kept_for_motion.second, 25);
+  EXPECT_EQ(kept_for_motion.first, kept_for_motion.second);
+  const auto kept_for_design = keeping_margin("30", "{tension_margin: 0}");
+  EXPECT_EQ(kept_for_design.second, 25);
+  EXPECT_EQ(kept_for_design.first, kept_for_design.second);
 }
 
 TEST_F(DaemonNative, RequestsWithBadArgumentsAreNamedErrors) {

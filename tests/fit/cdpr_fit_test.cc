@@ -413,10 +413,21 @@ TEST_F(CdprFit, ElasticRecordingOfTheMeasuredRobotCalibratesFromTheNominalConfig
 // the anchors there: the 8 coordinates outside V stay at their nominal values (z of the bottom
 // anchors is 11.7 mm off) and V absorbs that error. Given those 8 coordinates at their true values
 // (the paper's set-up: measured with a Faro arm), it must improve V (squared error by >10 %; on
-// the 25 poses designed in the frame-scaled box it goes from 8.0 to 7.0 mm RMS over V).
+// 25 poses designed D-optimally in the frame-scaled box at the full tilt it goes from 8.0 to 7.0
+// mm RMS over V). The paper's poses are not tilted much; on the default design, which adds half
+// tilts for the laser's beam direction, its model (no laser mounting, no elasticity) moves V away
+// (8.0 to 8.9 mm), so the test keeps the plain design.
 TEST_F(CdprFit, PaperMethodConvergesOnAnElasticRecording) {
-  const std::string rec = simulate_elastic(25, "elastic.csv", 4);
-  ASSERT_FALSE(HasFailure());
+  const std::string poses = path("plain-poses.csv");
+  const ProcessResult designed =
+      fit({"design-poses", "--config", kNominal, "--count", "25", "--angle-steps", "1",
+           "--emphasis-weight", "0", "--out", poses});
+  ASSERT_EQ(designed.status, 0) << designed.err;
+  const std::string rec = path("elastic.csv");
+  const ProcessResult simulated =
+      fit({"simulate", "--config", kTruth, "--nominal", kNominal, "--physics", "elastic", "--poses",
+           poses, "--seed", "4", "--out", rec});
+  ASSERT_EQ(simulated.status, 0) << simulated.err;
   auto nominal = cdpr::config::load_robot_config(kNominal);
   auto truth = cdpr::config::load_robot_config(kTruth);
   ASSERT_TRUE(nominal.ok() && truth.ok());
