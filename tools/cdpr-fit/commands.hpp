@@ -102,7 +102,7 @@ struct DesignArgs {
   // 0: plain D-optimal on the estimated parameters.
   double emphasis_weight = PoseDesignOptions{}.emphasis_weight;
   // N: every designed pose needs a tension distribution within [f_min + margin, f_max - margin]
-  // (PoseDesignOptions::tension_margin; cdprd passes its motion.tension_margin)
+  // (PoseDesignOptions::tension_margin; cdprd passes its measuring.design_tension_margin)
   double tension_margin = 0.0;
   SensorNoise noise;
   // The channels the calibration will record besides lengths and tensions (issue 18): laser,

@@ -39,7 +39,11 @@ struct MotionSettings {
   double max_angular_velocity = 0.5;      // rad/s
   double max_angular_acceleration = 2.0;  // rad/s^2
   double max_angular_jerk = 20.0;         // rad/s^3
-  double tension_margin = 0.0;            // N kept inside [f_min, f_max] when planning moves
+  // N kept inside [f_min, f_max] when planning moves: the planner puts the least loaded cables on
+  // f_min + margin, and the true robot's tensions differ from the model's (the virtual MINI's
+  // cables are 20-30 % softer): at f_min itself cables went slack at designed poses, and a cable
+  // held by the others then read a constant tension while its command changed (force_stuck).
+  double tension_margin = 10.0;
   double max_cable_speed = 0.2;           // m/s, slew of a re-referenced cable (hot swap)
   double max_cable_acceleration = 1.0;    // m/s^2
 };
@@ -67,7 +71,7 @@ struct MeasuringSettings {
   // least motion.tension_margin). The design is made on the geometry it is about to correct; the
   // true robot's tensions differ (24 N past f_max at a 25-degree tilt of the virtual MINI), and
   // the default design (half tilts, the laser's beam direction emphasised) puts more poses near
-  // the limits: without a margin the virtual cell raised force faults (docs/daemon.md).
+  // the limits (docs/daemon.md).
   double design_tension_margin = 10.0;
   int laser_samples = 20;                   // readings per pose (median/MAD robust mean)
   double laser_interval_s = -1.0;           // between laser readings; < 0: the laser's poll period
