@@ -243,10 +243,11 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
                  "the design, beside the estimated parameters; 0: plain D-optimal")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
-  dp->add_option("--tension-margin", design.tension_margin,
-                 "keep every pose's cable tensions this far inside [f_min, f_max], N (cdprd designs "
-                 "with 10 N, measuring.design_tension_margin; a tilted pose at the workspace edge "
-                 "may overload the real robot, whose geometry is not the nominal one)")
+  dp->add_option(
+        "--tension-margin", design.tension_margin,
+        "keep every pose's cable tensions this far inside [f_min, f_max], N (cdprd designs "
+        "with 10 N, measuring.design_tension_margin; a tilted pose at the workspace edge "
+        "may overload the real robot, whose geometry is not the nominal one)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   dp->add_option("--noise-laser", design.noise.sigma_laser, "laser noise std dev, m")
