@@ -44,8 +44,8 @@ struct MotionSettings {
   // cables are 20-30 % softer): at f_min itself cables went slack at designed poses, and a cable
   // held by the others then read a constant tension while its command changed (force_stuck).
   double tension_margin = 10.0;
-  double max_cable_speed = 0.2;           // m/s, slew of a re-referenced cable (hot swap)
-  double max_cable_acceleration = 1.0;    // m/s^2
+  double max_cable_speed = 0.2;         // m/s, slew of a re-referenced cable (hot swap)
+  double max_cable_acceleration = 1.0;  // m/s^2
 };
 
 struct TensionWatch {
