@@ -73,8 +73,8 @@ const Mini& mini() {
 // MINI with the plain D-optimal design at the full tilt only. On the default design cable 2 moves
 // 0.12 mm from home to the first pose, inside last_move_directions' deadband (5 sigmas, 0.5 mm):
 // the direction of that move cannot be known from the readings, so hysteresis and friction there
-// are not representable from the recording; on this design every first move of cables 2 and 5 is
-// past the deadband (checked below), and on the default design one is not.
+// are not representable from the recording; on this design every move of cables 2 and 5 is past
+// the deadband (checked below), and on the default design one is not.
 const Mini& mini_full_angle() {
   static const Mini m =
       designed_robot(scenario::mini_config_scenario(), Eigen::Vector3d::Constant(0.156), 1, 0.0);
