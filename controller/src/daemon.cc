@@ -753,6 +753,8 @@ Result<std::vector<Pose>> Daemon::plan_poses(const std::string& poses_csv) {
     PoseDesignOptions o;
     o.num_poses = config_.measuring.poses;
     o.max_angle = config_.measuring.max_angle;
+    o.angle_steps = config_.measuring.design_angle_steps;
+    o.emphasis_weight = config_.measuring.design_emphasis_weight;
     // Candidates keep the design margin, at least the planning margin so that no designed pose is
     // dropped below for it.
     o.tension_margin =

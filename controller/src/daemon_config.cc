@@ -81,16 +81,20 @@ Status read_tension_watch(const YamlField& n, TensionWatch& t) {
 Status read_measuring(const YamlField& n, const std::string& dir, MeasuringSettings& m) {
   if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(n.check_keys(
-      {"poses", "pose_file", "max_angle", "design_tension_margin", "laser_samples",
-       "laser_interval_s", "average_cycles", "settle_window_s", "settle_position_tolerance",
-       "settle_tension_tolerance", "settle_timeout_s", "tension_band", "extra_pose_rounds",
-       "remeasure_rounds", "noise_length_m", "noise_force_n", "noise_laser_m"}));
+      {"poses", "pose_file", "max_angle", "design_tension_margin", "design_angle_steps",
+       "design_emphasis_weight", "laser_samples", "laser_interval_s", "average_cycles",
+       "settle_window_s", "settle_position_tolerance", "settle_tension_tolerance",
+       "settle_timeout_s", "tension_band", "extra_pose_rounds", "remeasure_rounds",
+       "noise_length_m", "noise_force_n", "noise_laser_m"}));
   CDPR_RETURN_IF_ERROR(n.optional("poses", m.poses, 7, 1000));
   CDPR_RETURN_IF_ERROR(n.optional("pose_file", m.pose_file));
   m.pose_file = resolve(dir, m.pose_file);
   CDPR_RETURN_IF_ERROR(in_range(n, "max_angle", 0.05, 0.7854, "rad", m.max_angle));
   CDPR_RETURN_IF_ERROR(
       in_range(n, "design_tension_margin", 0.0, 1e5, "N", m.design_tension_margin));
+  CDPR_RETURN_IF_ERROR(n.optional("design_angle_steps", m.design_angle_steps, 1, 6));
+  CDPR_RETURN_IF_ERROR(
+      in_range(n, "design_emphasis_weight", 0.0, 100.0, "", m.design_emphasis_weight));
   CDPR_RETURN_IF_ERROR(n.optional("laser_samples", m.laser_samples, 1, 10000));
   CDPR_RETURN_IF_ERROR(in_range(n, "laser_interval_s", -1.0, 10.0, "s", m.laser_interval_s));
   CDPR_RETURN_IF_ERROR(n.optional("average_cycles", m.average_cycles, 1, 100000));

@@ -17,8 +17,8 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
       "identity: {vendor_id: 0x00CD9001}\n"
       "motion: {max_linear_velocity: 0.2}\n"
       "tension_watch: {stuck_raw_units: 10, stuck_confirm_s: 0.5}\n"
-      "measuring: {poses: 30, max_angle: 0.4363, design_tension_margin: 15, laser_samples: 10, "
-      "remeasure_rounds: 2}\n"
+      "measuring: {poses: 30, max_angle: 0.4363, design_tension_margin: 15, design_angle_steps: 3, "
+      "design_emphasis_weight: 1, laser_samples: 10, remeasure_rounds: 2}\n"
       "identification: {length_scales: true, diagnose: false}\n"
       "acceptance: {mode: auto, max_anchor_change_m: 0.01}\n"
       "control: {socket: /run/x.sock, group: cdpr}\n",
@@ -39,6 +39,8 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
   EXPECT_EQ(c->measuring.remeasure_rounds, 2);
   EXPECT_DOUBLE_EQ(c->measuring.max_angle, 0.4363);
   EXPECT_DOUBLE_EQ(c->measuring.design_tension_margin, 15.0);
+  EXPECT_EQ(c->measuring.design_angle_steps, 3);
+  EXPECT_DOUBLE_EQ(c->measuring.design_emphasis_weight, 1.0);
   EXPECT_TRUE(c->identification.options.estimate_length_scales);
   EXPECT_FALSE(c->identification.diagnose);
   EXPECT_EQ(c->acceptance.mode, AcceptanceMode::kAuto);
@@ -100,6 +102,17 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
   ASSERT_FALSE(margin.ok());
   EXPECT_NE(margin.status().to_string().find("measuring.design_tension_margin"), std::string::npos)
       << margin.status().to_string();
+
+  auto steps =
+      parse_daemon_config("robot: r\ncanopen: n\nmeasuring: {design_angle_steps: 0}\n", "d.yaml");
+  ASSERT_FALSE(steps.ok());
+  EXPECT_NE(steps.status().to_string().find("measuring.design_angle_steps"), std::string::npos)
+      << steps.status().to_string();
+  auto weight = parse_daemon_config(
+      "robot: r\ncanopen: n\nmeasuring: {design_emphasis_weight: -1}\n", "d.yaml");
+  ASSERT_FALSE(weight.ok());
+  EXPECT_NE(weight.status().to_string().find("measuring.design_emphasis_weight"), std::string::npos)
+      << weight.status().to_string();
 
   auto bad_yaml = parse_daemon_config("robot: [unclosed\n", "d.yaml");
   ASSERT_FALSE(bad_yaml.ok());

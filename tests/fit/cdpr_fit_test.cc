@@ -414,9 +414,9 @@ TEST_F(CdprFit, ElasticRecordingOfTheMeasuredRobotCalibratesFromTheNominalConfig
 // anchors is 11.7 mm off) and V absorbs that error. Given those 8 coordinates at their true values
 // (the paper's set-up: measured with a Faro arm), it must improve V (squared error by >10 %; on
 // 25 poses designed D-optimally in the frame-scaled box at the full tilt it goes from 8.0 to 7.0
-// mm RMS over V). The paper's poses are not tilted much; on the default design, which adds half
+// mm RMS over V). The paper's poses are not tilted much; on cdprd's design, which adds half
 // tilts for the laser's beam direction, its model (no laser mounting, no elasticity) moves V away
-// (8.0 to 8.9 mm), so the test keeps the plain design.
+// (8.0 to 8.9 mm), so the test designs the plain set explicitly.
 TEST_F(CdprFit, PaperMethodConvergesOnAnElasticRecording) {
   const std::string poses = path("plain-poses.csv");
   const ProcessResult designed =

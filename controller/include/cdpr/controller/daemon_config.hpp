@@ -73,6 +73,14 @@ struct MeasuringSettings {
   // the default design (half tilts, the laser's beam direction emphasised) puts more poses near
   // the limits (docs/daemon.md).
   double design_tension_margin = 10.0;
+  // The design's tilt steps and the weight of the laser's beam direction
+  // (PoseDesignOptions::angle_steps, emphasis_weight). cdprd's defaults (2, 3) are not the
+  // library's (1, 0): on MINI, the robot cdprd drives, they named more in every part of the
+  // concealed-effect benchmark (compound 74/80 against 66/80, singles 24/24 and 23/24 against
+  // 23/24 and 21/24, null suspects 3/20 against 4/20), while on the LARGE frame the singles
+  // regress (docs/mismatch-benchmark.md, "Session 22"). Without the laser the emphasis is dropped.
+  int design_angle_steps = 2;
+  double design_emphasis_weight = 3.0;
   int laser_samples = 20;                   // readings per pose (median/MAD robust mean)
   double laser_interval_s = -1.0;           // between laser readings; < 0: the laser's poll period
   int average_cycles = 25;                  // encoder and tension readings averaged per pose
