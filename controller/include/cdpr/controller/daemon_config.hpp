@@ -70,7 +70,7 @@ struct MeasuringSettings {
   // N: the designed poses' tensions kept this far inside [f_min, f_max] on the NOMINAL model (at
   // least motion.tension_margin). The design is made on the geometry it is about to correct; the
   // true robot's tensions differ (24 N past f_max at a 25-degree tilt of the virtual MINI), and
-  // the default design (half tilts, the laser's beam direction emphasised) puts more poses near
+  // cdprd's design (half tilts, the laser's beam direction emphasised, below) puts more poses near
   // the limits (docs/daemon.md).
   double design_tension_margin = 10.0;
   // The design's tilt steps and the weight of the laser's beam direction
@@ -78,7 +78,7 @@ struct MeasuringSettings {
   // library's (1, 0): on MINI, the robot cdprd drives, they named more in every part of the
   // concealed-effect benchmark (compound 74/80 against 66/80, singles 24/24 and 23/24 against
   // 23/24 and 21/24, null suspects 3/20 against 4/20), while on the LARGE frame the singles
-  // regress (docs/mismatch-benchmark.md, "Session 22"). Without the laser the emphasis is dropped.
+  // regress (docs/mismatch-benchmark.md, "Session 22"). Without a laser the emphasis adds nothing.
   int design_angle_steps = 2;
   double design_emphasis_weight = 3.0;
   int laser_samples = 20;                   // readings per pose (median/MAD robust mean)
