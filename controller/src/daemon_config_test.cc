@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <string>
+#include <utility>
+
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
@@ -79,40 +82,22 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
   EXPECT_NE(twice.status().to_string().find("given twice"), std::string::npos)
       << twice.status().to_string();
 
-  auto stuck =
-      parse_daemon_config("robot: r\ncanopen: n\ntension_watch: {stuck_raw_units: -2}\n", "d.yaml");
-  ASSERT_FALSE(stuck.ok());
-  EXPECT_NE(stuck.status().to_string().find("tension_watch.stuck_raw_units"), std::string::npos)
-      << stuck.status().to_string();
-
-  auto rounds =
-      parse_daemon_config("robot: r\ncanopen: n\nmeasuring: {remeasure_rounds: 11}\n", "d.yaml");
-  ASSERT_FALSE(rounds.ok());
-  EXPECT_NE(rounds.status().to_string().find("measuring.remeasure_rounds"), std::string::npos)
-      << rounds.status().to_string();
-
-  // A tilt beyond 45 degrees is refused (the design would plan poses no CDPR reaches safely).
-  auto tilt = parse_daemon_config("robot: r\ncanopen: n\nmeasuring: {max_angle: 1.2}\n", "d.yaml");
-  ASSERT_FALSE(tilt.ok());
-  EXPECT_NE(tilt.status().to_string().find("measuring.max_angle"), std::string::npos)
-      << tilt.status().to_string();
-
-  auto margin = parse_daemon_config(
-      "robot: r\ncanopen: n\nmeasuring: {design_tension_margin: -1}\n", "d.yaml");
-  ASSERT_FALSE(margin.ok());
-  EXPECT_NE(margin.status().to_string().find("measuring.design_tension_margin"), std::string::npos)
-      << margin.status().to_string();
-
-  auto steps =
-      parse_daemon_config("robot: r\ncanopen: n\nmeasuring: {design_angle_steps: 0}\n", "d.yaml");
-  ASSERT_FALSE(steps.ok());
-  EXPECT_NE(steps.status().to_string().find("measuring.design_angle_steps"), std::string::npos)
-      << steps.status().to_string();
-  auto weight = parse_daemon_config(
-      "robot: r\ncanopen: n\nmeasuring: {design_emphasis_weight: -1}\n", "d.yaml");
-  ASSERT_FALSE(weight.ok());
-  EXPECT_NE(weight.status().to_string().find("measuring.design_emphasis_weight"), std::string::npos)
-      << weight.status().to_string();
+  // Values out of range are refused, naming the group and the key. A tilt beyond 45 degrees is
+  // among them (the design would plan poses no CDPR reaches safely).
+  const std::pair<std::string, std::string> out_of_range[] = {
+      {"tension_watch: {stuck_raw_units: -2}", "tension_watch.stuck_raw_units"},
+      {"measuring: {remeasure_rounds: 11}", "measuring.remeasure_rounds"},
+      {"measuring: {max_angle: 1.2}", "measuring.max_angle"},
+      {"measuring: {design_tension_margin: -1}", "measuring.design_tension_margin"},
+      {"measuring: {design_angle_steps: 0}", "measuring.design_angle_steps"},
+      {"measuring: {design_emphasis_weight: -1}", "measuring.design_emphasis_weight"},
+  };
+  for (const auto& [group, field] : out_of_range) {
+    auto refused = parse_daemon_config("robot: r\ncanopen: n\n" + group + "\n", "d.yaml");
+    ASSERT_FALSE(refused.ok()) << group;
+    EXPECT_NE(refused.status().to_string().find(field), std::string::npos)
+        << refused.status().to_string();
+  }
 
   auto bad_yaml = parse_daemon_config("robot: [unclosed\n", "d.yaml");
   ASSERT_FALSE(bad_yaml.ok());
