@@ -276,6 +276,11 @@ Result<PoseDesign> design_poses(const CalibratedModel& model, const PoseDesignOp
     (in(emphasised) ? emph : rest).push_back(q);
     if (!in(added)) estimated.push_back(q);
   }
+  // A kind without a column (the laser's on a robot without one) is neither judged nor reported.
+  std::erase_if(emphasised, [&](ParameterKind kind) {
+    return std::none_of(emph.begin(), emph.end(),
+                        [&](int q) { return gi->ids[static_cast<std::size_t>(q)].kind == kind; });
+  });
   const bool compound = !emph.empty() && !rest.empty();
   auto design_value = [&](const Eigen::MatrixXd& X) {
     const double full = log_det(X);

@@ -226,6 +226,13 @@ TEST(PoseDesign, EmphasisedBeamDirectionIsSeenAtLittleCostToTheCalibration) {
   auto dnp = design_poses(s.nominal, no_laser);
   ASSERT_TRUE(dn.ok() && dnp.ok()) << dn.status().to_string();
   EXPECT_TRUE(dn->emphasised.empty());
+  // A robot without a laser: nothing to see, nothing reported as emphasised.
+  CalibratedModel laserless = s.nominal;
+  laserless.robot.lasers.clear();
+  auto dl = design_poses(laserless, no_laser_emphasised);
+  ASSERT_TRUE(dl.ok()) << dl.status().to_string();
+  EXPECT_TRUE(dl->emphasised.empty());
+  EXPECT_EQ(dl->emphasis_log_det, 0.0);
   ASSERT_EQ(dn->poses.size(), dnp->poses.size());
   for (std::size_t k = 0; k < dn->poses.size(); ++k) {
     EXPECT_EQ((dn->poses[k].vector() - dnp->poses[k].vector()).norm(), 0.0) << "pose " << k;
