@@ -791,7 +791,11 @@ Status Daemon::regulate_tensions(int pose_index) {
   }
   const int m = g->model.num_cables();
   std::array<double, kMaxAxes> trim{};
-  constexpr int kRegulationSteps = 4;
+  // Before calibration the nominal geometry can be several mm off the robot's (MINI: 14.5 mm RMS
+  // at the anchors), so at a tilted pose a cable can hang several mm slack: the steps for a slack
+  // cable grow to take that up (about 20 mm in all on the MINI) and are capped, so a cable that
+  // catches mid-step ends at most half-way up its band.
+  constexpr int kRegulationSteps = 8;
   for (int iteration = 0; iteration < kRegulationSteps; ++iteration) {
     const std::uint64_t id = rt_->request_average();
     const int n = std::max(3, config_.measuring.average_cycles / 2);
@@ -825,9 +829,10 @@ Status Daemon::regulate_tensions(int pose_index) {
                       winch_counts_to_length<double>(
                           g->model.winches[k], r.average_counts[k] - rt_->encoder_offsets()[k])));
       // A slack cable (no tension) has an unknown slack length to take up: the step grows with
-      // each iteration.
-      const double dl =
-          -(want + (want > f ? 1.5 : -1.5) * band - f) * length / ea * (1 << iteration);
+      // each iteration, up to half the band's worth of stretch.
+      const double cap = 0.5 * (std::max(lo, hi) - lo) * length / ea;
+      const double dl = std::clamp(
+          -(want + (want > f ? 1.5 : -1.5) * band - f) * length / ea * (1 << iteration), -cap, cap);
       trim[k] += winch_counts_change<double>(g->model.winches[k], dl);
     }
     if (inside) return Status::success();
