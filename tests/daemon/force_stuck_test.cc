@@ -176,6 +176,60 @@ TEST_F(ForceStuck, AStuckReadingFoundWhileMovingQuickStops) {
       << "move to " << target.position.transpose();
 }
 
+// A move after tension-regulation trims: the platform yields to the other cables' trims as they
+// fade, and a healthy cable's real tension can stay on one raw value while its plan moves (the
+// virtual MINI before calibration: cable 8 at 12.0 N at pose 16, a false force_stuck). The plan is
+// evidence only beyond the fading trims' worth; the next move without trims finds the stuck
+// reading.
+TEST_F(ForceStuck, AReadingHeldWhileOtherCablesTrimsFadeIsNotStuckTheNextMoveFindsIt) {
+  const Pose home = daemon().rt().snapshot().pose();
+  Pose target = home;
+  Eigen::Index k = 0;
+  double largest = 0.0;
+  for (int axis = 0; axis < 3; ++axis) {
+    for (double d : {-0.15, -0.12, -0.1, 0.1, 0.12, 0.15}) {
+      Pose p = home;
+      p.position(axis) += d;
+      if (!check_pose(cell_->nominal, p, PathCheckOptions{}).ok()) continue;
+      Eigen::Index i = 0;
+      const double c = (planned(p) - planned(home)).cwiseAbs().maxCoeff(&i);
+      if (c > largest) {
+        largest = c;
+        target = p;
+        k = i;
+      }
+    }
+  }
+  ASSERT_GT(largest * gain(), 1.5 * stuck_raw_units());
+  // Another cable trimmed by more than the plan's change of cable k plus the threshold.
+  const int j = static_cast<int>((k + 1) % cell_->nominal.num_cables());
+  const double worth = largest + 2.0 * stuck_raw_units() / gain();
+  post_trim(j, counts_for(j, worth, home));
+  ASSERT_TRUE(
+      cell_->run_until([&] { return daemon().rt().snapshot().command_done >= trim_->seq; }, 10.0));
+  ASSERT_TRUE(holds_settled(10.0));
+  ASSERT_EQ(daemon().rt().snapshot().fault.kind, FaultKind::kNone);
+  // Cable k's reading now keeps its raw value (as a real one held by the others' trims would).
+  cell_->robot->set_force_fault(static_cast<int>(k), sim::ForceChannelFault::kStuck);
+  auto move_to = [&](const Pose& p) {
+    return cell_->request(
+        "move", {{"pose", {p.position.x(), p.position.y(), p.position.z(), 0.0, 0.0, 0.0}}});
+  };
+  const Reply there = move_to(target);
+  ASSERT_TRUE(there.ok) << there.message;
+  ASSERT_TRUE(holds_settled(30.0)) << daemon().status().dump();
+  EXPECT_EQ(daemon().rt().snapshot().fault.kind, FaultKind::kNone)
+      << "the plan of cable " << k + 1 << " moved " << largest << " N, the trims faded " << worth
+      << " N";
+  // Back without trims: the plan's change alone is evidence, and the reading is found stuck.
+  const Reply back = move_to(home);
+  ASSERT_TRUE(back.ok) << back.message;
+  ASSERT_TRUE(cell_->run_until([&] { return daemon().state() == DaemonState::kFault; }, 30.0))
+      << daemon().status().dump();
+  EXPECT_EQ(daemon().rt().snapshot().fault.kind, FaultKind::kForceStuck);
+  EXPECT_EQ(daemon().rt().snapshot().fault.cable, k);
+}
+
 TEST_F(ForceStuck, AForceNodeThatFallsSilentWhileMovingIsNodeLostNotStuck) {
   // Its readings stop changing because none arrive: the heartbeat watch names that.
   const Pose home = daemon().rt().snapshot().pose();

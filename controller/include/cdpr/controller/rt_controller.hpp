@@ -212,12 +212,18 @@ class RtController {
   canopen::Timestamp move_start_{0};
   std::uint64_t done_ = 0;
   std::array<double, kMaxAxes> trim_{}, trim_goal_{}, trim_at_move_{};
+  // The trims fading out during the current move, worth their length times their cable's
+  // stiffness, summed over the cables (N): what they may change any cable's tension by (0 when
+  // not moving).
+  double fading_trim_worth_ = 0.0;
   std::array<int, kMaxAxes> slack_count_{}, overload_count_{};
   // Stuck-reading watch: the raw value seen last, the range of the expected tension since it
   // changed, and for how many cycles that range has been too wide.
   std::array<bool, kMaxAxes> stuck_valid_{};
   std::array<std::int64_t, kMaxAxes> stuck_raw_{};
   std::array<double, kMaxAxes> plan_min_{}, plan_max_{}, trim_min_{}, trim_max_{};
+  // Set when a move with fading trims ends: the watch's plan window starts again.
+  bool restart_plan_window_ = false;
   std::array<int, kMaxAxes> stuck_count_{};
   std::uint64_t force_pdos_ = 0;  // the force node's TPDO count last cycle
 
