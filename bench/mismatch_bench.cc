@@ -1199,6 +1199,7 @@ int main(int argc, char** argv) {
   bool polish = cdpr::DiagnosisOptions{}.polish_gauss_newton;
   bool gn_force_noise = cdpr::DiagnosisOptions{}.gauss_newton_force_noise;
   double refinement_gate = cdpr::DiagnosisOptions{}.refinement_gate_p;
+  double second_round_evidence = cdpr::DiagnosisOptions{}.second_round_min_evidence;
   int first_seed = 0;  // seeds first_seed .. first_seed + seeds - 1
   // The pose set of cdprd's defaults (MeasuringSettings: 25 poses tilted up to 15 degrees).
   int num_poses = 25;
@@ -1239,6 +1240,8 @@ int main(int argc, char** argv) {
       gn_force_noise = false;
     } else if (a == "--refinement-gate-p" && i + 1 < argc) {
       refinement_gate = std::max(0.0, std::atof(argv[++i]));
+    } else if (a == "--second-round-evidence" && i + 1 < argc) {
+      second_round_evidence = std::max(0.0, std::atof(argv[++i]));
     } else if (a == "--follow-up-beside-named") {
       beside = true;
     } else if (a == "--follow-up-confounded-too") {
@@ -1279,6 +1282,7 @@ int main(int argc, char** argv) {
           "[--follow-up-beside-named] [--follow-up-confounded-too] [--follow-up-full-rerun] "
           "[--bic-informing-rows|--bic-all-rows] [--polish|--no-polish] "
           "[--gn-force-noise|--no-gn-force-noise] [--refinement-gate-p P (0: off)] "
+          "[--second-round-evidence B] "
           "[--first-seed S] [--poses N] [--noise-free] [--laser-sigma-mm S] "
           "[--design-estimate word,...] [--design-emphasis W] [--angle-steps N] [--max-angle-deg "
           "A] [--tension-margin N]\n"
@@ -1367,6 +1371,7 @@ int main(int argc, char** argv) {
   dopt.polish_gauss_newton = polish;
   dopt.gauss_newton_force_noise = gn_force_noise;
   dopt.refinement_gate_p = refinement_gate;
+  dopt.second_round_min_evidence = second_round_evidence;
   const auto t_all = std::chrono::steady_clock::now();
   std::vector<std::string> which;
   if (robots != "large") which.push_back("mini");

@@ -1220,15 +1220,20 @@ const Trial* choose_trial(const std::vector<const Trial*>& pool, const std::vect
 }
 
 // The forward step's choice among the effects tried beside the accepted ones (Holm over their
-// likelihood-ratio tests); nullptr when none passes.
-const Trial* best_step(const std::vector<Trial>& tried, double alpha) {
-  std::vector<const Trial*> pool;
+// likelihood-ratio tests); nullptr when none passes. Only a trial whose BIC is more than
+// `min_evidence` below the accepted set's can be chosen (every trial counts in Holm's family).
+const Trial* best_step(const std::vector<Trial>& tried, double alpha, double min_evidence = 0.0) {
   std::vector<double> p;
-  for (const auto& t : tried) {
-    pool.push_back(&t);
-    p.push_back(t.fit.lrt_p_value);
+  for (const auto& t : tried) p.push_back(t.fit.lrt_p_value);
+  const std::vector<double> all = holm(p);
+  std::vector<const Trial*> pool;
+  std::vector<double> adj;
+  for (std::size_t q = 0; q < tried.size(); ++q) {
+    if (!(tried[q].fit.bic_delta < -min_evidence)) continue;
+    pool.push_back(&tried[q]);
+    adj.push_back(all[q]);
   }
-  return choose_trial(pool, holm(p), alpha);
+  return choose_trial(pool, adj, alpha);
 }
 
 // A candidate the screen sees only through a structure it does not explain: significant, but no
@@ -1592,7 +1597,7 @@ MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& scr
       auto st = refit(ctx, acc.current, cs.id, fit);
       if (st) more.push_back({std::move(fit), std::move(*st)});
     }
-    const Trial* best = best_step(more, alpha);
+    const Trial* best = best_step(more, alpha, options.second_round_min_evidence);
     if (best == nullptr) break;
     EffectFit f = best->fit;
     f.accepted = true;
@@ -2195,6 +2200,72 @@ const char* to_string(Diagnosis::Verdict v) {
   return "unknown";
 }
 
+namespace {
+// Every normalised residual of a fit, with where it comes from (the equilibrium of a pose is one
+// reading: its whitened rows mix the cables' tensions).
+std::vector<GrossReading> normalised_readings(const IdentificationReport& rep) {
+  std::vector<GrossReading> all;
+  auto add = [&](int j, const char* channel, int index, double si, double sigmas) {
+    if (std::isfinite(sigmas)) all.push_back({j, channel, index, si, std::abs(sigmas)});
+  };
+  for (int j = 0; j < static_cast<int>(rep.residuals.size()); ++j) {
+    const PoseResiduals& r = rep.residuals[static_cast<std::size_t>(j)];
+    for (Eigen::Index i = 0; i < r.length_normalized.size(); ++i) {
+      add(j, "cable length", static_cast<int>(i), r.length_m(i), r.length_normalized(i));
+    }
+    for (Eigen::Index i = 0; i < r.laser_normalized.size(); ++i) {
+      add(j, "laser distance", static_cast<int>(i), r.laser_m(i), r.laser_normalized(i));
+    }
+    if (r.wrench_normalized.allFinite()) {
+      add(j, "equilibrium", -1, r.wrench_si.head<3>().norm(),
+          r.wrench_normalized.cwiseAbs().maxCoeff());
+    }
+    for (Eigen::Index i = 0; i < r.swivel_normalized.size(); ++i) {
+      add(j, "swivel angle", static_cast<int>(i), r.swivel_rad(i), r.swivel_normalized(i));
+    }
+    if (r.inclination_normalized.allFinite()) {
+      const int c =
+          std::abs(r.inclination_normalized(0)) >= std::abs(r.inclination_normalized(1)) ? 0 : 1;
+      add(j, "inclination", -1, r.inclination_rad(c), r.inclination_normalized(c));
+    }
+    add(j, "IMU yaw", -1, r.imu_yaw_rad, r.imu_yaw_normalized);
+  }
+  return all;
+}
+
+// The gate of each channel: max(gross_sigmas, gross_spread x the 95th percentile of the channel's
+// normalised residuals). Each channel against its own spread: missing physics can leave the
+// lengths thousands of their (sub-micrometre) sigmas out while a wild laser reading is hundreds of
+// its own.
+std::map<std::string, double> channel_gates(const std::vector<GrossReading>& all,
+                                            const DiagnosisOptions& options) {
+  std::map<std::string, std::vector<double>> mags;
+  for (const auto& g : all) mags[g.channel].push_back(g.sigmas);
+  std::map<std::string, double> gate;
+  for (auto& [channel, v] : mags) {
+    const auto q95 = v.begin() + static_cast<std::ptrdiff_t>(0.95 * (v.size() - 1));
+    std::nth_element(v.begin(), q95, v.end());
+    gate[channel] = std::max(options.gross_sigmas, options.gross_spread * *q95);
+  }
+  return gate;
+}
+
+// Whether the fit with the accepted effects brings every flagged reading within gross_sigmas:
+// physics concentrated in a few readings (DiagnosisOptions::gross_effects_sigmas) is then
+// modelled, while a wild reading stays out whatever effect is beside it.
+bool explained_by_effects(const std::vector<GrossReading>& gross, const IdentificationReport& fit,
+                          const DiagnosisOptions& options) {
+  const std::vector<GrossReading> all = normalised_readings(fit);
+  for (const GrossReading& g : gross) {
+    const auto r = std::find_if(all.begin(), all.end(), [&](const GrossReading& a) {
+      return a.pose == g.pose && a.channel == g.channel && a.index == g.index;
+    });
+    if (r == all.end() || !(r->sigmas <= options.gross_sigmas)) return false;
+  }
+  return true;
+}
+}  // namespace
+
 // ---- Stage 0, gross readings (DiagnosisOptions::gross_sigmas): the standard model refitted with
 // a Cauchy loss, which a few wild readings cannot drag, and the readings it leaves far out.
 std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
@@ -2226,46 +2297,10 @@ std::vector<GrossReading> find_gross_readings(const CalibratedModel& nominal,
   while (true) {
     auto rep = robust_fit(rest);
     if (!rep) return {};
-    // Every normalised residual, with where it comes from (the equilibrium of a pose is one
-    // reading: its whitened rows mix the cables' tensions).
-    std::vector<GrossReading> all;
-    auto add = [&](int j, const char* channel, int index, double si, double sigmas) {
-      if (std::isfinite(sigmas)) all.push_back({j, channel, index, si, std::abs(sigmas)});
-    };
-    for (int j = 0; j < static_cast<int>(rep->residuals.size()); ++j) {
-      const PoseResiduals& r = rep->residuals[static_cast<std::size_t>(j)];
-      for (Eigen::Index i = 0; i < r.length_normalized.size(); ++i) {
-        add(j, "cable length", static_cast<int>(i), r.length_m(i), r.length_normalized(i));
-      }
-      for (Eigen::Index i = 0; i < r.laser_normalized.size(); ++i) {
-        add(j, "laser distance", static_cast<int>(i), r.laser_m(i), r.laser_normalized(i));
-      }
-      if (r.wrench_normalized.allFinite()) {
-        add(j, "equilibrium", -1, r.wrench_si.head<3>().norm(),
-            r.wrench_normalized.cwiseAbs().maxCoeff());
-      }
-      for (Eigen::Index i = 0; i < r.swivel_normalized.size(); ++i) {
-        add(j, "swivel angle", static_cast<int>(i), r.swivel_rad(i), r.swivel_normalized(i));
-      }
-      if (r.inclination_normalized.allFinite()) {
-        const int c =
-            std::abs(r.inclination_normalized(0)) >= std::abs(r.inclination_normalized(1)) ? 0 : 1;
-        add(j, "inclination", -1, r.inclination_rad(c), r.inclination_normalized(c));
-      }
-      add(j, "IMU yaw", -1, r.imu_yaw_rad, r.imu_yaw_normalized);
-    }
+    std::vector<GrossReading> all = normalised_readings(*rep);
     if (all.empty()) return {};
     const std::size_t isolated = std::max<std::size_t>(1, all.size() / 50);
-    // Each channel against its own spread: missing physics can leave the lengths thousands of
-    // their (sub-micrometre) sigmas out while a wild laser reading is hundreds of its own.
-    std::map<std::string, std::vector<double>> mags;
-    for (const auto& g : all) mags[g.channel].push_back(g.sigmas);
-    std::map<std::string, double> gate;
-    for (auto& [channel, v] : mags) {
-      const auto q95 = v.begin() + static_cast<std::ptrdiff_t>(0.95 * (v.size() - 1));
-      std::nth_element(v.begin(), q95, v.end());
-      gate[channel] = std::max(options.gross_sigmas, options.gross_spread * *q95);
-    }
+    const std::map<std::string, double> gate = channel_gates(all, options);
     const auto worst =
         std::max_element(all.begin(), all.end(), [&](const GrossReading& a, const GrossReading& b) {
           return a.sigmas / gate.at(a.channel) < b.sigmas / gate.at(b.channel);
@@ -2412,11 +2447,21 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   auto before = identify(nominal, set, identification);
   if (!before) return before.status();
   d.before = std::move(*before);
-  // Stage 0, gross readings: nothing is named on a recording with a wild reading.
+  // Stage 0, gross readings: nothing is named on a recording with a wild reading; readings within
+  // gross_effects_sigmas are tried against the effects accepted on the whole recording (stage 3d).
   d.gross_readings = find_gross_readings(nominal, set, d.before, identification, options);
-  if (!d.gross_readings.empty()) {
-    state_gross_readings(d);
-    return d;
+  auto gross_verdict = [&] {
+    Diagnosis g;
+    g.before = std::move(d.before);
+    g.gross_readings = std::move(d.gross_readings);
+    g.model_after = nominal;
+    state_gross_readings(g);
+    return g;
+  };
+  if (std::any_of(d.gross_readings.begin(), d.gross_readings.end(), [&](const GrossReading& g) {
+        return !(g.sigmas <= options.gross_effects_sigmas);
+      })) {
+    return gross_verdict();
   }
   auto screen = locate_mismatch(d.before, set, identification, options.screen);
   if (!screen) return screen.status();
@@ -2456,6 +2501,20 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     auto again =
         locate_mismatch(acc.current.report, acc.current.set, acc.current.opt, options.screen);
     if (again) d.screen_after = std::move(*again);
+  }
+  std::string physics_in_few;
+  // Stage 3d: flagged readings that the accepted effects bring within gross_sigmas are physics
+  // concentrated in a few readings (DiagnosisOptions::gross_effects_sigmas).
+  if (!d.gross_readings.empty()) {
+    if (acc.accepted.empty() ||
+        !explained_by_effects(d.gross_readings, acc.current.report, options)) {
+      return gross_verdict();
+    }
+    physics_in_few = format(
+        "%s far out of a robust fit of the standard model %s inside the noise with the effects "
+        "named: physics concentrated in a few readings, not a gross error.",
+        describe(d.gross_readings).c_str(), d.gross_readings.size() == 1 ? "falls" : "fall");
+    d.gross_readings.clear();
   }
   // Stage 4, naming: the pairs this recording cannot tell apart.
   const std::vector<ConfoundedPair> found = confounded_pairs(ctx, standard, d.screen, acc);
@@ -2502,6 +2561,10 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   CDPR_RETURN_IF_ERROR(model_the_effects(d, acc.current, cv_before, K, options.cv_folds == 0,
                                          validation, nominal, identification, nl));
   state_verdict(d, alpha);
+  if (!physics_in_few.empty()) {
+    const auto after = std::find(d.findings.begin(), d.findings.end(), d.headline);
+    d.findings.insert(after == d.findings.end() ? after : after + 1, physics_in_few);
+  }
   return d;
 }
 

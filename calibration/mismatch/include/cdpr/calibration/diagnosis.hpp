@@ -98,6 +98,14 @@ struct DiagnosisOptions {
   // on that effect). 0: never on that ground.
   int forward_own_directions = 4;
   int second_round_own_directions = 4;
+  // The evidence a second-round effect must carry beside the tests of a forward step: its BIC
+  // (2 ln of the Bayes factor, deviance units) at least this far below the accepted set's. The
+  // first round's effects also pass Holm over the trials and the bootstrap; the second round's
+  // only the screen and the step's tests, so at the design that sees the laser's beam direction a
+  // noise realisation that looks like a tilt was named beside every effect of one seed (LARGE seed
+  // 0: LRT p 0.0016 on 2 parameters, BIC -1.1; the true tilts beside sag or creep -10 to -11).
+  // 6 is "strong" evidence on Kass and Raftery's scale; 0: the step's BIC < 0 alone (as before).
+  double second_round_min_evidence = 0.0;
   // After the second round accepted an effect, each earlier one is tested for removal (the others
   // refitted jointly from the standard model without it; Holm over the accepted, alpha): an effect
   // that only stood in for the one found later is dropped.
@@ -122,6 +130,16 @@ struct DiagnosisOptions {
   double gross_spread = 10.0;
   double gross_rest_p = 1e-3;
   double gross_share = 0.5;
+  // Flagged readings that are all within gross_effects_sigmas of the robust fit are tried against
+  // the effects: stages 1-3 run on the whole recording, and when the accepted effects bring each
+  // flagged reading within gross_sigmas of their fit, the readings are physics concentrated in a
+  // few readings, not gross errors (a heavy cable's sag where tilted poses leave it near f_min put
+  // four LARGE length readings 26-45 sigmas out of the robust fit at 3x noise while the whole
+  // misfit was 3.4 sigmas; MINI sag + Hooke 27-35). A reading further out is gross at once: the
+  // effects would fit its smear (a 0.3 m length error on MINI: three effects named, and the
+  // reading inside their fit's own spread). 0: flagged readings end the diagnosis at once (before
+  // session 23).
+  double gross_effects_sigmas = 100.0;
 };
 
 // One fitted effect parameter, in SI units (and as shown to people).
