@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 
 #include "alloc_counter.hpp"
 #include "cdpr/calibration/winch.hpp"
@@ -65,6 +66,28 @@ class ForceStuck : public testing::CellTest {
     daemon().rt().post(trim_.get());
   }
   double stuck_raw_units() { return daemon().config().tension_watch.stuck_raw_units; }
+  // The move from `from` along one axis (up to 0.15 m, feasible) whose planned tensions change
+  // most for one cable: its target, that cable and the change (N).
+  std::tuple<Pose, Eigen::Index, double> largest_plan_change(const Pose& from) {
+    Pose target = from;
+    Eigen::Index k = 0;
+    double largest = 0.0;
+    for (int axis = 0; axis < 3; ++axis) {
+      for (double d : {-0.15, -0.12, -0.1, 0.1, 0.12, 0.15}) {
+        Pose p = from;
+        p.position(axis) += d;
+        if (!check_pose(cell_->nominal, p, PathCheckOptions{}).ok()) continue;
+        Eigen::Index i = 0;
+        const double c = (planned(p) - planned(from)).cwiseAbs().maxCoeff(&i);
+        if (c > largest) {
+          largest = c;
+          target = p;
+          k = i;
+        }
+      }
+    }
+    return {target, k, largest};
+  }
 
   std::unique_ptr<MotionCommand> trim_;
 };
@@ -140,23 +163,7 @@ TEST_F(ForceStuck, TheSameTrimWithAHealthyReadingRaisesNothing) {
 TEST_F(ForceStuck, AStuckReadingFoundWhileMovingQuickStops) {
   // The move whose planned tensions change most for one cable, and that cable.
   const Pose home = daemon().rt().snapshot().pose();
-  Pose target = home;
-  Eigen::Index k = 0;
-  double largest = 0.0;
-  for (int axis = 0; axis < 3; ++axis) {
-    for (double d : {-0.15, -0.12, -0.1, 0.1, 0.12, 0.15}) {
-      Pose p = home;
-      p.position(axis) += d;
-      if (!check_pose(cell_->nominal, p, PathCheckOptions{}).ok()) continue;
-      Eigen::Index i = 0;
-      const double c = (planned(p) - planned(home)).cwiseAbs().maxCoeff(&i);
-      if (c > largest) {
-        largest = c;
-        target = p;
-        k = i;
-      }
-    }
-  }
+  const auto [target, k, largest] = largest_plan_change(home);
   // Found early enough in the move to stop it: the span passes the threshold before the end.
   ASSERT_GT(largest * gain(), 1.5 * stuck_raw_units())
       << "no move changes a cable's planned tension by 1.5 times the threshold";
@@ -183,23 +190,7 @@ TEST_F(ForceStuck, AStuckReadingFoundWhileMovingQuickStops) {
 // reading.
 TEST_F(ForceStuck, AReadingHeldWhileOtherCablesTrimsFadeIsNotStuckTheNextMoveFindsIt) {
   const Pose home = daemon().rt().snapshot().pose();
-  Pose target = home;
-  Eigen::Index k = 0;
-  double largest = 0.0;
-  for (int axis = 0; axis < 3; ++axis) {
-    for (double d : {-0.15, -0.12, -0.1, 0.1, 0.12, 0.15}) {
-      Pose p = home;
-      p.position(axis) += d;
-      if (!check_pose(cell_->nominal, p, PathCheckOptions{}).ok()) continue;
-      Eigen::Index i = 0;
-      const double c = (planned(p) - planned(home)).cwiseAbs().maxCoeff(&i);
-      if (c > largest) {
-        largest = c;
-        target = p;
-        k = i;
-      }
-    }
-  }
+  const auto [target, k, largest] = largest_plan_change(home);
   ASSERT_GT(largest * gain(), 1.5 * stuck_raw_units());
   // Another cable trimmed by more than the plan's change of cable k plus the threshold.
   const int j = static_cast<int>((k + 1) % cell_->nominal.num_cables());
