@@ -2511,9 +2511,10 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
       return gross_verdict();
     }
     physics_in_few = format(
-        "%s far out of a robust fit of the standard model %s inside the noise with the effects "
-        "named: physics concentrated in a few readings, not a gross error.",
-        describe(d.gross_readings).c_str(), d.gross_readings.size() == 1 ? "falls" : "fall");
+        "%s far out of a robust fit of the standard model %s within %.0f sigmas of the fit with "
+        "the effects named: physics concentrated in a few readings, not a gross error.",
+        describe(d.gross_readings).c_str(), d.gross_readings.size() == 1 ? "comes" : "come",
+        options.gross_sigmas);
     d.gross_readings.clear();
   }
   // Stage 4, naming: the pairs this recording cannot tell apart.

@@ -337,9 +337,9 @@ void RtController::watch_stuck(canopen::Timestamp now) noexcept {
     trim_max_[k] = std::max(trim_max_[k], trimmed);
     // While the trims of other cables fade during a move, the platform yields to them and every
     // tension changes by up to their worth: the plan is evidence only beyond it, and the plan's
-    // window starts again when that move ends. (With the nominal
-    // geometry 14.5 mm off the virtual MINI's, regulation trims of other cables held cable 8's
-    // real tension on one raw value while its plan moved more than the threshold.)
+    // window starts again when that move ends. (With the nominal geometry 14.5 mm off the virtual
+    // MINI's, regulation trims of other cables held cable 8's real tension on one raw value while
+    // its plan moved more than the threshold.)
     const double plan_span = std::max(
         0.0, plan_max_[k] - plan_min_[k] - (mode_ == RtMode::kMoving ? fading_trim_worth_ : 0.0));
     // In threshold units: > 1 is evidence enough.
