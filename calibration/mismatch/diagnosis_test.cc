@@ -634,8 +634,8 @@ TEST(Diagnosis, ReadingsThatTheNamedEffectExplainsAreNotGross) {
   ASSERT_GE(diag->findings.size(), 2u);
   EXPECT_NE(diag->findings[1].find("physics concentrated in a few readings"), std::string::npos);
 
-  // A 0.3 m error in one length beside a strong elasticity (EA 10 kN): the effect is accepted on
-  // the whole recording, the wild reading stays hundreds of sigmas out, and is named.
+  // A 0.3 m error in one length beside a strong elasticity (EA 10 kN): thousands of sigmas, beyond
+  // gross_effects_sigmas, so it is named gross at once and nothing is accepted.
   SimulatedMeasurements strong = simulate(d, 3);
   conceal_hooke(d, strong, 1.0e4);
   strong.set.poses[9].cable_lengths(3) += 0.3;
