@@ -818,7 +818,10 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     auto set2 = record(r, *t, base, noise_seed);
     cdpr::DiagnosisOptions once = dopt;
     once.follow_up_poses = 0;
-    if (g_confirmatory_follow_up) once.screen.only_groups = cdpr::follow_up_groups(first);
+    if (g_confirmatory_follow_up) {
+      once.screen.only_groups = cdpr::follow_up_groups(first);
+      if (fu.held_back) once.confirm_suspect = fu.suspect;
+    }
     auto d2 = set2.ok()
                   ? cdpr::diagnose(r.nominal, *set2, nullptr, cdpr::IdentificationOptions{}, once)
                   : cdpr::Result<Diagnosis>(set2.status());
@@ -852,12 +855,22 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     out.separation_tried = true;
     std::vector<Pose> more = r.poses;
     more.insert(more.end(), cf.separating_poses.begin(), cf.separating_poses.end());
+    // A suspect held back beside the named effects (DiagnosisOptions::weak_step_bic):
+    // its follow-up poses are measured in the same round and the re-run is confirmatory, as
+    // cdprd does.
+    cdpr::DiagnosisOptions sep = dopt;
+    if (d->follow_up && d->follow_up->held_back) {
+      more.insert(more.end(), d->follow_up->poses.begin(), d->follow_up->poses.end());
+      sep.screen.only_groups = cdpr::follow_up_groups(*d);
+      sep.confirm_suspect = d->follow_up->suspect;
+      out.follow_up = true;
+    }
     auto set2 = record(r, *t, more, noise_seed);
     if (!set2.ok()) {  // the separating poses cannot be measured: not separated
       out.separation_error = "simulation: " + set2.status().to_string();
       break;
     }
-    auto d2 = cdpr::diagnose(r.nominal, *set2, nullptr, cdpr::IdentificationOptions{}, dopt);
+    auto d2 = cdpr::diagnose(r.nominal, *set2, nullptr, cdpr::IdentificationOptions{}, sep);
     if (!d2.ok()) {
       out.separation_error = "diagnose: " + d2.status().to_string();
       break;
@@ -874,9 +887,9 @@ RunResult run_case(const Robot& r, const Case& c, int seed, const cdpr::Diagnosi
     out.text +=
         "\n--- after the separating poses ---\n" + diagnosis_text(*d2, r.nominal.robot, *set2);
     // A second round (measuring.extra_pose_rounds 2): the re-run's suspect beside the named
-    // effects gets its follow-up poses.
-    if (dopt.follow_up_beside_named && d2->follow_up && !d2->follow_up->poses.empty() &&
-        run_follow_up(more, *d2)) {
+    // effects gets its follow-up poses (held back for weak evidence, or follow_up_beside_named).
+    if (d2->follow_up && !d2->follow_up->poses.empty() &&
+        (dopt.follow_up_beside_named || d2->follow_up->held_back) && run_follow_up(more, *d2)) {
       out.separated = out.any_true_named && !out.extra_named;
     }
     break;
@@ -1200,6 +1213,7 @@ int main(int argc, char** argv) {
   bool gn_force_noise = cdpr::DiagnosisOptions{}.gauss_newton_force_noise;
   double refinement_gate = cdpr::DiagnosisOptions{}.refinement_gate_p;
   double second_round_evidence = cdpr::DiagnosisOptions{}.second_round_min_evidence;
+  double weak_step = cdpr::DiagnosisOptions{}.weak_step_bic;
   int first_seed = 0;  // seeds first_seed .. first_seed + seeds - 1
   // The pose set of cdprd's defaults (MeasuringSettings: 25 poses tilted up to 15 degrees).
   int num_poses = 25;
@@ -1242,6 +1256,8 @@ int main(int argc, char** argv) {
       refinement_gate = std::max(0.0, std::atof(argv[++i]));
     } else if (a == "--second-round-evidence" && i + 1 < argc) {
       second_round_evidence = std::max(0.0, std::atof(argv[++i]));
+    } else if (a == "--weak-step-bic" && i + 1 < argc) {
+      weak_step = std::max(0.0, std::atof(argv[++i]));
     } else if (a == "--follow-up-beside-named") {
       beside = true;
     } else if (a == "--follow-up-confounded-too") {
@@ -1282,7 +1298,7 @@ int main(int argc, char** argv) {
           "[--follow-up-beside-named] [--follow-up-confounded-too] [--follow-up-full-rerun] "
           "[--bic-informing-rows|--bic-all-rows] [--polish|--no-polish] "
           "[--gn-force-noise|--no-gn-force-noise] [--refinement-gate-p P (0: off)] "
-          "[--second-round-evidence B] "
+          "[--second-round-evidence B] [--weak-step-bic B (0: off)] "
           "[--first-seed S] [--poses N] [--noise-free] [--laser-sigma-mm S] "
           "[--design-estimate word,...] [--design-emphasis W] [--angle-steps N] [--max-angle-deg "
           "A] [--tension-margin N]\n"
@@ -1354,6 +1370,13 @@ int main(int argc, char** argv) {
       bench_noise().sigma_laser * 1e3, num_poses,
       max_angle_deg > 0.0 ? max_angle_deg : cdpr::PoseDesignOptions{}.max_angle / kDeg,
       design_estimate.empty() ? "" : " (design for more parameters)", kDwellS);
+  if (second_round_evidence > 0.0 || weak_step > 0.0) {
+    std::printf(
+        "second screening round: an effect needs BIC below -%.3g; one above -%.3g is held back as "
+        "a "
+        "suspect with follow-up poses\n",
+        second_round_evidence, weak_step);
+  }
   std::printf("mapping (true effect -> families of diagnose() that count as naming it):\n");
   for (const Effect& e : effects()) {
     std::string f;
@@ -1372,6 +1395,7 @@ int main(int argc, char** argv) {
   dopt.gauss_newton_force_noise = gn_force_noise;
   dopt.refinement_gate_p = refinement_gate;
   dopt.second_round_min_evidence = second_round_evidence;
+  dopt.weak_step_bic = weak_step;
   const auto t_all = std::chrono::steady_clock::now();
   std::vector<std::string> which;
   if (robots != "large") which.push_back("mini");

@@ -15,6 +15,8 @@ target_link_libraries(cdpr_daemon
 
 cdpr_add_gtest(NAME daemon_config_test SOURCES ${_d}/src/daemon_config_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.cc LIBS cdpr_daemon)
+cdpr_add_gtest(NAME daemon_calibration_report_test SOURCES ${_d}/src/calibration_report_test.cc
+               LIBS cdpr_daemon)
 foreach(t daemon_state_store_test daemon_config_test)
   if(TARGET ${t})
     target_compile_definitions(${t} PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")

@@ -338,6 +338,20 @@ CvRms cv_rms(const MismatchDesign& d, const Eigen::MatrixXd* extra, const std::v
 bool corrected_set(const MeasurementSet& set, const MismatchDesign& d, const CandidateColumns& c,
                    const Eigen::VectorXd& theta, bool force_noise, MeasurementSet& out) {
   out = set;
+  if (c.tension_readings.cols() == theta.size() && c.tension_readings.rows() > 0) {
+    // An error of the tension readings: each reading corrected (CandidateColumns::
+    // tension_readings), the rows follow through the identification.
+    const Eigen::VectorXd e = c.tension_readings * theta;
+    const int np = set.num_poses();
+    if (e.size() % std::max(np, 1) != 0) return false;
+    const int m = np > 0 ? static_cast<int>(e.size() / np) : 0;
+    for (int j = 0; j < np; ++j) {
+      PoseMeasurement& pm = out.poses[static_cast<std::size_t>(j)];
+      if (pm.tensions.size() != m) continue;
+      for (int i = 0; i < m; ++i) pm.tensions(i) -= e(static_cast<Eigen::Index>(j) * m + i);
+    }
+    return true;
+  }
   const Eigen::VectorXd v = c.X * theta;
   const bool have_si = c.si.rows() == c.X.rows() && c.si.cols() == c.X.cols();
   const Eigen::VectorXd v_si = have_si ? Eigen::VectorXd(c.si * theta) : Eigen::VectorXd();
@@ -1180,16 +1194,46 @@ std::vector<double> holm(const std::vector<double>& p) {
   return adj;
 }
 
-// An effect is accepted when its likelihood-ratio test passes (after Holm over the tried ones),
-// it is worth its parameters (BIC) and it improves the held-out fit.
-bool passes_tests(const EffectFit& f, double p_adj, double alpha) {
-  return p_adj < alpha && f.bic_delta < 0 && f.cv_normalized_after < f.cv_normalized_before;
+// What an effect must show to be accepted: its likelihood-ratio test passes (after Holm over the
+// tried ones) at `alpha`, it is worth its parameters (BIC below 0) and it improves the held-out
+// fit; an effect of the selection group of the suspect being confirmed
+// (DiagnosisOptions::confirm_suspect) also needs its BIC below -strong_bic.
+struct Gate {
+  double alpha = 0.05;
+  std::string strong_group;  // empty: none
+  double strong_bic = 0.0;
+};
+
+Gate gate_of(const DiagnosisOptions& options) {
+  Gate g;
+  g.alpha = options.screen.alpha;
+  if (const EffectDescriptor* e =
+          options.confirm_suspect.empty() ? nullptr : find_effect(options.confirm_suspect)) {
+    g.strong_group = selection_group(std::string(e->family));
+    g.strong_bic = options.weak_step_bic;
+  }
+  return g;
+}
+
+// A step that adds `f` beside accepted effects is held back as a suspect instead of taken
+// (DiagnosisOptions::weak_step_bic): weak evidence, robot time available, not a confirmatory run.
+bool held_back_step(const EffectFit& f, const DiagnosisOptions& options) {
+  return options.weak_step_bic > 0.0 && options.follow_up_poses > 0 &&
+         options.screen.only_groups.empty() && !(f.bic_delta < -options.weak_step_bic);
+}
+
+bool passes_tests(const EffectFit& f, double p_adj, const Gate& gate) {
+  const double needed = !gate.strong_group.empty() && selection_group(f.family) == gate.strong_group
+                            ? -gate.strong_bic
+                            : 0.0;
+  return p_adj < gate.alpha && f.bic_delta < std::min(0.0, needed) &&
+         f.cv_normalized_after < f.cv_normalized_before;
 }
 
 // Among passing fits, one per family: the simplest, unless a richer member is significantly
 // better than it (LRT of the difference) and has the lower BIC; of those, the lowest BIC.
 const Trial* choose_trial(const std::vector<const Trial*>& pool, const std::vector<double>& adj,
-                          double alpha) {
+                          const Gate& gate) {
   std::map<std::string, const Trial*> per_family;
   std::vector<std::size_t> order(pool.size());
   for (std::size_t q = 0; q < order.size(); ++q) order[q] = q;
@@ -1198,7 +1242,7 @@ const Trial* choose_trial(const std::vector<const Trial*>& pool, const std::vect
   });
   for (std::size_t q : order) {
     const Trial* t = pool[q];
-    if (!passes_tests(t->fit, adj[q], alpha)) continue;
+    if (!passes_tests(t->fit, adj[q], gate)) continue;
     const std::string group = selection_group(t->fit.family);
     auto it = per_family.find(group);
     if (it == per_family.end()) {
@@ -1208,7 +1252,7 @@ const Trial* choose_trial(const std::vector<const Trial*>& pool, const std::vect
     const EffectFit& simple = it->second->fit;
     const int dk = t->fit.extra_parameters - simple.extra_parameters;
     const double gain = simple.deviance_after - t->fit.deviance_after;
-    if (dk > 0 && chi2_upper_tail(gain, dk) < alpha && t->fit.bic_delta < simple.bic_delta) {
+    if (dk > 0 && chi2_upper_tail(gain, dk) < gate.alpha && t->fit.bic_delta < simple.bic_delta) {
       it->second = t;
     }
   }
@@ -1222,7 +1266,8 @@ const Trial* choose_trial(const std::vector<const Trial*>& pool, const std::vect
 // The forward step's choice among the effects tried beside the accepted ones (Holm over their
 // likelihood-ratio tests); nullptr when none passes. Only a trial whose BIC is more than
 // `min_evidence` below the accepted set's can be chosen (every trial counts in Holm's family).
-const Trial* best_step(const std::vector<Trial>& tried, double alpha, double min_evidence = 0.0) {
+const Trial* best_step(const std::vector<Trial>& tried, const Gate& gate,
+                       double min_evidence = 0.0) {
   std::vector<double> p;
   for (const auto& t : tried) p.push_back(t.fit.lrt_p_value);
   const std::vector<double> all = holm(p);
@@ -1233,7 +1278,7 @@ const Trial* best_step(const std::vector<Trial>& tried, double alpha, double min
     pool.push_back(&tried[q]);
     adj.push_back(all[q]);
   }
-  return choose_trial(pool, adj, alpha);
+  return choose_trial(pool, adj, gate);
 }
 
 // A candidate the screen sees only through a structure it does not explain: significant, but no
@@ -1313,6 +1358,9 @@ struct Acceptance {
   // Joint BIC of each set of effects refitted jointly from the standard model by the swaps, in
   // the order refitted (+inf: could not be fitted); stage 4 judges pairs in the set with them.
   std::map<std::vector<std::string>, double> joint_bics;
+  // The second round's choice held back for weak evidence (DiagnosisOptions::
+  // weak_step_bic): a suspect for follow-up poses, not named.
+  std::optional<EffectFit> held_back;
 };
 
 // A refinement (an accepted effect whose selection group holds a simpler family: nonlinear
@@ -1363,7 +1411,6 @@ void keep_refinements_that_pass(const RefitContext& ctx, const State& standard,
 Acceptance accept_effects(const RefitContext& ctx, const State& standard,
                           const MismatchSummary& screen) {
   const DiagnosisOptions& options = ctx.options;
-  const double alpha = options.screen.alpha;
   const std::vector<ConfoundedPair>& pairs = screen.confounded;
   Acceptance out;
   std::vector<Trial>& trials = out.trials;
@@ -1372,9 +1419,10 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
     auto st = refit(ctx, standard, id, fit);
     if (st) trials.push_back({std::move(fit), std::move(*st)});
   }
-  auto passes = [&](const EffectFit& f, double p_adj) { return passes_tests(f, p_adj, alpha); };
+  const Gate gate = gate_of(options);
+  auto passes = [&](const EffectFit& f, double p_adj) { return passes_tests(f, p_adj, gate); };
   auto choose = [&](const std::vector<const Trial*>& pool, const std::vector<double>& adj) {
-    return choose_trial(pool, adj, alpha);
+    return choose_trial(pool, adj, gate);
   };
   State current = standard;
   std::set<std::string> families_taken;
@@ -1422,9 +1470,10 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
     std::vector<EffectFit> accepted;
     State state;
     double bic = 0.0;
+    std::optional<EffectFit> held_back;  // the step it stopped at for weak evidence
   };
   auto forward_from = [&](const Trial& first) {
-    Path path{{first.fit}, first.state, 0.0};
+    Path path{{first.fit}, first.state, 0.0, std::nullopt};
     path.accepted.front().accepted = true;
     std::set<std::string> groups{selection_group(first.fit.family)};
     std::set<std::string> ids{first.fit.id};
@@ -1443,8 +1492,12 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
         auto st = refit(ctx, path.state, id, fit);
         if (st) more.push_back({std::move(fit), std::move(*st)});
       }
-      const Trial* best = best_step(more, alpha);
+      const Trial* best = best_step(more, gate);
       if (best == nullptr) break;
+      if (held_back_step(best->fit, options)) {
+        path.held_back = best->fit;
+        break;
+      }
       EffectFit f = best->fit;
       f.accepted = true;
       path.accepted.push_back(f);
@@ -1464,6 +1517,7 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
     }
     out.accepted = std::move(best_path->accepted);
     current = std::move(best_path->state);
+    out.held_back = std::move(best_path->held_back);
     for (const auto& f : out.accepted) {
       ids_taken.insert(f.id);
       families_taken.insert(selection_group(f.family));
@@ -1565,7 +1619,6 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
 MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& screen0,
                              Acceptance& acc) {
   const DiagnosisOptions& options = ctx.options;
-  const double alpha = options.screen.alpha;
   MismatchSummary last;
   for (;;) {
     auto s2 = locate_mismatch(acc.current.report, acc.current.set, acc.current.opt, options.screen);
@@ -1597,8 +1650,17 @@ MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& scr
       auto st = refit(ctx, acc.current, cs.id, fit);
       if (st) more.push_back({std::move(fit), std::move(*st)});
     }
-    const Trial* best = best_step(more, alpha, options.second_round_min_evidence);
+    const Trial* best = best_step(more, gate_of(options), options.second_round_min_evidence);
     if (best == nullptr) break;
+    if (held_back_step(best->fit, options)) {
+      // Weak evidence: robot time decides it (stage 5 proposes its follow-up poses). One held
+      // back by the first round's forward steps stays the suspect.
+      if (!acc.held_back) {
+        acc.held_back = best->fit;
+        acc.held_back->round = 2;
+      }
+      break;
+    }
     EffectFit f = best->fit;
     f.accepted = true;
     f.round = 2;
@@ -1912,58 +1974,59 @@ std::vector<ConfoundedFinding> separate(const std::vector<ConfoundedPair>& found
 // When the screen's overall test already fails (the verdict will be "mismatch unexplained"),
 // more poses are the next step anyway: the candidate with the lowest p-value is then the suspect
 // whatever its corrected p-value.
+// The follow_up_poses poses that add the most information on `suspect`'s parameters; nullopt when
+// the grid has none for it.
+std::optional<FollowUp> follow_up_for(const CandidateScreen& suspect, const RobotModel& estimate,
+                                      const ExtraPoseGrid& grid, int np,
+                                      const DiagnosisOptions& options) {
+  const CandidateColumns* cs = grid.design ? find_columns(*grid.design, suspect.id) : nullptr;
+  if (cs == nullptr) return std::nullopt;
+  const PoseGrams g = pose_grams(*grid.design, {&cs->X}, true, false);
+  const int k = g.block_size[0];
+  auto logdet = [&](const Eigen::MatrixXd& M) {
+    const Eigen::MatrixXd S = reduce_geometry(M, g.geometry).topLeftCorner(k, k);
+    const double ridge = 1e-9 * std::max(S.trace(), 1e-300);
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt(S + ridge * Eigen::MatrixXd::Identity(k, k));
+    return ldlt.vectorD().array().max(ridge).log().sum();
+  };
+  Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
+  for (int j = 0; j < np; ++j) M += g.M[static_cast<std::size_t>(j)];
+  const double f_ref = default_reference_tension(estimate);
+  FollowUp fu;
+  fu.suspect = suspect.id;
+  fu.name = suspect.name;
+  fu.p_value = suspect.p_value;
+  fu.p_adjusted = suspect.p_adjusted;
+  fu.parameters = k;
+  fu.information_before = logdet(M);
+  const std::vector<int> chosen = greedy_extra_poses(
+      g, np, options.follow_up_poses,
+      [&](int q) { return grid.pretensions[static_cast<std::size_t>(q)] == f_ref; }, logdet,
+      -std::numeric_limits<double>::infinity(), M);
+  for (int q : chosen) {
+    fu.poses.push_back(grid.poses[static_cast<std::size_t>(q)]);
+    fu.pretensions.push_back(grid.pretensions[static_cast<std::size_t>(q)]);
+  }
+  fu.information_after = logdet(M);
+  if (fu.poses.empty()) return std::nullopt;
+  return fu;
+}
+
 std::optional<FollowUp> follow_up(const MismatchSummary& screen, const RobotModel& estimate,
                                   const std::function<const ExtraPoseGrid&()>& grid_of, int np,
                                   const DiagnosisOptions& options, bool misfit_clause = true,
                                   const std::vector<std::string>& not_suspects = {}) {
-  const double alpha = options.screen.alpha;
-  {
-    const bool unexplained_misfit = misfit_clause && screen.p_value < alpha;
-    const CandidateScreen* suspect = nullptr;
-    for (const auto& cs : screen.candidates) {
-      if (cs.modelled || cs.rank == 0) continue;
-      if (std::find(not_suspects.begin(), not_suspects.end(), cs.id) != not_suspects.end())
-        continue;
-      if (proxy_for_structure(screen, cs.id, options.screen_gate_p)) continue;
-      if (!(cs.p_adjusted < options.suspect_p) && !unexplained_misfit) continue;
-      if (suspect == nullptr || cs.p_value < suspect->p_value) suspect = &cs;
-    }
-    if (suspect != nullptr) {
-      const ExtraPoseGrid& grid = grid_of();
-      const CandidateColumns* cs = grid.design ? find_columns(*grid.design, suspect->id) : nullptr;
-      if (cs != nullptr) {
-        const PoseGrams g = pose_grams(*grid.design, {&cs->X}, true, false);
-        const int k = g.block_size[0];
-        auto logdet = [&](const Eigen::MatrixXd& M) {
-          const Eigen::MatrixXd S = reduce_geometry(M, g.geometry).topLeftCorner(k, k);
-          const double ridge = 1e-9 * std::max(S.trace(), 1e-300);
-          const Eigen::LDLT<Eigen::MatrixXd> ldlt(S + ridge * Eigen::MatrixXd::Identity(k, k));
-          return ldlt.vectorD().array().max(ridge).log().sum();
-        };
-        Eigen::MatrixXd M = Eigen::MatrixXd::Zero(g.total, g.total);
-        for (int j = 0; j < np; ++j) M += g.M[static_cast<std::size_t>(j)];
-        const double f_ref = default_reference_tension(estimate);
-        FollowUp fu;
-        fu.suspect = suspect->id;
-        fu.name = suspect->name;
-        fu.p_value = suspect->p_value;
-        fu.p_adjusted = suspect->p_adjusted;
-        fu.parameters = k;
-        fu.information_before = logdet(M);
-        const std::vector<int> chosen = greedy_extra_poses(
-            g, np, options.follow_up_poses,
-            [&](int q) { return grid.pretensions[static_cast<std::size_t>(q)] == f_ref; }, logdet,
-            -std::numeric_limits<double>::infinity(), M);
-        for (int q : chosen) {
-          fu.poses.push_back(grid.poses[static_cast<std::size_t>(q)]);
-          fu.pretensions.push_back(grid.pretensions[static_cast<std::size_t>(q)]);
-        }
-        fu.information_after = logdet(M);
-        if (!fu.poses.empty()) return fu;
-      }
-    }
+  const bool unexplained_misfit = misfit_clause && screen.p_value < options.screen.alpha;
+  const CandidateScreen* suspect = nullptr;
+  for (const auto& cs : screen.candidates) {
+    if (cs.modelled || cs.rank == 0) continue;
+    if (std::find(not_suspects.begin(), not_suspects.end(), cs.id) != not_suspects.end()) continue;
+    if (proxy_for_structure(screen, cs.id, options.screen_gate_p)) continue;
+    if (!(cs.p_adjusted < options.suspect_p) && !unexplained_misfit) continue;
+    if (suspect == nullptr || cs.p_value < suspect->p_value) suspect = &cs;
   }
-  return std::nullopt;
+  if (suspect == nullptr) return std::nullopt;
+  return follow_up_for(*suspect, estimate, grid_of(), np, options);
 }
 
 void state_gross_readings(Diagnosis& d) {
@@ -2134,7 +2197,16 @@ void state_verdict(Diagnosis& d, double alpha) {
         d.screen.chi2, d.screen.dof, d.screen.p_value);
   }
   d.findings.push_back(d.headline);
-  if (d.follow_up) {
+  if (d.follow_up && d.follow_up->held_back) {
+    const FollowUp& fu = *d.follow_up;
+    d.findings.push_back(format(
+        "Suspected, not proven: %s passed the tests beside the effects named, but with weak "
+        "evidence (BIC %+.1f; p = %.3g on the second screen, %.3g after Holm's correction). "
+        "Measure the %d proposed follow-up poses (they multiply the information on its parameters "
+        "by %.1f), append them to this recording and diagnose again to decide.",
+        fu.name.c_str(), fu.bic_delta, fu.p_value, fu.p_adjusted, static_cast<int>(fu.poses.size()),
+        std::exp((fu.information_after - fu.information_before) / std::max(1, fu.parameters))));
+  } else if (d.follow_up) {
     const FollowUp& fu = *d.follow_up;
     d.findings.push_back(format(
         "Suspected, not proven: %s (p = %.3g for it alone, %.3g after Holm's correction over the "
@@ -2502,6 +2574,16 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
         locate_mismatch(acc.current.report, acc.current.set, acc.current.opt, options.screen);
     if (again) d.screen_after = std::move(*again);
   }
+  if (acc.held_back) {
+    // Held back for weak evidence (DiagnosisOptions::weak_step_bic); taken after all by a swap of
+    // the first round, it is no suspect.
+    if (acc.ids_taken.count(acc.held_back->id)) {
+      acc.held_back.reset();
+    } else if (std::none_of(acc.candidates.begin(), acc.candidates.end(),
+                            [&](const EffectFit& c) { return c.id == acc.held_back->id; })) {
+      acc.candidates.push_back(*acc.held_back);
+    }
+  }
   std::string physics_in_few;
   // Stage 3d: flagged readings that the accepted effects bring within gross_sigmas are physics
   // concentrated in a few readings (DiagnosisOptions::gross_effects_sigmas).
@@ -2532,7 +2614,21 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     return *grid;
   };
   if (!found.empty()) d.confounded = separate(found, acc.trials, grid_of(), np, options);
-  if (options.follow_up_poses > 0 && d.accepted.empty()) {
+  if (options.follow_up_poses > 0 && acc.held_back && d.screen_after) {
+    // The effect held back for weak evidence (DiagnosisOptions::weak_step_bic), with its p-value
+    // on the screen of the model with the accepted effects; not screened there, its trial's test
+    // stands in.
+    CandidateScreen cs;
+    cs.id = acc.held_back->id;
+    cs.name = acc.held_back->name;
+    cs.p_value = cs.p_adjusted = acc.held_back->lrt_p_value;
+    if (const CandidateScreen* found_there = d.screen_after->find(cs.id)) cs = *found_there;
+    d.follow_up = follow_up_for(cs, d.before.estimate.robot, grid_of(), np, options);
+    if (d.follow_up) {
+      d.follow_up->held_back = true;
+      d.follow_up->bic_delta = acc.held_back->bic_delta;
+    }
+  } else if (options.follow_up_poses > 0 && d.accepted.empty()) {
     d.follow_up = follow_up(d.screen, d.before.estimate.robot, grid_of, np, options);
   } else if (options.follow_up_poses > 0 && options.follow_up_beside_named && d.screen_after) {
     // Candidates confounded with a named effect on the first screen are not suspects here

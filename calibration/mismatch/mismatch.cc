@@ -507,8 +507,8 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   std::vector<Candidate> lib;
   auto candidate = [](const char* id, Eigen::MatrixXd X, Eigen::MatrixXd x_si) {
     const EffectDescriptor* e = find_effect(id);
-    return Candidate{id,           std::string(e->name), std::string(e->family),
-                     std::move(X), std::move(x_si),      {}};
+    return Candidate{
+        id, std::string(e->name), std::string(e->family), std::move(X), std::move(x_si), {}, {}};
   };
   // `slope`: the value's derivative by the row's tension reading (CandidateColumns::dtension;
   // `none` for a value that does not follow it).
@@ -686,12 +686,14 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
     if (h.X.norm() > 0) lib.push_back(std::move(h));
     Candidate c = candidate("pulley_friction_per_cable", Eigen::MatrixXd::Zero(n, m),
                             Eigen::MatrixXd::Zero(n, m));
+    c.tension_readings = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(np) * m, m);
     for (int j = 0; j < np; ++j) {
       const auto uj = static_cast<std::size_t>(j);
       const int r0 = pose_start[uj], nr = pose_start[uj + 1] - r0;
       for (int i = 0; i < m; ++i) {
         c.X.block(r0, i, nr, 1) = move(j, i) * tension_white[uj].col(i);
         c.si.block(r0, i, nr, 1) = move(j, i) * tension_si[uj].col(i);
+        c.tension_readings(static_cast<Eigen::Index>(j) * m + i, i) = move(j, i);
       }
     }
     if (c.X.norm() > 0) lib.push_back(std::move(c));

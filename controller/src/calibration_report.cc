@@ -265,4 +265,21 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
   return page;
 }
 
+ExtraPoseRound extra_pose_round(const Diagnosis& d) {
+  ExtraPoseRound r;
+  for (const ConfoundedFinding& cf : d.confounded) {
+    r.poses.insert(r.poses.end(), cf.separating_poses.begin(), cf.separating_poses.end());
+    r.pretensions.insert(r.pretensions.end(), cf.separating_pretensions.begin(),
+                         cf.separating_pretensions.end());
+  }
+  if (d.follow_up) {
+    r.poses.insert(r.poses.end(), d.follow_up->poses.begin(), d.follow_up->poses.end());
+    r.pretensions.insert(r.pretensions.end(), d.follow_up->pretensions.begin(),
+                         d.follow_up->pretensions.end());
+    r.confirm_groups = follow_up_groups(d);
+    if (d.follow_up->held_back) r.confirm_suspect = d.follow_up->suspect;
+  }
+  return r;
+}
+
 }  // namespace cdpr::controller

@@ -1071,6 +1071,9 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
   // After the follow-up poses of a suspect beside named effects, the next diagnosis is
   // confirmatory (follow_up_groups): it decides the suspect beside the named effects.
   std::vector<std::string> confirm_groups;
+  // A suspect held back for weak evidence beside named effects (FollowUp::held_back): the
+  // confirmatory diagnosis after its follow-up poses names it only with strong evidence.
+  std::string confirm_suspect;
   for (int round = 0;;) {
     auto read = recording::read_recording(rec_path);
     if (!read.ok()) return fail(read.status());
@@ -1096,6 +1099,7 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
     dopt.bootstrap_samples = config_.identification.bootstrap;
     dopt.cv_folds = config_.identification.folds;
     dopt.screen.only_groups = confirm_groups;
+    dopt.confirm_suspect = confirm_suspect;
     diagnosis = diagnose(initial, set, nullptr, config_.identification.options, dopt);
     if (!diagnosis.ok()) return fail(diagnosis.status());
     if (!diagnosis->gross_readings.empty() && remeasure_round < ms.remeasure_rounds) {
@@ -1138,23 +1142,13 @@ void Daemon::run_calibration(std::vector<Pose> poses, PeerInfo peer) {
       continue;
     }
     if (round++ >= ms.extra_pose_rounds) break;
-    confirm_groups.clear();
-    std::vector<Pose> extra;
-    std::vector<double> pretensions;
-    for (const ConfoundedFinding& cf : diagnosis->confounded) {
-      extra.insert(extra.end(), cf.separating_poses.begin(), cf.separating_poses.end());
-      pretensions.insert(pretensions.end(), cf.separating_pretensions.begin(),
-                         cf.separating_pretensions.end());
-    }
-    // A suspect's follow-up poses (with nothing named; beside named effects when
-    // DiagnosisOptions::follow_up_beside_named proposed them).
-    if (diagnosis->follow_up) {
-      extra.insert(extra.end(), diagnosis->follow_up->poses.begin(),
-                   diagnosis->follow_up->poses.end());
-      pretensions.insert(pretensions.end(), diagnosis->follow_up->pretensions.begin(),
-                         diagnosis->follow_up->pretensions.end());
-      confirm_groups = follow_up_groups(*diagnosis);
-    }
+    // Separating poses of the confounded pairs; a suspect's follow-up poses (with nothing named;
+    // beside named effects when held back for weak evidence, or follow_up_beside_named).
+    ExtraPoseRound more = extra_pose_round(*diagnosis);
+    confirm_groups = std::move(more.confirm_groups);
+    confirm_suspect = std::move(more.confirm_suspect);
+    const std::vector<Pose>& extra = more.poses;
+    const std::vector<double>& pretensions = more.pretensions;
     if (extra.empty()) break;
     spdlog::info("calibration {}: the mismatch locator asks for {} extra poses", id, extra.size());
     set_state(DaemonState::kMeasuring, "calibration " + std::to_string(id) + ": " +

@@ -190,15 +190,18 @@ nlohmann::json diagnosis_json(const Diagnosis& d, const RobotModel& nominal,
     const FollowUp& f = *d.follow_up;
     nlohmann::json poses = nlohmann::json::array();
     for (const Pose& p : f.poses) poses.push_back(to_json(Eigen::VectorXd(p.vector())));
-    follow_up = {{"suspect", f.suspect},
-                 {"name", f.name},
-                 {"parameters", f.parameters},
-                 {"p_value", number_or_null(f.p_value)},
-                 {"p_adjusted", number_or_null(f.p_adjusted)},
-                 {"poses", poses},
-                 {"pretensions_n", vector_json(f.pretensions)},
-                 {"log_det_information_before", number_or_null(f.information_before)},
-                 {"log_det_information_after", number_or_null(f.information_after)}};
+    follow_up = {
+        {"suspect", f.suspect},
+        {"name", f.name},
+        {"parameters", f.parameters},
+        {"p_value", number_or_null(f.p_value)},
+        {"p_adjusted", number_or_null(f.p_adjusted)},
+        {"poses", poses},
+        {"pretensions_n", vector_json(f.pretensions)},
+        {"log_det_information_before", number_or_null(f.information_before)},
+        {"log_det_information_after", number_or_null(f.information_after)},
+        {"held_back", f.held_back},
+        {"bic_delta", f.held_back ? number_or_null(f.bic_delta) : nlohmann::json(nullptr)}};
   }
   nlohmann::json channels = nlohmann::json::array();
   for (const ChannelRms& ch : d.channels) {

@@ -62,6 +62,19 @@ struct CalibrationReportContext {
   std::vector<RemeasuredPose> remeasured;
 };
 
+// One round of extra poses that the mismatch locator asks for: the separating poses of each
+// confounded pair, then a suspect's follow-up poses, and how the next diagnosis runs. After a
+// suspect's follow-up poses beside named effects it is confirmatory: it screens only
+// confirm_groups (follow_up_groups) and names a suspect held back for weak evidence only with
+// strong evidence (DiagnosisOptions::confirm_suspect). No poses: the sequence is done.
+struct ExtraPoseRound {
+  std::vector<Pose> poses;
+  std::vector<double> pretensions;          // N, planned pretension at each pose
+  std::vector<std::string> confirm_groups;  // MismatchOptions::only_groups of the next diagnosis
+  std::string confirm_suspect;              // DiagnosisOptions::confirm_suspect of the next one
+};
+ExtraPoseRound extra_pose_round(const Diagnosis& d);
+
 // The gates and the proposed model. `diagnosis` may be nullptr. The referenced reports must
 // outlive the outcome.
 CalibrationOutcome evaluate_calibration(const RobotModel& before, const MeasurementSet& set,

@@ -91,7 +91,9 @@ struct MeasuringSettings {
   // N: after settling, the measured tensions are regulated into [f_min - band, f_max + band]
   // (length trims, mostly internal force); 0: off.
   double tension_band = 3.0;
-  int extra_pose_rounds = 1;  // rounds of extra poses the mismatch locator may ask for
+  // Rounds of extra poses the mismatch locator may ask for: separating poses of a confounded
+  // pair, then follow-up poses of a suspect that the re-run with them holds back (docs/daemon.md).
+  int extra_pose_rounds = 2;
   // Rounds in which the poses of gross readings (Diagnosis::gross_readings) are measured again
   // (their first rows left out of the identification); not counted in extra_pose_rounds.
   int remeasure_rounds = 1;

@@ -108,6 +108,21 @@ struct DiagnosisOptions {
   // creep and drum (BIC -0.6 to -5.3), so the default is 0: the step's BIC < 0 alone
   // (docs/mismatch-benchmark.md "Session 23").
   double second_round_min_evidence = 0.0;
+  // Robot time instead of a threshold: a step that adds an effect beside accepted ones (the first
+  // round's forward steps after the first effect, the second screening round) whose BIC is less
+  // than this below the set without it (weak evidence, yet past every test) is not taken; the
+  // effect is held back as a suspect (FollowUp::held_back) with follow_up_poses poses aimed at its
+  // parameters, and the confirmatory re-run on the longer recording (follow_up_groups,
+  // confirm_suspect) decides it. Applies only when follow_up_poses > 0 and the run is not itself
+  // confirmatory (screen.only_groups empty). 0: off (taken on BIC < 0 alone).
+  double weak_step_bic = 0.0;
+  // The re-run after a held-back suspect's follow-up poses: its candidate id (FollowUp::suspect of
+  // a FollowUp with held_back). An effect of its selection group is then named only with strong
+  // evidence, its BIC more than weak_step_bic below the set without it: the poses were
+  // chosen to give that evidence (information on its parameters about doubled), and an effect
+  // that stays weak with them is a noise realisation that looked like one (LARGE seed 0's laser
+  // beam direction: BIC -1.1 on the 25 poses, -0.5 with its 20 follow-up poses). Empty: none.
+  std::string confirm_suspect;
   // After the second round accepted an effect, each earlier one is tested for removal (the others
   // refitted jointly from the standard model without it; Holm over the accepted, alpha): an effect
   // that only stood in for the one found later is dropped.
@@ -214,6 +229,10 @@ struct FollowUp {
   std::vector<double> pretensions;         // N, planned pretension at each of them
   // log det of the projected information on the suspect's parameters, without / with the poses.
   double information_before = 0.0, information_after = 0.0;
+  // An effect held back for weak evidence (DiagnosisOptions::weak_step_bic): its fit beside
+  // the named effects passed the tests with this BIC (deviance units, negative).
+  bool held_back = false;
+  double bic_delta = 0.0;
 };
 
 // A reading far from every model (DiagnosisOptions::gross_sigmas).

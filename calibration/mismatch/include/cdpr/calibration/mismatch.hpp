@@ -230,6 +230,14 @@ struct CandidateColumns {
   // per N; 0 elsewhere), so that a fitted effect moved into the lengths also carries how the force
   // noise reaches them (PoseMeasurement::extra_compliance). Empty for the others.
   Eigen::MatrixXd dtension;
+  // For a candidate that is an error of the tension readings themselves (pulley friction): the
+  // error of cable i's reading at pose j per unit coefficient, row j * cables + i (N). A fitted
+  // effect is then moved out of the readings exactly (each reading corrected), not through its
+  // linearised effect on the length and equilibrium rows: a cable slack in truth whose reading
+  // the error lifts above the slack threshold has a length row that no linear correction mends,
+  // while its corrected reading drops the row (LARGE's friction of 30 N, noise-free: chi^2 516
+  // left over the linearised way, 0 this way). Empty for the others.
+  Eigen::MatrixXd tension_readings;
 };
 
 struct MismatchDesign {
