@@ -6,6 +6,6 @@
 if(TARGET cdpr_sim)
   add_executable(mismatch_bench ${CMAKE_CURRENT_LIST_DIR}/mismatch_bench.cc)
   target_link_libraries(mismatch_bench
-    PRIVATE cdpr_sim cdpr_report cdpr_calibration cdpr_calibration_testing Threads::Threads
-            cdpr_options)
+    PRIVATE cdpr_sim cdpr_report cdpr_calibration cdpr_calibration_testing cdpr_daemon
+            Threads::Threads cdpr_options)
 endif()

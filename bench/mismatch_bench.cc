@@ -41,6 +41,7 @@
 #include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/calibration/winch.hpp"
+#include "cdpr/controller/daemon_config.hpp"
 #include "cdpr/recording/recording.hpp"
 #include "cdpr/report/report.hpp"
 #include "cdpr/sim/lockstep_io.hpp"
@@ -69,11 +70,13 @@ using cdpr::bench::must;
 // --laser-sigma-mm: the laser's noise per pose (the product averages measuring.laser_samples
 // readings per pose); 0 keeps mini_noise()'s 1 mm.
 double g_laser_sigma = 0.0;
-// --design-emphasis W: PoseDesignOptions::emphasis_weight (the laser's beam direction's weight
-// in the pose design); negative: the product's default.
-double g_design_emphasis = -1.0;
-// --angle-steps N: PoseDesignOptions::angle_steps (0: the product's default).
-int g_angle_steps = 0;
+// The pose design is cdprd's (MeasuringSettings: tilts in half steps, the laser's beam direction
+// emphasised), as the daemon designs the poses it measures; --library-design takes
+// PoseDesignOptions' defaults (the plain full-angle design of cdpr-fit design-poses).
+// --design-emphasis W: PoseDesignOptions::emphasis_weight (the laser's beam direction's weight).
+double g_design_emphasis = cdpr::controller::MeasuringSettings{}.design_emphasis_weight;
+// --angle-steps N: PoseDesignOptions::angle_steps.
+int g_angle_steps = cdpr::controller::MeasuringSettings{}.design_angle_steps;
 
 cdpr::SensorNoise bench_noise() {
   cdpr::SensorNoise n = cdpr::bench::mini_noise();
@@ -130,8 +133,8 @@ Robot make_robot(const std::string& which, bool quick, int num_poses,
     }
     item->set(d.identification, true);
   }
-  if (g_design_emphasis >= 0.0) d.emphasis_weight = g_design_emphasis;
-  if (g_angle_steps > 0) d.angle_steps = g_angle_steps;
+  d.emphasis_weight = g_design_emphasis;
+  d.angle_steps = g_angle_steps;
   if (which == "mini") {
     const cdpr::scenario::Scenario s = cdpr::scenario::mini_config_scenario();
     r.name = "MINI";
@@ -1283,6 +1286,9 @@ int main(int argc, char** argv) {
       tension_margin = std::max(0.0, std::atof(argv[++i]));
     } else if (a == "--angle-steps" && i + 1 < argc) {
       g_angle_steps = std::clamp(std::atoi(argv[++i]), 1, 10);
+    } else if (a == "--library-design") {
+      g_angle_steps = cdpr::PoseDesignOptions{}.angle_steps;
+      g_design_emphasis = cdpr::PoseDesignOptions{}.emphasis_weight;
     } else if (a == "--design-emphasis" && i + 1 < argc) {
       g_design_emphasis = std::max(0.0, std::atof(argv[++i]));
     } else if (a == "--design-estimate" && i + 1 < argc) {
@@ -1300,7 +1306,8 @@ int main(int argc, char** argv) {
           "[--gn-force-noise|--no-gn-force-noise] [--refinement-gate-p P (0: off)] "
           "[--second-round-evidence B] [--weak-step-bic B (0: off)] "
           "[--first-seed S] [--poses N] [--noise-free] [--laser-sigma-mm S] "
-          "[--design-estimate word,...] [--design-emphasis W] [--angle-steps N] [--max-angle-deg "
+          "[--design-estimate word,...] [--library-design] [--design-emphasis W] [--angle-steps N] "
+          "[--max-angle-deg "
           "A] [--tension-margin N]\n"
           "  effects:");
       for (const Effect& e : effects()) std::fprintf(stderr, " %s", e.key.c_str());
@@ -1364,18 +1371,26 @@ int main(int argc, char** argv) {
                     .c_str());
   std::printf(
       "noise%s: laser %.3g mm, encoder 0.1 mm, force 1 N; %d designed poses tilted up to %.0f "
-      "deg%s; "
+      "deg in %d step%s, the laser's beam direction at weight %.3g%s%s; "
       "lock-step physics (cdpr-sim), %.0f s per pose\n",
       g_noise_free ? " (stated; the recordings are noise-free)" : "",
       bench_noise().sigma_laser * 1e3, num_poses,
       max_angle_deg > 0.0 ? max_angle_deg : cdpr::PoseDesignOptions{}.max_angle / kDeg,
+      g_angle_steps, g_angle_steps == 1 ? "" : "s", g_design_emphasis,
+      g_angle_steps == cdpr::controller::MeasuringSettings{}.design_angle_steps &&
+              g_design_emphasis == cdpr::controller::MeasuringSettings{}.design_emphasis_weight
+          ? " (cdprd's design)"
+          : "",
       design_estimate.empty() ? "" : " (design for more parameters)", kDwellS);
-  if (second_round_evidence > 0.0 || weak_step > 0.0) {
+  if (weak_step > 0.0) {
     std::printf(
-        "second screening round: an effect needs BIC below -%.3g; one above -%.3g is held back as "
-        "a "
-        "suspect with follow-up poses\n",
-        second_round_evidence, weak_step);
+        "an effect added beside named ones with BIC above -%.3g is held back as a suspect: its "
+        "follow-up poses measured, the confirmatory re-run names it only below -%.3g\n",
+        weak_step, weak_step);
+  }
+  if (second_round_evidence > 0.0) {
+    std::printf("the second screening round names an effect only with BIC below -%.3g\n",
+                second_round_evidence);
   }
   std::printf("mapping (true effect -> families of diagnose() that count as naming it):\n");
   for (const Effect& e : effects()) {

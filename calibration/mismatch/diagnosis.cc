@@ -1358,8 +1358,8 @@ struct Acceptance {
   // Joint BIC of each set of effects refitted jointly from the standard model by the swaps, in
   // the order refitted (+inf: could not be fitted); stage 4 judges pairs in the set with them.
   std::map<std::vector<std::string>, double> joint_bics;
-  // The second round's choice held back for weak evidence (DiagnosisOptions::
-  // weak_step_bic): a suspect for follow-up poses, not named.
+  // An effect held back for weak evidence (DiagnosisOptions::weak_step_bic: a forward step of the
+  // winning path or the second round): a suspect for follow-up poses, not named.
   std::optional<EffectFit> held_back;
 };
 
@@ -1495,8 +1495,14 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
       const Trial* best = best_step(more, gate);
       if (best == nullptr) break;
       if (held_back_step(best->fit, options)) {
+        // The paths compete as if the step were taken: holding it back decides what is named,
+        // not which path explains the recording best (a path ending at a weak step would lose to
+        // one with a stand-in for its first effect: elasticity for creep beside force gains).
         path.held_back = best->fit;
-        break;
+        std::vector<EffectFit> with = path.accepted;
+        with.push_back(best->fit);
+        path.bic = joint_bic(ctx, best->state, bic_penalty(ctx, with));
+        return path;
       }
       EffectFit f = best->fit;
       f.accepted = true;
@@ -1963,19 +1969,9 @@ std::vector<ConfoundedFinding> separate(const std::vector<ConfoundedPair>& found
   return out;
 }
 
-// Follow-up poses for a suspect. With no effect named, the candidate with the lowest
-// screen p-value is a suspect when that p-value after Holm's correction is below
-// options.suspect_p: an effect near the noise (a laser tilt of half a degree leaves 0.6 sigma
-// on 25 laser rows) is often visible there but not named. (Before Holm's correction the
-// smallest of the library's p-values was below 0.2 on 17 of 20 null recordings.) The
-// poses that add the most information on its parameters (log det of its projected
-// information, the identification profiled out; greedy over the grid at the planned
-// pretension) are proposed; measured and appended, they decide it.
-// When the screen's overall test already fails (the verdict will be "mismatch unexplained"),
-// more poses are the next step anyway: the candidate with the lowest p-value is then the suspect
-// whatever its corrected p-value.
-// The follow_up_poses poses that add the most information on `suspect`'s parameters; nullopt when
-// the grid has none for it.
+// The follow_up_poses poses that add the most information on `suspect`'s parameters (log det of
+// its projected information, the identification profiled out; greedy over the grid at the planned
+// pretension); nullopt when the grid has none for it.
 std::optional<FollowUp> follow_up_for(const CandidateScreen& suspect, const RobotModel& estimate,
                                       const ExtraPoseGrid& grid, int np,
                                       const DiagnosisOptions& options) {
@@ -2012,6 +2008,15 @@ std::optional<FollowUp> follow_up_for(const CandidateScreen& suspect, const Robo
   return fu;
 }
 
+// Follow-up poses for a suspect. With no effect named, the candidate with the lowest
+// screen p-value is a suspect when that p-value after Holm's correction is below
+// options.suspect_p: an effect near the noise (a laser tilt of half a degree leaves 0.6 sigma
+// on 25 laser rows) is often visible there but not named. (Before Holm's correction the
+// smallest of the library's p-values was below 0.2 on 17 of 20 null recordings.) Its
+// poses (follow_up_for) are proposed; measured and appended, they decide it.
+// When the screen's overall test already fails (the verdict will be "mismatch unexplained"),
+// more poses are the next step anyway: the candidate with the lowest p-value is then the suspect
+// whatever its corrected p-value.
 std::optional<FollowUp> follow_up(const MismatchSummary& screen, const RobotModel& estimate,
                                   const std::function<const ExtraPoseGrid&()>& grid_of, int np,
                                   const DiagnosisOptions& options, bool misfit_clause = true,

@@ -598,12 +598,16 @@ TEST(Diagnosis, AWeakStepBesideNamedEffectsIsHeldBackUntilItsFollowUpPosesGiveSt
   SimulatedMeasurements sim = simulate(d, 3);
   conceal_hooke(d, sim, 5.0e4);
   DiagnosisOptions o = quick_options();
+  o.weak_step_bic = 0.0;  // off: taken on BIC < 0
   auto named = diagnose(d.s.nominal, sim.set, nullptr, {}, o);
   ASSERT_TRUE(named.ok()) << named.status().to_string();
   const auto second = std::find_if(named->accepted.begin(), named->accepted.end(),
                                    [](const EffectFit& f) { return f.round == 2; });
   ASSERT_NE(second, named->accepted.end()) << trace(*named);
   EXPECT_FALSE(named->follow_up.has_value()) << trace(*named);
+  // Weak evidence by the default bound too (a BIC between -weak_step_bic and 0).
+  EXPECT_LT(second->bic_delta, 0.0);
+  EXPECT_GT(second->bic_delta, -DiagnosisOptions{}.weak_step_bic);
   auto in_group = [&](const Diagnosis& x) {
     return std::any_of(x.accepted.begin(), x.accepted.end(), [&](const EffectFit& f) {
       return selection_group(f.family) == selection_group(second->family);

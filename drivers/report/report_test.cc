@@ -245,6 +245,33 @@ TEST_F(CalibrationReport, ADiagnosisAddsItsSectionsToEveryRendering) {
   EXPECT_EQ(r.html.find("</body>"), r.html.rfind("</body>"));  // one page
 }
 
+// A suspect held back beside a named effect for weak evidence: the JSON says so and carries its
+// BIC; an ordinary suspect's BIC is null; the page lists its follow-up poses.
+TEST_F(CalibrationReport, AHeldBackSuspectCarriesItsWeakEvidence) {
+  Diagnosis d = elasticity_named();
+  FollowUp fu;
+  fu.suspect = "laser_direction";
+  fu.name = "laser beam direction (a tilted mount)";
+  fu.parameters = 2;
+  fu.held_back = true;
+  fu.bic_delta = -1.1;
+  fu.poses = {Pose{}, Pose{}};
+  fu.pretensions = {40.0, 40.0};
+  d.follow_up = fu;
+  in_.diagnosis = &d;
+  const Rendered r = render_calibration_report(in_);
+  const nlohmann::json& j = r.json.at("diagnosis").at("follow_up");
+  EXPECT_EQ(j.at("suspect"), "laser_direction");
+  EXPECT_TRUE(j.at("held_back").get<bool>());
+  EXPECT_DOUBLE_EQ(j.at("bic_delta").get<double>(), -1.1);
+  EXPECT_EQ(j.at("poses").size(), 2u);
+  EXPECT_THAT(r.html, HasSubstr(fu.name));
+  d.follow_up->held_back = false;
+  const Rendered plain = render_calibration_report(in_);
+  EXPECT_FALSE(plain.json.at("diagnosis").at("follow_up").at("held_back").get<bool>());
+  EXPECT_TRUE(plain.json.at("diagnosis").at("follow_up").at("bic_delta").is_null());
+}
+
 // A named effect with its value +- std and the share of the standard fit's excess chi^2 it
 // removes; the residual maps before/after; the findings folded.
 TEST_F(CalibrationReport, NamedEffectsTableShowsValueStdAndShareOfTheMisfit) {

@@ -413,26 +413,41 @@ TEST(CompoundEffects, ASmallerEffectHiddenByALargerOneIsNamedByTheSecondRound) {
 // (second_round_own_directions): both are named, nothing else. Before (the pair never tried
 // together), these two seeds named creep alone; over seeds 1001-1008 both were named in 4 of 8
 // runs before and in 7 of 8 after (1006: elasticity for creep, the two share their direction).
+// Beside creep the gains' evidence can be weak (they share creep's direction: BIC -3.5 on seed
+// 1004); they are then held back with follow-up poses (DiagnosisOptions::weak_step_bic), and the
+// confirmatory re-run with those poses measured names both, as cdprd does.
 TEST(CompoundEffects, ForceGainsBesideCreepAreBothNamedThoughTheyShareOneDirection) {
   const double ea = mini().truth.cables[0].ea;
+  int held = 0;
   for (std::uint64_t seed : {1003u, 1004u}) {
     SCOPED_TRACE(seed);
-    const MeasurementSet set = record_with(
-        [&](sim::HiddenEffects& e, RobotModel&) {
-          sim::CreepEffect c;
-          c.tau_s = 10.0;
-          c.coefficient = 0.1 / (ea * std::log1p(500.0 / c.tau_s));
-          e.creep = c;
-          e.force_gain_error.values = force_gains();
-        },
-        true, seed);
+    const Hide hide = [&](sim::HiddenEffects& e, RobotModel&) {
+      sim::CreepEffect c;
+      c.tau_s = 10.0;
+      c.coefficient = 0.1 / (ea * std::log1p(500.0 / c.tau_s));
+      e.creep = c;
+      e.force_gain_error.values = force_gains();
+    };
+    const MeasurementSet set = record_with(hide, true, seed);
     Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
     ASSERT_TRUE(d.ok()) << d.status().to_string();
+    if (d->follow_up && d->follow_up->held_back) {
+      ++held;
+      EXPECT_EQ(d->follow_up->suspect, "force_gain_per_cable") << d->headline;
+      std::vector<Pose> more = mini().poses;
+      more.insert(more.end(), d->follow_up->poses.begin(), d->follow_up->poses.end());
+      DiagnosisOptions confirm = options(true);
+      confirm.screen.only_groups = follow_up_groups(*d);
+      confirm.confirm_suspect = d->follow_up->suspect;
+      d = diagnose(mini().nominal, record_poses(hide, true, seed, more), nullptr, {}, confirm);
+      ASSERT_TRUE(d.ok()) << d.status().to_string();
+    }
     ASSERT_EQ(d->verdict, Diagnosis::Verdict::kMismatchNamed) << d->headline;
     EXPECT_NE(accepted(*d, "creep"), nullptr) << d->headline;
     EXPECT_NE(accepted(*d, "force sensor gain"), nullptr) << d->headline;
     EXPECT_EQ(d->accepted.size(), 2u) << d->headline;
   }
+  EXPECT_LE(held, 1);  // seed 1003's gains are strong at once
 }
 
 // MINI with cable creep (compliance +10 % of 1/EA over the 500 s recording, tau 10 s) and drum
