@@ -1625,6 +1625,7 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
 MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& screen0,
                              Acceptance& acc) {
   const DiagnosisOptions& options = ctx.options;
+  const Gate gate = gate_of(options);
   MismatchSummary last;
   for (;;) {
     auto s2 = locate_mismatch(acc.current.report, acc.current.set, acc.current.opt, options.screen);
@@ -1656,7 +1657,7 @@ MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& scr
       auto st = refit(ctx, acc.current, cs.id, fit);
       if (st) more.push_back({std::move(fit), std::move(*st)});
     }
-    const Trial* best = best_step(more, gate_of(options), options.second_round_min_evidence);
+    const Trial* best = best_step(more, gate, options.second_round_min_evidence);
     if (best == nullptr) break;
     if (held_back_step(best->fit, options)) {
       // Weak evidence: robot time decides it (stage 5 proposes its follow-up poses). One held
