@@ -49,15 +49,14 @@ struct DiagnosisOptions {
   // A Gauss-Newton effect that follows the tension readings (nonlinear elasticity, compliance,
   // creep) moved into the lengths makes them depend on the readings: true adds its derivative by
   // the tension to the lengths' extra compliance (PoseMeasurement::extra_compliance), so that
-  // their sigma carries the force noise as the identification's own elasticity does. False (as
-  // before session 20) leaves the sigma at the model's compliance: the log det of the deviance
+  // their sigma carries the force noise as the identification's own elasticity does. False leaves the sigma at the model's compliance: the log det of the deviance
   // then favours such an effect over the identified EA it competes with.
   bool gauss_newton_force_noise = false;
   // A refinement named in place of the simpler family of its selection group (nonlinear
   // elasticity for Hooke's) must pass the gate of naming an effect on what it adds: the
   // likelihood ratio of its extra parameters against the accepted set with the simpler member in
   // its place, Bonferroni over the library, below this; else the simpler member is named.
-  // 0: off (the forward paths' joint BIC alone decides, as before session 20).
+  // 0: off (the forward paths' joint BIC alone decides).
   double refinement_gate_p = 0.05;
   int separating_poses = 6;                   // extra poses proposed for each confounded pair
   double separating_half_extent_scale = 1.0;  // of the extra-pose grid (the visited region)
@@ -79,7 +78,7 @@ struct DiagnosisOptions {
   // Beside named effects, a candidate confounded on the first screen (MismatchSummary::confounded)
   // with a named effect is not a suspect: what the second screen sees in its directions is
   // mostly the named effect's own residue, and 20 poses aimed at it lifted absent effects over the
-  // gates (session 14). A suspect of another channel or family (the laser's beam direction beside
+  // gates. A suspect of another channel or family (the laser's beam direction beside
   // the cables' effects) still gets its follow-up poses.
   bool follow_up_skips_confounded_with_named = true;
   // The first accepted effect must also be seen by the linear screen: its screen p-value
@@ -106,7 +105,7 @@ struct DiagnosisOptions {
   // 0: LRT p 0.0016 on 2 parameters, BIC -1.1; the true tilts beside sag or creep -10 to -11).
   // 6 ("strong" on Kass and Raftery's scale) mends that seed but loses true MINI tilts beside
   // creep and drum (BIC -0.6 to -5.3), so the default is 0: the step's BIC < 0 alone
-  // (docs/mismatch-benchmark.md "Session 23").
+  // (docs/mismatch-benchmark.md, "Choices the figures support").
   double second_round_min_evidence = 0.0;
   // Robot time instead of a threshold: a step that adds an effect beside accepted ones (the first
   // round's forward steps after the first effect, the second screening round) whose BIC is less
@@ -115,7 +114,7 @@ struct DiagnosisOptions {
   // parameters, and the confirmatory re-run on the longer recording (follow_up_groups,
   // confirm_suspect) decides it. Applies only when follow_up_poses > 0 and the run is not itself
   // confirmatory (screen.only_groups empty). 6 is "strong" evidence on Kass and Raftery's scale
-  // (docs/mismatch-benchmark.md "Session 24": LARGE seed 0's absent laser beam direction, BIC
+  // (docs/mismatch-benchmark.md, "Choices the figures support": LARGE seed 0's absent laser beam direction, BIC
   // -1.1, held back and not confirmed; true MINI beam tilts beside creep and drum scale, -0.6 to
   // -5.3, confirmed with their follow-up poses). 0: off (taken on BIC < 0 alone).
   double weak_step_bic = 6.0;
@@ -159,7 +158,7 @@ struct DiagnosisOptions {
   // parameter per reading, so none brings one wild reading from hundreds of sigmas within
   // gross_sigmas; the bound saves the stages' time on a smeared fit (a 0.3 m length error on MINI,
   // about 30 000 sigmas: 279 s). A reading further out is gross at once; 0: every flagged reading
-  // is (before session 23).
+  // is.
   double gross_effects_sigmas = 1000.0;
 };
 
@@ -308,7 +307,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
 // suspect BESIDE named effects screens (MismatchOptions::only_groups): the named effects', the
 // suspect's and both sides of each confounded pair (its separating poses are measured in the same
 // round). The poses were chosen to decide that suspect; a full re-run on the longer recording
-// also lifted absent effects over the gates (docs/mismatch-benchmark.md, session 17). Empty when
+// also lifted absent effects over the gates (docs/mismatch-benchmark.md, "Choices the figures support"). Empty when
 // `d` has no follow-up or names nothing (a suspect with nothing named gets a full re-run).
 std::vector<std::string> follow_up_groups(const Diagnosis& d);
 
