@@ -64,8 +64,8 @@ struct MeasuringSettings {
   std::string pose_file;  // pose list CSV (docs/recording-format.md); "" = pose design
   // rad: the designed poses' tilt about each platform axis (PoseDesignOptions::max_angle, 15
   // degrees). More tilt carries more of the laser beam's direction, but 25 degrees overloaded a
-  // cable of the virtual MINI (docs/mismatch-benchmark.md, "Choices the figures support"); cable-platform
-  // interference is not checked.
+  // cable of the virtual MINI (docs/mismatch-benchmark.md, "Choices the figures support");
+  // cable-platform interference is not checked.
   double max_angle = 0.2618;
   // N: the designed poses' tensions kept this far inside [f_min, f_max] on the NOMINAL model (at
   // least motion.tension_margin). The design is made on the geometry it is about to correct; the
@@ -78,7 +78,8 @@ struct MeasuringSettings {
   // library's (1, 0): on MINI, the robot cdprd drives, they named more in every part of the
   // concealed-effect benchmark (compound 74/80 against 66/80, singles 24/24 and 23/24 against
   // 23/24 and 21/24, null suspects 3/20 against 4/20), while on the LARGE frame the singles
-  // regress (docs/mismatch-benchmark.md, "Choices the figures support"). Without a laser the emphasis adds nothing.
+  // regress (docs/mismatch-benchmark.md, "Choices the figures support"). Without a laser the
+  // emphasis adds nothing.
   int design_angle_steps = 2;
   double design_emphasis_weight = 3.0;
   int laser_samples = 20;                   // readings per pose (median/MAD robust mean)

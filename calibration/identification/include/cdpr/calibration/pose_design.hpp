@@ -55,14 +55,15 @@ struct PoseDesignOptions {
   // 1 (the full angle only) is the default; 2 with the beam direction emphasised (below) names
   // more compound effects on both benchmark robots and is cdprd's design for MINI
   // (MeasuringSettings), but on LARGE it lets an absent laser mounting through beside named
-  // effects and the gross-reading check fire on sag (docs/mismatch-benchmark.md, "Choices the figures support").
-  // Below 1: kInvalidArgument (as a negative or non-finite emphasis_weight).
+  // effects and the gross-reading check fire on sag (docs/mismatch-benchmark.md, "Choices the
+  // figures support"). Below 1: kInvalidArgument (as a negative or non-finite emphasis_weight).
   int angle_steps = 1;
   double reference_tension = std::numeric_limits<double>::quiet_NaN();  // N; NaN: default
   // N: a candidate needs a tension distribution within [f_min + margin, f_max - margin] of every
   // cable. A pose at the edge of the NOMINAL model's workspace can be outside the true robot's:
   // the true geometry's internal forces moved a cable of the virtual MINI 24 N past its f_max at
-  // a 25-degree tilt (docs/mismatch-benchmark.md, "Choices the figures support"). 0: the limits themselves.
+  // a 25-degree tilt (docs/mismatch-benchmark.md, "Choices the figures support"). 0: the limits
+  // themselves.
   double tension_margin = 0.0;
   SensorNoise noise;
   // The channels the calibration will record (issue 18): the design maximises the information of

@@ -49,8 +49,9 @@ struct DiagnosisOptions {
   // A Gauss-Newton effect that follows the tension readings (nonlinear elasticity, compliance,
   // creep) moved into the lengths makes them depend on the readings: true adds its derivative by
   // the tension to the lengths' extra compliance (PoseMeasurement::extra_compliance), so that
-  // their sigma carries the force noise as the identification's own elasticity does. False leaves the sigma at the model's compliance: the log det of the deviance
-  // then favours such an effect over the identified EA it competes with.
+  // their sigma carries the force noise as the identification's own elasticity does. False leaves
+  // the sigma at the model's compliance: the log det of the deviance then favours such an effect
+  // over the identified EA it competes with.
   bool gauss_newton_force_noise = false;
   // A refinement named in place of the simpler family of its selection group (nonlinear
   // elasticity for Hooke's) must pass the gate of naming an effect on what it adds: the
@@ -114,9 +115,9 @@ struct DiagnosisOptions {
   // parameters, and the confirmatory re-run on the longer recording (follow_up_groups,
   // confirm_suspect) decides it. Applies only when follow_up_poses > 0 and the run is not itself
   // confirmatory (screen.only_groups empty). 6 is "strong" evidence on Kass and Raftery's scale
-  // (docs/mismatch-benchmark.md, "Choices the figures support": LARGE seed 0's absent laser beam direction, BIC
-  // -1.1, held back and not confirmed; true MINI beam tilts beside creep and drum scale, -0.6 to
-  // -5.3, confirmed with their follow-up poses). 0: off (taken on BIC < 0 alone).
+  // (docs/mismatch-benchmark.md, "Choices the figures support": LARGE seed 0's absent laser beam
+  // direction, BIC -1.1, held back and not confirmed; true MINI beam tilts beside creep and drum
+  // scale, -0.6 to -5.3, confirmed with their follow-up poses). 0: off (taken on BIC < 0 alone).
   double weak_step_bic = 6.0;
   // The re-run after a held-back suspect's follow-up poses: its candidate id (FollowUp::suspect of
   // a FollowUp with held_back). An effect of its selection group is then named only with strong
@@ -307,8 +308,9 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
 // suspect BESIDE named effects screens (MismatchOptions::only_groups): the named effects', the
 // suspect's and both sides of each confounded pair (its separating poses are measured in the same
 // round). The poses were chosen to decide that suspect; a full re-run on the longer recording
-// also lifted absent effects over the gates (docs/mismatch-benchmark.md, "Choices the figures support"). Empty when
-// `d` has no follow-up or names nothing (a suspect with nothing named gets a full re-run).
+// also lifted absent effects over the gates (docs/mismatch-benchmark.md, "Choices the figures
+// support"). Empty when `d` has no follow-up or names nothing (a suspect with nothing named gets a
+// full re-run).
 std::vector<std::string> follow_up_groups(const Diagnosis& d);
 
 }  // namespace cdpr
