@@ -84,14 +84,6 @@ Status check_model_and_data(const RobotModel& model, const ForwardKinematicsOpti
   return Status::success();
 }
 
-double characteristic_length(const RobotModel& model) {
-  double r = 0.0;
-  for (Eigen::Index i = 0; i < model.platform_anchors.cols(); ++i) {
-    r = std::max(r, model.platform_anchors.col(i).norm());
-  }
-  return r > 0.0 ? r : 1.0;
-}
-
 void residual_stats(const Eigen::VectorXd& r, ForwardKinematicsSummary& s) {
   s.max_abs_residual = 0.0;
   s.worst_cable = -1;
@@ -113,7 +105,7 @@ ForwardKinematicsSummary solve(const RobotModel& model, const ForwardKinematicsO
   const Pose& start = options.initial_pose ? *options.initial_pose : model.home;
   Eigen::Vector3d position = start.position;
   Eigen::Matrix3d rotation = rotation_from_rpy<double>(start.rpy);
-  const double lc = characteristic_length(model);
+  const double lc = model.platform_radius();
 
   KinematicsData* cur = &data.current;
   KinematicsData* tri = &data.trial;

@@ -17,15 +17,6 @@ Eigen::Matrix3d skew(const Eigen::Vector3d& v) {
   return s;
 }
 
-// Characteristic length that turns moments into forces and rotations into lengths.
-double platform_radius(const RobotModel& model) {
-  double rho = 0.0;
-  for (int i = 0; i < model.num_cables(); ++i) {
-    rho = std::max(rho, model.platform_anchors.col(i).norm());
-  }
-  return rho > 1e-6 ? rho : 1.0;
-}
-
 Wrench scaled(const Wrench& w, double rho) {
   Wrench s = w;
   s.tail<3>() /= rho;
@@ -436,7 +427,7 @@ ElastostaticSummary solve_elastostatics(const RobotModel& model,
       return summary;
     }
   }
-  const double rho = platform_radius(model);
+  const double rho = model.platform_radius();
 
   // Start pose.
   Pose start = model.home;

@@ -273,12 +273,8 @@ StructureConditioning structure_conditioning(const RobotModel& model, const Pose
     return out;
   }
   out.valid = true;
-  double rho = 0.0;
-  for (int i = 0; i < model.num_cables(); ++i) {
-    rho = std::max(rho, model.platform_anchors.col(i).norm());
-  }
   Eigen::MatrixXd a = data.structure_matrix;
-  if (rho > 0.0) a.bottomRows<3>() /= rho;
+  a.bottomRows<3>() /= model.platform_radius();
   const Eigen::JacobiSVD<Eigen::MatrixXd> svd(a);
   const Eigen::VectorXd& sv = svd.singularValues();
   const int n = static_cast<int>(sv.size());

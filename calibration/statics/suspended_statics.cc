@@ -13,14 +13,6 @@
 namespace cdpr {
 namespace {
 
-double platform_radius(const RobotModel& model) {
-  double rho = 0.0;
-  for (int i = 0; i < model.num_cables(); ++i) {
-    rho = std::max(rho, model.platform_anchors.col(i).norm());
-  }
-  return rho > 0.0 ? rho : 1.0;
-}
-
 Status check_input(const RobotModel& model, int min_cables, const char* what) {
   const int m = model.num_cables();
   if (m < min_cables || m > 6) {
@@ -148,7 +140,7 @@ Status finish_state(const RobotModel& model, SuspendedState& s) {
   const Eigen::MatrixXd A = kin.structure_matrix;
   s.tensions = A.colPivHouseholderQr().solve(-w);
   Eigen::Matrix<double, 6, 1> r = A * s.tensions + w;
-  r.tail<3>() /= platform_radius(model);
+  r.tail<3>() /= model.platform_radius();
   s.wrench_residual = r.cwiseAbs().maxCoeff();
   s.lengths = kin.lengths;
   return Status::success();
@@ -177,7 +169,7 @@ Result<SuspendedState> suspended_equilibrium_pose(const RobotModel& model, const
   const int m = model.num_cables();
   const int nfree = 6 - m;  // the first nfree rpy angles
   const double weight = model.platform.mass * model.gravity;
-  const double rho = platform_radius(model);
+  const double rho = model.platform_radius();
   KinematicsData kin(model);
   Eigen::Vector3d rpy0 = target.rpy;
   if (options.initial_pose) {
@@ -238,7 +230,7 @@ Result<SuspendedState> forward_kinematics_suspended(
                          m, static_cast<int>(kinematic_lengths.size()));
   }
   const double weight = model.platform.mass * model.gravity;
-  const double rho = platform_radius(model);
+  const double rho = model.platform_radius();
   const Pose start = options.initial_pose.value_or(model.home);
   Eigen::Matrix3d R0 = rotation_from_rpy<double>(start.rpy);
   KinematicsData kin(model);

@@ -18,14 +18,6 @@
 namespace cdpr::sim {
 namespace {
 
-double platform_radius(const RobotModel& model) {
-  double rho = 0.0;
-  for (int i = 0; i < model.num_cables(); ++i) {
-    rho = std::max(rho, model.platform_anchors.col(i).norm());
-  }
-  return rho > 1e-6 ? rho : 1.0;
-}
-
 double scaled_max(const Wrench& w, double rho) {
   return std::max(w.head<3>().cwiseAbs().maxCoeff(), w.tail<3>().cwiseAbs().maxCoeff() / rho);
 }
@@ -64,7 +56,7 @@ Physics::Physics(RobotModel truth, const Scenario& scenario, std::uint64_t seed,
       lengths_(Eigen::VectorXd::Zero(truth_.num_cables())),
       sag_tensions_(Eigen::VectorXd::Zero(truth_.num_cables())),
       sag_trial_tensions_(Eigen::VectorXd::Zero(truth_.num_cables())),
-      rho_(platform_radius(truth_)) {
+      rho_(truth_.platform_radius()) {
   const int m = truth_.num_cables();
   const HiddenEffects& e = scenario_.effects;
   // True lasers: mount offset and tilt (platform frame), target plane tilt and offset (world).

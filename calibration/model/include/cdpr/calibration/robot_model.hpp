@@ -18,6 +18,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -160,6 +161,15 @@ struct RobotModel {
   }
 
   int num_cables() const { return static_cast<int>(frame_anchors.cols()); }
+
+  // The platform's characteristic length rho (m): the largest |b_i|, or 1 for a point platform
+  // (every |b_i| under 1 um). It turns moments into forces and rotations into lengths wherever
+  // force and moment rows, or position and angle errors, are weighed together.
+  double platform_radius() const {
+    double rho = 0.0;
+    for (int i = 0; i < num_cables(); ++i) rho = std::max(rho, platform_anchors.col(i).norm());
+    return rho > 1e-6 ? rho : 1.0;
+  }
 };
 
 }  // namespace cdpr
