@@ -14,6 +14,7 @@
 #include "bench_util.hpp"
 #include "cdpr/calibration/ik_compensation.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "cdpr/controller/path.hpp"
 #include "cdpr/controller/path_check.hpp"
 #include "cdpr/controller/slew.hpp"
 #include "cdpr/controller/trajectory.hpp"
@@ -158,6 +159,61 @@ void BM_CheckPath(benchmark::State& state) {
   state.SetLabel(model.name + ", " + std::to_string(traj.linear_distance()) + " m");
 }
 BENCHMARK(BM_CheckPath)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
+// A MINI path with every piece kind: a full circle of 0.1 m radius, a turning spline through two
+// waypoints, a line back.
+cdpr::Path mixed_path() {
+  Pose start;
+  start.position << 0.1, 0.0, 0.0;
+  std::vector<cdpr::PathSegment> segs(4);
+  segs[0].kind = cdpr::PathSegment::Kind::kArc;
+  segs[0].target = start;
+  segs[1].kind = segs[2].kind = cdpr::PathSegment::Kind::kSpline;
+  segs[1].target.position << 0.05, 0.05, 0.02;
+  segs[1].target.rpy << 3 * kDeg, 0.0, 5 * kDeg;
+  segs[2].target.position << 0.0, 0.0, 0.0;
+  segs[3].target = start;
+  return cdpr::bench::must(cdpr::Path::plan(start, segs, {}), "path");
+}
+
+void BM_PathSample(benchmark::State& state) {
+  const cdpr::Path path = mixed_path();
+  Pose pose;
+  cdpr::TaskVelocity v;
+  double t = 0.0;
+  const cdpr::test::AllocationCounter count;
+  for (auto _ : state) {
+    path.sample(t, pose, &v);
+    t += 0.004;
+    if (t > path.duration()) t = 0.0;
+    benchmark::DoNotOptimize(pose.rpy.data());
+    benchmark::DoNotOptimize(v.angular.data());
+    benchmark::ClobberMemory();
+  }
+  report_allocations(state, count.allocations());
+}
+BENCHMARK(BM_PathSample);
+
+void BM_PlanPath(benchmark::State& state) {
+  for (auto _ : state) {
+    const cdpr::Path path = mixed_path();
+    benchmark::DoNotOptimize(path.duration());
+  }
+}
+BENCHMARK(BM_PlanPath)->Unit(benchmark::kMicrosecond);
+
+void BM_CheckMixedPath(benchmark::State& state) {
+  const RobotModel model = robot(0);
+  const cdpr::Path path = mixed_path();
+  cdpr::PathCheckSummary summary;
+  for (auto _ : state) {
+    const cdpr::Status s = cdpr::check_path(model, path, {}, &summary);
+    if (!s.ok()) state.SkipWithError(s.to_string().c_str());
+    benchmark::DoNotOptimize(summary);
+  }
+  state.counters["points"] = summary.points;
+}
+BENCHMARK(BM_CheckMixedPath)->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 
