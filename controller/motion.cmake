@@ -1,5 +1,5 @@
 # Motion: task-space trajectories (double-S, straight line with the orientation on the geodesic),
-# feasibility along a path, the per-cycle tension plan and encoder targets, the joint-space slew
+# multi-segment paths (lines, arcs, splines) and the path file reader, feasibility along a path, the per-cycle tension plan and encoder targets, the joint-space slew
 # limiter. Planning and checks run in the supervisor; sampling, command_counts and the slew
 # limiter in the RT cycle (allocation-free).
 add_library(cdpr_motion STATIC ${CMAKE_CURRENT_LIST_DIR}/src/trajectory.cc
