@@ -48,8 +48,9 @@ cdpr::PoseTrajectory move(int which) {
   return cdpr::bench::must(cdpr::PoseTrajectory::plan(Pose{}, to, limits), "plan");
 }
 
-void BM_TrajectorySample(benchmark::State& state) {
-  const cdpr::PoseTrajectory traj = move(0);
+// Samples `traj` (a PoseTrajectory or a Path) every 4 ms of it, over and over.
+template <typename Trajectory>
+void sample_every_cycle(benchmark::State& state, const Trajectory& traj) {
   Pose pose;
   cdpr::TaskVelocity v;
   double t = 0.0;
@@ -63,6 +64,10 @@ void BM_TrajectorySample(benchmark::State& state) {
     benchmark::ClobberMemory();
   }
   report_allocations(state, count.allocations());
+}
+
+void BM_TrajectorySample(benchmark::State& state) {
+  sample_every_cycle(state, move(0));
 }
 BENCHMARK(BM_TrajectorySample);
 
@@ -177,20 +182,7 @@ cdpr::Path mixed_path() {
 }
 
 void BM_PathSample(benchmark::State& state) {
-  const cdpr::Path path = mixed_path();
-  Pose pose;
-  cdpr::TaskVelocity v;
-  double t = 0.0;
-  const cdpr::test::AllocationCounter count;
-  for (auto _ : state) {
-    path.sample(t, pose, &v);
-    t += 0.004;
-    if (t > path.duration()) t = 0.0;
-    benchmark::DoNotOptimize(pose.rpy.data());
-    benchmark::DoNotOptimize(v.angular.data());
-    benchmark::ClobberMemory();
-  }
-  report_allocations(state, count.allocations());
+  sample_every_cycle(state, mixed_path());
 }
 BENCHMARK(BM_PathSample);
 
