@@ -19,4 +19,7 @@ cdpr_add_gtest(NAME motion_slew_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src/slew_
 cdpr_add_gtest(NAME motion_path_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src/path_test.cc
                LIBS cdpr_motion cdpr_calibration_testing cdpr_test_support)
 cdpr_add_gtest(NAME motion_path_file_test SOURCES ${CMAKE_CURRENT_LIST_DIR}/src/path_file_test.cc
-               LIBS cdpr_motion cdpr_test_support)
+               LIBS cdpr_motion cdpr_calibration_testing cdpr_test_support)
+if(TARGET motion_path_file_test)
+  target_compile_definitions(motion_path_file_test PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
+endif()

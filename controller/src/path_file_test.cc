@@ -8,6 +8,9 @@
 #include <fstream>
 #include <string>
 
+#include "cdpr/controller/path_check.hpp"
+#include "testing/test_robots.hpp"
+
 namespace cdpr {
 namespace {
 
@@ -127,6 +130,28 @@ TEST(PathFile, LoadsAFileAndNamesAMissingOne) {
   auto missing = load_path_file((dir / "none.path").string(), origin());
   EXPECT_EQ(missing.status().code(), ErrorCode::kNotFound);
   std::filesystem::remove_all(dir);
+}
+
+TEST(PathFile, TheShippedDemoPlansAndPassesTheMiniCheck) {
+  const std::string file = std::string(CDPR_SOURCE_DIR) + "/config/examples/mini-demo.path";
+  const RobotModel mini = testing::mini_robot();
+  auto segs = load_path_file(file, mini.home);
+  ASSERT_TRUE(segs.ok()) << segs.status().to_string();
+  auto path = Path::plan(mini.home, *segs, PathLimits{}, nullptr, file);
+  ASSERT_TRUE(path.ok()) << path.status().to_string();
+  // Stops: line, circle (after it the dwell), spline, helix, line home.
+  EXPECT_EQ(path->motions().size(), 5u);
+  PathCheckOptions options;
+  options.tension_margin = 5.0;
+  options.workspace_box =
+      Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-0.156), Eigen::Vector3d::Constant(0.156));
+  PathCheckSummary summary;
+  const Status s = check_path(mini, *path, options, &summary);
+  EXPECT_TRUE(s.ok()) << s.to_string();
+  EXPECT_GT(summary.points, 200);
+  Pose end;
+  path->sample(path->duration(), end);
+  EXPECT_LT(end.position.norm(), 1e-12);
 }
 
 }  // namespace
