@@ -14,6 +14,7 @@
 #include "bench_util.hpp"
 #include "cdpr/calibration/ik_compensation.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "cdpr/controller/path.hpp"
 #include "cdpr/controller/path_check.hpp"
 #include "cdpr/controller/slew.hpp"
 #include "cdpr/controller/trajectory.hpp"
@@ -47,8 +48,9 @@ cdpr::PoseTrajectory move(int which) {
   return cdpr::bench::must(cdpr::PoseTrajectory::plan(Pose{}, to, limits), "plan");
 }
 
-void BM_TrajectorySample(benchmark::State& state) {
-  const cdpr::PoseTrajectory traj = move(0);
+// Samples `traj` (a PoseTrajectory or a Path) every 4 ms of it, over and over.
+template <typename Trajectory>
+void sample_every_cycle(benchmark::State& state, const Trajectory& traj) {
   Pose pose;
   cdpr::TaskVelocity v;
   double t = 0.0;
@@ -62,6 +64,10 @@ void BM_TrajectorySample(benchmark::State& state) {
     benchmark::ClobberMemory();
   }
   report_allocations(state, count.allocations());
+}
+
+void BM_TrajectorySample(benchmark::State& state) {
+  sample_every_cycle(state, move(0));
 }
 BENCHMARK(BM_TrajectorySample);
 
@@ -158,6 +164,48 @@ void BM_CheckPath(benchmark::State& state) {
   state.SetLabel(model.name + ", " + std::to_string(traj.linear_distance()) + " m");
 }
 BENCHMARK(BM_CheckPath)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond);
+
+// A MINI path with every piece kind: a full circle of 0.1 m radius, a turning spline through two
+// waypoints, a line back.
+cdpr::Path mixed_path() {
+  Pose start;
+  start.position << 0.1, 0.0, 0.0;
+  std::vector<cdpr::PathSegment> segs(4);
+  segs[0].kind = cdpr::PathSegment::Kind::kArc;
+  segs[0].target = start;
+  segs[1].kind = segs[2].kind = cdpr::PathSegment::Kind::kSpline;
+  segs[1].target.position << 0.05, 0.05, 0.02;
+  segs[1].target.rpy << 3 * kDeg, 0.0, 5 * kDeg;
+  segs[2].target.position << 0.0, 0.0, 0.0;
+  segs[3].target = start;
+  return cdpr::bench::must(cdpr::Path::plan(start, segs, {}), "path");
+}
+
+void BM_PathSample(benchmark::State& state) {
+  sample_every_cycle(state, mixed_path());
+}
+BENCHMARK(BM_PathSample);
+
+void BM_PlanPath(benchmark::State& state) {
+  for (auto _ : state) {
+    const cdpr::Path path = mixed_path();
+    benchmark::DoNotOptimize(path.duration());
+  }
+}
+BENCHMARK(BM_PlanPath)->Unit(benchmark::kMicrosecond);
+
+void BM_CheckMixedPath(benchmark::State& state) {
+  const RobotModel model = robot(0);
+  const cdpr::Path path = mixed_path();
+  cdpr::PathCheckSummary summary;
+  for (auto _ : state) {
+    const cdpr::Status s = cdpr::check_path(model, path, {}, &summary);
+    if (!s.ok()) state.SkipWithError(s.to_string().c_str());
+    benchmark::DoNotOptimize(summary);
+  }
+  state.counters["points"] = summary.points;
+}
+BENCHMARK(BM_CheckMixedPath)->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 

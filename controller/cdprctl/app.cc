@@ -500,6 +500,12 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err,
       ->required()
       ->expected(3, 6);
   mv->callback([&] {
+    // Exactly a position (orientation 0) or a full pose: 4 or 5 numbers are a typo, not a pose.
+    if (move_pose.size() != 3 && move_pose.size() != 6) {
+      throw CLI::ValidationError(
+          "POSE", "takes exactly 3 (x y z) or 6 (x y z roll pitch yaw) numbers, got " +
+                      std::to_string(move_pose.size()));
+    }
     inv.name = "move";
     inv.cmd = "move";
     std::vector<double> p = move_pose;

@@ -310,6 +310,10 @@ TEST_F(CdprctlTest, UsageErrorsExitTwoAndHelpExitsZero) {
       {"calibrate", "--poses", "/no/such/file.csv"},
       {"--timeout", "-1", "status"},
       {"move", "0.1", "0.2"},
+      {"move", "0.1", "0.2", "0.3", "0"},
+      {"move", "0.1", "0.2", "0.3", "0", "0"},
+      {"move", "0.1", "0.2", "0.3", "0", "0", "0", "0"},
+      {"move", "0.1", "0.2", "0.3", "x"},
   };
   for (const auto& args : bad) {
     const Outcome o = ctl(args);

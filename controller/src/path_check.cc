@@ -104,7 +104,74 @@ Status explain_infeasible(const RobotModel& model, const KinematicsData& kinemat
                 "no cable tensions within the limits balance the platform's weight");
 }
 
-enum class Failure { kNone, kBox, kDegenerate, kWrench, kInput };
+enum class Failure { kNone, kBox, kDegenerate, kLength, kInterference, kWrench, kInput };
+
+// What a failure means for a pose ("is ...") and along a path ("... at").
+const char* pose_failure_text(Failure f) {
+  switch (f) {
+    case Failure::kBox:
+      return "is outside the workspace box";
+    case Failure::kDegenerate:
+      return "is not reachable";
+    case Failure::kLength:
+      return "is outside the cable length limits";
+    case Failure::kInterference:
+      return "has touching cables";
+    case Failure::kWrench:
+      return "is outside the wrench-feasible workspace";
+    default:
+      return "cannot be checked";
+  }
+}
+const char* path_failure_text(Failure f) {
+  switch (f) {
+    case Failure::kBox:
+      return "leaves the workspace box";
+    case Failure::kDegenerate:
+      return "meets a degenerate pose";
+    case Failure::kLength:
+      return "leaves the cable length limits";
+    case Failure::kInterference:
+      return "makes cables touch";
+    case Failure::kWrench:
+      return "leaves the wrench-feasible workspace";
+    default:
+      return "cannot be checked";
+  }
+}
+
+// Cable lengths within the limits and no two spans closer than the cable diameter.
+Status check_cables(const RobotModel& model, const KinematicsData& k,
+                    const PathCheckOptions& options, Failure& failure) {
+  const int m = model.num_cables();
+  for (int i = 0; i < m; ++i) {
+    const double L = k.lengths(i);
+    if (L < options.min_cable_length || L > options.max_cable_length) {
+      failure = Failure::kLength;
+      const bool above = L > options.max_cable_length;
+      return Status::error(ErrorCode::kOutOfRange, "cable %d is %.4f m long %s %.4f m", i + 1, L,
+                           above ? ">" : "<",
+                           above ? options.max_cable_length : options.min_cable_length);
+    }
+  }
+  const double d = options.cable_diameter;
+  if (!(d > 0.0)) return Status::success();
+  for (int i = 0; i < m; ++i) {
+    for (int j = i + 1; j < m; ++j) {
+      const auto ai = model.frame_anchors.col(i), aj = model.frame_anchors.col(j);
+      const auto bi = k.platform_points.col(i), bj = k.platform_points.col(j);
+      if ((ai - aj).norm() < d || (bi - bj).norm() < d) continue;  // they meet by design
+      const double dist = segment_distance(ai, bi, aj, bj);
+      if (dist < d) {
+        failure = Failure::kInterference;
+        return Status::error(ErrorCode::kOutOfRange,
+                             "cables %d and %d pass %.4f m apart < cable diameter %.4f m", i + 1,
+                             j + 1, dist, d);
+      }
+    }
+  }
+  return Status::success();
+}
 
 struct Verdict {
   Failure failure = Failure::kNone;
@@ -139,6 +206,10 @@ Verdict check_point(const RobotModel& model, const Eigen::Vector3d& position,
                       "cable %d is degenerate (its platform anchor is on its frame anchor or "
                       "inside its pulley circle)",
                       kinematics.invalid_cable + 1);
+    return v;
+  }
+  if (Status c = check_cables(model, kinematics, options, v.failure); !c.ok()) {
+    v.reason = c;
     return v;
   }
   const Status planned = plan_tensions(model, kinematics, reference, options.tension_margin, plan);
@@ -198,6 +269,14 @@ Status validate_options(const RobotModel& model, const PathCheckOptions& options
     return Status::error(ErrorCode::kInvalidArgument,
                          "path check: reference_tension must be finite and > 0 (got %g)",
                          *reference);
+  }
+  if (!(options.min_cable_length >= 0.0 && options.max_cable_length > options.min_cable_length) ||
+      !(std::isfinite(options.cable_diameter) && options.cable_diameter >= 0.0)) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "path check: need 0 <= min_cable_length < max_cable_length (got %g, %g) "
+                         "and a finite cable_diameter >= 0 (got %g)",
+                         options.min_cable_length, options.max_cable_length,
+                         options.cable_diameter);
   }
   if (options.workspace_box &&
       (!options.workspace_box->min().allFinite() || !options.workspace_box->max().allFinite() ||
@@ -284,10 +363,7 @@ Status check_pose(const RobotModel& model, const Pose& pose, const PathCheckOpti
   const Verdict v = check_point(model, pose.position, rotation_from_rpy<double>(pose.rpy),
                                 reference, options, kinematics, plan, summary, 0.0);
   if (v.failure == Failure::kNone) return Status::success();
-  const char* what = v.failure == Failure::kBox          ? "is outside the workspace box"
-                     : v.failure == Failure::kDegenerate ? "is not reachable"
-                     : v.failure == Failure::kWrench ? "is outside the wrench-feasible workspace"
-                                                     : "cannot be checked";
+  const char* what = pose_failure_text(v.failure);
   char where[160];
   pose_text(pose, where, sizeof where);
   const std::string_view reason = v.reason.message();
@@ -321,10 +397,7 @@ Status check_path(const RobotModel& model, const PoseTrajectory& trajectory,
     const Verdict v =
         check_point(model, position, rotation, reference, options, kinematics, plan, summary, s);
     if (v.failure == Failure::kNone) continue;
-    const char* what = v.failure == Failure::kBox          ? "leaves the workspace box"
-                       : v.failure == Failure::kDegenerate ? "meets a degenerate pose"
-                       : v.failure == Failure::kWrench     ? "leaves the wrench-feasible workspace"
-                                                           : "cannot be checked";
+    const char* what = path_failure_text(v.failure);
     char target[160];
     pose_text(trajectory.to(), target, sizeof target);
     const std::string_view reason = v.reason.message();
@@ -333,6 +406,81 @@ Status check_path(const RobotModel& model, const PoseTrajectory& trajectory,
                          static_cast<int>(reason.size()), reason.data());
   }
   return Status::success();
+}
+
+Status check_path(const RobotModel& model, const Path& path, const PathCheckOptions& options,
+                  PathCheckSummary* summary) {
+  if (summary != nullptr) *summary = PathCheckSummary{};
+  double reference = 0.0;
+  if (Status s = validate_options(model, options, &reference); !s.ok()) return s;
+  double total = 0.0;
+  for (const PathMotion& m : path.motions()) {
+    const double span = m.sigma_end - m.sigma_begin;
+    total += 1.0 + std::max({1.0, std::ceil(span * m.max_linear_rate / options.max_linear_step),
+                             std::ceil(span * m.max_angular_rate / options.max_angular_step)});
+  }
+  if (total > kMaxPoints) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "path check: %.3g points for a path of %g m (steps %g m, %g rad too "
+                         "small)",
+                         total, path.length(), options.max_linear_step, options.max_angular_step);
+  }
+  KinematicsData kinematics(model);
+  TensionPlan plan;
+  Eigen::Vector3d position;
+  Eigen::Matrix3d rotation;
+  auto check = [&](double sigma) -> Status {
+    path.path_point(sigma, position, rotation);
+    const Verdict v = check_point(model, position, rotation, reference, options, kinematics, plan,
+                                  summary, sigma);
+    if (v.failure == Failure::kNone) return Status::success();
+    const std::string_view reason = v.reason.message();
+    return Status::error(
+        v.reason.code(), "path line %d %s at sigma = %.3f m (%.3f, %.3f, %.3f) m: %.*s",
+        path.line_at(sigma), path_failure_text(v.failure), sigma, position.x(), position.y(),
+        position.z(), static_cast<int>(reason.size()), reason.data());
+  };
+  if (path.motions().empty()) return check(0.0);
+  for (const PathMotion& m : path.motions()) {
+    const double span = m.sigma_end - m.sigma_begin;
+    const int n = static_cast<int>(
+        std::max({1.0, std::ceil(span * m.max_linear_rate / options.max_linear_step),
+                  std::ceil(span * m.max_angular_rate / options.max_angular_step)}));
+    for (int k = 0; k <= n; ++k) {
+      const double sigma = k == n ? m.sigma_end : m.sigma_begin + span * k / n;
+      if (Status s = check(sigma); !s.ok()) return s;
+    }
+  }
+  return Status::success();
+}
+
+double segment_distance(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
+                        const Eigen::Vector3d& q0, const Eigen::Vector3d& q1) {
+  // Closest points p0 + s d1, q0 + t d2 with s, t in [0, 1] (clamped, then re-solved).
+  const Eigen::Vector3d d1 = p1 - p0, d2 = q1 - q0, r = p0 - q0;
+  const double a = d1.squaredNorm(), e = d2.squaredNorm(), f = d2.dot(r);
+  double s = 0.0, t = 0.0;
+  if (a <= 1e-300 && e <= 1e-300) return r.norm();
+  if (a <= 1e-300) {
+    t = std::clamp(f / e, 0.0, 1.0);
+  } else {
+    const double c = d1.dot(r);
+    if (e <= 1e-300) {
+      s = std::clamp(-c / a, 0.0, 1.0);
+    } else {
+      const double b = d1.dot(d2), denom = a * e - b * b;
+      s = denom > 1e-300 ? std::clamp((b * f - c * e) / denom, 0.0, 1.0) : 0.0;
+      t = (b * s + f) / e;
+      if (t < 0.0) {
+        t = 0.0;
+        s = std::clamp(-c / a, 0.0, 1.0);
+      } else if (t > 1.0) {
+        t = 1.0;
+        s = std::clamp((b - c) / a, 0.0, 1.0);
+      }
+    }
+  }
+  return ((p0 + s * d1) - (q0 + t * d2)).norm();
 }
 
 Status command_counts(const RobotModel& model, const Pose& pose, double reference_tension,

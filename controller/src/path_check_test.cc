@@ -247,6 +247,102 @@ TEST(CheckPath, RejectsBadOptionsNamingTheField) {
   EXPECT_EQ(check_path(mini, move, options).code(), ErrorCode::kInvalidArgument);
 }
 
+// A full circle of radius r about the origin in the plane z = z0, then a line to `end`.
+Path circle_then_line(double r, double z0, const Pose& end, int first_line = 1) {
+  std::vector<PathSegment> segs(2);
+  segs[0].kind = PathSegment::Kind::kArc;
+  segs[0].target = pose_at(r, 0, z0);
+  segs[0].center = Eigen::Vector3d(0, 0, z0);
+  segs[0].line = first_line;
+  segs[1].target = end;
+  segs[1].line = first_line + 1;
+  auto p = Path::plan(pose_at(r, 0, z0), segs, PathLimits{});
+  EXPECT_TRUE(p.ok()) << p.status().to_string();
+  return *p;
+}
+
+TEST(CheckMultiSegmentPath, AcceptsACircleCheckingItAtTheStepDensity) {
+  const RobotModel mini = testing::mini_robot();
+  const Path path = circle_then_line(0.1, 0.02, pose_at(0.1, 0.0, 0.1));
+  PathCheckSummary summary;
+  const Status s = check_path(mini, path, {}, &summary);
+  EXPECT_TRUE(s.ok()) << s.to_string();
+  // 2 pi 0.1 m in steps of at most 5 mm: 126 steps; 0.08 m of line: 16; both ends of each.
+  EXPECT_EQ(summary.points, 127 + 17);
+  PathCheckOptions fine;
+  fine.max_linear_step = 0.001;
+  EXPECT_TRUE(check_path(mini, path, fine, &summary).ok());
+  EXPECT_EQ(summary.points, 630 + 81);
+}
+
+TEST(CheckMultiSegmentPath, NamesTheLineAndPointWherePathLeavesTheWorkspace) {
+  const RobotModel mini = testing::mini_robot();
+  PathCheckOptions options;
+  options.workspace_box =
+      Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-0.156), Eigen::Vector3d::Constant(0.156));
+  const Path path = circle_then_line(0.1, 0.0, pose_at(0.1, 0.0, 0.2), 7);
+  const Status s = check_path(mini, path, options);
+  EXPECT_EQ(s.code(), ErrorCode::kOutOfRange);
+  // The line starts at sigma = 2 pi 0.1; its 40 steps of 5 mm pass z = 0.156 at step 32.
+  char expected[200];
+  std::snprintf(expected, sizeof expected,
+                "path line 8 leaves the workspace box at sigma = %.3f m (0.100, ",
+                2 * std::numbers::pi * 0.1 + 0.16);
+  EXPECT_TRUE(contains(s, expected)) << s.to_string() << "\nexpected: " << expected;
+  EXPECT_TRUE(contains(s, "0.000, 0.160) m: z = 0.1600 m > 0.1560 m")) << s.to_string();
+}
+
+TEST(CheckMultiSegmentPath, ChecksCableLengthsAndCableInterference) {
+  const RobotModel mini = testing::mini_robot();
+  const Path path = circle_then_line(0.1, 0.0, pose_at(0.1, 0.0, 0.05));
+  KinematicsData k(mini);
+  ASSERT_TRUE(inverse_kinematics(mini, mini.home, k));
+  PathCheckOptions options;
+  options.max_cable_length = k.lengths.maxCoeff() + 0.01;  // the circle reaches further
+  const Status s = check_path(mini, path, options);
+  EXPECT_EQ(s.code(), ErrorCode::kOutOfRange);
+  EXPECT_TRUE(contains(s, "leaves the cable length limits at sigma = ")) << s.to_string();
+  EXPECT_TRUE(contains(s, " m long > ")) << s.to_string();
+  // MINI's spans do not cross: at home the closest spans are those whose platform anchors are
+  // 0.06 m apart, a pair that a thinner cable cannot make touch.
+  PathCheckOptions thin;
+  thin.cable_diameter = 0.05;
+  EXPECT_TRUE(check_pose(mini, mini.home, thin).ok());
+  EXPECT_TRUE(check_path(mini, path, thin).ok());
+  // Cables 1 and 2 with their frame anchors swapped cross between frame and platform.
+  RobotModel crossed = mini;
+  crossed.frame_anchors.col(0).swap(crossed.frame_anchors.col(1));
+  std::swap(crossed.pulleys[0], crossed.pulleys[1]);
+  KinematicsData kc(crossed);
+  ASSERT_TRUE(inverse_kinematics(crossed, crossed.home, kc));
+  const double d = segment_distance(crossed.frame_anchors.col(0), kc.platform_points.col(0),
+                                    crossed.frame_anchors.col(1), kc.platform_points.col(1));
+  ASSERT_LT(d, 0.04);
+  PathCheckOptions thick;
+  thick.cable_diameter = d + 0.002;
+  const Status t = check_pose(crossed, crossed.home, thick);
+  EXPECT_EQ(t.code(), ErrorCode::kOutOfRange);
+  EXPECT_TRUE(contains(t, "has touching cables: cables 1 and 2 pass ")) << t.to_string();
+}
+
+TEST(SegmentDistance, IsTheClosestDistanceOfTwoSegments) {
+  const Eigen::Vector3d o = Eigen::Vector3d::Zero(), x = Eigen::Vector3d::UnitX();
+  // Crossing at right angles, 0.3 apart.
+  EXPECT_NEAR(segment_distance(-x, x, Eigen::Vector3d(0, -1, 0.3), Eigen::Vector3d(0, 1, 0.3)), 0.3,
+              1e-15);
+  // Parallel, overlapping.
+  EXPECT_NEAR(segment_distance(o, x, Eigen::Vector3d(0.5, 0.2, 0), Eigen::Vector3d(2, 0.2, 0)), 0.2,
+              1e-15);
+  // The closest points are ends (clamped).
+  EXPECT_NEAR(segment_distance(o, x, Eigen::Vector3d(2, 1, 0), Eigen::Vector3d(3, 5, 0)),
+              std::sqrt(2.0), 1e-15);
+  // Degenerate segments are points.
+  EXPECT_NEAR(segment_distance(o, o, Eigen::Vector3d(0, 3, 0), Eigen::Vector3d(0, 3, 0)), 3.0,
+              1e-15);
+  EXPECT_NEAR(segment_distance(o, o, Eigen::Vector3d(-1, 1, 0), Eigen::Vector3d(1, 1, 0)), 1.0,
+              1e-15);
+}
+
 TEST(CommandCounts, MatchesCompensatedInverseKinematicsWithThePlannedTensions) {
   const RobotModel mini = testing::mini_robot();
   const double reference = default_reference_tension(mini);

@@ -25,6 +25,7 @@
 #include "cdpr/calibration/ik_compensation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/controller/path.hpp"
 #include "cdpr/controller/trajectory.hpp"
 #include "cdpr/status.hpp"
 
@@ -55,6 +56,16 @@ struct PathCheckOptions {
   double reference_tension = std::numeric_limits<double>::quiet_NaN();
   // Allowed positions of the platform origin (world, m); nullopt: no box.
   std::optional<Eigen::AlignedBox3d> workspace_box;
+  // Allowed kinematic cable lengths L_i (frame anchor to platform anchor, with the pulley arc),
+  // m: e.g. what the drum holds and the shortest length the cable may be reeled to.
+  double min_cable_length = 0.0;
+  double max_cable_length = std::numeric_limits<double>::infinity();
+  // Cable-cable interference: the straight spans frame anchor a_i -> platform anchor r + R b_i of
+  // two cables must stay at least this far apart (the cable diameter, m; 0: not checked). A pair
+  // whose spans meet at an end by design (anchors closer than the diameter) is not checked. The
+  // span starts at a_i, not at its pulley's tangent point (an error of at most the pulley radius
+  // near the frame). Cable-platform interference is not checked.
+  double cable_diameter = 0.0;
 };
 
 // What a check saw (optional output; reset at the start of each check).
@@ -80,6 +91,19 @@ Status check_pose(const RobotModel& model, const Pose& pose, const PathCheckOpti
 // would need 212 N > f_max 200 N". Allocates nothing per point (a few scratch vectors per call).
 Status check_path(const RobotModel& model, const PoseTrajectory& trajectory,
                   const PathCheckOptions& options = {}, PathCheckSummary* summary = nullptr);
+
+// Every point of a multi-segment path (path.hpp), motion by motion, with sigma steps such that
+// the position moves at most max_linear_step and the rotation at most max_angular_step between
+// checked points (from each motion's bounds on |dp/dsigma| and the angular rate), both ends of
+// every motion included. The first failing point is named with the path file's line, e.g.
+// "path line 7 leaves the wrench-feasible workspace at sigma = 0.412 m (0.120, 0.000, 0.050) m:
+// cable 3 would need 212 N > f_max 200 N". PathCheckSummary's min_slack_s is then sigma (m).
+Status check_path(const RobotModel& model, const Path& path, const PathCheckOptions& options = {},
+                  PathCheckSummary* summary = nullptr);
+
+// Smallest distance between the segments [p0, p1] and [q0, q1] (m).
+double segment_distance(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
+                        const Eigen::Vector3d& q0, const Eigen::Vector3d& q1);
 
 // Scratch and results of command_counts, sized once for a model.
 struct CommandData {
