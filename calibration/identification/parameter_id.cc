@@ -106,6 +106,41 @@ const EstimateItem* find_estimate_item(std::string_view word) {
   return nullptr;
 }
 
+Status set_estimate(const std::vector<std::string>& words, int num_cables,
+                    IdentificationOptions& options) {
+  if (words.empty()) return Status::success();
+  IdentificationOptions o = options;
+  for (const EstimateItem& item : estimate_items()) item.set(o, false);
+  for (const std::string& w : words) {
+    const EstimateItem* item = find_estimate_item(w);
+    if (item == nullptr) {
+      std::string all;
+      for (const EstimateItem& k : estimate_items()) {
+        all += (all.empty() ? "" : ", ") + std::string(k.word);
+      }
+      return Status::error(ErrorCode::kInvalidArgument, "unknown item '%s' (one of %s)", w.c_str(),
+                           all.c_str());
+    }
+    if (item->required_cables > 0 && num_cables > 0 && num_cables != item->required_cables) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "%.*s is only for a robot of %d cables; this one has %d",
+                           static_cast<int>(item->word.size()), item->word.data(),
+                           item->required_cables, num_cables);
+    }
+    item->set(o, true);
+  }
+  options = o;
+  return Status::success();
+}
+
+std::vector<std::string> estimate_words(const IdentificationOptions& options) {
+  std::vector<std::string> v;
+  for (const EstimateItem& item : estimate_items()) {
+    if (item.is_set(options)) v.emplace_back(item.word);
+  }
+  return v;
+}
+
 const EstimateItem* estimate_item_of(ParameterKind kind) {
   for (const EstimateItem& item : estimate_items()) {
     if (item.kinds.size() == 1 && item.kinds[0] == kind) return &item;

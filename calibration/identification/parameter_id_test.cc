@@ -119,5 +119,24 @@ TEST(ParameterId, EachEstimateWordSwitchesOnItsKinds) {
   }
 }
 
+// One vocabulary for cdpr-fit's --estimate and cdprd's identification.estimate: the words switch on
+// exactly what they name; an empty list keeps the caller's defaults; errors name the word.
+TEST(SetEstimate, SwitchesOnExactlyTheNamedItemsAndNamesAnUnknownWord) {
+  IdentificationOptions defaults;
+  IdentificationOptions o = defaults;
+  ASSERT_TRUE(set_estimate({}, 8, o).ok());
+  EXPECT_EQ(estimate_words(o), estimate_words(defaults));
+  ASSERT_TRUE(set_estimate({"scales", "force-gains"}, 8, o).ok());
+  EXPECT_EQ(estimate_words(o), (std::vector<std::string>{"scales", "force-gains"}));
+  IdentificationOptions kept = o;
+  const Status unknown = set_estimate({"scales", "ofsets"}, 8, o);
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.to_string().find("'ofsets'"), std::string::npos) << unknown.to_string();
+  EXPECT_EQ(estimate_words(o), estimate_words(kept));  // unchanged on error
+  EXPECT_FALSE(set_estimate({"paper-anchors"}, 4, o).ok());
+  EXPECT_TRUE(set_estimate({"paper-anchors"}, 8, o).ok());
+  EXPECT_TRUE(set_estimate({"paper-anchors"}, 0, o).ok());  // cable count not known yet
+}
+
 }  // namespace
 }  // namespace cdpr

@@ -18,6 +18,13 @@ const char* to_string(CalibrationVerdict::Kind kind) {
   return "unknown";
 }
 
+FitTest chi_square_fit_test(double chi2, int dof, double alpha) {
+  FitTest t;
+  t.p_value = dof > 0 ? chi2_upper_tail(chi2, dof) : 0.0;
+  t.passed = t.p_value >= alpha;  // false for a NaN chi2
+  return t;
+}
+
 CalibrationVerdict judge_calibration(const IdentificationReport& report,
                                      const CalibrationVerdictOptions& options) {
   CalibrationVerdict v;
@@ -26,7 +33,8 @@ CalibrationVerdict judge_calibration(const IdentificationReport& report,
   v.alpha = options.alpha;
   v.converged = report.converged;
   v.at_bound = report.parameters_at_bound();
-  v.p_value = report.dof > 0 ? chi2_upper_tail(report.chi2, report.dof) : 0.0;
+  const FitTest fit = chi_square_fit_test(report.chi2, report.dof, options.alpha);
+  v.p_value = fit.p_value;
   char buf[256];
 
   bool solution = true;
@@ -40,7 +48,7 @@ CalibrationVerdict judge_calibration(const IdentificationReport& report,
     for (const std::string& n : v.at_bound) names += (names.empty() ? "" : ", ") + n;
     v.reasons.push_back("parameters ended on the bound of their physical range: " + names);
   }
-  const bool rejected = !(v.p_value >= options.alpha);
+  const bool rejected = !fit.passed;
   if (rejected) {
     std::snprintf(buf, sizeof(buf),
                   "the fit test failed: chi-square %.1f for %d degrees of freedom (chi2/dof %.2f), "

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdio>
 
 #include "cdpr/calibration/pose_design.hpp"
@@ -86,6 +87,27 @@ TEST(CalibrationVerdict, MiniDrumScaleFailsAndNullDataPasses) {
               drum_failed, seeds);
   EXPECT_GE(null_passed, (95 * seeds + 99) / 100);
   EXPECT_GE(drum_failed, (90 * seeds + 99) / 100);
+}
+
+TEST(ChiSquareFitTest, PassesAtTheMedianFailsFarOutAndNeverWithoutDegreesOfFreedom) {
+  // chi^2(k) has mean k: a fit whose chi^2 equals its dof sits near the median and passes.
+  const FitTest median = chi_square_fit_test(40.0, 40, 0.01);
+  EXPECT_TRUE(median.passed);
+  EXPECT_GT(median.p_value, 0.3);
+  EXPECT_LT(median.p_value, 0.7);
+  // Twice the dof on 40 dof is far out in the tail.
+  const FitTest far = chi_square_fit_test(80.0, 40, 0.01);
+  EXPECT_FALSE(far.passed);
+  EXPECT_LT(far.p_value, 0.01);
+  // The same p-value as the verdict reports.
+  IdentificationReport r;
+  r.chi2 = 80.0;
+  r.dof = 40;
+  r.converged = true;
+  EXPECT_DOUBLE_EQ(judge_calibration(r).p_value, far.p_value);
+  // Nothing to test: never passes, and a NaN chi^2 never passes either.
+  EXPECT_FALSE(chi_square_fit_test(0.0, 0, 0.01).passed);
+  EXPECT_FALSE(chi_square_fit_test(std::nan(""), 10, 0.01).passed);
 }
 
 }  // namespace

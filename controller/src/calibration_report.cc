@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <sstream>
 
+#include "cdpr/calibration/calibration_verdict.hpp"
 #include "cdpr/calibration/mismatch.hpp"
 #include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/report/format.hpp"
@@ -63,14 +64,14 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
     o.verdict_key = "not_diagnosed";
   }
 
-  // Fit: chi-square upper tail with the fit's degrees of freedom.
+  // Fit: the chi-square test every front end uses (calibration_verdict.hpp).
   {
     Gate g;
     g.name = "fit";
-    const double dof = std::max(1, o.fit->dof);
-    g.value = chi2_upper_tail(o.fit->chi2, dof);
+    const FitTest test = chi_square_fit_test(o.fit->chi2, o.fit->dof, gates.min_fit_p_value);
+    g.value = test.p_value;
     g.limit = gates.min_fit_p_value;
-    g.passed = o.fit->converged && g.value >= g.limit;
+    g.passed = o.fit->converged && test.passed;
     g.text = fmt("chi2 %.1f", o.fit->chi2) + " on " + std::to_string(o.fit->dof) +
              " dof, p = " + fmt("%.3g", g.value) + (g.passed ? " >= " : " < ") +
              fmt("%.3g", g.limit) + (o.fit->converged ? "" : " (the solver did not converge)");

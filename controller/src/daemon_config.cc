@@ -112,22 +112,32 @@ Status read_measuring(const YamlField& n, const std::string& dir, MeasuringSetti
   return in_range(n, "noise_laser_m", 1e-12, 1.0, "m", m.noise_laser_m);
 }
 
+// identification.estimate: the words of cdpr-fit's --estimate (set_estimate, one vocabulary).
+Status read_estimate(const YamlField& e, IdentificationOptions& o) {
+  if (!e.present()) return Status::success();
+  CDPR_RETURN_IF_ERROR(e.expect_list("a list of estimate items, e.g. [anchors, offsets]"));
+  if (e.size() == 0) return e.error("estimates nothing: name at least one item");
+  std::vector<std::string> words;
+  for (std::size_t i = 0; i < e.size(); ++i) {
+    CDPR_ASSIGN_OR_RETURN(std::string w, e[i].text());
+    if (find_estimate_item(w) == nullptr) {
+      std::string all;
+      for (const EstimateItem& k : estimate_items()) {
+        all += (all.empty() ? "" : ", ") + std::string(k.word);
+      }
+      return e[i].error("unknown estimate item '" + w + "' (one of " + all + ")");
+    }
+    words.push_back(std::move(w));
+  }
+  // The cable count is the robot file's: identify() refuses a mask that does not fit it.
+  Status s = set_estimate(words, 0, o);
+  return s.ok() ? s : e.error(s.message());
+}
+
 Status read_identification(const YamlField& n, IdentificationSettings& s) {
   if (!n.present()) return Status::success();
-  CDPR_RETURN_IF_ERROR(
-      n.check_keys({"frame_anchors", "platform_anchors", "length_offsets", "length_scales",
-                    "force_gains", "force_offsets", "laser_origin", "laser_direction",
-                    "laser_plane", "diagnose", "bootstrap", "folds"}));
-  IdentificationOptions& o = s.options;
-  CDPR_RETURN_IF_ERROR(n.optional("frame_anchors", o.estimate_frame_anchors));
-  CDPR_RETURN_IF_ERROR(n.optional("platform_anchors", o.estimate_platform_anchors));
-  CDPR_RETURN_IF_ERROR(n.optional("length_offsets", o.estimate_length_offsets));
-  CDPR_RETURN_IF_ERROR(n.optional("length_scales", o.estimate_length_scales));
-  CDPR_RETURN_IF_ERROR(n.optional("force_gains", o.estimate_force_gains));
-  CDPR_RETURN_IF_ERROR(n.optional("force_offsets", o.estimate_force_offsets));
-  CDPR_RETURN_IF_ERROR(n.optional("laser_origin", o.estimate_laser_origin));
-  CDPR_RETURN_IF_ERROR(n.optional("laser_direction", o.estimate_laser_direction));
-  CDPR_RETURN_IF_ERROR(n.optional("laser_plane", o.estimate_laser_plane));
+  CDPR_RETURN_IF_ERROR(n.check_keys({"estimate", "diagnose", "bootstrap", "folds"}));
+  CDPR_RETURN_IF_ERROR(read_estimate(n["estimate"], s.options));
   CDPR_RETURN_IF_ERROR(n.optional("diagnose", s.diagnose));
   CDPR_RETURN_IF_ERROR(n.optional("bootstrap", s.bootstrap, 1, 100000));
   CDPR_RETURN_IF_ERROR(n.optional("folds", s.folds, 0, 1000));

@@ -22,7 +22,7 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
       "tension_watch: {stuck_raw_units: 10, stuck_confirm_s: 0.5}\n"
       "measuring: {poses: 30, max_angle: 0.4363, design_tension_margin: 15, design_angle_steps: 3, "
       "design_emphasis_weight: 1, laser_samples: 10, remeasure_rounds: 2}\n"
-      "identification: {length_scales: true, diagnose: false}\n"
+      "identification: {estimate: [anchors, scales], diagnose: false}\n"
       "acceptance: {mode: auto, max_anchor_change_m: 0.01}\n"
       "control: {socket: /run/x.sock, group: cdpr}\n",
       "/etc/cdpr/cdprd.yaml");
@@ -45,6 +45,8 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
   EXPECT_EQ(c->measuring.design_angle_steps, 3);
   EXPECT_DOUBLE_EQ(c->measuring.design_emphasis_weight, 1.0);
   EXPECT_TRUE(c->identification.options.estimate_length_scales);
+  EXPECT_TRUE(c->identification.options.estimate_frame_anchors);
+  EXPECT_FALSE(c->identification.options.estimate_length_offsets);  // exactly what is named
   EXPECT_FALSE(c->identification.diagnose);
   EXPECT_EQ(c->acceptance.mode, AcceptanceMode::kAuto);
   EXPECT_DOUBLE_EQ(c->acceptance.max_anchor_change_m, 0.01);
@@ -102,6 +104,33 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
   auto bad_yaml = parse_daemon_config("robot: [unclosed\n", "d.yaml");
   ASSERT_FALSE(bad_yaml.ok());
   EXPECT_NE(bad_yaml.status().to_string().find("d.yaml:"), std::string::npos);
+}
+
+// identification.estimate takes cdpr-fit's --estimate words: every word of the one table, and the
+// same options as set_estimate() gives the CLI; an unknown word is refused at its line.
+TEST(DaemonConfig, EstimateUsesTheWordsOfCdprFitsEstimate) {
+  for (const EstimateItem& item : estimate_items()) {
+    const std::string word(item.word);
+    auto c = parse_daemon_config(
+        "robot: r\ncanopen: n\nidentification: {estimate: [" + word + "]}\n", "d.yaml");
+    ASSERT_TRUE(c.ok()) << word << ": " << c.status().to_string();
+    IdentificationOptions cli;
+    ASSERT_TRUE(set_estimate({word}, item.required_cables, cli).ok()) << word;
+    EXPECT_EQ(estimate_words(c->identification.options), estimate_words(cli)) << word;
+  }
+  auto typo = parse_daemon_config(
+      "robot: r\ncanopen: n\nidentification:\n  estimate:\n    - anchors\n    - ofsets\n",
+      "d.yaml");
+  ASSERT_FALSE(typo.ok());
+  EXPECT_NE(typo.status().to_string().find("d.yaml:6:"), std::string::npos)
+      << typo.status().to_string();
+  EXPECT_NE(typo.status().to_string().find("unknown estimate item 'ofsets'"), std::string::npos);
+  auto old_key = parse_daemon_config(
+      "robot: r\ncanopen: n\nidentification: {frame_anchors: true}\n", "d.yaml");
+  EXPECT_FALSE(old_key.ok());
+  auto nothing =
+      parse_daemon_config("robot: r\ncanopen: n\nidentification: {estimate: []}\n", "d.yaml");
+  EXPECT_FALSE(nothing.ok());
 }
 
 // The mismatch locator's cross-validation: leave one pose out unless K >= 2 folds are asked for;

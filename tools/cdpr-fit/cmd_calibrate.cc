@@ -43,25 +43,8 @@ void adapt_to_channels(const MeasurementSet& set, const std::vector<std::string>
 
 Status apply_estimate(const std::vector<std::string>& names, int num_cables,
                       IdentificationOptions* o) {
-  if (names.empty()) return Status::success();  // the defaults of IdentificationOptions
-  for (const EstimateItem& item : estimate_items()) item.set(*o, false);
-  for (const std::string& n : names) {
-    const EstimateItem* item = find_estimate_item(n);
-    if (item == nullptr) {
-      std::string all;
-      for (const std::string& k : estimate_names()) all += (all.empty() ? "" : ", ") + k;
-      return Status::error(ErrorCode::kInvalidArgument, "--estimate: unknown item '%s' (one of %s)",
-                           n.c_str(), all.c_str());
-    }
-    if (item->required_cables > 0 && num_cables != item->required_cables) {
-      return Status::error(ErrorCode::kInvalidArgument,
-                           "--estimate paper-anchors is the paper's 16-coordinate subset of an "
-                           "8-cable robot; this config has %d cables",
-                           num_cables);
-    }
-    item->set(*o, true);
-  }
-  return Status::success();
+  Status s = set_estimate(names, num_cables, *o);
+  return s.ok() ? s : s.prepend("--estimate: ");
 }
 
 std::vector<std::string> estimated_items(const IdentificationOptions& o) {

@@ -225,6 +225,14 @@ const EstimateItem* find_estimate_item(std::string_view word);  // nullptr: not 
 // The word that estimates `kind` and nothing else ("laser-direction" for kLaserDirection);
 // nullptr when no word does.
 const EstimateItem* estimate_item_of(ParameterKind kind);
+// Switches on exactly the items `words` name and every other item off: the one vocabulary of
+// cdpr-fit's --estimate and cdprd's identification.estimate. An empty list changes nothing (the
+// caller's defaults). The error names the unknown word with the table's words, or the item a
+// robot of `num_cables` cannot use (0: not known yet, that check left to identify()).
+Status set_estimate(const std::vector<std::string>& words, int num_cables,
+                    IdentificationOptions& options);
+// The words of the items switched on in `options`, in the table's order.
+std::vector<std::string> estimate_words(const IdentificationOptions& options);
 
 struct ParameterEstimate {
   ParameterId id;

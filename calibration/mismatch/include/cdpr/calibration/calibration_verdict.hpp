@@ -47,6 +47,15 @@ struct CalibrationVerdict {
 
 const char* to_string(CalibrationVerdict::Kind kind);  // "passed", "fit_rejected", ...
 
+// The chi-square test of a weighted least-squares fit, the one used by every front end (cdpr-fit's
+// verdict, the daemon's acceptance gate): p = P(chi^2(dof) > chi2), passed when p >= alpha. With no
+// degrees of freedom left (dof <= 0) nothing is tested: p = 0, not passed.
+struct FitTest {
+  double p_value = 0.0;
+  bool passed = false;
+};
+FitTest chi_square_fit_test(double chi2, int dof, double alpha);
+
 CalibrationVerdict judge_calibration(const IdentificationReport& report,
                                      const CalibrationVerdictOptions& options = {});
 
