@@ -160,6 +160,11 @@ void Master::background(Timestamp now) {
 }
 
 void Master::cycle(Timestamp now) {
+  receive(now);
+  transmit(now);
+}
+
+void Master::receive(Timestamp now) {
   ++stats_.cycles;
   can::Frame f;
   // Bounded drain: a babbling node must not starve the cycle.
@@ -191,6 +196,12 @@ void Master::cycle(Timestamp now) {
   if (faulted_) {
     for (Drive& d : drives_) d.quick_stop();
   }
+}
+
+void Master::transmit(Timestamp now) {
+  // What the caller asked of the drives since receive(): its targets and state requests.
+  for (Drive& d : drives_) d.commit(now);
+  can::Frame f;
   if (!bus_sup_.may_transmit(now, events_)) return;
   for (auto& n : nodes_) {
     for (const PdoLayout& l : n->rpdos) {
