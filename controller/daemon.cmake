@@ -3,7 +3,9 @@
 set(_d ${CDPR_CONTROLLER_DIR})
 add_library(cdpr_daemon STATIC
   ${_d}/src/daemon_config.cc
+  ${_d}/src/canopen_robot_io.cc
   ${_d}/src/rt_controller.cc
+  ${_d}/src/rt_controller_watch.cc
   ${_d}/src/state_store.cc
   ${_d}/src/calibration_report.cc
   ${_d}/src/daemon.cc)
@@ -13,6 +15,15 @@ target_link_libraries(cdpr_daemon
          cdpr_calibration nlohmann_json::nlohmann_json Threads::Threads cdpr_version
   PRIVATE spdlog::spdlog cdpr_yaml cdpr_report cdpr_options)
 
+# Test support: a fake robot I/O for unit tests of the RT cycle (controller/testing).
+if(CDPR_BUILD_TESTS)
+  add_library(cdpr_daemon_testing STATIC ${_d}/testing/fake_robot_io.cc)
+  target_include_directories(cdpr_daemon_testing PUBLIC ${_d}/testing)
+  target_link_libraries(cdpr_daemon_testing PUBLIC cdpr_daemon PRIVATE cdpr_options)
+endif()
+
+cdpr_add_gtest(NAME daemon_rt_controller_test SOURCES ${_d}/src/rt_controller_test.cc
+               LIBS cdpr_daemon cdpr_daemon_testing cdpr_calibration_testing cdpr_test_support)
 cdpr_add_gtest(NAME daemon_config_test SOURCES ${_d}/src/daemon_config_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_calibration_report_test SOURCES ${_d}/src/calibration_report_test.cc

@@ -155,7 +155,10 @@ Result<std::unique_ptr<Daemon>> Daemon::create(DaemonConfig config, DaemonIo io)
   ro.settle_tension = ms.settle_tension_tolerance;
   ro.slew_velocity = d->config_.motion.max_cable_speed;
   ro.slew_acceleration = d->config_.motion.max_cable_acceleration;
-  auto rt = RtController::create(*d->master_, *d->active_, ro);
+  auto robot_io = CanopenRobotIO::create(*d->master_, d->io_.laser);
+  if (!robot_io.ok()) return robot_io.status();
+  d->robot_io_ = std::move(*robot_io);
+  auto rt = RtController::create(*d->robot_io_, *d->active_, ro);
   if (!rt.ok()) return rt.status();
   d->rt_ = std::move(*rt);
   return d;

@@ -157,6 +157,29 @@ TEST_F(MasterTest, FaultEmcyQuickStopAndFaultReset) {
   EXPECT_EQ(cia402::decode_state(drives[1]->statusword()), cia402::State::kSwitchOnDisabled);
 }
 
+TEST_F(MasterTest, TransmitSendsTheTargetsAndRequestsMadeAfterReceive) {
+  ASSERT_TRUE(make_and_boot().ok());
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  run(20ms);
+  // A controller's cycle: receive, compute on what came in, transmit in the same cycle.
+  master->receive(net.now());
+  Drive* d3 = master->drive(3);
+  Drive* d5 = master->drive(5);
+  const std::int32_t target = d3->actual_counts() + 25;
+  ASSERT_TRUE(d3->set_target_counts(target));
+  d5->quick_stop();
+  master->transmit(net.now());
+  EXPECT_EQ(d3->target_counts(), target) << "the target goes out in this cycle";
+  EXPECT_EQ(d3->controlword() & cia402::cw::kStateMask, cia402::cw::kEnableOperation);
+  EXPECT_EQ(d5->controlword() & cia402::cw::kStateMask, cia402::cw::kQuickStop)
+      << "the request goes out in this cycle";
+  const Timestamp next = net.now() + config.sync_period;
+  while (net.now() < next) net.idle();
+  run(3 * config.sync_period);
+  EXPECT_EQ(drives[3]->position(), target);
+  EXPECT_FALSE(d5->enabled());
+}
+
 TEST_F(MasterTest, StuckDriveIsNamed) {
   ASSERT_TRUE(make_and_boot().ok());
   drives[4]->set_ignore_controlword(true);

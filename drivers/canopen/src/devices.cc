@@ -134,6 +134,27 @@ void Drive::update(Timestamp now) {
   controlword_ = c;
   image_->set(cw_slot_, c);
   image_->set(target_slot_, target_);
+  stepped_target_ = sup_.target();
+  stepped_reset_ = sup_.fault_reset_pending();
+  stepped_stuck_ = sup_.stuck();
+}
+
+void Drive::commit(Timestamp now) {
+  if (!received_) return;
+  if (sup_.target() != stepped_target_ || sup_.fault_reset_pending() != stepped_reset_ ||
+      sup_.stuck() != stepped_stuck_) {
+    // Same statusword, new request: the state bits follow it, the mode bits stay as update()
+    // made them (the state, and so enabled(), does not change).
+    const std::uint16_t state_bits = sup_.step(statusword_, now);
+    controlword_ =
+        static_cast<std::uint16_t>(state_bits | (controlword_ & ~cia402::cw::kStateMask));
+    stepped_target_ = sup_.target();
+    stepped_reset_ = sup_.fault_reset_pending();
+    stepped_stuck_ = sup_.stuck();
+  }
+  if (enabled() && mode_ == Mode::kCyclicSyncPosition && user_target_valid_) target_ = user_target_;
+  image_->set(cw_slot_, controlword_);
+  image_->set(target_slot_, target_);
 }
 
 Result<ForceSensor> ForceSensor::bind(const NodeConfig& config, const ProcessImage& image) {

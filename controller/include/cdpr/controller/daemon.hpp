@@ -33,6 +33,7 @@
 #include "cdpr/can/can_bus.hpp"
 #include "cdpr/can/virtual_bus.hpp"
 #include "cdpr/canopen/master.hpp"
+#include "cdpr/controller/canopen_robot_io.hpp"
 #include "cdpr/controller/daemon_config.hpp"
 #include "cdpr/controller/rt_controller.hpp"
 #include "cdpr/controller/state_store.hpp"
@@ -178,6 +179,7 @@ class Daemon {
   canopen::MasterConfig network_;
   std::unique_ptr<StateStore> store_;
   std::unique_ptr<canopen::Master> master_;
+  std::unique_ptr<CanopenRobotIO> robot_io_;
   std::unique_ptr<RtController> rt_;
 
   mutable std::mutex mu_;  // everything below

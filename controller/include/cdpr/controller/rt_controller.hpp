@@ -1,17 +1,26 @@
-// The per-cycle part of cdprd: read -> update -> write against the CANopen master.
+// The per-cycle part of cdprd: read -> update -> write against the robot's I/O (RobotIO).
 //
-//   RtController rt(master, options);           // non-RT: sizes every buffer once
+//   RtController rt(io, geometry, options);     // non-RT: sizes every buffer once
 //   rt.set_encoder_offsets(offsets);             // non-RT, before the loop runs
 //   rt.post(command);                            // any thread: a move, or a re-reference
 //   loop: rt.cycle(now);                         // RT thread, once per SYNC period
 //   RtSnapshot s = rt.snapshot();                // any thread, lock-free
 //
-// cycle(now): takes a posted command at the cycle boundary, samples the active trajectory (or
-// holds), plans the tensions (QP, allocation-free) and computes the compensated inverse
-// kinematics with the active geometry, writes the drive targets, runs the master's cycle (TPDOs
-// in, drive state machines, RPDOs and SYNC out), then watches what came back: drive faults, lost
-// nodes, bus-off, slack or overloaded cables. A fault quick-stops every drive and is latched
-// until fault_reset(). It publishes a snapshot (seqlock) and the master's events (SPSC ring).
+// cycle(now) is a list of named stages, each a private function, on this cycle's readings:
+//   read_inputs        io.read(now): actual counts, tensions, drive states, bus events
+//   take_requests      an operator's quick stop or fault reset (atomics, any thread)
+//   watch_faults       drive faults, lost nodes, bus-off, overloaded or slack cables, a stuck
+//                      force reading: a fault quick-stops every drive and is latched until
+//                      fault_reset()
+//   take_command       a posted command at the cycle boundary (move, trim, re-reference)
+//   sample_trajectory  the pose to command (the active trajectory, or the pose held)
+//   compute_targets    tension plan (QP, allocation-free) and compensated inverse kinematics
+//                      with the active geometry
+//   slew_targets       the drive targets: the re-reference slew, or the IK plus the
+//                      rate-limited tension-regulation trims
+//   write_outputs      io.write(command): the targets and the state requests of this cycle
+//   update_settle      the stillness window and the averages the sequence asked for
+//   publish            the snapshot (seqlock); the bus events go to an SPSC ring
 // cycle() allocates, locks, logs and throws nothing (tests prove it).
 //
 // Geometry hand-over (hot swap): a kReference command carries an immutable Geometry snapshot and
@@ -24,12 +33,14 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <memory>
 #include <optional>
 
 #include "cdpr/calibration/robot_model.hpp"
-#include "cdpr/canopen/master.hpp"
+#include "cdpr/canopen/events.hpp"
 #include "cdpr/controller/motion_command.hpp"
 #include "cdpr/controller/path_check.hpp"
+#include "cdpr/controller/robot_io.hpp"
 #include "cdpr/controller/slew.hpp"
 #include "cdpr/controller/spsc_ring.hpp"
 #include "cdpr/controller/trajectory.hpp"
@@ -135,10 +146,9 @@ class RtController {
  public:
   // Trims count against this many times the stuck-reading threshold (see watch_stuck).
   static constexpr double kStuckTrimFactor = 2.0;
-  // Binds to the master's drives (cables 1..m in the master's drive order) and its first force
-  // node (channels = cables). Allocates here only.
-  static Result<std::unique_ptr<RtController>> create(canopen::Master& master,
-                                                      const Geometry& initial,
+  // Drives the robot through `io` (axis k = cable k, tension channel k = cable k), which must
+  // outlive the controller. Allocates here only.
+  static Result<std::unique_ptr<RtController>> create(RobotIO& io, const Geometry& initial,
                                                       const RtControllerOptions& options);
 
   // Non-RT set-up, before the loop runs (or while it is disabled).
@@ -171,27 +181,45 @@ class RtController {
   void set_overruns(std::uint64_t n) noexcept { overruns_ = n; }
 
  private:
-  RtController(canopen::Master& master, const Geometry& initial,
-               const RtControllerOptions& options);
+  RtController(RobotIO& io, const Geometry& initial, const RtControllerOptions& options);
+  // The stages of cycle(), in order.
+  void read_inputs(canopen::Timestamp now) noexcept;
+  void take_requests(canopen::Timestamp now) noexcept;
+  void watch_faults(canopen::Timestamp now) noexcept;
   void take_command(canopen::Timestamp now) noexcept;
+  void sample_trajectory(canopen::Timestamp now) noexcept;
+  void compute_targets(canopen::Timestamp now) noexcept;
+  void slew_targets() noexcept;
+  void write_outputs() noexcept;
+  void update_settle() noexcept;
+  void publish(canopen::Timestamp now) noexcept;
+  // Parts of the stages.
+  void watch_events(canopen::Timestamp now) noexcept;
+  void watch_tensions(canopen::Timestamp now) noexcept;
+  void watch_stuck(canopen::Timestamp now) noexcept;
+  double stuck_evidence(int i) noexcept;
+  void reset_stuck_watch() noexcept { stuck_valid_.fill(false); }
+  void start_move(const MotionCommand& c, canopen::Timestamp now) noexcept;
+  void start_reference(const MotionCommand& c, canopen::Timestamp now) noexcept;
+  void step_trims() noexcept;
+  void update_average() noexcept;
   void set_fault(const RtFault& f) noexcept;
   void hold_fault(const RtFault& f) noexcept;
-  void watch(canopen::Timestamp now) noexcept;
-  void watch_stuck(canopen::Timestamp now) noexcept;
-  void reset_stuck_watch() noexcept { stuck_valid_.fill(false); }
-  void update_settle() noexcept;
-  bool compute_targets(const Pose& pose) noexcept;
+  bool solve(const Pose& pose) noexcept;
+  bool active() const noexcept {
+    return mode_ == RtMode::kMoving || mode_ == RtMode::kHolding || mode_ == RtMode::kSlewing;
+  }
   double cable_counts_per_metre(int i) const noexcept;
 
-  canopen::Master& master_;
+  RobotIO& io_;
+  RobotReading in_;   // this cycle's readings
+  RobotCommand out_;  // this cycle's command
   RtControllerOptions options_;
   int m_ = 0;
-  std::array<canopen::Drive*, kMaxAxes> drives_{};
-  canopen::ForceSensor* force_ = nullptr;
   const Geometry* geometry_ = nullptr;
   CommandData command_data_;
   std::array<double, kMaxAxes> offsets_{};
-  std::array<double, kMaxAxes> target_{};   // sent last cycle (fractional counts)
+  std::array<double, kMaxAxes> target_{};   // sent (fractional counts)
   std::array<double, kMaxAxes> desired_{};  // from the IK this cycle
   SlewLimiter slew_;
 
@@ -225,7 +253,7 @@ class RtController {
   // Set when a move with fading trims ends: the watch's plan window starts again.
   bool restart_plan_window_ = false;
   std::array<int, kMaxAxes> stuck_count_{};
-  std::uint64_t force_pdos_ = 0;  // the force node's TPDO count last cycle
+  std::uint64_t force_pdos_ = 0;  // the tension readings' count the watch saw last
 
   // Stillness window: ring of the last settle_cycles actual counts and tensions.
   static constexpr int kMaxWindow = 512;

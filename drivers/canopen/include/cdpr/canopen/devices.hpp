@@ -49,6 +49,10 @@ class Drive {
   // RT: read statusword/actual from the image, step the supervisor, write controlword/target.
   // Until the first TPDO arrived (on_pdo), nothing is known: the supervisor does not run.
   void update(Timestamp now);
+  // RT, after update and before the RPDOs are encoded: a CSP target set since update goes into
+  // the image, and a state request made since update (enable, disable, quick stop, fault reset)
+  // is stepped into this cycle's controlword instead of waiting for the next update.
+  void commit(Timestamp now);
   void on_pdo() { received_ = true; }
   bool received() const { return received_; }
 
@@ -89,6 +93,10 @@ class Drive {
   bool user_target_valid_ = false;
   bool was_enabled_ = false;
   bool received_ = false;
+  // The supervisor's request as update() stepped it (commit() steps again if it changed).
+  cia402::Target stepped_target_ = cia402::Target::kSwitchOnDisabled;
+  bool stepped_reset_ = false;
+  bool stepped_stuck_ = false;
   std::uint32_t enable_count_ = 0;
   std::int64_t max_enable_error_ = 0;
   // Profile position handshake.

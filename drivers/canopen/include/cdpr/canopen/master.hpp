@@ -1,8 +1,8 @@
 // The CANopen master: boots the network (reset communication, boot-ups, SDO configuration of
 // heartbeats, PDOs and drive modes, NMT start, SYNC), then runs cycle(now) from the RT loop: it
-// takes in TPDOs, heartbeats, EMCYs and error frames, steps the drives, sends RPDOs, SYNC and its
-// own heartbeat. cycle() never allocates, locks, logs or throws; what it has to say goes to
-// events() and to the drives' Status.
+// takes in TPDOs, heartbeats, EMCYs and error frames, steps the drives (receive), sends RPDOs, SYNC
+// and its own heartbeat (transmit). cycle() never allocates, locks, logs or throws; what it has to
+// say goes to events() and to the drives' Status.
 //
 // Blocking calls (boot, set_mode, wait_for, shutdown) wait through the Hooks: `now` is the clock
 // (the RT loop's, or a test's injected one) and `idle` runs whenever nothing is waiting on the bus
@@ -78,8 +78,16 @@ class Master {
   // (docs/canopen.md, bus-off). Needs CAP_NET_ADMIN for the restart itself.
   Status enable_link_restart();
 
-  // The RT cycle.
+  // The RT cycle, receive(now) then transmit(now). A controller that reads, computes and writes
+  // on this cycle's readings calls the two halves itself, with its update between them:
+  //   receive: drains the receive queue (TPDOs into the process images, heartbeats, EMCYs,
+  //            error frames), checks heartbeat consumers, steps every drive's state machine on
+  //            the statusword that came in (events, the latched fault and its quick stop);
+  //   transmit: takes what was asked of the drives since receive (targets, enable, quick stop,
+  //            fault reset: Drive::commit), sends RPDOs, SYNC when due, the master heartbeat.
   void cycle(Timestamp now);
+  void receive(Timestamp now);
+  void transmit(Timestamp now);
 
   // Blocking helpers (start-up/maintenance).
   Status nmt(NmtCommand cmd, NodeId node);  // node 0 = all

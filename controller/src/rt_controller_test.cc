@@ -1,0 +1,359 @@
+#include "cdpr/controller/rt_controller.hpp"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <functional>
+#include <memory>
+
+#include "alloc_counter.hpp"
+#include "cdpr/calibration/simulate.hpp"
+#include "cdpr/calibration/winch.hpp"
+#include "fake_robot_io.hpp"
+#include "testing/test_robots.hpp"
+
+namespace cdpr::controller {
+namespace {
+
+using testing::FakeRobotIO;
+using namespace std::chrono_literals;
+
+Geometry make_geometry(int version, RobotModel model) {
+  Geometry g;
+  g.version = version;
+  g.reference_tension = default_reference_tension(model);
+  g.model = std::move(model);
+  return g;
+}
+
+// The controller on the fake robot, time driven by the test (one SYNC period per cycle).
+class RtRig : public ::testing::Test {
+ protected:
+  void SetUp() override { make(RtControllerOptions{}); }
+
+  void make(const RtControllerOptions& options) {
+    options_ = options;
+    auto rt = RtController::create(io_, geometry_, options_);
+    ASSERT_TRUE(rt.ok()) << rt.status().to_string();
+    rt_ = std::move(*rt);
+    // The drives stand at the home pose's targets, the tensions at its plan.
+    const std::array<double, kMaxAxes> targets = ik_counts(geometry_, geometry_.model.home);
+    for (int i = 0; i < m_; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      io_.position[k] = targets[k];
+      io_.tension[k] = planned_[k];
+    }
+  }
+
+  // Encoder targets of `pose` under `g` (offsets 0), and its planned tensions in planned_.
+  std::array<double, kMaxAxes> ik_counts(const Geometry& g, const Pose& pose) {
+    CommandData data(g.model);
+    EXPECT_TRUE(command_counts(g.model, pose, g.reference_tension, data).ok());
+    std::array<double, kMaxAxes> counts{};
+    for (int i = 0; i < m_; ++i) {
+      counts[static_cast<std::size_t>(i)] = data.cable.counts(i);
+      planned_[static_cast<std::size_t>(i)] = data.plan.tensions(i);
+    }
+    return counts;
+  }
+
+  void cycle(int n = 1) {
+    for (int c = 0; c < n; ++c) {
+      rt_->cycle(now_);
+      now_ += kPeriod;
+    }
+  }
+  bool run_until(const std::function<bool(const RtSnapshot&)>& done, int max_cycles) {
+    for (int c = 0; c < max_cycles; ++c) {
+      if (done(rt_->snapshot())) return true;
+      cycle();
+    }
+    return done(rt_->snapshot());
+  }
+
+  // Commands live in the rig (the loop keeps a pointer to the active one).
+  MotionCommand& make_command(MotionCommand::Type type) {
+    MotionCommand& c = commands_.emplace_back();
+    c.type = type;
+    return c;
+  }
+  std::uint64_t post(MotionCommand& c) {
+    c.seq = ++seq_;
+    rt_->post(&c);
+    return seq_;
+  }
+  std::uint64_t post_reference(const Pose& pose, bool from_actual,
+                               const Geometry* geometry = nullptr) {
+    MotionCommand& c = make_command(MotionCommand::Type::kReference);
+    c.pose = pose;
+    c.from_actual = from_actual;
+    c.geometry = geometry;
+    return post(c);
+  }
+  std::uint64_t post_move(const Pose& to) {
+    auto traj = PoseTrajectory::plan(rt_->snapshot().pose(), to, MotionLimits{});
+    EXPECT_TRUE(traj.ok());
+    MotionCommand& c = make_command(MotionCommand::Type::kMove);
+    c.trajectory = std::move(*traj);
+    return post(c);
+  }
+  // From disabled to holding still at home.
+  void hold_home() {
+    const std::uint64_t seq = post_reference(geometry_.model.home, true);
+    ASSERT_TRUE(
+        run_until([&](const RtSnapshot& s) { return s.command_done == seq && s.settled; }, 2000));
+  }
+  double counts_per_metre() const {
+    return 1.0 / winch_metres_per_count(geometry_.model.winches[0]);
+  }
+
+  static constexpr canopen::Timestamp kPeriod = 4ms;
+  Geometry geometry_ = make_geometry(1, cdpr::testing::mini_robot());
+  int m_ = geometry_.model.num_cables();
+  FakeRobotIO io_{geometry_.model.num_cables()};
+  RtControllerOptions options_;
+  std::unique_ptr<RtController> rt_;
+  std::array<double, kMaxAxes> planned_{};
+  std::deque<MotionCommand> commands_;
+  std::uint64_t seq_ = 0;
+  canopen::Timestamp now_{1s};
+};
+
+TEST_F(RtRig, DisabledTargetsFollowThisCyclesActualPositions) {
+  io_.position[0] += 1234.0;
+  cycle();
+  const RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.mode, RtMode::kDisabled);
+  EXPECT_FALSE(io_.last().send_targets) << "a disabled loop sends no targets";
+  // Read before update: the target is the position read in the same cycle.
+  EXPECT_EQ(s.target_counts[0], std::lround(io_.position[0]));
+  EXPECT_EQ(s.actual_counts[0], s.target_counts[0]);
+}
+
+TEST_F(RtRig, ModesGoFromDisabledToHoldingToMovingToHolding) {
+  cycle();
+  EXPECT_EQ(rt_->snapshot().mode, RtMode::kDisabled);
+  hold_home();
+  EXPECT_EQ(rt_->snapshot().mode, RtMode::kHolding);
+  Pose to = geometry_.model.home;
+  to.position.z() += 0.02;
+  const std::uint64_t move = post_move(to);
+  cycle();
+  EXPECT_EQ(rt_->snapshot().mode, RtMode::kMoving);
+  EXPECT_EQ(rt_->snapshot().command_taken, move);
+  ASSERT_TRUE(run_until([&](const RtSnapshot& s) { return s.command_done == move; }, 5000));
+  const RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.mode, RtMode::kHolding);
+  EXPECT_NEAR(s.pose().position.z(), to.position.z(), 1e-12);
+  // The targets written are the pose's inverse kinematics.
+  const std::array<double, kMaxAxes> ik = ik_counts(geometry_, to);
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    EXPECT_NEAR(io_.last().target_counts[k], ik[k], 0.5) << "cable " << i;
+  }
+  EXPECT_GT(s.largest_move_step, 0.0);
+  EXPECT_TRUE(run_until([](const RtSnapshot& r) { return r.settled; }, 2000));
+}
+
+TEST_F(RtRig, ReReferenceSlewsFromWhereTheDrivesAreWithoutAJump) {
+  // The drives stand 5 mm of cable off their home targets.
+  const double off = 0.005 * counts_per_metre();
+  for (int i = 0; i < m_; ++i) io_.position[static_cast<std::size_t>(i)] += i % 2 ? off : -off;
+  const std::array<double, kMaxAxes> start = io_.position;
+  const std::uint64_t seq = post_reference(geometry_.model.home, true);
+  cycle();
+  ASSERT_EQ(rt_->snapshot().mode, RtMode::kSlewing);
+  const double step_bound = options_.slew_velocity * counts_per_metre() * options_.cycle_s;
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    EXPECT_LE(std::abs(io_.last().target_counts[k] - start[k]), step_bound + 1.0) << i;
+  }
+  ASSERT_TRUE(run_until([&](const RtSnapshot& s) { return s.command_done == seq; }, 2000));
+  EXPECT_EQ(rt_->snapshot().mode, RtMode::kHolding);
+  EXPECT_LE(rt_->snapshot().largest_reference_step, step_bound * (1 + 1e-9));
+  const std::array<double, kMaxAxes> ik = ik_counts(geometry_, geometry_.model.home);
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    EXPECT_NEAR(rt_->snapshot().target_counts[k], ik[k], 1e-6) << "cable " << i;
+  }
+}
+
+TEST_F(RtRig, HotSwapTakesTheNewGeometryWithoutAJump) {
+  hold_home();
+  RobotModel moved = geometry_.model;
+  moved.frame_anchors(0, 0) += 0.003;
+  const Geometry next = make_geometry(2, moved);
+  const std::array<double, kMaxAxes> before = rt_->snapshot().target_counts;
+  const std::uint64_t seq = post_reference(geometry_.model.home, false, &next);
+  cycle();
+  EXPECT_EQ(rt_->geometry_in_use(), 2);
+  const double step_bound = options_.slew_velocity * counts_per_metre() * options_.cycle_s;
+  EXPECT_LE(std::abs(rt_->snapshot().target_counts[0] - before[0]), step_bound + 1e-9);
+  ASSERT_TRUE(run_until([&](const RtSnapshot& s) { return s.command_done == seq; }, 2000));
+  const std::array<double, kMaxAxes> ik = ik_counts(next, next.model.home);
+  EXPECT_NEAR(rt_->snapshot().target_counts[0], ik[0], 1e-6);
+  EXPECT_GT(std::abs(ik[0] - before[0]), 100.0) << "the new geometry moves cable 1";
+  EXPECT_EQ(rt_->snapshot().geometry_version, 2);
+}
+
+TEST_F(RtRig, TrimsMoveAtTheirRateThenFadeOutOverTheNextMove) {
+  hold_home();
+  const double rate = options_.trim_velocity * counts_per_metre() * options_.cycle_s;
+  MotionCommand& trim = make_command(MotionCommand::Type::kTrim);
+  trim.trim[1] = 20.5 * rate;
+  const std::array<double, kMaxAxes> before = rt_->snapshot().target_counts;
+  const std::uint64_t seq = post(trim);
+  cycle();
+  EXPECT_NEAR(rt_->snapshot().trim_counts[1], rate, 1e-9) << "one cycle's worth";
+  ASSERT_TRUE(run_until([&](const RtSnapshot& s) { return s.command_done == seq; }, 100));
+  const RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.trim_counts[1], trim.trim[1]);
+  EXPECT_NEAR(s.target_counts[1] - before[1], trim.trim[1], 1e-6);
+  EXPECT_EQ(s.target_counts[0], before[0]) << "only cable 2 is trimmed";
+  Pose to = geometry_.model.home;
+  to.position.x() += 0.01;
+  const std::uint64_t move = post_move(to);
+  ASSERT_TRUE(run_until([&](const RtSnapshot& r) { return r.command_done == move; }, 5000));
+  EXPECT_EQ(rt_->snapshot().trim_counts[1], 0.0);
+}
+
+TEST_F(RtRig, DriveFaultQuickStopsInTheSameCycleAndLatchesUntilReset) {
+  hold_home();
+  io_.fault(2, 0x7500);
+  const int stops = io_.quick_stops();
+  cycle();
+  RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.mode, RtMode::kDisabled);
+  EXPECT_EQ(s.fault.kind, FaultKind::kDriveFault);
+  EXPECT_EQ(s.fault.node, 3);
+  EXPECT_EQ(s.fault.code, 0x7500);
+  EXPECT_EQ(io_.quick_stops(), stops + 1) << "written in the cycle that read the fault";
+  RtEvent e;
+  ASSERT_TRUE(rt_->pop_event(e));
+  EXPECT_EQ(e.event.type, canopen::EventType::kDriveFault);
+  // Latched: no command is taken, the fault stays.
+  const std::uint64_t ref = post_reference(geometry_.model.home, true);
+  cycle(20);
+  EXPECT_EQ(rt_->snapshot().fault.kind, FaultKind::kDriveFault);
+  EXPECT_NE(rt_->snapshot().command_taken, ref);
+  rt_->request_fault_reset();
+  cycle();
+  EXPECT_EQ(rt_->snapshot().fault.kind, FaultKind::kNone);
+  EXPECT_TRUE(io_.last().fault_reset && io_.last().enable);
+  EXPECT_FALSE(io_.last().quick_stop);
+  ASSERT_TRUE(
+      run_until([&](const RtSnapshot& r) { return r.command_done == ref && r.settled; }, 2000));
+  EXPECT_EQ(rt_->snapshot().mode, RtMode::kHolding);
+}
+
+TEST_F(RtRig, BusEventsAndAnOperatorQuickStopAreNamedFaults) {
+  struct Case {
+    canopen::EventType event;
+    FaultKind fault;
+    int node;
+  };
+  for (const Case& c : {Case{canopen::EventType::kHeartbeatLost, FaultKind::kNodeLost, 4},
+                        Case{canopen::EventType::kBusOff, FaultKind::kBusOff, 0}}) {
+    hold_home();
+    canopen::Event e;
+    e.type = c.event;
+    e.node = static_cast<canopen::NodeId>(c.node);
+    io_.push_event(e);
+    cycle();
+    EXPECT_EQ(rt_->snapshot().fault.kind, c.fault) << to_string(c.fault);
+    EXPECT_EQ(rt_->snapshot().fault.node, c.node);
+    EXPECT_TRUE(io_.last().quick_stop);
+    rt_->request_fault_reset();
+    cycle();
+  }
+  hold_home();
+  rt_->request_quick_stop();
+  cycle();
+  EXPECT_EQ(rt_->snapshot().fault.kind, FaultKind::kQuickStop);
+  EXPECT_TRUE(io_.last().quick_stop);
+  EXPECT_EQ(rt_->snapshot().mode, RtMode::kDisabled);
+}
+
+TEST_F(RtRig, OverloadQuickStopsAfterTheWatchCyclesSlackIsOnlyCounted) {
+  hold_home();
+  io_.tension[3] = 0.5;  // slack
+  cycle(options_.watch_cycles + 3);
+  EXPECT_EQ(rt_->snapshot().fault.kind, FaultKind::kNone);
+  EXPECT_EQ(rt_->snapshot().slack_cycles[3], options_.watch_cycles + 3);
+  io_.tension[3] = planned_[3];
+  io_.tension[5] = 1.2 * geometry_.model.cables[5].f_max;
+  cycle(options_.watch_cycles - 1);
+  EXPECT_EQ(rt_->snapshot().fault.kind, FaultKind::kNone) << "not yet: watch_cycles";
+  cycle();
+  const RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.fault.kind, FaultKind::kOverload);
+  EXPECT_EQ(s.fault.cable, 5);
+  EXPECT_NEAR(s.fault.value, io_.tension[5], 0.2);
+  EXPECT_EQ(s.mode, RtMode::kDisabled);
+}
+
+TEST_F(RtRig, StuckReadingIsAFaultWhileItsPlanChangesNotOnAStillRobot) {
+  hold_home();
+  io_.frozen[0] = true;
+  cycle(3 * options_.stuck_confirm_cycles);
+  EXPECT_EQ(rt_->snapshot().fault.kind, FaultKind::kNone) << "still: the plan does not change";
+  Pose to = geometry_.model.home;
+  to.position.z() += 0.1;
+  const std::uint64_t move = post_move(to);
+  ASSERT_TRUE(run_until(
+      [&](const RtSnapshot& s) {
+        return s.fault.kind != FaultKind::kNone || s.command_done == move;
+      },
+      5000));
+  const RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.fault.kind, FaultKind::kForceStuck);
+  EXPECT_EQ(s.fault.cable, 0);
+  EXPECT_EQ(s.mode, RtMode::kDisabled) << "moving: quick stop";
+}
+
+TEST_F(RtRig, StuckReadingWhileTrimmingHoldsThePose) {
+  hold_home();
+  io_.frozen[2] = true;
+  MotionCommand& trim = make_command(MotionCommand::Type::kTrim);
+  trim.trim[2] = 0.002 * counts_per_metre();  // 2 mm of cable: far more than the threshold
+  post(trim);
+  ASSERT_TRUE(
+      run_until([](const RtSnapshot& s) { return s.fault.kind != FaultKind::kNone; }, 2000));
+  const RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.fault.kind, FaultKind::kForceStuck);
+  EXPECT_EQ(s.fault.cable, 2);
+  EXPECT_EQ(s.mode, RtMode::kHolding) << "holding: the pose is held";
+  EXPECT_LT(s.trim_counts[2], trim.trim[2]) << "the trim stopped where it was";
+}
+
+TEST_F(RtRig, CycleAllocatesNothingWhileHoldingMovingOrFaulted) {
+  hold_home();
+  Pose to = geometry_.model.home;
+  to.position.y() += 0.02;
+  post_move(to);
+  std::uint64_t allocations = 0;
+  {
+    test::AllocationCounter count;
+    cycle(300);  // moving, then holding
+    io_.fault(1, 0x2310);
+    cycle(5);
+    rt_->request_fault_reset();
+    cycle(5);
+    allocations = count.allocations();
+  }
+  EXPECT_EQ(allocations, 0u);
+  EXPECT_GT(rt_->snapshot().largest_move_step, 0.0) << "the platform moved";
+}
+
+TEST(RtController, CreateRefusesAnIoThatDoesNotFitTheRobot) {
+  const Geometry g = make_geometry(1, cdpr::testing::mini_robot());
+  FakeRobotIO io(g.model.num_cables() - 1);
+  auto rt = RtController::create(io, g, RtControllerOptions{});
+  ASSERT_FALSE(rt.ok());
+  EXPECT_NE(rt.status().to_string().find("axes"), std::string::npos) << rt.status().to_string();
+}
+
+}  // namespace
+}  // namespace cdpr::controller
