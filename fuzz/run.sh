@@ -3,7 +3,8 @@
 #
 #   fuzz/run.sh [--build] [--seconds N] [--jobs N] [TARGET...]
 #
-#   --build      configure (preset `fuzz`, once) and build the targets first
+#   --build      configure (preset `fuzz`, once; through ccache when installed) and build the
+#                targets first: only what they link (parsers and decoders, not the identification)
 #   --seconds N  fuzzing time per target (default: $CDPR_FUZZ_SECONDS, else 20)
 #   --jobs N     targets run side by side (default 2)
 #
@@ -27,7 +28,7 @@ while [ $# -gt 0 ]; do
     --build) do_build=1 ;;
     --seconds) seconds=$2; shift ;;
     --jobs) jobs=$2; shift ;;
-    -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,17p' "$0"; exit 0 ;;
     -*) echo "run.sh: unknown option $1" >&2; exit 2 ;;
     *) targets+=("$1") ;;
   esac
@@ -39,7 +40,10 @@ fi
 
 if [ $do_build -eq 1 ]; then
   start=$(date +%s)
-  [ -f "$build/CMakeCache.txt" ] || cmake --preset fuzz >"$build.configure.log" 2>&1 ||
+  # Through ccache where it is installed: a second run recompiles nothing that did not change.
+  launcher=()
+  if command -v ccache >/dev/null; then launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
+  [ -f "$build/CMakeCache.txt" ] || cmake --preset fuzz "${launcher[@]}" >"$build.configure.log" 2>&1 ||
     { cat "$build.configure.log"; exit 1; }
   cmake --build --preset fuzz -j "$jobs" --target "${targets[@]/#/fuzz_}"
   echo "fuzz: build took $(($(date +%s) - start)) s"

@@ -6,6 +6,9 @@ set -euo pipefail
 PACKAGES=(
   # toolchain
   build-essential cmake ninja-build pkg-config clang-format clang-tidy
+  # compiler cache: scripts/test.sh and fuzz/run.sh compile through it, so a rerun rebuilds only
+  # what changed
+  ccache
   # libFuzzer targets (fuzz/, preset fuzz): clang and its sanitizer/fuzzer runtimes
   clang libclang-rt-14-dev
   # libraries

@@ -67,7 +67,9 @@ TEST(CalibrationVerdict, MiniDrumScaleFailsAndNullDataPasses) {
   const MiniCase& c = mini_case();
   ASSERT_EQ(c.poses.size(), 25u);
   const CalibratedModel drum = with_drum_scale(c.s, 0.003);
-  const int seeds = 40;
+  // Ten seeds: each must come out right (null data passes, the drum scale fails; at 2000-2039 all
+  // 40 do). The rates over many seeds and sizes are bench/calibrate_verdict_bench.cc's figures.
+  const int seeds = 10;
   int null_passed = 0, drum_failed = 0;
   for (int k = 0; k < seeds; ++k) {
     const std::uint64_t seed = 2000 + static_cast<std::uint64_t>(k);

@@ -9,12 +9,14 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <condition_variable>
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <mutex>
 #include <sstream>
 #include <thread>
+#include <utility>
 
 #include "cdpr/controller/control_server.hpp"
 #include "render.hpp"
@@ -31,6 +33,41 @@ using namespace std::chrono_literals;
 struct Outcome {
   int code = -1;
   std::string out, err;
+};
+
+// cdprctl's standard output, which the scripted daemon's thread may wait on: a `watch` is ended
+// (daemon gone, Ctrl-C) once what it must show was printed, not after a guessed delay.
+class WatchedOutput : public std::streambuf {
+ public:
+  bool wait_for(const std::string& text) {
+    std::unique_lock lock(mu_);
+    return cv_.wait_for(lock, 60s, [&] { return text_.find(text) != std::string::npos; });
+  }
+  std::string take() {
+    std::lock_guard lock(mu_);
+    return std::exchange(text_, {});
+  }
+
+ protected:
+  int_type overflow(int_type c) override {
+    if (traits_type::eq_int_type(c, traits_type::eof())) return traits_type::not_eof(c);
+    const char ch = traits_type::to_char_type(c);
+    xsputn(&ch, 1);
+    return c;
+  }
+  std::streamsize xsputn(const char* s, std::streamsize n) override {
+    {
+      std::lock_guard lock(mu_);
+      text_.append(s, static_cast<std::size_t>(n));
+    }
+    cv_.notify_all();
+    return n;
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  std::string text_;
 };
 
 class CdprctlTest : public ::testing::Test {
@@ -84,10 +121,11 @@ class CdprctlTest : public ::testing::Test {
     argv.insert(argv.end(), args.begin(), args.end());
     std::vector<const char*> raw;
     for (const auto& a : argv) raw.push_back(a.c_str());
-    std::ostringstream out, err;
+    std::ostream out(&out_);
+    std::ostringstream err;
     Outcome o;
     o.code = run(static_cast<int>(raw.size()), raw.data(), out, err, env);
-    o.out = out.str();
+    o.out = out_.take();
     o.err = err.str();
     return o;
   }
@@ -106,6 +144,7 @@ class CdprctlTest : public ::testing::Test {
   }
 
   std::string dir_, socket_;
+  WatchedOutput out_;
   std::unique_ptr<control::ControlServer> server_;
   std::mutex mu_;
   std::vector<ControlRequest> requests_;
@@ -492,7 +531,7 @@ TEST_F(CdprctlTest, WatchPrintsPlainLinesAndEndsWhenTheDaemonCloses) {
     server_->publish("progress", {{"phase", "moving"}, {"pose", 2}, {"poses", 25}});
     server_->publish("log", {{"level", "warning"}, {"message", "laser retry"}});
     server_->publish("fault", {{"fault", "cable_slack"}, {"node", 5}, {"message", "f 0.4 N"}});
-    std::this_thread::sleep_for(100ms);
+    out_.wait_for("FAULT: cable_slack");
     server_->stop();
   });
   const Outcome o = ctl({"watch"});
@@ -518,7 +557,7 @@ TEST_F(CdprctlTest, WatchDrawsALiveBarOnATerminalAndEndsAtCtrlC) {
                                     {"laser_m", 0.75}});
     }
     server_->publish("state", {{"state", "identifying"}, {"reason", "all poses measured"}});
-    std::this_thread::sleep_for(100ms);
+    out_.wait_for("state: identifying (all poses measured)\nmeasuring  pose 3/4");
     interrupted = true;
   });
   Environment env;
@@ -544,7 +583,7 @@ TEST_F(CdprctlTest, WatchWithJsonPrintsEachEventAsOneLine) {
     std::this_thread::sleep_for(20ms);
     server_->publish("state", {{"state", "holding"}});
     server_->publish("state", {{"state", "moving"}});
-    std::this_thread::sleep_for(100ms);
+    out_.wait_for("\"moving\"");
     interrupted = true;
   });
   Environment env;

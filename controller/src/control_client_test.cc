@@ -35,7 +35,7 @@ class ControlClientTest : public ::testing::Test {
     ControlServerOptions o;
     o.path = path_;
     auto s = ControlServer::start(o, [](const ControlRequest& r) {
-      if (r.cmd == "geometry_history") std::this_thread::sleep_for(300ms);  // a slow answer
+      if (r.cmd == "geometry_history") std::this_thread::sleep_for(1500ms);  // a slow answer
       return ControlReply::ok({{"cmd", r.cmd}});
     });
     ASSERT_TRUE(s.ok()) << s.status().to_string();
@@ -69,8 +69,8 @@ TEST_F(ControlClientTest, KeepsEventsThatArriveWhileWaitingForAReply) {
   auto r = c->call("status", json::object(), deadline_after(5));
   ASSERT_TRUE(r.ok());
   EXPECT_EQ(r->result()["cmd"], json("status"));
-  auto e1 = c->next_event(deadline_after(1));
-  auto e2 = c->next_event(deadline_after(1));
+  auto e1 = c->next_event(deadline_after(10));
+  auto e2 = c->next_event(deadline_after(10));
   ASSERT_TRUE(e1.ok() && e2.ok());
   EXPECT_EQ(e1->data["message"], json("first"));
   EXPECT_EQ(e2->data["message"], json("second"));
@@ -104,7 +104,7 @@ TEST_F(ControlClientTest, ACancelFlagEndsAWaitForEvents) {
   t.join();
   ASSERT_FALSE(ev.ok());
   EXPECT_EQ(ev.status().code(), ErrorCode::kAborted);
-  EXPECT_LT(std::chrono::steady_clock::now() - t0, 2s);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 10s);  // no hang, however loaded the host
 }
 
 TEST_F(ControlClientTest, DeadlineAfterZeroMeansNoBound) {

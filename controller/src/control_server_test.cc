@@ -551,11 +551,32 @@ TEST_F(ControlServerTest, APeerOutsideTheGroupCannotOpenTheSocket) {
 // ---- abuse ------------------------------------------------------------------------------------
 
 // Latency of one status round trip.
+//
+// The two flood tests below hold the flood until the stalled client is dropped (stall_timeout,
+// 3 s) and bound the probe's worst round trip and the slowest publish below that: a server that
+// waited on the stalled client (up to its stall_timeout) fails, a loaded host does not.
+constexpr auto kStall = std::chrono::seconds(3);
+constexpr double kNotBlockedMs = 2000.0;
+
+// Probes until `dropped` holds (at least 1.5 s, at most 60 s): the round trips in ms.
+template <class Pred>
+std::vector<double> probe_until(ControlClient& c, Pred dropped);
 double round_trip_ms(ControlClient& c) {
   const auto t0 = Clock::now();
   auto r = c.call("status", json::object(), deadline_after(10));
   EXPECT_TRUE(r.ok()) << r.status().to_string();
   return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+template <class Pred>
+std::vector<double> probe_until(ControlClient& c, Pred dropped) {
+  std::vector<double> latencies;
+  const auto t0 = Clock::now();
+  while ((Clock::now() - t0 < 1500ms || !dropped()) && Clock::now() - t0 < 60s) {
+    latencies.push_back(round_trip_ms(c));
+    std::this_thread::sleep_for(5ms);
+  }
+  return latencies;
 }
 
 TEST_F(ControlServerTest, ServesTwoHundredConcurrentClients) {
@@ -599,7 +620,7 @@ TEST_F(ControlServerTest, TurnsAwayClientsBeyondTheLimitWithBusy) {
 TEST_F(ControlServerTest, StaysResponsiveWhileAWatcherNeverReadsAndEventsFlood) {
   ControlServerOptions o = options();
   o.max_pending_bytes = 64 * 1024;
-  o.stall_timeout = 300ms;
+  o.stall_timeout = kStall;
   start(o);
   ControlClient sleeper = connect();  // watches, then never reads
   ASSERT_TRUE(sleeper.call("watch", json::object(), deadline_after(5)).ok());
@@ -621,12 +642,8 @@ TEST_F(ControlServerTest, StaysResponsiveWhileAWatcherNeverReadsAndEventsFlood) 
       ++published;
     }
   });
-  std::vector<double> latencies;
-  const auto t_end = Clock::now() + 1500ms;
-  while (Clock::now() < t_end) {
-    latencies.push_back(round_trip_ms(probe));
-    std::this_thread::sleep_for(5ms);
-  }
+  std::vector<double> latencies =
+      probe_until(probe, [&] { return server_->stats().clients_disconnected_slow >= 1; });
   done = true;
   publisher.join();
   std::sort(latencies.begin(), latencies.end());
@@ -637,13 +654,12 @@ TEST_F(ControlServerTest, StaysResponsiveWhileAWatcherNeverReadsAndEventsFlood) 
       "%zu calls: median %.3f ms, worst %.3f ms; events dropped %llu\n",
       published, slowest_publish_ms, latencies.size(), median, worst,
       static_cast<unsigned long long>(server_->stats().events_dropped));
-  // Bounds generous for a loaded 2-core machine; the point is "not blocked" (seconds).
-  EXPECT_LT(worst, 250.0);
-  EXPECT_LT(slowest_publish_ms, 100.0);
+  EXPECT_LT(worst, kNotBlockedMs);
+  EXPECT_LT(slowest_publish_ms, kNotBlockedMs);
   const ControlServerStats s = server_->stats();
   EXPECT_GT(s.events_dropped, 0u);
   EXPECT_EQ(s.clients_disconnected_slow, 1u);  // the sleeper, after stall_timeout
-  auto gone = sleeper.read_line(deadline_after(0.5));
+  auto gone = sleeper.read_line(deadline_after(5));
   // It may still read what was queued before the disconnect, then end-of-stream.
   while (gone.ok()) gone = sleeper.read_line(deadline_after(5));
   EXPECT_EQ(gone.status().code(), ErrorCode::kUnavailable);
@@ -652,7 +668,7 @@ TEST_F(ControlServerTest, StaysResponsiveWhileAWatcherNeverReadsAndEventsFlood) 
 TEST_F(ControlServerTest, StaysResponsiveUnderARequestFloodFromAClientThatNeverReads) {
   ControlServerOptions o = options();
   o.max_pending_bytes = 64 * 1024;
-  o.stall_timeout = 300ms;
+  o.stall_timeout = kStall;
   start(o);
   ControlClient probe = connect();
   std::atomic<bool> done{false};
@@ -670,12 +686,8 @@ TEST_F(ControlServerTest, StaysResponsiveUnderARequestFloodFromAClientThatNeverR
       flood_bytes += batch.size();
     }
   });
-  std::vector<double> latencies;
-  const auto t_end = Clock::now() + 1500ms;
-  while (Clock::now() < t_end) {
-    latencies.push_back(round_trip_ms(probe));
-    std::this_thread::sleep_for(5ms);
-  }
+  std::vector<double> latencies =
+      probe_until(probe, [&] { return server_->stats().clients_disconnected_slow >= 1; });
   done = true;
   flooder.join();
   std::sort(latencies.begin(), latencies.end());
@@ -684,7 +696,7 @@ TEST_F(ControlServerTest, StaysResponsiveUnderARequestFloodFromAClientThatNeverR
       "median %.3f ms, worst %.3f ms; %llu requests served\n",
       flood_bytes.load(), latencies.size(), latencies[latencies.size() / 2], latencies.back(),
       static_cast<unsigned long long>(server_->stats().requests));
-  EXPECT_LT(latencies.back(), 250.0);
+  EXPECT_LT(latencies.back(), kNotBlockedMs);
   EXPECT_EQ(server_->stats().clients_disconnected_slow, 1u);
 }
 

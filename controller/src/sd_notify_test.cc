@@ -38,10 +38,10 @@ class NotifySocket {
   }
   bool ok() const { return ok_; }
   const std::string& path() const { return path_; }
-  // The next datagram, or nullopt after 2 s.
+  // The next datagram, or nullopt after 10 s (generous: only a datagram never sent fails).
   std::optional<std::string> receive() {
     pollfd p{fd_, POLLIN, 0};
-    if (poll(&p, 1, 2000) != 1) return std::nullopt;
+    if (poll(&p, 1, 10000) != 1) return std::nullopt;
     char buf[4096];
     const ssize_t n = recv(fd_, buf, sizeof buf, 0);
     if (n < 0) return std::nullopt;

@@ -32,10 +32,13 @@ holding, WORK = cell.holding, cell.work
 
 
 def true_pose():
+    """The sim's true platform pose: the line it prints on SIGUSR1 (waited for, not timed)."""
+    def poses():
+        return [l for l in open(cell.sim_log.name) if "true platform pose" in l]
+    before = len(poses())
     cell.sim.send_signal(signal.SIGUSR1)
-    time.sleep(1.0)
-    lines = [l for l in open(cell.sim_log.name) if "true platform pose" in l]
-    return [float(x) for x in lines[-1].split("pose")[1].split()]
+    wait_for(lambda: len(poses()) > before, 60, "the sim's true platform pose")
+    return [float(x) for x in poses()[-1].split("pose")[1].split()]
 
 
 def scenario():

@@ -44,12 +44,19 @@ RegisterMap load_map(const std::string& name) {
   return m.ok() ? *m : RegisterMap{};
 }
 
+// Wall-clock bounds (CI runs on a loaded 2-core machine): a slave that answers is waited for
+// generously, so only a hang fails; a read that must time out (nobody answers) uses a short
+// timeout, which is the outcome expected; "answered at once" means well before the answer timeout.
+constexpr double kAnswerTimeoutS = 10.0;
+constexpr double kAtOnceS = kAnswerTimeoutS / 2;
+constexpr double kHangS = 30.0;
+
 LaserConfig rtu_config(const std::string& device, const RegisterMap& map, int slave = 17) {
   LaserConfig c;
   c.name = map.name;
   c.link.transport = RtuSettings{device, 115200, 'E', 8, 1, false};
   c.link.slave_id = slave;
-  c.link.response_timeout_s = 0.2;
+  c.link.response_timeout_s = kAnswerTimeoutS;
   c.link.retries = 1;
   c.link.reconnect_delay_s = 0.1;
   c.map = map;
@@ -219,22 +226,29 @@ TEST(LaserRtu, PollingThreadPublishesFreshTimestampedReadings) {
   ASSERT_TRUE(laser.start().ok());
   const auto t0 = Clock::now();
   LaserReading first = laser.latest();
-  while (first.sequence == 0 && since(t0) < 2.0) {
+  while (first.sequence == 0 && since(t0) < kHangS) {
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
     first = laser.latest();
   }
   ASSERT_GT(first.sequence, 0u);
-  std::this_thread::sleep_for(std::chrono::milliseconds(400));
-  const LaserReading last = laser.latest();
+  // At least 20 more readings (however long a loaded machine takes), never faster than 50 Hz.
+  const auto t_first = Clock::now();
+  LaserReading last = laser.latest();
+  while (last.sequence < first.sequence + 20 && since(t_first) < kHangS) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    last = laser.latest();
+  }
   laser.stop();
   ASSERT_TRUE(last.ok()) << last.error.to_string();
   EXPECT_NEAR(last.distance_m, 0.75, 0.5e-3);
   const auto n = last.sequence - first.sequence;
-  // 50 Hz for 0.4 s: about 20 readings (loose bounds for a loaded machine).
-  EXPECT_GE(n, 8u);
-  EXPECT_LE(n, 24u);
+  EXPECT_GE(n, 20u);
   EXPECT_GT(last.stamp_ns, first.stamp_ns);
-  EXPECT_LT(monotonic_ns() - last.stamp_ns, 1'000'000'000);
+  // A request starts no earlier than one period after the previous slot, nor before the previous
+  // request ended (stamps are mid-request): n readings after `first` span >= (n - 1) periods.
+  const double span_s = 1e-9 * static_cast<double>(last.stamp_ns - first.stamp_ns);
+  EXPECT_LE(static_cast<double>(n), 50.0 * span_s + 1.5) << "polls faster than its rate";
+  EXPECT_LT(monotonic_ns() - last.stamp_ns, static_cast<std::int64_t>(kHangS * 1e9));
   const DriverStatus st = laser.status();
   EXPECT_FALSE(st.running);
   EXPECT_GE(st.counters.requests, n);
@@ -299,7 +313,7 @@ TEST(LaserRtu, SlaveNotAnsweringTimesOutBoundedAndNamed) {
   EXPECT_NE(msg.find("address 52"), std::string::npos) << msg;  // register 0x34
   EXPECT_NE(msg.find("3 tries"), std::string::npos) << msg;
   EXPECT_GE(dt, 0.29);
-  EXPECT_LT(dt, 1.0);
+  EXPECT_LT(dt, kHangS);
   EXPECT_EQ(laser.status().counters.timeouts, 1u);
 }
 
@@ -316,13 +330,17 @@ TEST(LaserRtu, WrongSlaveIdIsATimeoutNamingTheId) {
     LaserSensor wrong(cfg);
     const auto t0 = Clock::now();
     const LaserReading r = wrong.read_once();
-    EXPECT_LT(since(t0), 0.6);
+    EXPECT_LT(since(t0), kHangS);
     EXPECT_EQ(r.status, ReadingStatus::kTimeout) << r.error.to_string();
     EXPECT_NE(r.error.message().find("no answer from slave 17"), std::string_view::npos)
         << r.error.to_string();
   }  // closes the serial port (opened exclusively)
-  // The slave is alive: the right id gets the value.
-  LaserSensor right(rtu_config(rig.pty.master_path(), map, 18));
+  // The slave is alive: the right id gets the value. The python slave loses the first request
+  // after the port is opened again, so this read is retried: 5 tries of 1 s (never 5 misses).
+  LaserConfig right_cfg = rtu_config(rig.pty.master_path(), map, 18);
+  right_cfg.link.response_timeout_s = 1.0;
+  right_cfg.link.retries = 4;
+  LaserSensor right(right_cfg);
   const LaserReading ok = right.read_once();
   ASSERT_TRUE(ok.ok()) << ok.error.to_string();
   EXPECT_NEAR(ok.distance_m, 1.5, 0.5e-3);
@@ -340,7 +358,7 @@ TEST(LaserRtu, CorruptedFrameIsACrcError) {
   LaserSensor laser(cfg);
   const auto t0 = Clock::now();
   const LaserReading r = laser.read_once();
-  EXPECT_LT(since(t0), 1.0);
+  EXPECT_LT(since(t0), kAtOnceS);  // no answer timeout waited out
   EXPECT_EQ(r.status, ReadingStatus::kCommError);
   EXPECT_EQ(r.error.code(), ErrorCode::kProtocolError);
   EXPECT_NE(r.error.message().find("CRC"), std::string_view::npos) << r.error.to_string();
@@ -357,7 +375,7 @@ TEST(LaserRtu, ExceptionIsDecodedToText) {
   LaserSensor laser(rtu_config(rig.pty.master_path(), map));
   const auto t0 = Clock::now();
   const LaserReading r = laser.read_once();
-  EXPECT_LT(since(t0), 0.5);  // answered at once, not retried
+  EXPECT_LT(since(t0), kAtOnceS);  // answered at once, not retried
   EXPECT_EQ(r.status, ReadingStatus::kCommError);
   EXPECT_EQ(r.error.code(), ErrorCode::kAborted);
   EXPECT_NE(r.error.message().find("exception 2 (illegal data address)"), std::string_view::npos)
@@ -400,7 +418,7 @@ TEST(LaserTcp, ReconnectsAfterTheServerRestarts) {
           .ok());
   const int port = slave.port();
   LaserConfig cfg = tcp_config(port, map);
-  cfg.link.response_timeout_s = 0.1;
+  cfg.link.response_timeout_s = 1.0;
   cfg.link.retries = 0;
   cfg.link.reconnect_delay_s = 0.05;
   cfg.poll_rate_hz = 100;
@@ -414,11 +432,11 @@ TEST(LaserTcp, ReconnectsAfterTheServerRestarts) {
     }
     return false;
   };
-  ASSERT_TRUE(wait_for([](const LaserReading& r) { return r.ok(); }, 3.0));
+  ASSERT_TRUE(wait_for([](const LaserReading& r) { return r.ok(); }, kHangS));
   EXPECT_NEAR(laser.latest().distance_m, 5.0, 0.5e-3);
 
   slave.stop();
-  ASSERT_TRUE(wait_for([](const LaserReading& r) { return !r.ok() && r.sequence > 0; }, 3.0));
+  ASSERT_TRUE(wait_for([](const LaserReading& r) { return !r.ok() && r.sequence > 0; }, kHangS));
   const LaserReading down = laser.latest();
   EXPECT_NE(down.error.message().find(std::to_string(port)), std::string_view::npos)
       << down.error.to_string();
@@ -427,7 +445,7 @@ TEST(LaserTcp, ReconnectsAfterTheServerRestarts) {
   ASSERT_TRUE(
       again.start_tcp(port, {.map_path = map_dir() + "/proxitron-lma-u32.yaml", .distances = {7.5}})
           .ok());
-  ASSERT_TRUE(wait_for([](const LaserReading& r) { return r.ok(); }, 5.0))
+  ASSERT_TRUE(wait_for([](const LaserReading& r) { return r.ok(); }, kHangS))
       << laser.latest().error.to_string();
   EXPECT_NEAR(laser.latest().distance_m, 7.5, 0.5e-3);
   const DriverStatus st = laser.status();

@@ -145,8 +145,8 @@ Status PtyPair::start() {
       log_);
   if (!p.ok()) return p.status();
   socat_ = std::move(*p);
-  if (!wait_for_file(a_, 5.0) || !wait_for_file(b_, 5.0)) {
-    return Status::error(ErrorCode::kTimeout, "socat made no pty pair in 5 s: %s",
+  if (!wait_for_file(a_, 30.0) || !wait_for_file(b_, 30.0)) {
+    return Status::error(ErrorCode::kTimeout, "socat made no pty pair in 30 s: %s",
                          read_text(log_).c_str());
   }
   return Status::success();
@@ -189,13 +189,13 @@ Status LaserSlave::start(const std::vector<std::string>& where, const SlaveOptio
   if (!p.ok()) return p.status();
   proc_ = std::move(*p);
   const auto t0 = Clock::now();
-  while (since(t0) < 15.0) {
+  while (since(t0) < 60.0) {
     if (wait_for_file(ready_, 0.05)) return Status::success();
     if (!proc_.running()) {
       return Status::error(ErrorCode::kUnavailable, "laser slave exited: %s", log().c_str());
     }
   }
-  return Status::error(ErrorCode::kTimeout, "laser slave not ready in 15 s: %s", log().c_str());
+  return Status::error(ErrorCode::kTimeout, "laser slave not ready in 60 s: %s", log().c_str());
 }
 
 }  // namespace cdpr::modbus::testing

@@ -6,6 +6,9 @@
 // - with them taken out (MismatchOptions::direction_candidates = false), it reports the
 //   unexplained structure: the direction of the last move of cables 2 and 5, not "no mismatch"
 //   and not a wrong name.
+// Each realistic-noise case runs on one seed (a diagnosis takes a minute or more): how often the
+// locator names the effects over many seeds is the benchmark's figure (bench/mismatch_bench.cc,
+// docs/mismatch-benchmark.md), not this test's.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -251,18 +254,14 @@ TEST(DirectionEffects, NoiseFreeFrictionOnACableSlackInTruthIsRepresentedExactly
 TEST(DirectionEffects, EachIsNamedWithRealisticNoise) {
   // One at a time: on MINI the two are confounded (canonical correlation about 0.85: a length
   // error at a free pose shows mostly in the equilibrium rows, like a tension error).
-  for (std::uint64_t seed : {1001u, 1002u}) {
-    SCOPED_TRACE(seed);
-    for (const bool hysteresis : {true, false}) {
-      const MeasurementSet set =
-          record(hysteresis ? 5e-4 : 0.0, hysteresis ? 0.0 : 3.0, true, seed);
-      Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
-      ASSERT_TRUE(d.ok()) << d.status().to_string();
-      EXPECT_EQ(d->verdict, Diagnosis::Verdict::kMismatchNamed) << d->headline;
-      ASSERT_EQ(d->accepted.size(), 1u) << d->headline;
-      EXPECT_EQ(d->accepted[0].family, hysteresis ? "cable hysteresis" : "pulley friction")
-          << d->headline;
-    }
+  for (const bool hysteresis : {true, false}) {
+    const MeasurementSet set = record(hysteresis ? 5e-4 : 0.0, hysteresis ? 0.0 : 3.0, true, 1001);
+    Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
+    ASSERT_TRUE(d.ok()) << d.status().to_string();
+    EXPECT_EQ(d->verdict, Diagnosis::Verdict::kMismatchNamed) << d->headline;
+    ASSERT_EQ(d->accepted.size(), 1u) << d->headline;
+    EXPECT_EQ(d->accepted[0].family, hysteresis ? "cable hysteresis" : "pulley friction")
+        << d->headline;
   }
 }
 
@@ -291,16 +290,13 @@ TEST(DirectionEffects, OutOfTheLibraryTheyAreDescribedNotMisnamedNoiseFree) {
 }
 
 TEST(DirectionEffects, OutOfTheLibraryTheyAreDescribedNotMisnamedWithRealisticNoise) {
-  for (std::uint64_t seed : {1001u, 1002u}) {
-    SCOPED_TRACE(seed);
-    const MeasurementSet set = record(5e-4, 3.0, true, seed);
-    Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(false));
-    ASSERT_TRUE(d.ok()) << d.status().to_string();
-    expect_described(*d);
-    for (const auto& u : d->screen.unexplained) {
-      if (u.channel != "cable tensions") continue;
-      for (double f : u.slopes) EXPECT_GT(f, 1.0) << u.description;  // 3 N of friction and more
-    }
+  const MeasurementSet set = record(5e-4, 3.0, true, 1001);
+  Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(false));
+  ASSERT_TRUE(d.ok()) << d.status().to_string();
+  expect_described(*d);
+  for (const auto& u : d->screen.unexplained) {
+    if (u.channel != "cable tensions") continue;
+    for (double f : u.slopes) EXPECT_GT(f, 1.0) << u.description;  // 3 N of friction and more
   }
 }
 
@@ -375,7 +371,7 @@ std::vector<double> force_gains() {
 // round is what finds them.
 TEST(CompoundEffects, ASmallerEffectHiddenByALargerOneIsNamedByTheSecondRound) {
   const double ea = mini().truth.cables[0].ea;
-  for (std::uint64_t seed : {1001u, 1002u}) {
+  for (std::uint64_t seed : {1001u}) {  // one seed (see the top of the file); 1002 too
     SCOPED_TRACE(seed);
     const MeasurementSet set = record_with(
         [&](sim::HiddenEffects& e, RobotModel&) {
@@ -419,7 +415,9 @@ TEST(CompoundEffects, ASmallerEffectHiddenByALargerOneIsNamedByTheSecondRound) {
 TEST(CompoundEffects, ForceGainsBesideCreepAreBothNamedThoughTheyShareOneDirection) {
   const double ea = mini().truth.cables[0].ea;
   int held = 0;
-  for (std::uint64_t seed : {1003u, 1004u}) {
+  // One seed (see the top of the file): 1004, whose gains beside creep are weak evidence, held
+  // back and confirmed by the re-run with their follow-up poses (1003's are strong at once).
+  for (std::uint64_t seed : {1004u}) {
     SCOPED_TRACE(seed);
     const Hide hide = [&](sim::HiddenEffects& e, RobotModel&) {
       sim::CreepEffect c;
@@ -447,7 +445,7 @@ TEST(CompoundEffects, ForceGainsBesideCreepAreBothNamedThoughTheyShareOneDirecti
     EXPECT_NE(accepted(*d, "force sensor gain"), nullptr) << d->headline;
     EXPECT_EQ(d->accepted.size(), 2u) << d->headline;
   }
-  EXPECT_LE(held, 1);  // seed 1003's gains are strong at once
+  EXPECT_EQ(held, 1);  // the path through the held-back suspect was taken
 }
 
 // MINI with cable creep (compliance +10 % of 1/EA over the 500 s recording, tau 10 s) and drum
@@ -485,7 +483,7 @@ MeasurementSet record_creep_and_drum_scales(const std::vector<double>& scale, st
 // candidate it shadowed counted as its proxy and was never a first effect.
 TEST(CompoundEffects, CreepSeenOnAFewCablesIsExplainedNotReportedAsStructureOutsideTheLibrary) {
   const std::vector<double> scale = {0.002, -0.0015, 0.001, -0.002, 0.0015, -0.001, 0.002, -0.0005};
-  for (std::uint64_t seed : {1001u, 1002u, 1004u}) {
+  for (std::uint64_t seed : {1001u}) {  // one seed (see the top of the file); 1002, 1004 too
     SCOPED_TRACE(seed);
     const MeasurementSet set = record_creep_and_drum_scales(scale, seed);
     Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
@@ -507,7 +505,7 @@ TEST(CompoundEffects, CreepSeenOnAFewCablesIsExplainedNotReportedAsStructureOuts
 // drum scale + elasticity with no pair to creep; 1001-1010 now all name creep or list it.
 TEST(CompoundEffects, AnEffectStandingInForCreepBesideDrumScalesIsReportedAsConfoundedWithIt) {
   const std::vector<double> scale = {0.002, -0.002, 0.0015, -0.001, -0.002, 0.002, -0.0015, 0.001};
-  for (std::uint64_t seed : {1003u, 1004u, 1005u}) {
+  for (std::uint64_t seed : {1003u}) {  // one seed (see the top of the file); 1004, 1005 too
     SCOPED_TRACE(seed);
     const MeasurementSet set = record_creep_and_drum_scales(scale, seed);
     Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
@@ -575,7 +573,7 @@ TEST(CompoundEffects, SeparatingPosesArePredictedAtTheTimeTheyWillBeMeasured) {
   const std::vector<double> scale = {0.002, -0.002, 0.0015, -0.001, -0.002, 0.002, -0.0015, 0.001};
   const Hide hide = creep_and_drum_scales(scale);
   int checked = 0;
-  for (std::uint64_t seed : {1003u, 1004u}) {
+  for (std::uint64_t seed : {1003u}) {  // one seed (see the top of the file); 1004 too
     SCOPED_TRACE(seed);
     const MeasurementSet set = record_with(hide, true, seed);
     Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));

@@ -88,7 +88,7 @@ TEST(ModbusLink, RefusedTcpConnectionFailsFast) {
   LinkConfig c;
   const int port = closed_port();
   c.transport = TcpSettings{"127.0.0.1", port};
-  c.response_timeout_s = 0.2;
+  c.response_timeout_s = 10.0;  // the longest allowed: "fast" is well before it, also when loaded
   ModbusLink link(c);
   const auto t0 = std::chrono::steady_clock::now();
   const Status s = link.connect();
@@ -96,7 +96,7 @@ TEST(ModbusLink, RefusedTcpConnectionFailsFast) {
   EXPECT_FALSE(s.ok());
   EXPECT_NE(s.message().find("127.0.0.1:" + std::to_string(port)), std::string_view::npos)
       << s.to_string();
-  EXPECT_LT(dt, 1.0);
+  EXPECT_LT(dt, 5.0);
 }
 
 TEST(ModbusLink, RequestsOutsideTheModbusLimitsAreRejectedBeforeSending) {
@@ -126,17 +126,22 @@ TEST(LaserSensor, AbsentDeviceGivesErrorReadingsNotCrashesOrHangs) {
   EXPECT_EQ(r.sequence, 1u);
 
   ASSERT_TRUE(laser.start().ok());
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  const LaserReading p = laser.latest();
-  EXPECT_GT(p.sequence, 2u);  // the thread keeps polling (and failing) at its rate
+  // The thread keeps polling (and failing) at its rate: a few readings, however loaded the host.
+  const auto t_start = std::chrono::steady_clock::now();
+  LaserReading p = laser.latest();
+  while (p.sequence <= 3 && std::chrono::steady_clock::now() - t_start < std::chrono::seconds(30)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    p = laser.latest();
+  }
+  EXPECT_GT(p.sequence, 3u);
   EXPECT_EQ(p.status, ReadingStatus::kCommError);
   const DriverStatus st = laser.status();
   EXPECT_TRUE(st.running);
   EXPECT_FALSE(st.connected);
   EXPECT_EQ(st.last_connect_error.code(), ErrorCode::kNotFound);
   const auto t0 = std::chrono::steady_clock::now();
-  laser.stop();
-  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 0.5);
+  laser.stop();  // not held up by the reconnect attempts: no hang
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 10.0);
   EXPECT_FALSE(laser.running());
 
   const Result<Measurement> m = laser.measure(4, {.interval_s = 0.0});
