@@ -8,10 +8,17 @@ add_library(cdpr_daemon STATIC
   ${_d}/src/rt_controller_watch.cc
   ${_d}/src/state_store.cc
   ${_d}/src/calibration_report.cc
-  ${_d}/src/daemon.cc)
+  ${_d}/src/supervisor.cc
+  ${_d}/src/measuring_sequence.cc
+  ${_d}/src/daemon_text.cc
+  ${_d}/src/daemon.cc
+  ${_d}/src/daemon_state.cc
+  ${_d}/src/daemon_service.cc
+  ${_d}/src/daemon_calibration.cc
+  ${_d}/src/daemon_commands.cc)
 target_include_directories(cdpr_daemon PUBLIC ${_d}/include)
 target_link_libraries(cdpr_daemon
-  PUBLIC cdpr_io cdpr_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording
+  PUBLIC cdpr_io cdpr_control cdpr_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording
          cdpr_calibration nlohmann_json::nlohmann_json Threads::Threads cdpr_version
   PRIVATE spdlog::spdlog cdpr_yaml cdpr_report cdpr_options)
 
@@ -28,7 +35,10 @@ cdpr_add_gtest(NAME daemon_config_test SOURCES ${_d}/src/daemon_config_test.cc L
 cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_calibration_report_test SOURCES ${_d}/src/calibration_report_test.cc
                LIBS cdpr_daemon)
-foreach(t daemon_state_store_test daemon_config_test)
+cdpr_add_gtest(NAME daemon_supervisor_test SOURCES ${_d}/src/supervisor_test.cc LIBS cdpr_daemon)
+cdpr_add_gtest(NAME daemon_measuring_sequence_test SOURCES ${_d}/src/measuring_sequence_test.cc
+               LIBS cdpr_daemon)
+foreach(t daemon_state_store_test daemon_config_test daemon_supervisor_test)
   if(TARGET ${t})
     target_compile_definitions(${t} PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
   endif()

@@ -77,11 +77,53 @@ json figures(const RtLoop& loop) {
             {"max", us(s.compute.max)}}}};
 }
 
-control::ControlReply to_control(const Reply& r) {
-  if (r.ok) return control::ControlReply::ok(r.result);
-  return control::ControlReply::error(
-      control::control_error_from_string(r.code).value_or(control::ControlErrorCode::kInternal),
-      r.message);
+// The configured laser, started (nullptr: none configured).
+Result<std::unique_ptr<modbus::LaserSensor>> start_laser(const DaemonConfig& cfg) {
+  if (cfg.laser.empty()) {
+    spdlog::warn("no laser configured: the daemon can drive the robot but not calibrate it");
+    return std::unique_ptr<modbus::LaserSensor>();
+  }
+  auto lc = modbus::load_laser_config(cfg.laser);
+  if (!lc.ok()) return lc.status();
+  auto laser = std::make_unique<modbus::LaserSensor>(std::move(*lc));
+  if (Status s = laser->start(); !s.ok()) return s.prepend("laser: ");
+  return laser;
+}
+
+// The main thread until a signal or the RT loop stops: the supervisor's tick every 10 ms, the
+// loop's figures and the state for systemd every second, the watchdog while the loop advances.
+void supervise(Daemon& d, const RtLoop& loop, SystemdNotifier& notify) {
+  const auto watchdog = SystemdNotifier::watchdog_interval();
+  auto next_figures = std::chrono::steady_clock::now();
+  auto next_watchdog = next_figures;
+  std::uint64_t last_cycles = 0;
+  std::string last_state;
+  while (!g_stop.load()) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    d.service();
+    const auto now = std::chrono::steady_clock::now();
+    if (now >= next_figures) {
+      d.set_loop_figures(figures(loop));
+      d.rt().set_overruns(loop.stats().overruns);
+      next_figures = now + std::chrono::seconds(1);
+      const std::string state = to_string(d.state());
+      if (state != last_state) {
+        (void)notify.status(state);
+        last_state = state;
+      }
+    }
+    // The watchdog is fed only while the RT loop advances.
+    if (watchdog && now >= next_watchdog) {
+      const std::uint64_t cycles = loop.cycles();
+      if (cycles != last_cycles) (void)notify.watchdog();
+      last_cycles = cycles;
+      next_watchdog = now + *watchdog / 3;
+    }
+    if (!loop.running()) {
+      spdlog::error("the RT loop stopped");
+      break;
+    }
+  }
 }
 
 }  // namespace
@@ -120,21 +162,12 @@ int main(int argc, char** argv) {
     spdlog::error("CAN interface: {}", bus.status().to_string());
     return 1;
   }
-  std::unique_ptr<modbus::LaserSensor> laser;
-  if (!cfg->laser.empty()) {
-    auto lc = modbus::load_laser_config(cfg->laser);
-    if (!lc.ok()) {
-      spdlog::error("{}", lc.status().to_string());
-      return 2;
-    }
-    laser = std::make_unique<modbus::LaserSensor>(std::move(*lc));
-    if (Status s = laser->start(); !s.ok()) {
-      spdlog::error("laser: {}", s.to_string());
-      return 2;
-    }
-  } else {
-    spdlog::warn("no laser configured: the daemon can drive the robot but not calibrate it");
+  auto started_laser = start_laser(*cfg);
+  if (!started_laser.ok()) {
+    spdlog::error("{}", started_laser.status().to_string());
+    return 2;
   }
+  std::unique_ptr<modbus::LaserSensor> laser = std::move(*started_laser);
 
   static const cdpr::SteadyClock clock;
   DaemonIo io;
@@ -176,7 +209,7 @@ int main(int argc, char** argv) {
   auto server = control::ControlServer::start(so, [&d](const control::ControlRequest& r) {
     const PeerInfo peer{static_cast<int>(r.peer.pid), static_cast<int>(r.peer.uid),
                         static_cast<int>(r.peer.gid)};
-    return to_control(d.handle(r.cmd, r.args, peer));
+    return d.handle(r.cmd, r.args, peer).to_control();
   });
   if (!server.ok()) {
     spdlog::error("control socket: {}", server.status().to_string());
@@ -192,37 +225,7 @@ int main(int argc, char** argv) {
   (void)notify.ready("holding; geometry version " +
                      std::to_string(d.status()["geometry_version"].get<int>()));
 
-  const auto watchdog = SystemdNotifier::watchdog_interval();
-  auto next_figures = std::chrono::steady_clock::now();
-  auto next_watchdog = next_figures;
-  std::uint64_t last_cycles = 0;
-  std::string last_state;
-  while (!g_stop.load()) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    d.service();
-    const auto now = std::chrono::steady_clock::now();
-    if (now >= next_figures) {
-      d.set_loop_figures(figures(loop));
-      d.rt().set_overruns(loop.stats().overruns);
-      next_figures = now + std::chrono::seconds(1);
-      const std::string state = to_string(d.state());
-      if (state != last_state) {
-        (void)notify.status(state);
-        last_state = state;
-      }
-    }
-    // The watchdog is fed only while the RT loop advances.
-    if (watchdog && now >= next_watchdog) {
-      const std::uint64_t cycles = loop.cycles();
-      if (cycles != last_cycles) (void)notify.watchdog();
-      last_cycles = cycles;
-      next_watchdog = now + *watchdog / 3;
-    }
-    if (!loop.running()) {
-      spdlog::error("the RT loop stopped");
-      break;
-    }
-  }
+  supervise(d, loop, notify);
   spdlog::info("stopping: holding, then quick stop and disable");
   (void)notify.stopping("stopping");
   d.shutdown();

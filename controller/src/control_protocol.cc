@@ -32,22 +32,30 @@ constexpr ArgSpec kReportArgs[] = {{"version", ArgType::kVersion, false},
 
 constexpr ArgSpec kMoveArgs[] = {{"pose", ArgType::kPose, true}};
 
-constexpr std::array<CommandSpec, 14> kCommands{{
-    {"status", false, {}},
-    {"calibrate", true, kCalibrateArgs},
-    {"watch", false, {}},
-    {"abort", true, {}},
-    {"accept", true, {}},
-    {"reject", true, {}},
-    {"geometry_show", false, kOptionalVersion},
-    {"geometry_diff", false, kDiffArgs},
-    {"geometry_history", false, {}},
-    {"geometry_rollback", true, kRequiredVersion},
-    {"report", false, kReportArgs},
-    {"stop", true, {}},
-    {"fault_reset", true, {}},
-    {"move", true, kMoveArgs},
+constexpr std::array<CommandSpec, kCommandCount> kCommands{{
+    {"status", false, {}, Command::kStatus},
+    {"calibrate", true, kCalibrateArgs, Command::kCalibrate},
+    {"watch", false, {}, Command::kWatch},
+    {"abort", true, {}, Command::kAbort},
+    {"accept", true, {}, Command::kAccept},
+    {"reject", true, {}, Command::kReject},
+    {"geometry_show", false, kOptionalVersion, Command::kGeometryShow},
+    {"geometry_diff", false, kDiffArgs, Command::kGeometryDiff},
+    {"geometry_history", false, {}, Command::kGeometryHistory},
+    {"geometry_rollback", true, kRequiredVersion, Command::kGeometryRollback},
+    {"report", false, kReportArgs, Command::kReport},
+    {"stop", true, {}, Command::kStop},
+    {"fault_reset", true, {}, Command::kFaultReset},
+    {"move", true, kMoveArgs, Command::kMove},
 }};
+
+constexpr bool commands_in_enum_order() {
+  for (std::size_t i = 0; i < kCommands.size(); ++i) {
+    if (kCommands[i].command != static_cast<Command>(i)) return false;
+  }
+  return true;
+}
+static_assert(commands_in_enum_order(), "kCommands[i].command must be Command(i)");
 
 std::string_view type_name(ArgType t) {
   switch (t) {

@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/io/append_only_file.hpp"
 #include "cdpr/io/atomic_file.hpp"
 #include "cdpr/recording/recording.hpp"
 
@@ -25,29 +26,6 @@ namespace {
 
 Status errno_status(const char* what, const std::string& path) {
   return Status::error(ErrorCode::kIoError, "%s %s: %s", what, path.c_str(), std::strerror(errno));
-}
-
-Status write_all(int fd, std::string_view text, const std::string& path) {
-  std::size_t done = 0;
-  while (done < text.size()) {
-    const ssize_t n = ::write(fd, text.data() + done, text.size() - done);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return errno_status("cannot write", path);
-    }
-    done += static_cast<std::size_t>(n);
-  }
-  return Status::success();
-}
-
-Status fsync_directory(const std::string& path) {
-  const std::string dir = fs::path(path).parent_path().string();
-  const int fd = ::open(dir.empty() ? "." : dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (fd < 0) return errno_status("cannot open directory", dir);
-  const int r = ::fsync(fd);
-  ::close(fd);
-  if (r != 0) return errno_status("cannot fsync directory", dir);
-  return Status::success();
 }
 
 std::string numbered(int n) {
@@ -83,31 +61,6 @@ Result<std::string> read_text_file(const std::string& path) {
   std::ostringstream s;
   s << in.rdbuf();
   return s.str();
-}
-
-AppendOnlyFile::~AppendOnlyFile() {
-  close();
-}
-
-Status AppendOnlyFile::open(const std::string& path, bool truncate) {
-  close();
-  const int flags = O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC | (truncate ? O_TRUNC : 0);
-  fd_ = ::open(path.c_str(), flags, 0644);
-  if (fd_ < 0) return errno_status("cannot open", path);
-  path_ = path;
-  return fsync_directory(path);
-}
-
-Status AppendOnlyFile::append(std::string_view record) {
-  if (fd_ < 0) return Status(ErrorCode::kFailedPrecondition, "append to a closed file");
-  if (Status s = write_all(fd_, record, path_); !s.ok()) return s;
-  if (::fdatasync(fd_) != 0) return errno_status("cannot fsync", path_);
-  return Status::success();
-}
-
-void AppendOnlyFile::close() {
-  if (fd_ >= 0) ::close(fd_);
-  fd_ = -1;
 }
 
 Result<StateStore> StateStore::open(const std::string& directory) {
@@ -227,7 +180,7 @@ Status StateStore::activate(int version, nlohmann::json why) {
   }
   why["version"] = version;
   why["time"] = recording::utc_timestamp();
-  AppendOnlyFile log;
+  io::AppendOnlyFile log;
   if (Status s = log.open((fs::path(dir_) / "history.jsonl").string(), false); !s.ok()) return s;
   return log.append(why.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
 }

@@ -9,6 +9,7 @@
 #include <fstream>
 
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/io/append_only_file.hpp"
 #include "cdpr/io/atomic_file.hpp"
 
 namespace cdpr::controller {
@@ -72,7 +73,7 @@ TEST_F(StateStoreTest, AppendedRecordsSurviveAndATornLastHistoryLineIsSkipped) {
   ASSERT_TRUE(s.ok());
   ASSERT_TRUE(s->add_geometry(robot_, {}).ok());
   ASSERT_TRUE(s->activate(1, {{"why", "a"}}).ok());
-  AppendOnlyFile f;
+  io::AppendOnlyFile f;
   ASSERT_TRUE(f.open((dir_ / "history.jsonl").string(), false).ok());
   ASSERT_TRUE(f.append("{\"version\": 1, \"why\": \"torn").ok());  // a crash mid-line
   auto h = s->history();

@@ -2,6 +2,7 @@
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdio>
@@ -632,6 +633,95 @@ TEST(Recording, SwivelColumnsNeedSwivelPulleys) {
   EXPECT_THAT(std::string(s.message()), HasSubstr("swivel_1: cable 1 has no swivel pulley"));
   for (PulleyModel& p : model.pulleys) p.radius = 0.02;
   EXPECT_TRUE(check_against_model(rec, model).ok());
+}
+
+// ---- RecordingAppender ------------------------------------------------------------------------
+
+std::string read_all(const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "rb");
+  if (f == nullptr) return {};
+  std::string text;
+  char buf[4096];
+  for (std::size_t n; (n = std::fread(buf, 1, sizeof buf, f)) > 0;) text.append(buf, n);
+  std::fclose(f);
+  return text;
+}
+
+std::string scratch_file(const char* name) {
+  const std::string path = (std::filesystem::temp_directory_path() /
+                            (std::string(name) + "-" + std::to_string(::getpid()) + ".csv"))
+                               .string();
+  std::filesystem::remove(path);
+  return path;
+}
+
+TEST(RecordingAppender, FileEqualsTheWritersOutputAfterEveryRow) {
+  const Recording all = random_recording(4, 1, 6, true, true, 11);
+  const std::string path = scratch_file("cdpr_appender_rows");
+  RecordingAppender out(path, all);
+  EXPECT_TRUE(out.recording().poses.empty());
+  EXPECT_FALSE(std::filesystem::exists(path));  // created with the first row
+  Recording so_far = all;
+  so_far.poses.clear();
+  for (const RecordedPose& p : all.poses) {
+    ASSERT_TRUE(out.append(p).ok());
+    so_far.poses.push_back(p);
+    auto text = format_recording(so_far);
+    ASSERT_TRUE(text.ok());
+    EXPECT_EQ(read_all(path), *text);
+  }
+  // What stays in memory is what the file reads back as, bit for bit.
+  auto back = read_recording(path);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  expect_same(out.recording(), *back);
+  std::filesystem::remove(path);
+}
+
+TEST(RecordingAppender, RefusesARowThatDoesNotFitAndWritesNothing) {
+  const Recording all = random_recording(3, 1, 2, false, false, 5);
+  const std::string path = scratch_file("cdpr_appender_refuse");
+  RecordingAppender out(path, all);
+  ASSERT_TRUE(out.append(all.poses[1]).ok());
+  const std::string before = read_all(path);
+  EXPECT_THAT(out.append(all.poses[0]).to_string(), HasSubstr("does not increase"));
+  RecordedPose short_row = all.poses[1];
+  short_row.index += 10;
+  short_row.lengths.resize(2);
+  EXPECT_FALSE(out.append(short_row).ok());
+  EXPECT_EQ(read_all(path), before);
+  EXPECT_EQ(out.recording().poses.size(), 1u);
+  std::filesystem::remove(path);
+}
+
+TEST(RecordingAppender, ATornLastRowIsCutAndEveryWholeRowReadsBack) {
+  const Recording all = random_recording(4, 1, 3, false, false, 7);
+  const std::string path = scratch_file("cdpr_appender_torn");
+  {
+    RecordingAppender out(path, all);
+    for (const RecordedPose& p : all.poses) ASSERT_TRUE(out.append(p).ok());
+  }
+  const std::string whole = read_all(path);
+  auto intact = RecordingAppender::cut_torn_row(path);
+  ASSERT_TRUE(intact.ok());
+  EXPECT_EQ(*intact, 0u);
+  // A power loss in the middle of the next row's write: part of it, without its newline.
+  {
+    io::AppendOnlyFile f;
+    ASSERT_TRUE(f.open(path, false).ok());
+    ASSERT_TRUE(f.append("9,1.5,0.1,0.2").ok());
+  }
+  EXPECT_FALSE(read_recording(path).ok());
+  auto cut = RecordingAppender::cut_torn_row(path);
+  ASSERT_TRUE(cut.ok()) << cut.status().to_string();
+  EXPECT_EQ(*cut, std::string("9,1.5,0.1,0.2").size());
+  EXPECT_EQ(read_all(path), whole);
+  auto back = read_recording(path);
+  ASSERT_TRUE(back.ok()) << back.status().to_string();
+  expect_same(*back, all);
+  auto missing = RecordingAppender::cut_torn_row(path + ".absent");
+  ASSERT_TRUE(missing.ok());
+  EXPECT_EQ(*missing, 0u);
+  std::filesystem::remove(path);
 }
 
 }  // namespace

@@ -9,6 +9,9 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <utility>
+
+#include "cdpr/io/append_only_file.hpp"
 
 namespace cdpr::io {
 namespace {
@@ -160,6 +163,45 @@ bool is_temporary_name(std::string_view file_name, int* writer_pid) {
     *writer_pid = v;
   }
   return true;
+}
+
+// ---- AppendOnlyFile --------------------------------------------------------------------------
+
+AppendOnlyFile::~AppendOnlyFile() {
+  close();
+}
+
+AppendOnlyFile::AppendOnlyFile(AppendOnlyFile&& other) noexcept
+    : fd_(std::exchange(other.fd_, -1)), path_(std::move(other.path_)) {}
+
+AppendOnlyFile& AppendOnlyFile::operator=(AppendOnlyFile&& other) noexcept {
+  if (this != &other) {
+    close();
+    fd_ = std::exchange(other.fd_, -1);
+    path_ = std::move(other.path_);
+  }
+  return *this;
+}
+
+Status AppendOnlyFile::open(const std::string& path, bool truncate) {
+  close();
+  const int flags = O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC | (truncate ? O_TRUNC : 0);
+  fd_ = ::open(path.c_str(), flags, 0644);
+  if (fd_ < 0) return os_error(errno, "open", path);
+  path_ = path;
+  return fsync_directory(directory_of(path));
+}
+
+Status AppendOnlyFile::append(std::string_view record) {
+  if (fd_ < 0) return Status(ErrorCode::kFailedPrecondition, "append to a closed file");
+  if (Status s = write_all(fd_, record, path_); !s.ok()) return s;
+  if (::fdatasync(fd_) != 0) return os_error(errno, "flush", path_);
+  return Status::success();
+}
+
+void AppendOnlyFile::close() {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
 }
 
 }  // namespace cdpr::io

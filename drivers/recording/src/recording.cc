@@ -275,15 +275,21 @@ Result<Recording> read_recording(const std::string& path) {
   return parse_recording(text, path);
 }
 
-Result<std::string> format_recording(const Recording& rec) {
+namespace {
+
+Status check_columns(const Recording& rec) {
   if (rec.num_cables < 1 || rec.num_lasers < 0) {
     return Status::error(ErrorCode::kInvalidArgument,
                          "a recording needs at least one cable (has %d cables and %d lasers)",
                          rec.num_cables, rec.num_lasers);
   }
-  if (rec.poses.empty()) {
-    return Status(ErrorCode::kInvalidArgument, "a recording needs at least one pose");
-  }
+  return Status::success();
+}
+
+}  // namespace
+
+Result<std::string> format_recording_header(const Recording& rec) {
+  CDPR_RETURN_IF_ERROR(check_columns(rec));
   std::string out;
   CDPR_RETURN_IF_ERROR(detail::format_metadata(rec.metadata, kRecordingFormat, &out));
   out += "pose,time_s";
@@ -301,58 +307,74 @@ Result<std::string> format_recording(const Recording& rec) {
   }
   if (rec.has_temperature) out += ",temperature_c";
   out += '\n';
+  return out;
+}
+
+Result<std::string> format_recording_row(const Recording& rec, const RecordedPose& p) {
+  CDPR_RETURN_IF_ERROR(check_columns(rec));
+  CDPR_RETURN_IF_ERROR(check_size("length", p.lengths.size(), rec.num_cables, p.index));
+  CDPR_RETURN_IF_ERROR(check_size("tension", p.tensions.size(), rec.num_cables, p.index));
+  CDPR_RETURN_IF_ERROR(check_size("laser", p.lasers.size(), rec.num_lasers, p.index));
+  if (rec.has_swivel) {
+    CDPR_RETURN_IF_ERROR(check_size("swivel", p.swivels.size(), rec.num_cables, p.index));
+  }
+  if (!std::isfinite(p.time_s) || !p.commanded.vector().allFinite()) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "pose %lld: time and commanded pose must be finite",
+                         static_cast<long long>(p.index));
+  }
+  std::string out = std::to_string(p.index);
+  out += ',' + format_number(p.time_s);
+  const auto cmd = p.commanded.vector();
+  for (int a = 0; a < 6; ++a) out += ',' + format_number(cmd(a));
+  for (Eigen::Index i = 0; i < p.lengths.size(); ++i) {
+    CDPR_RETURN_IF_ERROR(append(&out, p.lengths(i), "a length", p.index));
+  }
+  for (Eigen::Index i = 0; i < p.tensions.size(); ++i) {
+    CDPR_RETURN_IF_ERROR(append(&out, p.tensions(i), "a tension", p.index));
+  }
+  for (Eigen::Index i = 0; i < p.lasers.size(); ++i) {
+    CDPR_RETURN_IF_ERROR(append(&out, p.lasers(i), "a laser distance", p.index));
+  }
+  if (rec.has_swivel) {
+    for (Eigen::Index i = 0; i < p.swivels.size(); ++i) {
+      CDPR_RETURN_IF_ERROR(append(&out, p.swivels(i), "a swivel angle", p.index));
+    }
+  }
+  if (rec.has_inclinometer) {
+    CDPR_RETURN_IF_ERROR(append(&out, p.inclination(0), "the inclinometer roll", p.index));
+    CDPR_RETURN_IF_ERROR(append(&out, p.inclination(1), "the inclinometer pitch", p.index));
+  }
+  if (rec.has_imu_yaw) {
+    CDPR_RETURN_IF_ERROR(append(&out, p.imu_yaw, "the IMU yaw", p.index));
+  }
+  if (rec.has_reference) {
+    const auto ref = p.reference.vector();
+    for (int a = 0; a < 6; ++a) {
+      CDPR_RETURN_IF_ERROR(append(&out, ref(a), "the reference pose", p.index));
+    }
+  }
+  if (rec.has_temperature) {
+    CDPR_RETURN_IF_ERROR(append(&out, p.temperature_c, "the temperature", p.index));
+  }
+  out += '\n';
+  return out;
+}
+
+Result<std::string> format_recording(const Recording& rec) {
+  CDPR_RETURN_IF_ERROR(check_columns(rec));
+  if (rec.poses.empty()) {
+    return Status(ErrorCode::kInvalidArgument, "a recording needs at least one pose");
+  }
+  CDPR_ASSIGN_OR_RETURN(std::string out, format_recording_header(rec));
   for (std::size_t n = 0; n < rec.poses.size(); ++n) {
     const RecordedPose& p = rec.poses[n];
     if (n > 0 && p.index <= rec.poses[n - 1].index) {
       return Status::error(ErrorCode::kInvalidArgument, "pose index %lld does not increase",
                            static_cast<long long>(p.index));
     }
-    CDPR_RETURN_IF_ERROR(check_size("length", p.lengths.size(), rec.num_cables, p.index));
-    CDPR_RETURN_IF_ERROR(check_size("tension", p.tensions.size(), rec.num_cables, p.index));
-    CDPR_RETURN_IF_ERROR(check_size("laser", p.lasers.size(), rec.num_lasers, p.index));
-    if (rec.has_swivel) {
-      CDPR_RETURN_IF_ERROR(check_size("swivel", p.swivels.size(), rec.num_cables, p.index));
-    }
-    if (!std::isfinite(p.time_s) || !p.commanded.vector().allFinite()) {
-      return Status::error(ErrorCode::kInvalidArgument,
-                           "pose %lld: time and commanded pose must be finite",
-                           static_cast<long long>(p.index));
-    }
-    out += std::to_string(p.index);
-    out += ',' + format_number(p.time_s);
-    const auto cmd = p.commanded.vector();
-    for (int a = 0; a < 6; ++a) out += ',' + format_number(cmd(a));
-    for (Eigen::Index i = 0; i < p.lengths.size(); ++i) {
-      CDPR_RETURN_IF_ERROR(append(&out, p.lengths(i), "a length", p.index));
-    }
-    for (Eigen::Index i = 0; i < p.tensions.size(); ++i) {
-      CDPR_RETURN_IF_ERROR(append(&out, p.tensions(i), "a tension", p.index));
-    }
-    for (Eigen::Index i = 0; i < p.lasers.size(); ++i) {
-      CDPR_RETURN_IF_ERROR(append(&out, p.lasers(i), "a laser distance", p.index));
-    }
-    if (rec.has_swivel) {
-      for (Eigen::Index i = 0; i < p.swivels.size(); ++i) {
-        CDPR_RETURN_IF_ERROR(append(&out, p.swivels(i), "a swivel angle", p.index));
-      }
-    }
-    if (rec.has_inclinometer) {
-      CDPR_RETURN_IF_ERROR(append(&out, p.inclination(0), "the inclinometer roll", p.index));
-      CDPR_RETURN_IF_ERROR(append(&out, p.inclination(1), "the inclinometer pitch", p.index));
-    }
-    if (rec.has_imu_yaw) {
-      CDPR_RETURN_IF_ERROR(append(&out, p.imu_yaw, "the IMU yaw", p.index));
-    }
-    if (rec.has_reference) {
-      const auto ref = p.reference.vector();
-      for (int a = 0; a < 6; ++a) {
-        CDPR_RETURN_IF_ERROR(append(&out, ref(a), "the reference pose", p.index));
-      }
-    }
-    if (rec.has_temperature) {
-      CDPR_RETURN_IF_ERROR(append(&out, p.temperature_c, "the temperature", p.index));
-    }
-    out += '\n';
+    CDPR_ASSIGN_OR_RETURN(const std::string row, format_recording_row(rec, p));
+    out += row;
   }
   return out;
 }

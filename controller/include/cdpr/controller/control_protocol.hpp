@@ -89,10 +89,31 @@ struct ArgSpec {
   bool required;
 };
 
+// Every command of the protocol, in documentation order (commands()[i].command == Command(i)):
+// a handler table keyed by it (the daemon's) names each command's handler once.
+enum class Command {
+  kStatus,
+  kCalibrate,
+  kWatch,
+  kAbort,
+  kAccept,
+  kReject,
+  kGeometryShow,
+  kGeometryDiff,
+  kGeometryHistory,
+  kGeometryRollback,
+  kReport,
+  kStop,
+  kFaultReset,
+  kMove,
+};
+inline constexpr std::size_t kCommandCount = 14;
+
 struct CommandSpec {
   std::string_view name;
   bool privileged;  // moves the robot or changes the geometry
   std::span<const ArgSpec> args;
+  Command command;
 };
 
 // Every command of the protocol, in documentation order.

@@ -10,10 +10,12 @@
 // and an idle hook), so a test composes it with the virtual robot on the in-process bus and a
 // manual clock, and cdprd composes it with SocketCAN, the Modbus laser and CLOCK_MONOTONIC.
 //
-// State machine (status "state"): starting -> holding <-> moving; holding -> measuring ->
-// identifying -> awaiting_acceptance -> applying -> holding; fault from every state (a latched
-// RT fault, a failed start-up); fault -> holding through fault_reset. Each transition is logged
-// with its reason and published as a `state` event.
+// The state machine (status "state") is the table of supervisor.hpp (docs/architecture.md); every
+// transition goes through Daemon::transition, which logs it with its reason and publishes it as a
+// `state` event. The code is split by concern: daemon.cc (creation, start-up, homing, motion),
+// daemon_service.cc (the supervisor's tick), daemon_state.cc (state directory, geometry versions,
+// hot swap), daemon_calibration.cc (the calibration run; its measuring steps are
+// measuring_sequence.hpp), daemon_commands.cc (control requests and status).
 #pragma once
 
 #include <atomic>
@@ -34,9 +36,11 @@
 #include "cdpr/can/virtual_bus.hpp"
 #include "cdpr/canopen/master.hpp"
 #include "cdpr/controller/canopen_robot_io.hpp"
+#include "cdpr/controller/control_protocol.hpp"
 #include "cdpr/controller/daemon_config.hpp"
 #include "cdpr/controller/rt_controller.hpp"
 #include "cdpr/controller/state_store.hpp"
+#include "cdpr/controller/supervisor.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
 #include "cdpr/recording/recording.hpp"
 #include "cdpr/version.hpp"
@@ -45,6 +49,9 @@ namespace cdpr::controller {
 
 // `cdprd --version`, and the daemon named in its recordings and reports (cmake/CdprVersion.cmake).
 inline constexpr const char* kDaemonVersion = "cdprd " CDPR_VERSION_STRING;
+
+class MeasuringSequence;    // measuring_sequence.hpp
+struct CalibrationOutcome;  // calibration_report.hpp
 
 struct DaemonIo {
   can::CanBus* bus = nullptr;            // the master's endpoint
@@ -55,19 +62,6 @@ struct DaemonIo {
   std::chrono::microseconds poll{1000};
 };
 
-enum class DaemonState {
-  kStarting,
-  kHolding,
-  kMoving,
-  kMeasuring,
-  kIdentifying,
-  kAwaitingAcceptance,
-  kApplying,
-  kFault,
-  kStopped,
-};
-const char* to_string(DaemonState s);
-
 struct PeerInfo {
   int pid = -1, uid = -1, gid = -1;
 };
@@ -76,12 +70,25 @@ struct PeerInfo {
 struct Reply {
   bool ok = true;
   nlohmann::json result = nlohmann::json::object();
-  std::string code;  // bad_request, invalid_state, not_found, busy, fault, internal
+  control::ControlErrorCode error = control::ControlErrorCode::kInternal;  // when !ok
+  std::string code;  // the wire name of `error` (set with it by failure(); for logs and tests)
   std::string message;
 
-  static Reply success(nlohmann::json r) { return Reply{true, std::move(r), {}, {}}; }
-  static Reply failure(std::string code, std::string message) {
-    return Reply{false, nlohmann::json::object(), std::move(code), std::move(message)};
+  static Reply success(nlohmann::json r) {
+    Reply reply;
+    reply.result = std::move(r);
+    return reply;
+  }
+  static Reply failure(control::ControlErrorCode kind, std::string text) {
+    Reply reply;
+    reply.ok = false;
+    reply.error = kind;
+    reply.code = std::string(control::to_string(kind));
+    reply.message = std::move(text);
+    return reply;
+  }
+  control::ControlReply to_control() const {
+    return ok ? control::ControlReply::ok(result) : control::ControlReply::error(error, message);
   }
 };
 
@@ -121,8 +128,7 @@ class Daemon {
  private:
   struct Calibration {
     int id = 0;
-    std::string outcome;  // measuring, identifying, awaiting_acceptance, applied, rejected, failed,
-                          // aborted
+    CalibrationRunOutcome outcome = CalibrationRunOutcome::kMeasuring;
     int pose = 0, poses = 0;
     double started_s = 0.0, elapsed_s = 0.0, remaining_s = 0.0;
     std::string message;
@@ -132,15 +138,38 @@ class Daemon {
     int proposed_version = 0;
     int before_version = 0;
   };
+  class SequenceRobot;  // the measuring sequence's view of the daemon (daemon_calibration.cc)
+  struct Identified;    // what the identification rounds produce (daemon_calibration.cc)
+  using Handler = Reply (Daemon::*)(const nlohmann::json& args, const PeerInfo& peer);
 
   Daemon(DaemonConfig config, DaemonIo io);
-  Status load_state();
-  void repair_recordings();
+  RtControllerOptions rt_options() const;
   Status check_identities();
+  Status enable_drives();
   Status home();
-  void set_state(DaemonState s, const std::string& reason);
+
+  // The one place a state changes: fires `event` in the supervisor table, runs the row's action,
+  // logs and publishes the change (a refused event is logged and changes nothing).
+  void transition(SupervisorEvent event, const std::string& reason);
   void publish(const std::string& event, nlohmann::json data);
   double now_s() const;
+  const Geometry* active_geometry() const;
+  int active_version() const;
+
+  // State directory and geometry versions (daemon_state.cc).
+  Status load_state();
+  Status first_start(Result<int>& active);
+  void repair_recordings();
+  const Geometry* make_geometry(int version, const RobotModel& model);
+  Status activate(int version, const nlohmann::json& why, const PeerInfo* peer);
+  void interrupt_swap(const std::string& fault);
+  void complete_swap(const RtSnapshot& s);
+
+  // The supervisor's tick (daemon_service.cc).
+  void log_rt_events();
+  void watch_slack(const RtSnapshot& s);
+  void latch_fault(const RtSnapshot& s);
+  void after_fault_reset();
 
   // Motion (supervisor or worker thread).
   std::uint64_t post(std::unique_ptr<MotionCommand> c);
@@ -152,27 +181,48 @@ class Daemon {
   Status move_to(const Pose& pose, double reference_tension, bool abortable);
   Status hold_still(bool abortable);
   Result<Pose> pose_from_encoders(const RobotModel& model);
-  const Geometry* make_geometry(int version, const RobotModel& model);
-  Status activate(int version, const nlohmann::json& why, const PeerInfo* peer);
 
-  // The calibration sequence (worker thread).
+  // The calibration run (worker thread; daemon_calibration.cc).
   void run_calibration(std::vector<Pose> poses, PeerInfo peer);
-  Status measure_pose(const Pose& pose, double reference_tension, recording::RecordedPose& row);
-  Status regulate_tensions(int pose_index);
   Result<std::vector<Pose>> plan_poses(const std::string& poses_csv);
-  void finish_calibration(const std::string& outcome, const std::string& message);
+  recording::Recording recording_header(const Geometry& g) const;
+  Status regulate_tensions(int pose_index);
+  Status sample_pose(recording::RecordedPose& row);
+  Status identify_rounds(int id, MeasuringSequence& seq, Identified& result);
+  Status measure_more(int id, std::vector<Pose> poses, std::vector<double> pretensions,
+                      const std::string& what, MeasuringSequence& seq);
+  Result<nlohmann::json> write_report(int id, const Geometry& g, const MeasuringSequence& seq,
+                                      const Identified& result, const CalibrationOutcome& out);
+  void await_acceptance(int id, const Geometry& g, const CalibrationOutcome& out,
+                        nlohmann::json summary, const PeerInfo& peer);
+  void finish_calibration(CalibrationRunOutcome outcome, const std::string& message);
+  void fail_calibration(const Status& s);
 
-  Reply cmd_status() const;
+  // Control requests (daemon_commands.cc; status in daemon_status.cc).
+  static Handler handler(control::Command command);
+  Reply cmd_status(const nlohmann::json& args, const PeerInfo& peer);
   Reply cmd_calibrate(const nlohmann::json& args, const PeerInfo& peer);
-  Reply cmd_accept(const PeerInfo& peer);
-  Reply cmd_reject(const PeerInfo& peer);
+  Reply cmd_watch(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_abort(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_accept(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_reject(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_geometry_show(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_geometry_diff(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_geometry_history(const nlohmann::json& args, const PeerInfo& peer);
   Reply cmd_rollback(const nlohmann::json& args, const PeerInfo& peer);
-  Reply cmd_geometry_show(const nlohmann::json& args) const;
-  Reply cmd_geometry_diff(const nlohmann::json& args) const;
-  Reply cmd_geometry_history() const;
-  Reply cmd_report(const nlohmann::json& args) const;
+  Reply cmd_report(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_stop(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_fault_reset(const nlohmann::json& args, const PeerInfo& peer);
   Reply cmd_move(const nlohmann::json& args, const PeerInfo& peer);
 
+  // Locking rule: the three mutexes are never held together, and none is held while calling the
+  // RT controller (except post/command_in_use under motion_mu_), the store, the log or the event
+  // sink. A field's group says which mutex guards it.
+
+  // Fixed once the daemon runs: set by create() and start() before any other thread starts; read
+  // without a lock (the store and the master are called from one thread at a time: the master by
+  // start() then only the RT loop; the store by the supervisor, the worker and the requests, whose
+  // writes are atomic files and whose reads follow them).
   DaemonConfig config_;
   DaemonIo io_;
   RobotModel nominal_;
@@ -181,30 +231,39 @@ class Daemon {
   std::unique_ptr<canopen::Master> master_;
   std::unique_ptr<CanopenRobotIO> robot_io_;
   std::unique_ptr<RtController> rt_;
+  can::Timestamp running_since_{0};  // end of start-up: boot-ups after it are reboots
 
-  mutable std::mutex mu_;  // everything below
-  DaemonState state_ = DaemonState::kStarting;
+  // Under mu_: what status shows and the supervisor, requests and worker decide on.
+  mutable std::mutex mu_;
+  Supervisor supervisor_;  // the state
   std::string state_reason_;
+  RtFault last_fault_;
+  std::string fault_text_;
+  std::set<int> rebooted_nodes_;  // nodes that booted while the daemon ran (need a restart)
+  std::string warning_;  // a condition that is named but does not stop the robot (a slack cable)
+  nlohmann::json loop_figures_ = nlohmann::json::object();
   int active_version_ = 0;
-  std::deque<std::unique_ptr<MotionCommand>> commands_;
-  std::uint64_t next_seq_ = 1;
   std::vector<std::unique_ptr<Geometry>> geometries_;  // kept while the RT loop may use them
   const Geometry* active_ = nullptr;
-  std::optional<Calibration> calibration_;
   std::optional<int> swap_target_;  // version being applied
   std::uint64_t swap_seq_ = 0;
   std::string swap_why_;
-  RtFault last_fault_;
-  std::string fault_text_;
-  can::Timestamp running_since_{0};  // end of start-up (set once, before the RT loop runs)
-  std::set<int> rebooted_nodes_;     // nodes that booted while the daemon ran (need a restart)
-  std::string warning_;  // a condition that is named but does not stop the robot (a slack cable)
-  nlohmann::json loop_figures_ = nlohmann::json::object();
+  std::optional<Calibration> calibration_;
+
+  // Under motion_mu_: the commands handed to the RT loop (post, reclaim).
+  std::mutex motion_mu_;
+  std::deque<std::unique_ptr<MotionCommand>> commands_;
+  std::uint64_t next_seq_ = 1;
+
+  // Under sink_mu_: where events go.
+  std::mutex sink_mu_;
   std::function<void(const nlohmann::json&)> sink_;
+
+  // The calibration worker: the thread object is touched by the control requests (one at a time:
+  // the control server calls handle() from one thread) and shutdown(); the flags are atomic.
   std::thread worker_;
   std::atomic<bool> abort_{false};
   std::atomic<bool> worker_running_{false};
-  std::mutex post_mu_;  // one poster at a time
 };
 
 }  // namespace cdpr::controller

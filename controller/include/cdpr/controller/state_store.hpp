@@ -27,24 +27,6 @@ namespace cdpr::controller {
 
 Result<std::string> read_text_file(const std::string& path);
 
-// A file that grows by whole records, each made durable (fsync) before append() returns.
-class AppendOnlyFile {
- public:
-  AppendOnlyFile() = default;
-  ~AppendOnlyFile();
-  AppendOnlyFile(const AppendOnlyFile&) = delete;
-  AppendOnlyFile& operator=(const AppendOnlyFile&) = delete;
-  // Creates (or, with `truncate` false, continues) the file; the directory entry is made durable.
-  Status open(const std::string& path, bool truncate);
-  Status append(std::string_view record);
-  void close();
-  bool is_open() const { return fd_ >= 0; }
-
- private:
-  int fd_ = -1;
-  std::string path_;
-};
-
 class StateStore {
  public:
   // Opens (creating the folders of) a state directory.

@@ -24,6 +24,7 @@
 
 #include "cdpr/calibration/measurement.hpp"
 #include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/io/append_only_file.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr::recording {
@@ -109,6 +110,40 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name);
 // non-increasing pose indices and infinite values.
 Status write_recording(const Recording& recording, const std::string& path);
 Result<std::string> format_recording(const Recording& recording);
+// The two parts of that text: the header block (metadata and column names; the poses are not
+// used) and one row of `recording`'s columns (sizes and finiteness checked as above).
+Result<std::string> format_recording_header(const Recording& recording);
+Result<std::string> format_recording_row(const Recording& recording, const RecordedPose& pose);
+
+// A recording written as it is measured (cdprd's sequence): each row is appended and made durable
+// (fdatasync) before append() returns, the file being created with the header block at the first
+// row, so that the file always equals write_recording()'s output for the rows appended so far. A
+// crash loses at most the row being written; cut_torn_row() removes what it left (part of a row
+// without its newline) before the file is read again. Nothing is read back: recording() holds
+// the header and every row appended.
+//
+//   RecordingAppender out(dir + "/recording.csv", header);   // header: metadata and columns
+//   CDPR_RETURN_IF_ERROR(out.append(row));
+//   auto set = to_measurement_set(out.recording());
+class RecordingAppender {
+ public:
+  RecordingAppender(std::string path, Recording header);
+
+  // Refuses a row whose index does not increase or whose sizes do not fit the columns (nothing
+  // is written then).
+  Status append(const RecordedPose& row);
+  const Recording& recording() const { return recording_; }
+  const std::string& path() const { return file_path_; }
+
+  // Cuts a torn last row (bytes after the last newline) off `path`; returns how many bytes were
+  // cut (0: the file ends with a newline, is empty or does not exist).
+  static Result<std::size_t> cut_torn_row(const std::string& path);
+
+ private:
+  std::string file_path_;
+  Recording recording_;
+  io::AppendOnlyFile file_;
+};
 
 // Checks a recording against the robot model it will be used with: cable count m and laser
 // count k (a recording without laser columns fits any config), swivel columns only for cables

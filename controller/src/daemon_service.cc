@@ -1,0 +1,144 @@
+// Daemon::service, the supervisor's tick: the RT loop's events, a slack cable's warning, a latched
+// fault and its reset, the hot swap's completion, and the state following the RT loop's mode.
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+
+#include "cdpr/controller/daemon.hpp"
+#include "daemon_text.hpp"
+
+namespace cdpr::controller {
+using json = nlohmann::json;
+
+void Daemon::service() {
+  reclaim();
+  log_rt_events();
+  const RtSnapshot s = rt_->snapshot();
+  watch_slack(s);
+  const DaemonState st = state();
+  if (s.fault.kind != FaultKind::kNone && st != DaemonState::kFault &&
+      st != DaemonState::kStarting) {
+    latch_fault(s);
+    return;
+  }
+  if (st == DaemonState::kFault && s.fault.kind == FaultKind::kNone && s.all_enabled &&
+      !worker_running_.load()) {
+    after_fault_reset();
+    return;
+  }
+  if (st == DaemonState::kApplying) {
+    complete_swap(s);
+    return;
+  }
+  if (!worker_running_.load() && (st == DaemonState::kHolding || st == DaemonState::kMoving)) {
+    const bool moving = s.mode == RtMode::kMoving;
+    transition(moving ? SupervisorEvent::kRtMoving : SupervisorEvent::kRtHolding,
+               moving ? "moving" : "holding");
+  }
+}
+
+void Daemon::log_rt_events() {
+  RtEvent e;
+  while (rt_->pop_event(e)) {
+    const canopen::Event& ev = e.event;
+    std::string what = std::string(canopen::to_string(ev.type));
+    if (ev.type == canopen::EventType::kEmcy) {
+      char buf[64];
+      std::snprintf(buf, sizeof buf, " code 0x%04X register 0x%02X", ev.emcy.code,
+                    ev.emcy.error_register);
+      what += buf;
+    }
+    if (ev.type == canopen::EventType::kBootUp && running_since_.count() > 0 &&
+        ev.time > running_since_) {
+      // A node that boots while the daemon runs has lost its configuration (PDO mapping, CSP):
+      // only a restart of cdprd configures it again.
+      std::lock_guard lock(mu_);
+      rebooted_nodes_.insert(int{ev.node});
+    }
+    const bool serious =
+        ev.type == canopen::EventType::kBootUp || ev.type == canopen::EventType::kEmcy ||
+        ev.type == canopen::EventType::kHeartbeatLost || ev.type == canopen::EventType::kBusOff ||
+        ev.type == canopen::EventType::kDriveFault || ev.type == canopen::EventType::kDriveStuck ||
+        ev.type == canopen::EventType::kRxOverflow || ev.type == canopen::EventType::kSyncOverrun ||
+        ev.type == canopen::EventType::kTxFailed;
+    if (serious) {
+      spdlog::warn("CANopen: node {}: {}", int{ev.node}, what);
+      publish("log",
+              {{"level", "warning"}, {"message", "node " + std::to_string(ev.node) + ": " + what}});
+    } else {
+      spdlog::debug("CANopen: node {}: {}", int{ev.node}, what);
+    }
+  }
+}
+
+// A slack cable is named (status "warning", the log, a `warning` event) but does not stop the
+// robot: an 8-cable robot keeps control with one slack cable (docs/daemon.md).
+void Daemon::watch_slack(const RtSnapshot& s) {
+  std::string warning;
+  for (int i = 0; i < s.num_cables && warning.empty(); ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    if (s.slack_cycles[k] >= config_.tension_watch.cycles) {
+      char buf[96];
+      std::snprintf(buf, sizeof buf, "slack_cable on cable %d at %.1f N", i + 1, s.tensions[k]);
+      warning = buf;
+    }
+  }
+  bool new_warning = false;
+  std::string old_warning;
+  {
+    std::lock_guard lock(mu_);
+    // A slack cable stays the same warning while its tension changes.
+    const auto stem = [](const std::string& w) { return w.substr(0, w.find(" at ")); };
+    if (stem(warning) != stem(warning_)) {
+      new_warning = true;
+      old_warning = warning_;
+    }
+    warning_ = warning;
+  }
+  if (!new_warning) return;
+  if (!warning.empty()) {
+    spdlog::warn("warning: {}", warning);
+    publish("warning", {{"warning", "slack_cable"}, {"message", warning}});
+  } else {
+    spdlog::info("warning cleared: {}", old_warning);
+    publish("warning", {{"warning", nullptr}, {"message", "cleared: " + old_warning}});
+  }
+}
+
+void Daemon::latch_fault(const RtSnapshot& s) {
+  const std::string text = detail::fault_text(s.fault);
+  {
+    std::lock_guard lock(mu_);
+    last_fault_ = s.fault;
+    fault_text_ = text;
+  }
+  spdlog::error("fault: {}", text);
+  interrupt_swap(text);
+  publish("fault", {{"fault", to_string(s.fault.kind)},
+                    {"node", s.fault.node},
+                    {"cable", s.fault.cable + 1},
+                    {"message", text}});
+  transition(SupervisorEvent::kFaultLatched, text);
+}
+
+// After fault_reset: the platform is where the quick stop left it.
+void Daemon::after_fault_reset() {
+  const Geometry* g = active_geometry();
+  auto pose = pose_from_encoders(g->model);
+  if (!pose.ok()) {
+    transition(SupervisorEvent::kFaultResetFailed,
+               "after fault reset: " + pose.status().to_string());
+    return;
+  }
+  auto c = std::make_unique<MotionCommand>();
+  c->type = MotionCommand::Type::kReference;
+  c->pose = *pose;
+  c->from_actual = true;
+  // The active geometry explicitly: a hot swap the fault interrupted may have handed the RT loop
+  // the new one already.
+  c->geometry = g;
+  post(std::move(c));
+  transition(SupervisorEvent::kFaultCleared, "fault reset; holding where the platform stopped");
+}
+
+}  // namespace cdpr::controller
