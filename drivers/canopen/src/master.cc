@@ -389,6 +389,7 @@ Status Master::configure_node(NodeId id) {
   if (c.kind == NodeKind::kCia402Drive && c.drive.mode != Mode::kNone) {
     CDPR_RETURN_IF_ERROR(set_mode(id, c.drive.mode));
   }
+  if (!c.eds_data) read_identity(*n);  // for its DCF
   return Status::success();
 }
 
@@ -438,78 +439,6 @@ std::vector<std::uint16_t> Master::disabled_pdos(NodeId id) const {
   return nodes_[static_cast<std::size_t>(node_index_[id])]->disabled;
 }
 
-Status Master::write_dcf(NodeId id, const std::string& path) const {
-  if (node_index_[id] < 0) {
-    return Status::error(ErrorCode::kNotFound, "node %u: not in the configuration", unsigned{id});
-  }
-  const NodeRt& n = *nodes_[static_cast<std::size_t>(node_index_[id])];
-  eds::Eds description;
-  if (n.config.eds_data) {
-    description = *n.config.eds_data;
-  } else {
-    // No EDS: a description of the objects the master wrote, typed by their size.
-    auto e = eds::Eds::parse(
-        "[MandatoryObjects]\nSupportedObjects=0\n[OptionalObjects]\nSupportedObjects=0\n"
-        "[ManufacturerObjects]\nSupportedObjects=0\n[1000]\nParameterName=Device type\n"
-        "DataType=0x0007\nAccessType=ro\n",
-        "(no EDS: objects written by the master)");
-    if (!e.ok()) return e.status();
-    description = std::move(*e);
-    for (const auto& [key, size] : n.applied_size) {
-      const ObjectAddress a{static_cast<std::uint16_t>(key >> 8),
-                            static_cast<std::uint8_t>(key & 0xFF)};
-      const eds::Object* existing = description.object(a.index);
-      eds::Object o = existing != nullptr ? *existing : eds::Object{};
-      o.index = a.index;
-      char name[32];
-      std::snprintf(name, sizeof name, "Object 0x%04X", unsigned{a.index});
-      if (o.name.empty()) o.name = name;
-      eds::SubObject sub;
-      sub.address = a;
-      std::snprintf(name, sizeof name, "0x%04X:%02X", unsigned{a.index}, unsigned{a.sub});
-      sub.name = name;
-      sub.data_type = size == 1   ? eds::type::kUnsigned8
-                      : size == 2 ? eds::type::kUnsigned16
-                                  : eds::type::kUnsigned32;
-      sub.access = eds::Access::kRw;
-      std::erase_if(o.subs, [&](const eds::SubObject& x) { return x.address.sub == a.sub; });
-      o.subs.push_back(sub);
-      std::sort(o.subs.begin(), o.subs.end(), [](const eds::SubObject& x, const eds::SubObject& y) {
-        return x.address.sub < y.address.sub;
-      });
-      if (o.subs.size() == 1 && a.sub == 0) {
-        o.code = eds::ObjectCode::kVar;
-      } else {
-        o.code = eds::ObjectCode::kRecord;
-        // A record needs its sub-index 0 (highest sub-index supported).
-        if (o.subs.front().address.sub != 0) {
-          eds::SubObject count;
-          count.address = {a.index, 0};
-          count.name = "Highest sub-index supported";
-          count.data_type = eds::type::kUnsigned8;
-          count.access = eds::Access::kRo;
-          o.subs.insert(o.subs.begin(), count);
-        }
-        o.subs.front().default_value = std::to_string(o.subs.back().address.sub);
-      }
-      description.put(std::move(o));
-    }
-  }
-  eds::Commissioning c;
-  c.node_id = id;
-  c.node_name = n.config.name;
-  c.bitrate = config_.bitrate;
-  c.network_name = config_.interface;
-  return eds::write_text_file(path, eds::to_dcf(description, c, n.applied));
-}
-
-Status Master::write_dcfs(const std::string& dir) const {
-  for (const auto& n : nodes_) {
-    CDPR_RETURN_IF_ERROR(write_dcf(n->config.id, dir + "/" + n->config.name + ".dcf"));
-  }
-  return Status::success();
-}
-
 void Master::restart_link(void* self) {
   auto* m = static_cast<Master*>(self);
   if (!m->link_) return;
@@ -549,7 +478,8 @@ Status Master::set_mode(NodeId id, Mode mode) {
   // Hold the position while the drive switches: whichever mode it is in meanwhile, the target
   // follows the actual position and no command of the old mode is carried over.
   drive.set_mode(Mode::kNone);
-  if (mode == Mode::kCyclicSyncPosition) {
+  const DriveConfig& dc = n->config.drive;
+  if (mode == Mode::kCyclicSyncPosition && !has(dc, DriveQuirk::kNoInterpolationPeriod)) {
     // 0x60C2 interpolation time period = value * 10^index s, equal to the SYNC period.
     const double ms = to_ms(config_.sync_period);
     std::int8_t exponent = -3;
@@ -574,16 +504,19 @@ Status Master::set_mode(NodeId id, Mode mode) {
   const Timestamp start = hooks_.now();
   const auto timeout = n->config.drive.mode_switch_timeout;
   std::int8_t shown = 0;
+  // Quirk no_mode_display: the drive's 0x6061 does not follow, 0x6060 read back stands for it.
+  const bool display = !has(dc, DriveQuirk::kNoModeDisplay);
   for (;;) {
-    auto r = sdo.read<std::int8_t>(cia402::obj::kModesDisplay, pump_);
+    auto r = sdo.read<std::int8_t>(
+        display ? cia402::obj::kModesDisplay : cia402::obj::kModesOfOperation, pump_);
     if (!r.ok()) return r.status();
     shown = *r;
     if (shown == static_cast<std::int8_t>(mode)) break;
     if (hooks_.now() - start >= timeout) {
       return Status::error(ErrorCode::kTimeout,
-                           "node %u: 0x6061 shows mode %d %.0f ms after writing 0x6060 = %d (%s)",
-                           unsigned{id}, int{shown}, to_ms(timeout), static_cast<int>(mode),
-                           to_string(mode).data());
+                           "node %u: 0x%04X shows mode %d %.0f ms after writing 0x6060 = %d (%s)",
+                           unsigned{id}, display ? 0x6061u : 0x6060u, int{shown}, to_ms(timeout),
+                           static_cast<int>(mode), to_string(mode).data());
     }
     const Timestamp until = hooks_.now() + std::chrono::milliseconds(10);
     (void)wait_for([&] { return hooks_.now() >= until; }, std::chrono::seconds(1), "mode poll");
@@ -607,6 +540,13 @@ Status Master::set_actual_position(NodeId id, double position, std::chrono::nano
     return Status::error(ErrorCode::kFailedPrecondition,
                          "node %u: set actual position needs OPERATION_ENABLED (drive in %s)",
                          unsigned{id}, cia402::to_string(drive.state()).data());
+  }
+  if (const auto& e = n->config.eds_data; e && (e->find(cia402::obj::kHomingMethod) == nullptr ||
+                                                e->find(cia402::obj::kHomeOffset) == nullptr)) {
+    return Status::error(ErrorCode::kFailedPrecondition,
+                         "node %u: set actual position needs the drive's homing, but %s has no "
+                         "0x6098 (homing method) or 0x607C (home offset)",
+                         unsigned{id}, e->source().c_str());
   }
   const Mode previous = drive.mode();
   const std::int32_t counts = drive.to_counts(position);
@@ -676,42 +616,6 @@ Status Master::enable_all(std::chrono::nanoseconds timeout) {
     }
   }
   return s;
-}
-
-Status Master::shutdown(std::chrono::nanoseconds timeout) {
-  Status first;
-  if (running_) {
-    quick_stop_all();
-    Status s = wait_for(
-        [&] {
-          for (const Drive& d : drives_) {
-            if (d.received() && !d.supervisor().reached() && !d.supervisor().in_fault()) {
-              return false;
-            }
-          }
-          return true;
-        },
-        timeout, "quick stop of the drives");
-    if (!s.ok()) first = s;
-    for (Drive& d : drives_) d.disable();
-    s = wait_for(
-        [&] {
-          for (const Drive& d : drives_) {
-            if (d.received() && !d.supervisor().reached() && !d.supervisor().in_fault()) {
-              return false;
-            }
-          }
-          return true;
-        },
-        timeout, "disable voltage of the drives");
-    if (!s.ok() && first.ok()) first = s;
-  }
-  running_ = false;
-  sync_.stop();
-  own_state_ = NmtState::kPreOperational;
-  Status s = nmt(NmtCommand::kEnterPreOperational, 0);
-  if (!s.ok() && first.ok()) first = s;
-  return first;
 }
 
 BusLoad Master::bus_load() const {
