@@ -6,6 +6,7 @@ add_library(cdpr_daemon STATIC
   ${_d}/src/rt_controller.cc
   ${_d}/src/state_store.cc
   ${_d}/src/calibration_report.cc
+  ${_d}/src/log_coalescer.cc
   ${_d}/src/daemon.cc)
 target_include_directories(cdpr_daemon PUBLIC ${_d}/include)
 target_link_libraries(cdpr_daemon
@@ -15,6 +16,8 @@ target_link_libraries(cdpr_daemon
 
 cdpr_add_gtest(NAME daemon_config_test SOURCES ${_d}/src/daemon_config_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.cc LIBS cdpr_daemon)
+cdpr_add_gtest(NAME daemon_log_coalescer_test SOURCES ${_d}/src/log_coalescer_test.cc
+               LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_calibration_report_test SOURCES ${_d}/src/calibration_report_test.cc
                LIBS cdpr_daemon)
 foreach(t daemon_state_store_test daemon_config_test)

@@ -556,6 +556,10 @@ Status Daemon::activate(int version, const json& why, const PeerInfo* peer) {
 }
 
 void Daemon::service() {
+  const auto warn_bus = [this](const std::string& line) {
+    spdlog::warn("CANopen: {}", line);
+    publish("log", {{"level", "warning"}, {"message", line}});
+  };
   reclaim();
   RtEvent e;
   while (rt_->pop_event(e)) {
@@ -580,14 +584,14 @@ void Daemon::service() {
         ev.type == canopen::EventType::kDriveFault || ev.type == canopen::EventType::kDriveStuck ||
         ev.type == canopen::EventType::kRxOverflow || ev.type == canopen::EventType::kSyncOverrun ||
         ev.type == canopen::EventType::kTxFailed;
-    if (serious) {
-      spdlog::warn("CANopen: node {}: {}", int{ev.node}, what);
-      publish("log",
-              {{"level", "warning"}, {"message", "node " + std::to_string(ev.node) + ": " + what}});
+    if (serious) {  // one line per condition and its count while it lasts
+      const std::string line = "node " + std::to_string(ev.node) + ": " + what;
+      if (auto l = bus_log_.report(line, line, ev.time)) warn_bus(*l);
     } else {
       spdlog::debug("CANopen: node {}: {}", int{ev.node}, what);
     }
   }
+  for (const std::string& l : bus_log_.expire(io_.clock->now())) warn_bus(l);
   const RtSnapshot s = rt_->snapshot();
   // A slack cable is named (status "warning", the log, a `warning` event) but does not stop the
   // robot: an 8-cable robot keeps control with one slack cable (docs/daemon.md).

@@ -34,6 +34,7 @@
 #include "cdpr/can/virtual_bus.hpp"
 #include "cdpr/canopen/master.hpp"
 #include "cdpr/controller/daemon_config.hpp"
+#include "cdpr/controller/log_coalescer.hpp"
 #include "cdpr/controller/rt_controller.hpp"
 #include "cdpr/controller/state_store.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
@@ -196,6 +197,7 @@ class Daemon {
   std::string fault_text_;
   can::Timestamp running_since_{0};  // end of start-up (set once, before the RT loop runs)
   std::set<int> rebooted_nodes_;     // nodes that booted while the daemon ran (need a restart)
+  LogCoalescer bus_log_;             // the RT loop's CANopen events, for the log (service())
   std::string warning_;  // a condition that is named but does not stop the robot (a slack cable)
   nlohmann::json loop_figures_ = nlohmann::json::object();
   std::function<void(const nlohmann::json&)> sink_;
