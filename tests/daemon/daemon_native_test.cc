@@ -236,6 +236,19 @@ TEST_F(DaemonNative, RtCycleDoesNotAllocateWhileHoldingOrMoving) {
   EXPECT_GT(daemon().rt().snapshot().largest_move_step, 0.0) << "the platform did not move";
 }
 
+// Issue 39 (6): 10 s without the bus (every transmission fails) is one "transmit failed" line
+// when it starts and one with the count when it is over, not one per frame (16,136 lines in 45 s).
+TEST_F(DaemonNative, TransmitFailuresWhileTheBusIsGoneAreTwoLogLinesWithACount) {
+  start_daemon();
+  cell_->master_endpoint().set_transmit_failing(true);
+  (void)run_until([] { return false; }, 10.0);
+  cell_->master_endpoint().set_transmit_failing(false);
+  (void)run_until([] { return false; }, 3.0);
+  EXPECT_EQ(cell_->count_events("log", "message", "transmit failed"), 2);
+  EXPECT_EQ(cell_->count_events("log", "message", "transmit failed ended: "), 1);
+  EXPECT_GT(daemon().master().stats().tx_failures, 1000u);
+}
+
 TEST_F(DaemonNative, AbortHoldsTheRobotAndKeepsTheGeometry) {
   start_daemon();
   const int before = daemon().status()["geometry_version"].get<int>();

@@ -202,6 +202,21 @@ class VirtualCell {
     return daemon->handle(cmd, args, peer);
   }
 
+  // Events of `type` whose data[key] is a string containing `part`.
+  int count_events(const std::string& type, const std::string& key, const std::string& part) {
+    std::lock_guard lock(events_mu_);
+    int n = 0;
+    for (const nlohmann::json& e : events_) {
+      if (e["event"] == type && e["data"].contains(key) && e["data"][key].is_string() &&
+          e["data"][key].get<std::string>().find(part) != std::string::npos) {
+        ++n;
+      }
+    }
+    return n;
+  }
+  // The daemon's end of the bus (e.g. to make its transmissions fail).
+  can::VirtualCanEndpoint& master_endpoint() { return *master_ep_; }
+
   bool saw_event(const std::string& type, const std::string& key, const std::string& value) {
     std::lock_guard lock(events_mu_);
     for (const nlohmann::json& e : events_) {
