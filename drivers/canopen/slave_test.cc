@@ -90,6 +90,16 @@ class SlaveTest : public ::testing::Test {
     const Status s = configure_pdo(sdo, pump, p);
     ASSERT_TRUE(s.ok()) << s.to_string();
   }
+  // RPDO `number` with transmission type 255 (applied on arrival) carrying `entries`.
+  void map_rpdo(int number, std::vector<PdoEntry> entries) {
+    PdoConfig p;
+    p.direction = PdoDirection::kRpdo;
+    p.number = number;
+    p.transmission_type = 255;
+    p.entries = std::move(entries);
+    const Status s = configure_pdo(sdo, pump, p);
+    ASSERT_TRUE(s.ok()) << s.to_string();
+  }
   void start() { send(nmt_frame(NmtCommand::kStart, kNode)); }
 
   struct Seen {
@@ -348,12 +358,7 @@ TEST_F(SlaveTest, ResetCommunicationRestoresTheCommunicationDefaults) {
 
 // Issue 39 (7): a mode written by RPDO has the checks and side effects of an SDO write.
 TEST_F(SlaveTest, ModeWrittenByRpdoIsCheckedAndShownIn6061) {
-  PdoConfig p;
-  p.direction = PdoDirection::kRpdo;
-  p.number = 2;
-  p.transmission_type = 255;
-  p.entries = {{{0x6060, 0}, DataType::kI8}};
-  ASSERT_TRUE(configure_pdo(sdo, pump, p).ok());
+  map_rpdo(2, {{{0x6060, 0}, DataType::kI8}});
   start();
   can::Frame f = make_frame(cob::rpdo(2, kNode), 1);
   f.data[0] = 8;  // CSP
@@ -373,12 +378,7 @@ TEST_F(SlaveTest, ModeWrittenByRpdoIsCheckedAndShownIn6061) {
 // Issue 39 (7): EMCY 0x8210 (short RPDO) and 0x8240 (SYNC length) are acknowledged by a fault
 // reset: 0x1001 = 0 and EMCY 0x0000.
 TEST_F(SlaveTest, FaultResetClearsACommunicationErrorWithEmcy0000) {
-  PdoConfig p;
-  p.direction = PdoDirection::kRpdo;
-  p.number = 1;
-  p.transmission_type = 255;
-  p.entries = {{{0x6040, 0}, DataType::kU16}, {{0x607A, 0}, DataType::kI32}};
-  ASSERT_TRUE(configure_pdo(sdo, pump, p).ok());
+  map_rpdo(1, {{{0x6040, 0}, DataType::kU16}, {{0x607A, 0}, DataType::kI32}});
   start();
   send(make_frame(cob::rpdo(1, kNode), 2));  // 2 bytes for a 6-byte mapping
   auto emcy = frames(cob::kEmcy + kNode);

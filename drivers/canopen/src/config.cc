@@ -260,30 +260,40 @@ Status parse_quirks(const YamlField& list, std::uint32_t& out) {
   return Status::success();
 }
 
+// The fields of a node entry; a profile has the same but the node's identity.
+Status check_node_fields(const YamlField& y, bool entry) {
+  CDPR_RETURN_IF_ERROR(y.check_keys({"id",
+                                     "name",
+                                     "profile",
+                                     "kind",
+                                     "heartbeat_ms",
+                                     "heartbeat_timeout_ms",
+                                     "master_heartbeat_timeout_ms",
+                                     "rpdo",
+                                     "tpdo",
+                                     "sdo",
+                                     "mode",
+                                     "counts_per_unit",
+                                     "transition_timeout_ms",
+                                     "mode_switch_timeout_ms",
+                                     "abort_connection_option",
+                                     "quick_stop_option",
+                                     "profile_velocity",
+                                     "profile_acceleration",
+                                     "homing_method",
+                                     "quirks",
+                                     "gain",
+                                     "offset",
+                                     "eds"}));
+  if (entry) return Status::success();
+  for (const char* key : {"id", "name", "profile"}) {
+    if (const YamlField k = y[key]; k.present()) return k.error("belongs to a node, not a profile");
+  }
+  return Status::success();
+}
+
 Status parse_node(const NodeFields& f, EdsCache& eds_cache, NodeConfig& c) {
-  CDPR_RETURN_IF_ERROR(f.node.check_keys({"id",
-                                          "name",
-                                          "profile",
-                                          "kind",
-                                          "heartbeat_ms",
-                                          "heartbeat_timeout_ms",
-                                          "master_heartbeat_timeout_ms",
-                                          "rpdo",
-                                          "tpdo",
-                                          "sdo",
-                                          "mode",
-                                          "counts_per_unit",
-                                          "transition_timeout_ms",
-                                          "mode_switch_timeout_ms",
-                                          "abort_connection_option",
-                                          "quick_stop_option",
-                                          "profile_velocity",
-                                          "profile_acceleration",
-                                          "homing_method",
-                                          "quirks",
-                                          "gain",
-                                          "offset",
-                                          "eds"}));
+  CDPR_RETURN_IF_ERROR(check_node_fields(f.node, /*entry=*/true));
   if (const YamlField kind = f["kind"]; kind.present()) {
     CDPR_ASSIGN_OR_RETURN(const int k, kind.choice({"generic", "cia402", "force_sensor"}));
     constexpr NodeKind kKinds[] = {NodeKind::kGeneric, NodeKind::kCia402Drive,
@@ -367,26 +377,7 @@ Status parse_document(const YamlField& root, MasterConfig& c) {
       if (!p.present()) {
         return profile.error("no profile '" + profile.scalar() + "' in profiles");
       }
-      CDPR_RETURN_IF_ERROR(p.check_keys({"kind",
-                                         "heartbeat_ms",
-                                         "heartbeat_timeout_ms",
-                                         "master_heartbeat_timeout_ms",
-                                         "rpdo",
-                                         "tpdo",
-                                         "sdo",
-                                         "mode",
-                                         "counts_per_unit",
-                                         "transition_timeout_ms",
-                                         "mode_switch_timeout_ms",
-                                         "abort_connection_option",
-                                         "quick_stop_option",
-                                         "profile_velocity",
-                                         "profile_acceleration",
-                                         "homing_method",
-                                         "quirks",
-                                         "gain",
-                                         "offset",
-                                         "eds"}));
+      CDPR_RETURN_IF_ERROR(check_node_fields(p, /*entry=*/false));
       f.profile = p;
     }
     CDPR_RETURN_IF_ERROR(parse_node(f, eds_cache, nc));
