@@ -10,7 +10,7 @@ target_link_libraries(cdpr_control PUBLIC cdpr_core nlohmann_json::nlohmann_json
 
 add_library(cdpr_ctl_app STATIC ${_ctl}/cdprctl/app.cc ${_ctl}/cdprctl/render.cc)
 target_include_directories(cdpr_ctl_app PUBLIC ${_ctl}/cdprctl)
-target_link_libraries(cdpr_ctl_app PUBLIC cdpr_control PRIVATE CLI11::CLI11 cdpr_version cdpr_options)
+target_link_libraries(cdpr_ctl_app PUBLIC cdpr_control PRIVATE cdpr_io CLI11::CLI11 cdpr_version cdpr_options)
 
 add_executable(cdprctl ${_ctl}/cdprctl/main.cc)
 target_link_libraries(cdprctl PRIVATE cdpr_ctl_app cdpr_options)

@@ -15,7 +15,8 @@ add_library(cdpr_daemon STATIC
   ${_d}/src/daemon_state.cc
   ${_d}/src/daemon_service.cc
   ${_d}/src/daemon_calibration.cc
-  ${_d}/src/daemon_commands.cc)
+  ${_d}/src/daemon_commands.cc
+  ${_d}/src/log_coalescer.cc)
 target_include_directories(cdpr_daemon PUBLIC ${_d}/include)
 target_link_libraries(cdpr_daemon
   PUBLIC cdpr_io cdpr_control cdpr_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording
@@ -33,6 +34,8 @@ cdpr_add_gtest(NAME daemon_rt_controller_test SOURCES ${_d}/src/rt_controller_te
                LIBS cdpr_daemon cdpr_daemon_testing cdpr_calibration_testing cdpr_test_support)
 cdpr_add_gtest(NAME daemon_config_test SOURCES ${_d}/src/daemon_config_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.cc LIBS cdpr_daemon)
+cdpr_add_gtest(NAME daemon_log_coalescer_test SOURCES ${_d}/src/log_coalescer_test.cc
+               LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_calibration_report_test SOURCES ${_d}/src/calibration_report_test.cc
                LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_supervisor_test SOURCES ${_d}/src/supervisor_test.cc LIBS cdpr_daemon)

@@ -19,6 +19,7 @@
 
 #include "cdpr/controller/control_client.hpp"
 #include "cdpr/controller/control_protocol.hpp"
+#include "cdpr/io/bounded_read.hpp"
 #include "cdpr/version.hpp"
 #include "render.hpp"
 
@@ -100,15 +101,6 @@ Status write_file_atomically(const std::string& path, std::string_view content) 
   return Status::success();
 }
 
-Result<std::string> read_text_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Status(ErrorCode::kNotFound, "cannot open " + path + ": " + errno_text(errno));
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) return Status(ErrorCode::kIoError, "cannot read " + path);
-  return ss.str();
-}
-
 // The hint for a socket we may not open: its group and mode.
 std::string permission_hint(const std::string& path) {
   struct stat sb {};
@@ -133,7 +125,9 @@ class Session {
                                         : (inv_.wait || inv_.watch) ? 0
                                                                     : kDefaultTimeoutS);
     if (!inv_.poses_file.empty()) {
-      Result<std::string> csv = read_text_file(inv_.poses_file);
+      // A regular file no larger than one request may carry: /dev/zero or a FIFO is refused at
+      // once (never read unboundedly, never waited on past --timeout).
+      Result<std::string> csv = io::read_regular_file(inv_.poses_file, control::kDefaultMaxLine);
       if (!csv.ok()) return fail(kExitUsage, std::string(csv.status().message()));
       if (const auto bad = control::find_invalid_utf8(*csv)) {
         return fail(kExitUsage,

@@ -374,6 +374,22 @@ TEST_F(CdprctlTest, RefusesAPoseFileTooLargeForOneRequest) {
   EXPECT_TRUE(requests().empty());
 }
 
+// Issue 39 (6): a pose file that is a device or a FIFO is refused at once, before any request
+// (it was read until the OOM killer came, or waited on past --timeout).
+TEST_F(CdprctlTest, RefusesAPoseFileThatIsADeviceOrAFifo) {
+  start_daemon();
+  const Outcome zero = ctl({"--timeout", "5", "calibrate", "--poses", "/dev/zero"});
+  EXPECT_EQ(zero.code, kExitUsage);
+  EXPECT_NE(zero.err.find("/dev/zero is a character device, not a regular file"), std::string::npos)
+      << zero.err;
+  const std::string fifo = dir_ + "/poses.fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const Outcome f = ctl({"--timeout", "5", "calibrate", "--poses", fifo});  // no writer
+  EXPECT_EQ(f.code, kExitUsage);
+  EXPECT_NE(f.err.find("is a FIFO, not a regular file"), std::string::npos) << f.err;
+  EXPECT_TRUE(requests().empty());
+}
+
 TEST_F(CdprctlTest, ReportWritesTheHtmlAtomically) {
   start_daemon();
   const std::string html =

@@ -38,6 +38,10 @@ void Daemon::service() {
 }
 
 void Daemon::log_rt_events() {
+  const auto warn_bus = [this](const std::string& line) {
+    spdlog::warn("CANopen: {}", line);
+    publish("log", {{"level", "warning"}, {"message", line}});
+  };
   RtEvent e;
   while (rt_->pop_event(e)) {
     const canopen::Event& ev = e.event;
@@ -61,14 +65,14 @@ void Daemon::log_rt_events() {
         ev.type == canopen::EventType::kDriveFault || ev.type == canopen::EventType::kDriveStuck ||
         ev.type == canopen::EventType::kRxOverflow || ev.type == canopen::EventType::kSyncOverrun ||
         ev.type == canopen::EventType::kTxFailed;
-    if (serious) {
-      spdlog::warn("CANopen: node {}: {}", int{ev.node}, what);
-      publish("log",
-              {{"level", "warning"}, {"message", "node " + std::to_string(ev.node) + ": " + what}});
+    if (serious) {  // one line per condition and its count while it lasts
+      const std::string line = "node " + std::to_string(ev.node) + ": " + what;
+      if (auto l = bus_log_.report(line, line, ev.time)) warn_bus(*l);
     } else {
       spdlog::debug("CANopen: node {}: {}", int{ev.node}, what);
     }
   }
+  for (const std::string& l : bus_log_.expire(io_.clock->now())) warn_bus(l);
 }
 
 // A slack cable is named (status "warning", the log, a `warning` event) but does not stop the

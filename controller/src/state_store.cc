@@ -17,6 +17,7 @@
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/io/append_only_file.hpp"
 #include "cdpr/io/atomic_file.hpp"
+#include "cdpr/io/bounded_read.hpp"
 #include "cdpr/recording/recording.hpp"
 
 namespace cdpr::controller {
@@ -56,11 +57,7 @@ std::vector<int> numbers_in(const std::string& dir, std::string_view suffix) {
 }  // namespace
 
 Result<std::string> read_text_file(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return Status::error(ErrorCode::kNotFound, "%s: cannot open", path.c_str());
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
+  return io::read_regular_file(path, kMaxStateFileBytes);
 }
 
 Result<StateStore> StateStore::open(const std::string& directory) {

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -227,7 +228,8 @@ TEST(EdsCheck, RefusesWrongTypesReadOnlyObjectsAndMissingObjects) {
       "net.yaml");
   ASSERT_FALSE(missing.ok());
   EXPECT_EQ(std::string(missing.status().message()),
-            "net.yaml: node 3 (winch3): the master writes 0x2100:00 (sdo write) as u8, but " +
+            "net.yaml:10: profiles.winch.sdo[0]: node 3 (winch3): the master writes 0x2100:00 "
+            "(sdo write) as u8, but " +
                 drive + " has no object 0x2100:00");
   // A TPDO inhibit time on a drive whose EDS has no such sub-index: the vendor-style one has.
   auto inhibit = parse_config(network(kEdsDir + "/cdpr-sim-force.eds", tpdo), "net.yaml");
@@ -251,6 +253,62 @@ TEST(EdsCheck, PlannedAccessesFollowTheBootOrder) {
   EXPECT_EQ(plan[2].object, (ObjectAddress{0x6007, 0}));
   EXPECT_EQ(plan[3].object, (ObjectAddress{0x1400, 1}));
   EXPECT_EQ(pdo_numbers(mini->nodes[0], PdoDirection::kTpdo), (std::vector<int>{1, 2, 3, 4}));
+}
+
+// The shipped drive EDS without some objects, as a file in the test's temp dir (the object
+// lists are rebuilt by to_dcf).
+std::string drive_eds_without(std::initializer_list<std::uint16_t> drop, const std::string& name) {
+  auto e = Eds::load(kEdsDir + "/cdpr-sim-drive.eds");
+  EXPECT_TRUE(e.ok()) << e.status().to_string();
+  Eds out;
+  for (const auto& [index, o] : e->objects()) {
+    if (std::find(drop.begin(), drop.end(), index) == drop.end()) out.put(o);
+  }
+  out.set_device_info(e->device_info());
+  const std::string path = ::testing::TempDir() + "/" + name + ".eds";
+  EXPECT_TRUE(write_text_file(path, to_dcf(out, Commissioning{}, {})).ok());
+  return path;
+}
+
+// Issue 39 (7): a CSP-only drive needs no homing objects; configured homing does.
+TEST(EdsCheck, ACspDriveWithoutHomingObjectsIsAcceptedUnlessHomingIsConfigured) {
+  const std::string eds = drive_eds_without({0x607C, 0x6098}, "no-homing");
+  const std::string tpdo = "\"0x6041:00 u16\", \"0x6064:00 i32\"";
+  auto csp = parse_config(network(eds, tpdo), "net.yaml");
+  EXPECT_TRUE(csp.ok()) << csp.status().to_string();
+  auto homing = parse_config(network(eds, tpdo, "    homing_method: 35\n"), "net.yaml");
+  ASSERT_FALSE(homing.ok());
+  EXPECT_NE(homing.status().message().find("writes 0x6098:00 (homing method)"), std::string::npos)
+      << homing.status().message();
+  auto mode = parse_config(network(eds, tpdo, "    mode: homing\n"), "net.yaml");
+  EXPECT_FALSE(mode.ok());
+}
+
+// Drives by configuration: a quirk changes what the master needs of the EDS; unknown quirks
+// are named at their YAML line.
+TEST(EdsCheck, QuirksChangeThePlannedAccessesAndUnknownOnesAreNamed) {
+  const std::string eds = drive_eds_without({0x60C2}, "no-60c2");
+  const std::string tpdo = "\"0x6041:00 u16\", \"0x6064:00 i32\"";
+  auto plain = parse_config(network(eds, tpdo), "net.yaml");
+  ASSERT_FALSE(plain.ok());
+  EXPECT_NE(plain.status().message().find("0x60C2:01"), std::string::npos);
+  auto quirk =
+      parse_config(network(eds, tpdo, "    quirks: [no_interpolation_period]\n"), "net.yaml");
+  EXPECT_TRUE(quirk.ok()) << quirk.status().to_string();
+  auto display = parse_config(
+      network(kEdsDir + "/cdpr-sim-drive.eds", tpdo, "    quirks: [no_mode_display]\n"),
+      "net.yaml");
+  ASSERT_TRUE(display.ok()) << display.status().to_string();
+  bool reads_6061 = false;
+  for (const PlannedAccess& a : planned_accesses(*display, display->nodes[0])) {
+    reads_6061 = reads_6061 || a.object == ObjectAddress{0x6061, 0};
+  }
+  EXPECT_FALSE(reads_6061);
+  auto unknown = parse_config(network(eds, tpdo, "    quirks: [no_such_thing]\n"), "net.yaml");
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_EQ(std::string(unknown.status().message()),
+            "net.yaml:9: profiles.winch.quirks[0]: 'no_such_thing' is not a quirk "
+            "(no_mode_display, no_interpolation_period)");
 }
 
 }  // namespace

@@ -219,6 +219,27 @@ TEST_F(MasterTest, DrivesStopWhenTheMasterDies) {
   }
 }
 
+// Issue 39 (7): drives that fault on a lost master heartbeat (0x6007 = 1) stay quiet after an
+// orderly shutdown: the master turned their consumer off (0x1016:01 = 0) before it went.
+TEST_F(MasterTest, AfterShutdownNoDriveFaultsOnTheMissingMasterHeartbeat) {
+  for (auto& n : config.nodes) {
+    if (n.kind == NodeKind::kCia402Drive) n.drive.abort_connection_option = 1;
+  }
+  ASSERT_TRUE(make_and_boot().ok());
+  ASSERT_TRUE(master->enable_all(2s).ok());
+  run(100ms);
+  const Status s = master->shutdown(2s);
+  ASSERT_TRUE(s.ok()) << s.to_string();
+  for (int i = 0; i < 4000; ++i) net.idle();  // 1 s without the master
+  for (NodeId id = 1; id <= 8; ++id) {
+    EXPECT_FALSE(drives[id]->master_lost()) << "node " << int{id};
+    EXPECT_EQ(drives[id]->od().get({0x1016, 1}), 0) << "node " << int{id};
+    EXPECT_EQ(cia402::decode_state(drives[id]->statusword()), cia402::State::kSwitchOnDisabled)
+        << "node " << int{id};
+    EXPECT_EQ(drives[id]->nmt_state(), NmtState::kPreOperational);
+  }
+}
+
 TEST_F(MasterTest, BusOffSilencesThenRecovers) {
   ASSERT_TRUE(make_and_boot().ok());
   run(20ms);
@@ -313,6 +334,21 @@ TEST_F(MasterTest, SetModeTimesOutNamingTheNodeWhenTheDriveNeverConfirms) {
   drives[4]->set_ignore_mode_switch(false);
   ASSERT_TRUE(master->set_mode(4, Mode::kCyclicSyncPosition).ok());
   EXPECT_TRUE(d4->set_target_counts(4317 + 5));
+}
+
+// Drives by configuration: a drive whose 0x6061 never follows boots with the no_mode_display
+// quirk (the master reads 0x6060 back).
+TEST_F(MasterTest, NoModeDisplayQuirkBootsADriveWhose6061NeverFollows) {
+  drives[2]->set_ignore_mode_switch(true);
+  config.nodes[1].drive.mode_switch_timeout = 200ms;
+  const Status without = make_and_boot();
+  ASSERT_FALSE(without.ok());
+  EXPECT_NE(without.message().find("node 2: 0x6061 shows mode"), std::string::npos)
+      << without.to_string();
+  config.nodes[1].drive.quirks |= static_cast<std::uint32_t>(DriveQuirk::kNoModeDisplay);
+  const Status with = make_and_boot();
+  ASSERT_TRUE(with.ok()) << with.to_string();
+  EXPECT_EQ(master->drive(2)->mode(), Mode::kCyclicSyncPosition);
 }
 
 TEST_F(MasterTest, ProfilePositionMoveHandshakeAndTargetReached) {
@@ -717,6 +753,22 @@ TEST_F(MasterTest, WritesADcfForANodeWithoutEds) {
   ASSERT_TRUE(v.ok());
   EXPECT_EQ(*v, 0x64010810);
   EXPECT_EQ(m->data_type, eds::type::kUnsigned32);
+  // Issue 39 (7): complete per CiA 306: the mandatory objects, a filled [DeviceInfo].
+  for (std::uint16_t index : {0x1000, 0x1001, 0x1018}) {
+    EXPECT_NE(dcf->object(index), nullptr) << "mandatory object 0x" << std::hex << index;
+  }
+  const eds::SubObject* vendor = dcf->find({0x1018, 1});
+  ASSERT_NE(vendor, nullptr);
+  auto vendor_id = dcf->value(*vendor, 9);
+  ASSERT_TRUE(vendor_id.ok()) << vendor_id.status().to_string();
+  EXPECT_EQ(*vendor_id, force->od().get({0x1018, 1}));
+  for (const char* key : {"VendorName", "VendorNumber", "ProductName", "ProductNumber",
+                          "RevisionNumber", "BaudRate_1000", "SimpleBootUpSlave", "Granularity",
+                          "NrOfRXPDO", "NrOfTXPDO", "LSS_Supported"}) {
+    EXPECT_FALSE(dcf->device_info(key).empty()) << "[DeviceInfo] lacks " << key;
+  }
+  EXPECT_EQ(dcf->device_info("BaudRate_1000"), "1");
+  EXPECT_EQ(dcf->device_info("NrOfTXPDO"), "2");
 }
 
 }  // namespace

@@ -90,6 +90,16 @@ class SlaveTest : public ::testing::Test {
     const Status s = configure_pdo(sdo, pump, p);
     ASSERT_TRUE(s.ok()) << s.to_string();
   }
+  // RPDO `number` with transmission type 255 (applied on arrival) carrying `entries`.
+  void map_rpdo(int number, std::vector<PdoEntry> entries) {
+    PdoConfig p;
+    p.direction = PdoDirection::kRpdo;
+    p.number = number;
+    p.transmission_type = 255;
+    p.entries = std::move(entries);
+    const Status s = configure_pdo(sdo, pump, p);
+    ASSERT_TRUE(s.ok()) << s.to_string();
+  }
   void start() { send(nmt_frame(NmtCommand::kStart, kNode)); }
 
   struct Seen {
@@ -173,7 +183,7 @@ TEST_F(SlaveTest, EventDrivenTpdoSendsOnChangeByTimerAndRespectsTheInhibitTime) 
   start();
   wait(1ms);
   ASSERT_EQ(frames(cob::tpdo(1, kNode)).size(), 1u) << "no frame on entering OPERATIONAL";
-  sync();  // NOT_READY_TO_SWITCH_ON -> SWITCH_ON_DISABLED: a change
+  write<std::uint16_t>({0x6040, 0}, 0x06);  // SWITCH_ON_DISABLED -> READY_TO_SWITCH_ON: a change
   wait(30ms);
   ASSERT_EQ(frames(cob::tpdo(1, kNode)).size(), 2u);
   // No change: the event timer alone sends, every 100 ms.
@@ -187,18 +197,18 @@ TEST_F(SlaveTest, EventDrivenTpdoSendsOnChangeByTimerAndRespectsTheInhibitTime) 
   }
   // A change is sent at once (the last frame is > 20 ms old)...
   seen.clear();
-  write<std::uint16_t>({0x6040, 0}, 0x06);  // SWITCH_ON_DISABLED -> READY_TO_SWITCH_ON
+  write<std::uint16_t>({0x6040, 0}, 0x07);  // READY_TO_SWITCH_ON -> SWITCHED_ON
   wait(1ms);
   auto f = frames(cob::tpdo(1, kNode));
   ASSERT_EQ(f.size(), 1u);
-  EXPECT_EQ(get_u16(f[0].data.data()) & 0x6F, 0x21);
+  EXPECT_EQ(get_u16(f[0].data.data()) & 0x6F, 0x23);
   const Timestamp first = times(cob::tpdo(1, kNode)).front();
   // ... and a second change right after waits for the inhibit time.
-  write<std::uint16_t>({0x6040, 0}, 0x07);  // -> SWITCHED_ON
+  write<std::uint16_t>({0x6040, 0}, 0x06);  // -> READY_TO_SWITCH_ON
   wait(30ms);
   f = frames(cob::tpdo(1, kNode));
   ASSERT_EQ(f.size(), 2u);
-  EXPECT_EQ(get_u16(f[1].data.data()) & 0x6F, 0x23);
+  EXPECT_EQ(get_u16(f[1].data.data()) & 0x6F, 0x21);
   EXPECT_GE(times(cob::tpdo(1, kNode))[1] - first, 20ms);
   // The inhibit time may not change while the PDO exists.
   EXPECT_FALSE(sdo.write<std::uint16_t>({0x1800, 3}, 10, pump).ok());
@@ -223,7 +233,7 @@ TEST_F(SlaveTest, AcyclicSynchronousTpdoSendsAtTheSyncAfterAChange) {
 // Item 4: after the fault reset, EMCY 0x0000 and 0x1001 = 0.
 TEST_F(SlaveTest, FaultResetSendsErrorResetEmcyAndClearsTheErrorRegister) {
   start();
-  sync();  // NOT_READY -> SWITCH_ON_DISABLED
+  sync();
   drive.inject_fault(0x2310);
   sync();
   ASSERT_EQ(cia402::decode_state(drive.statusword()), cia402::State::kFault);
@@ -344,6 +354,90 @@ TEST_F(SlaveTest, ResetCommunicationRestoresTheCommunicationDefaults) {
   EXPECT_EQ(drive.od().get({0x607A, 0}, true), 55);  // the application area stays
   send(nmt_frame(NmtCommand::kResetNode, kNode));
   EXPECT_EQ(drive.od().get({0x607A, 0}, true), 0);
+}
+
+// Issue 39 (7): a mode written by RPDO has the checks and side effects of an SDO write.
+TEST_F(SlaveTest, ModeWrittenByRpdoIsCheckedAndShownIn6061) {
+  map_rpdo(2, {{{0x6060, 0}, DataType::kI8}});
+  start();
+  can::Frame f = make_frame(cob::rpdo(2, kNode), 1);
+  f.data[0] = 8;  // CSP
+  send(f);
+  EXPECT_EQ(drive.od().get({0x6060, 0}, true), 8);
+  EXPECT_EQ(drive.od().get({0x6061, 0}, true), 8) << "0x6061 did not follow a PDO-written mode";
+  f.data[0] = 3;  // profile velocity: not supported (0x6502)
+  send(f);
+  EXPECT_EQ(drive.od().get({0x6060, 0}, true), 8) << "an unsupported mode was stored";
+  EXPECT_EQ(drive.od().get({0x6061, 0}, true), 8);
+  EXPECT_EQ(drive.rpdo_values_refused(), 1u);
+  f.data[0] = 1;  // profile position
+  send(f);
+  EXPECT_EQ(drive.od().get({0x6061, 0}, true), 1);
+}
+
+// Issue 39 (7): EMCY 0x8210 (short RPDO) and 0x8240 (SYNC length) are acknowledged by a fault
+// reset: 0x1001 = 0 and EMCY 0x0000.
+TEST_F(SlaveTest, FaultResetClearsACommunicationErrorWithEmcy0000) {
+  map_rpdo(1, {{{0x6040, 0}, DataType::kU16}, {{0x607A, 0}, DataType::kI32}});
+  start();
+  send(make_frame(cob::rpdo(1, kNode), 2));  // 2 bytes for a 6-byte mapping
+  auto emcy = frames(cob::kEmcy + kNode);
+  ASSERT_EQ(emcy.size(), 1u);
+  EXPECT_EQ(get_u16(emcy[0].data.data()), 0x8210);
+  EXPECT_NE(drive.od().get({0x1001, 0}), 0);
+  can::Frame cw = make_frame(cob::rpdo(1, kNode), 6);
+  send(cw);  // controlword 0
+  put_u16(cw.data.data(), 0x80);
+  send(cw);  // fault reset (rising edge of bit 7)
+  emcy = frames(cob::kEmcy + kNode);
+  ASSERT_EQ(emcy.size(), 2u) << "no EMCY 0x0000 after the fault reset";
+  EXPECT_EQ(get_u16(emcy[1].data.data()), 0x0000);
+  EXPECT_EQ(drive.od().get({0x1001, 0}), 0) << "0x1001 still shows the communication error";
+
+  sync(1, 1);  // 0x8240, PRE-OPERATIONAL
+  ASSERT_EQ(frames(cob::kEmcy + kNode).size(), 3u);
+  EXPECT_NE(drive.od().get({0x1001, 0}), 0);
+  write<std::uint16_t>({0x6040, 0}, 0x00);
+  write<std::uint16_t>({0x6040, 0}, 0x80);
+  emcy = frames(cob::kEmcy + kNode);
+  ASSERT_EQ(emcy.size(), 4u);
+  EXPECT_EQ(get_u16(emcy[3].data.data()), 0x0000);
+  EXPECT_EQ(drive.od().get({0x1001, 0}), 0);
+  write<std::uint16_t>({0x6040, 0}, 0x00);
+  write<std::uint16_t>({0x6040, 0}, 0x80);  // nothing pending: no further EMCY
+  EXPECT_EQ(frames(cob::kEmcy + kNode).size(), 4u);
+}
+
+// Issue 39 (7): after power-on the drive is SWITCH_ON_DISABLED in PRE-OPERATIONAL, before any
+// SYNC (CiA 402 transition 1 is the drive's own).
+TEST_F(SlaveTest, StatuswordIsSwitchOnDisabledInPreOperationalBeforeAnySync) {
+  wait(5ms);
+  ASSERT_EQ(drive.nmt_state(), NmtState::kPreOperational);
+  EXPECT_EQ(drive.syncs(), 0u);
+  auto sw = sdo.read<std::uint16_t>({0x6041, 0}, pump);
+  ASSERT_TRUE(sw.ok()) << sw.status().to_string();
+  EXPECT_EQ(cia402::decode_state(*sw), cia402::State::kSwitchOnDisabled);
+}
+
+// Issue 39 (7): the heartbeat keeps its period on average although the node is stepped late
+// (every 3 ms here, so a due time is missed by up to 3 ms).
+TEST_F(SlaveTest, HeartbeatPeriodIsExactWhenStepsComeLate) {
+  write<std::uint16_t>({0x1017, 0}, 100);
+  seen.clear();
+  for (int i = 0; i < 2100 / 3; ++i) {
+    net.clock().advance(3ms);
+    net.step_slaves();
+    collect();
+  }
+  const auto t = times(cob::kHeartbeat + kNode);
+  ASSERT_GE(t.size(), 20u);
+  const double mean_ms = std::chrono::duration<double, std::milli>(t.back() - t.front()).count() /
+                         static_cast<double>(t.size() - 1);
+  EXPECT_NEAR(mean_ms, 100.0, 3.0 / static_cast<double>(t.size() - 1) + 1e-9);
+  for (std::size_t i = 1; i < t.size(); ++i) {
+    EXPECT_LE(t[i] - t[i - 1], 103ms);
+    EXPECT_GE(t[i] - t[i - 1], 97ms);
+  }
 }
 
 TEST(SlaveEds, BuildsTheDictionaryFromTheShippedDriveEds) {

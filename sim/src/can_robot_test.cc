@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -289,6 +290,23 @@ TEST_F(CanRobotTest, NodesComeFromTheEdsWithDefaultPdosThatTheMasterDisables) {
   run(200ms);
   EXPECT_EQ(master->stats().unknown_frames, unknown) << "frames of PDOs nobody configured";
   EXPECT_LT(master->bus_load().load, 0.7);
+}
+
+// Issue 39 (7): the vcan tests' network builds the virtual robot from the shipped EDS files, the
+// same ones config/canopen-mini.yaml names, so those tests see the dictionaries that ship.
+TEST(CanRobotNetworks, TheVcanTestNetworkUsesTheShippedEdsFiles) {
+  auto shipped = co::load_config(CDPR_SOURCE_DIR "/config/canopen-mini.yaml");
+  ASSERT_TRUE(shipped.ok()) << shipped.status().to_string();
+  auto test = co::load_config(CDPR_SOURCE_DIR "/tests/sim/sim-master-network.yaml");
+  ASSERT_TRUE(test.ok()) << test.status().to_string();
+  ASSERT_EQ(test->nodes.size(), shipped->nodes.size());
+  for (std::size_t i = 0; i < test->nodes.size(); ++i) {
+    const co::NodeConfig& t = test->nodes[i];
+    ASSERT_NE(t.eds_data, nullptr) << t.name << " has no EDS";
+    EXPECT_EQ(std::filesystem::weakly_canonical(t.eds),
+              std::filesystem::weakly_canonical(shipped->nodes[i].eds))
+        << t.name;
+  }
 }
 
 }  // namespace

@@ -7,6 +7,8 @@
 #    each ExecStart= program exists in ROOT and is executable. A program that is not a target of
 #    this build yet (cdprd/cdprctl before the daemon is merged) is replaced by a stub in ROOT,
 #    and the test says so; a program that is a target must have been installed.
+#  - cdprd.service binds to and starts after the device unit of the shipped network's CAN
+#    interface (config/canopen-mini.yaml).
 #  - systemd-sysusers --root=ROOT creates the user and group cdpr from the sysusers.d entry.
 #  - every Section.Key of the systemd-networkd examples is a key this systemd-networkd knows.
 #  - `systemd-analyze security --offline=true` of cdprd.service: at most 2.5, and the same score
@@ -51,6 +53,16 @@ for unit in "${ours[@]}"; do
   }
   if [[ -n $out ]]; then fail "systemd-analyze verify $unit: $out"; else echo "verify $unit: OK"; fi
 done
+
+# cdprd waits for the CAN device of the shipped network (config/canopen-mini.yaml, interface).
+iface=$(sed -n 's/^[[:space:]]*interface:[[:space:]]*\([A-Za-z0-9_.-]*\).*/\1/p' \
+  "$src/config/canopen-mini.yaml" | head -n1)
+dev="sys-subsystem-net-devices-$iface.device"
+grep -qxF "BindsTo=$dev" "$unitdir/cdprd.service" ||
+  fail "cdprd.service does not bind to the CAN device of the shipped network (BindsTo=$dev)"
+grep -Eq "^After=(.* )?$dev( |$)" "$unitdir/cdprd.service" ||
+  fail "cdprd.service does not start after the CAN device (After=$dev)"
+echo "cdprd.service waits for $dev"
 
 # The service user.
 if command -v systemd-sysusers >/dev/null; then

@@ -446,7 +446,8 @@ TEST(CanopenInteropBus, BootEnableStreamShutdown) {
                      (static_cast<double>(force.raw(ch)) - kForceOffset[ch]) / kForceGain[ch]);
   }
 
-  // 6. Shut down: quick stop, disable voltage, SYNC off, NMT pre-operational.
+  // 6. Shut down: quick stop, disable voltage, consumer heartbeat off, SYNC off, NMT
+  // pre-operational.
   s = master.shutdown(seconds(10));
   EXPECT_TRUE(s.ok()) << s.to_string();
   for (NodeId id : kDrives) {
@@ -772,11 +773,16 @@ TEST_F(CanopenInterop, SdoConfigurationOfTheDrives) {
     // Heartbeats both ways, 0x6007, 0x605A.
     EXPECT_EQ(value(0x1017, 0) & 0xFFFF,
               std::lround(std::chrono::duration<double, std::milli>(nc.heartbeat_period).count()));
+    // The consumer of the master's heartbeat: set at boot, turned off (0) by the shutdown so the
+    // peer does not apply 0x6007 once the master is gone.
+    const auto consumer = downloads(id, 0x1016, 1);
+    ASSERT_GE(consumer.size(), 2u) << "node " << int{id};
     EXPECT_EQ(
-        value(0x1016, 1),
+        le(hex_bytes(consumer.front()->sdo_data), 0, 4, false),
         (std::int64_t{kMasterId} << 16) |
             std::lround(
                 std::chrono::duration<double, std::milli>(nc.master_heartbeat_timeout).count()));
+    EXPECT_EQ(value(0x1016, 1), 0) << "node " << int{id} << ": the consumer is still on";
     EXPECT_EQ(value(0x6007, 0) & 0xFFFF, nc.drive.abort_connection_option);
     ASSERT_TRUE(nc.drive.quick_stop_option.has_value());
     EXPECT_EQ(value(0x605A, 0) & 0xFFFF, *nc.drive.quick_stop_option);

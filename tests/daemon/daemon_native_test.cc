@@ -236,6 +236,19 @@ TEST_F(DaemonNative, RtCycleDoesNotAllocateWhileHoldingOrMoving) {
   EXPECT_GT(daemon().rt().snapshot().largest_move_step, 0.0) << "the platform did not move";
 }
 
+// Issue 39 (6): 10 s without the bus (every transmission fails) is one "transmit failed" line
+// when it starts and one with the count when it is over, not one per frame (16,136 lines in 45 s).
+TEST_F(DaemonNative, TransmitFailuresWhileTheBusIsGoneAreTwoLogLinesWithACount) {
+  start_daemon();
+  cell_->master_endpoint().set_transmit_failing(true);
+  (void)run_until([] { return false; }, 10.0);
+  cell_->master_endpoint().set_transmit_failing(false);
+  (void)run_until([] { return false; }, 3.0);
+  EXPECT_EQ(cell_->count_events("log", "message", "transmit failed"), 2);
+  EXPECT_EQ(cell_->count_events("log", "message", "transmit failed ended: "), 1);
+  EXPECT_GT(daemon().master().stats().tx_failures, 1000u);
+}
+
 TEST_F(DaemonNative, AbortHoldsTheRobotAndKeepsTheGeometry) {
   start_daemon();
   const int before = daemon().status()["geometry_version"].get<int>();
@@ -424,6 +437,55 @@ TEST_F(DaemonNative, RequestsWithBadArgumentsAreNamedErrors) {
   ASSERT_TRUE(dry.ok) << dry.message;
   EXPECT_EQ(dry.result["poses"].size(), 25u);
   EXPECT_EQ(daemon().state(), DaemonState::kHolding);
+}
+
+// Issue 39 (8): the laser over serial Modbus RTU through cdprd: the virtual robot serves RTU on a
+// pseudo-terminal, cdprd's configuration names a laser file (transport rtu, the pty as device),
+// and the driver built from it (as cdprd's main builds it) reads the true distance into the
+// daemon, at home and after a move.
+TEST(DaemonLaserRtu, TheDaemonReadsTheLaserOverModbusRtuFromItsConfiguration) {
+  const auto dir =
+      std::filesystem::temp_directory_path() / ("cdprd-rtu-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  {
+    auto c = testing::VirtualCell::create(CDPR_SOURCE_DIR, dir, 7,
+                                          testing::VirtualCell::LaserLink::kRtuThroughConfig);
+    ASSERT_TRUE(c.ok()) << c.status().to_string();
+    testing::VirtualCell& cell = **c;
+    EXPECT_NE(cell.slave->describe().find("RTU"), std::string::npos) << cell.slave->describe();
+    ASSERT_TRUE(cell.start_daemon().ok());
+    EXPECT_EQ(cell.config.laser, (dir / "laser.yaml").string());
+    // The daemon's reading follows the true distance (noise 0.1 mm) within a few polls.
+    const auto reads_truth = [&] {
+      const double truth = cell.physics->state().lasers.front().true_distance;
+      for (int i = 0; i < 500; ++i) {  // up to 5 s of wall time
+        const json l = cell.daemon->status()["laser_m"];
+        if (l.is_number() && std::abs(l.get<double>() - truth) < 1e-3) return true;
+        std::this_thread::sleep_for(10ms);
+      }
+      return false;
+    };
+    ASSERT_TRUE(reads_truth()) << cell.daemon->status()["laser_m"].dump();
+    const double at_home = cell.physics->state().lasers.front().true_distance;
+    Pose target = cell.nominal.home;
+    target.position.z() += 0.03;
+    ASSERT_TRUE(cell.request("move", {{"pose",
+                                       {target.position.x(), target.position.y(),
+                                        target.position.z(), 0.0, 0.0, 0.0}}})
+                    .ok);
+    ASSERT_TRUE(cell.run_until(
+        [&] {
+          const RtSnapshot s = cell.daemon->rt().snapshot();
+          return cell.daemon->state() == DaemonState::kHolding && s.settled &&
+                 (s.pose().position - target.position).norm() < 1e-9;
+        },
+        30.0));
+    EXPECT_GT(std::abs(cell.physics->state().lasers.front().true_distance - at_home), 5e-3);
+    EXPECT_TRUE(reads_truth()) << cell.daemon->status()["laser_m"].dump();
+    EXPECT_GT(cell.slave->answered(), 0u);
+  }
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -1,7 +1,8 @@
 // A robot cell in one process: cdprd's Daemon and the virtual robot (CANopen drives and force
 // node on the in-process virtual bus with a manual clock, the laser's Modbus slave on loopback
-// TCP read by our laser driver). For the native daemon tests and the daemon benchmark; the
-// composition lives here, not in the daemon: the two only meet on the bus and the Modbus link.
+// TCP, or Modbus RTU over a pty, read by our laser driver). For the native daemon tests and the
+// daemon benchmark; the composition lives here, not in the daemon: the two only meet on the bus and
+// the Modbus link.
 //
 // Truth: config/mini-measured.yaml with config/scenarios/mini-calibration.yaml's hidden effects;
 // the drives power on with the true platform at home (the reference platform).
@@ -11,6 +12,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -50,10 +52,16 @@ struct CellSettings {
 class VirtualCell {
  public:
   // `source` is the project's root (config/), `dir` a scratch folder for the state directory.
+  // How the laser reaches the daemon: Modbus TCP on loopback (the driver configured in code), or
+  // Modbus RTU over a pseudo-terminal the virtual robot serves, read by the driver that cdprd's
+  // `laser:` file configures (as cdprd's main does).
+  enum class LaserLink { kTcp, kRtuThroughConfig };
   static Result<std::unique_ptr<VirtualCell>> create(const std::string& source,
                                                      std::filesystem::path dir,
-                                                     std::uint64_t seed = 7) {
+                                                     std::uint64_t seed = 7,
+                                                     LaserLink link = LaserLink::kTcp) {
     std::unique_ptr<VirtualCell> c(new VirtualCell(source, std::move(dir)));
+    c->link_ = link;
     if (Status s = c->make_robot(seed); !s.ok()) return s;
     return c;
   }
@@ -78,7 +86,7 @@ class VirtualCell {
            "0x404}\n"
            "motion: " +
            s.motion + "\nmeasuring: " + s.measuring + "\nidentification: " + s.identification +
-           "\nacceptance: " + s.acceptance + "\n" + s.extra;
+           "\nacceptance: " + s.acceptance + "\n" + laser_line() + s.extra;
   }
 
   // The same from YAML lines: a `measuring:`, `identification:` or `acceptance:` line replaces
@@ -194,6 +202,21 @@ class VirtualCell {
     return daemon->handle(cmd, args, peer);
   }
 
+  // Events of `type` whose data[key] is a string containing `part`.
+  int count_events(const std::string& type, const std::string& key, const std::string& part) {
+    std::lock_guard lock(events_mu_);
+    int n = 0;
+    for (const nlohmann::json& e : events_) {
+      if (e["event"] == type && e["data"].contains(key) && e["data"][key].is_string() &&
+          e["data"][key].get<std::string>().find(part) != std::string::npos) {
+        ++n;
+      }
+    }
+    return n;
+  }
+  // The daemon's end of the bus (e.g. to make its transmissions fail).
+  can::VirtualCanEndpoint& master_endpoint() { return *master_ep_; }
+
   bool saw_event(const std::string& type, const std::string& key, const std::string& value) {
     std::lock_guard lock(events_mu_);
     for (const nlohmann::json& e : events_) {
@@ -270,12 +293,14 @@ class VirtualCell {
     robot = std::move(*r);
     robot->power_on(clock.now());
 
-    auto map = modbus::load_register_map(source_ + "/config/lasers/baumer-om20-om30.yaml");
+    const std::string map_path = source_ + "/config/lasers/baumer-om20-om30.yaml";
+    auto map = modbus::load_register_map(map_path);
     if (!map.ok()) return map.status();
     sim::LaserSlaveConfig lc;
     lc.transport = sim::LaserSlaveConfig::Transport::kTcp;
     lc.map = *map;
     lc.noise_sigma_m = scenario.noise.laser;
+    if (link_ == LaserLink::kRtuThroughConfig) return start_rtu_laser(lc, map_path);
     auto sl = sim::LaserSlave::start(lc);
     if (!sl.ok()) return sl.status();
     slave = std::move(*sl);
@@ -291,6 +316,36 @@ class VirtualCell {
     return laser->start();
   }
 
+  // The laser file of cdprd's configuration (RTU through config), or nothing.
+  std::string laser_line() const {
+    return link_ == LaserLink::kRtuThroughConfig ? "laser: " + (dir_ / "laser.yaml").string() + "\n"
+                                                 : std::string();
+  }
+  // The virtual robot serves Modbus RTU on a pty (symlinked in `dir`); a laser file names it
+  // (transport rtu, the baud and parity the slave announces) and the driver comes from that file.
+  Status start_rtu_laser(sim::LaserSlaveConfig lc, const std::string& map_path) {
+    lc.transport = sim::LaserSlaveConfig::Transport::kRtuPty;
+    lc.pty_link = (dir_ / "laser-tty").string();
+    lc.slave_id = 1;
+    lc.baud = 57600;
+    lc.parity = 'E';
+    auto sl = sim::LaserSlave::start(lc);
+    if (!sl.ok()) return sl.status();
+    slave = std::move(*sl);
+    const sim::LaserChannel l = physics->state().lasers.front();
+    slave->set_distance(l.true_distance, l.status);
+    const std::string file = (dir_ / "laser.yaml").string();
+    std::ofstream(file) << "name: platform-laser\ntransport: rtu\ndevice: " << lc.pty_link
+                        << "\nbaud: 57600\nparity: even\nslave_id: 1\nresponse_timeout: 0.2\n"
+                           "retries: 2\npoll_rate: 200\nregister_map: "
+                        << map_path << "\n";
+    auto cfg = modbus::load_laser_config(file);
+    if (!cfg.ok()) return cfg.status();
+    laser = std::make_unique<modbus::LaserSensor>(std::move(*cfg));
+    return laser->start();
+  }
+
+  LaserLink link_ = LaserLink::kTcp;
   std::string source_;
   std::filesystem::path dir_;
   can::VirtualCanBus bus_{clock};

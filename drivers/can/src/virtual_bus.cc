@@ -123,6 +123,9 @@ VirtualCanEndpoint::~VirtualCanEndpoint() {
 
 Status VirtualCanEndpoint::send(const Frame& frame) {
   CDPR_RETURN_IF_ERROR(check_frame(frame, name_));
+  if (tx_failing_.load(std::memory_order_relaxed)) {
+    return Status(ErrorCode::kUnavailable, "transmit failing (test)");
+  }
   // Normalise what a wire would carry: no payload for RTR, nothing beyond dlc.
   Frame f = frame;
   if (f.error) {

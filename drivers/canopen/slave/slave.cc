@@ -313,6 +313,7 @@ void SlaveNode::reset_communication(Timestamp now) {
   refresh_pdos();
   master_heard_ = false;
   master_lost_ = false;
+  comm_error_ = false;  // 0x1001 is back at its default
   state_ = NmtState::kPreOperational;
   send(heartbeat_frame(id_, NmtState::kBootUp));
   next_heartbeat_ = now;
@@ -332,7 +333,12 @@ void SlaveNode::send_emcy(std::uint16_t code, std::uint8_t error_register,
 }
 
 void SlaveNode::clear_errors() {
+  comm_error_ = false;
   send_emcy(0x0000, 0x00);
+}
+
+void SlaveNode::acknowledge_communication_error() {
+  if (comm_error_) clear_errors();
 }
 
 void SlaveNode::step(Timestamp now) {
@@ -349,7 +355,12 @@ void SlaveNode::step(Timestamp now) {
   const auto hb_ms = od_.get({0x1017, 0});
   if (hb_ms > 0 && now >= next_heartbeat_) {
     send(heartbeat_frame(id_, state_));
-    next_heartbeat_ = now + std::chrono::milliseconds(hb_ms);
+    // On absolute times: a step that comes late does not delay the next heartbeat (the period
+    // stays exact on average); a schedule a whole period behind (0x1017 just set, a stalled
+    // node) restarts from now.
+    const auto period = std::chrono::milliseconds(hb_ms);
+    next_heartbeat_ += period;
+    if (next_heartbeat_ <= now) next_heartbeat_ = now + period;
   }
   const auto consumer = static_cast<std::uint32_t>(od_.get({0x1016, 1}));
   const auto timeout = std::chrono::milliseconds(consumer & 0xFFFF);
@@ -410,6 +421,7 @@ void SlaveNode::handle(const can::Frame& f, Timestamp now) {
     const auto overflow = od_.get({0x1019, 0});
     if (f.dlc != (overflow >= 2 ? 1 : 0)) {
       send_emcy(0x8240, 0x11);
+      comm_error_ = true;
       state_ = NmtState::kPreOperational;
       return;
     }
@@ -433,6 +445,7 @@ void SlaveNode::handle(const can::Frame& f, Timestamp now) {
     for (const auto& m : p.map) need += m.second;
     if (f.dlc < need) {
       send_emcy(0x8210, 0x11);
+      comm_error_ = true;
       return;
     }
     p.pending = f.data;
@@ -445,13 +458,27 @@ void SlaveNode::handle(const can::Frame& f, Timestamp now) {
   }
 }
 
+// An RPDO writes its objects with the checks and side effects of an SDO write: a value the
+// object's check refuses is not stored (there is no abort to send; the object keeps its value,
+// e.g. 0x6061 keeps showing the old mode), and on_write follows a change.
 void SlaveNode::apply_rpdo(std::size_t i, Timestamp) {
   Pdo& p = rpdos_[i];
   std::size_t off = 0;
+  std::vector<Entry*> changed;
   for (const auto& [obj, bytes] : p.map) {
-    od_.set(obj, get_le(&p.pending[off], bytes));
+    const std::span<const std::uint8_t> value(&p.pending[off], bytes);
     off += bytes;
+    Entry* e = od_.find(obj);
+    if (e == nullptr) continue;
+    if (e->validate && e->data.size() == bytes && e->validate(value) != 0) {
+      ++rpdo_values_refused_;
+      continue;
+    }
+    const bool differs = !std::equal(value.begin(), value.end(), e->data.begin(), e->data.end());
+    od_.set(obj, get_le(value.data(), bytes));
+    if (differs && e->on_write && e->on_write_from_pdo) changed.push_back(e);
   }
+  for (Entry* e : changed) e->on_write();
   p.has_pending = false;
   ++rpdos_applied_;
 }
@@ -698,6 +725,7 @@ Drive402::Drive402(can::CanBus& bus, NodeId id, std::int32_t initial_position)
   d.add({0x6007, 0}, DataType::kI16, 1);
   Entry& cw = d.add({0x6040, 0}, DataType::kU16, 0);
   cw.on_write = [this] { apply_controlword(static_cast<std::uint16_t>(od().get({0x6040, 0}))); };
+  cw.on_write_from_pdo = false;  // on_rpdo_applied takes it from every RPDO
   d.add({0x6041, 0}, DataType::kU16, 0, Access::kRo);
   d.add({0x605A, 0}, DataType::kI16, 2);
   Entry& mode = d.add({0x6060, 0}, DataType::kI8, 0);
@@ -746,7 +774,10 @@ void Drive402::on_reset_application() {
 }
 
 void Drive402::on_step(Timestamp now) {
-  bool changed = false;
+  // The drive's own initialisation is over once it runs: NOT_READY_TO_SWITCH_ON passes by
+  // itself to SWITCH_ON_DISABLED (CiA 402 transition 1), in any NMT state, without a SYNC.
+  bool changed = s_ == S::kNotReady;
+  if (s_ == S::kNotReady) s_ = S::kSwitchOnDisabled;
   if (mode_pending_ && now >= mode_due_) {
     mode_pending_ = false;
     od().set({0x6061, 0}, od().get({0x6060, 0}));
@@ -838,6 +869,8 @@ void Drive402::apply_controlword(std::uint16_t cw) {
       }
       break;
   }
+  // A fault reset outside FAULT acknowledges a communication error (0x8210, 0x8240).
+  if (s_ != S::kFault && (cw & 0x80) && !(prev & 0x80)) acknowledge_communication_error();
   if (s_ == S::kEnabled && before != S::kEnabled) {
     ++enable_count_;
     enable_sync_pending_ = true;

@@ -41,6 +41,27 @@ std::string_view to_string(Mode m) {
   return "?";
 }
 
+namespace {
+
+struct QuirkInfo {
+  const char* name;
+  DriveQuirk quirk;
+};
+// Adding a quirk: one entry here, its bit and comment in config.hpp, its effect where the master
+// uses it, a line in docs/canopen.md.
+constexpr QuirkInfo kQuirks[] = {
+    {"no_mode_display", DriveQuirk::kNoModeDisplay},
+    {"no_interpolation_period", DriveQuirk::kNoInterpolationPeriod},
+};
+
+}  // namespace
+
+std::string quirk_names() {
+  std::string out;
+  for (const QuirkInfo& q : kQuirks) out += (out.empty() ? "" : ", ") + std::string(q.name);
+  return out;
+}
+
 const NodeConfig* MasterConfig::find(NodeId id) const {
   for (const auto& n : nodes) {
     if (n.id == id) return &n;
@@ -196,6 +217,7 @@ Status parse_sdo_writes(const YamlField& list, std::vector<SdoWrite>& out) {
     const std::int64_t hi =
         is_signed(w.type) ? (std::int64_t{1} << (bits - 1)) - 1 : (std::int64_t{1} << bits) - 1;
     CDPR_ASSIGN_OR_RETURN(w.value, value.integer(lo, hi));
+    w.where = e.file() + ":" + std::to_string(e.line()) + ": " + e.path();
     out.push_back(w);
   }
   return Status::success();
@@ -221,29 +243,57 @@ Status device_eds(const YamlField& field, EdsCache& cache, NodeConfig& c) {
   return Status::success();
 }
 
+Status parse_quirks(const YamlField& list, std::uint32_t& out) {
+  CDPR_RETURN_IF_ERROR(list.expect_list("a list of quirk names (" + quirk_names() + ")"));
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const YamlField q = list[i];
+    const QuirkInfo* found = nullptr;
+    for (const QuirkInfo& k : kQuirks) {
+      if (q.is_scalar() && q.scalar() == k.name) found = &k;
+    }
+    if (found == nullptr) {
+      const std::string what = q.is_scalar() ? "'" + q.scalar() + "'" : q.describe();
+      return q.error(what + " is not a quirk (" + quirk_names() + ")");
+    }
+    out |= static_cast<std::uint32_t>(found->quirk);
+  }
+  return Status::success();
+}
+
+// The fields of a node entry; a profile has the same but the node's identity.
+Status check_node_fields(const YamlField& y, bool entry) {
+  CDPR_RETURN_IF_ERROR(y.check_keys({"id",
+                                     "name",
+                                     "profile",
+                                     "kind",
+                                     "heartbeat_ms",
+                                     "heartbeat_timeout_ms",
+                                     "master_heartbeat_timeout_ms",
+                                     "rpdo",
+                                     "tpdo",
+                                     "sdo",
+                                     "mode",
+                                     "counts_per_unit",
+                                     "transition_timeout_ms",
+                                     "mode_switch_timeout_ms",
+                                     "abort_connection_option",
+                                     "quick_stop_option",
+                                     "profile_velocity",
+                                     "profile_acceleration",
+                                     "homing_method",
+                                     "quirks",
+                                     "gain",
+                                     "offset",
+                                     "eds"}));
+  if (entry) return Status::success();
+  for (const char* key : {"id", "name", "profile"}) {
+    if (const YamlField k = y[key]; k.present()) return k.error("belongs to a node, not a profile");
+  }
+  return Status::success();
+}
+
 Status parse_node(const NodeFields& f, EdsCache& eds_cache, NodeConfig& c) {
-  CDPR_RETURN_IF_ERROR(f.node.check_keys({"id",
-                                          "name",
-                                          "profile",
-                                          "kind",
-                                          "heartbeat_ms",
-                                          "heartbeat_timeout_ms",
-                                          "master_heartbeat_timeout_ms",
-                                          "rpdo",
-                                          "tpdo",
-                                          "sdo",
-                                          "mode",
-                                          "counts_per_unit",
-                                          "transition_timeout_ms",
-                                          "mode_switch_timeout_ms",
-                                          "abort_connection_option",
-                                          "quick_stop_option",
-                                          "profile_velocity",
-                                          "profile_acceleration",
-                                          "homing_method",
-                                          "gain",
-                                          "offset",
-                                          "eds"}));
+  CDPR_RETURN_IF_ERROR(check_node_fields(f.node, /*entry=*/true));
   if (const YamlField kind = f["kind"]; kind.present()) {
     CDPR_ASSIGN_OR_RETURN(const int k, kind.choice({"generic", "cia402", "force_sensor"}));
     constexpr NodeKind kKinds[] = {NodeKind::kGeneric, NodeKind::kCia402Drive,
@@ -287,6 +337,10 @@ Status parse_node(const NodeFields& f, EdsCache& eds_cache, NodeConfig& c) {
   CDPR_RETURN_IF_ERROR(integer("profile_velocity", d.profile_velocity, 0, 0xFFFFFFFF));
   CDPR_RETURN_IF_ERROR(integer("profile_acceleration", d.profile_acceleration, 0, 0xFFFFFFFF));
   CDPR_RETURN_IF_ERROR(integer("homing_method", d.homing_method, -128, 127));
+  d.homing = d.mode == Mode::kHoming || f["homing_method"].present();
+  if (const YamlField q = f["quirks"]; q.present()) {
+    CDPR_RETURN_IF_ERROR(parse_quirks(q, d.quirks));
+  }
   if (const YamlField e = f["eds"]; e.present()) CDPR_RETURN_IF_ERROR(device_eds(e, eds_cache, c));
   // One value for every channel (expanded in parse_config) or one per channel.
   if (const YamlField gain = f["gain"]; gain.present()) {
@@ -323,11 +377,7 @@ Status parse_document(const YamlField& root, MasterConfig& c) {
       if (!p.present()) {
         return profile.error("no profile '" + profile.scalar() + "' in profiles");
       }
-      CDPR_RETURN_IF_ERROR(p.check_keys(
-          {"kind", "heartbeat_ms", "heartbeat_timeout_ms", "master_heartbeat_timeout_ms", "rpdo",
-           "tpdo", "sdo", "mode", "counts_per_unit", "transition_timeout_ms",
-           "mode_switch_timeout_ms", "abort_connection_option", "quick_stop_option",
-           "profile_velocity", "profile_acceleration", "homing_method", "gain", "offset", "eds"}));
+      CDPR_RETURN_IF_ERROR(check_node_fields(p, /*entry=*/false));
       f.profile = p;
     }
     CDPR_RETURN_IF_ERROR(parse_node(f, eds_cache, nc));
@@ -459,6 +509,8 @@ Result<MasterConfig> parse_config(std::string_view yaml, std::string_view source
   }
   Status s = validate(c);
   if (s.ok()) s = check_eds(c);
+  // An error that names its own place (file:line: field) is left as it is.
+  if (!s.ok() && s.message().rfind(std::string(source) + ":", 0) == 0) return s;
   if (!s.ok()) {
     return Status::error(s.code(), "%.*s: %.*s", static_cast<int>(source.size()), source.data(),
                          static_cast<int>(s.message().size()), s.message().data());

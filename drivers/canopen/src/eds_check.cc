@@ -13,7 +13,7 @@ using Kind = PlannedAccess::Kind;
 
 void add(std::vector<PlannedAccess>& v, ObjectAddress a, DataType t, Kind k, const char* what,
          int pdo = 0) {
-  v.push_back(PlannedAccess{a, t, k, what, pdo});
+  v.push_back(PlannedAccess{a, t, k, what, pdo, {}});
 }
 
 std::string node_name(const NodeConfig& n) {
@@ -102,14 +102,26 @@ std::vector<PlannedAccess> planned_accesses(const MasterConfig& config, const No
       add(v, o::kProfileDeceleration, DataType::kU32, Kind::kWrite, "profile deceleration");
     }
   }
-  for (const SdoWrite& w : c.sdo_writes) add(v, w.object, w.type, Kind::kWrite, "sdo write");
+  for (const SdoWrite& w : c.sdo_writes) {
+    add(v, w.object, w.type, Kind::kWrite, "sdo write");
+    v.back().where = w.where;
+  }
   if (drive) {
-    // Mode switches (boot and set_mode) and homing (set_actual_position).
-    add(v, o::kInterpolationPeriodValue, DataType::kU8, Kind::kWrite,
-        "interpolation time period value");
-    add(v, o::kInterpolationPeriodIndex, DataType::kI8, Kind::kWrite, "interpolation time index");
+    // Mode switches (boot and set_mode).
+    if (!has(c.drive, DriveQuirk::kNoInterpolationPeriod)) {
+      add(v, o::kInterpolationPeriodValue, DataType::kU8, Kind::kWrite,
+          "interpolation time period value");
+      add(v, o::kInterpolationPeriodIndex, DataType::kI8, Kind::kWrite, "interpolation time index");
+    }
     add(v, o::kModesOfOperation, DataType::kI8, Kind::kWrite, "modes of operation");
-    add(v, o::kModesDisplay, DataType::kI8, Kind::kRead, "modes of operation display");
+    if (has(c.drive, DriveQuirk::kNoModeDisplay)) {
+      add(v, o::kModesOfOperation, DataType::kI8, Kind::kRead, "modes of operation (read back)");
+    } else {
+      add(v, o::kModesDisplay, DataType::kI8, Kind::kRead, "modes of operation display");
+    }
+  }
+  if (drive && c.drive.homing) {
+    // The drive's own homing (boot in homing mode, set_actual_position).
     add(v, o::kHomingMethod, DataType::kI8, Kind::kWrite, "homing method");
     add(v, o::kHomeOffset, DataType::kI32, Kind::kWrite, "home offset");
   }
@@ -118,8 +130,9 @@ std::vector<PlannedAccess> planned_accesses(const MasterConfig& config, const No
 
 Status check_against_eds(const MasterConfig& config, const NodeConfig& node, const eds::Eds& e) {
   auto fail = [&](const PlannedAccess& a, const std::string& why) {
-    return Status::error(ErrorCode::kInvalidArgument, "%s: the master %s, but %s",
-                         node_name(node).c_str(), use(a).c_str(), why.c_str());
+    return Status::error(ErrorCode::kInvalidArgument, "%s%s%s: the master %s, but %s",
+                         a.where.c_str(), a.where.empty() ? "" : ": ", node_name(node).c_str(),
+                         use(a).c_str(), why.c_str());
   };
   for (const PlannedAccess& a : planned_accesses(config, node)) {
     const eds::SubObject* s = e.find(a.object);
@@ -164,7 +177,7 @@ Status check_against_eds(const MasterConfig& config, const NodeConfig& node, con
       if (s == nullptr) continue;
       if (!eds::writable(s->access)) {
         PlannedAccess a{
-            {p.comm_index(), 1}, DataType::kU32, Kind::kWrite, "COB-ID of an unused PDO", n};
+            {p.comm_index(), 1}, DataType::kU32, Kind::kWrite, "COB-ID of an unused PDO", n, {}};
         return fail(a, e.where(*s) + " is " + std::string(eds::to_string(s->access)));
       }
     }

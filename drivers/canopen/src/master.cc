@@ -400,6 +400,7 @@ Status Master::configure_node(NodeId id) {
   if (c.kind == NodeKind::kCia402Drive && c.drive.mode != Mode::kNone) {
     CDPR_RETURN_IF_ERROR(set_mode(id, c.drive.mode));
   }
+  if (!c.eds_data) read_identity(*n);  // for its DCF
   return Status::success();
 }
 
@@ -478,7 +479,8 @@ Status Master::set_mode(NodeId id, Mode mode) {
   // Hold the position while the drive switches: whichever mode it is in meanwhile, the target
   // follows the actual position and no command of the old mode is carried over.
   drive.set_mode(Mode::kNone);
-  if (mode == Mode::kCyclicSyncPosition) {
+  const DriveConfig& dc = n->config.drive;
+  if (mode == Mode::kCyclicSyncPosition && !has(dc, DriveQuirk::kNoInterpolationPeriod)) {
     // 0x60C2 interpolation time period = value * 10^index s, equal to the SYNC period.
     const double ms = to_ms(config_.sync_period);
     std::int8_t exponent = -3;
@@ -503,16 +505,19 @@ Status Master::set_mode(NodeId id, Mode mode) {
   const Timestamp start = hooks_.now();
   const auto timeout = n->config.drive.mode_switch_timeout;
   std::int8_t shown = 0;
+  // Quirk no_mode_display: the drive's 0x6061 does not follow, 0x6060 read back stands for it.
+  const bool display = !has(dc, DriveQuirk::kNoModeDisplay);
   for (;;) {
-    auto r = sdo.read<std::int8_t>(cia402::obj::kModesDisplay, pump_);
+    auto r = sdo.read<std::int8_t>(
+        display ? cia402::obj::kModesDisplay : cia402::obj::kModesOfOperation, pump_);
     if (!r.ok()) return r.status();
     shown = *r;
     if (shown == static_cast<std::int8_t>(mode)) break;
     if (hooks_.now() - start >= timeout) {
       return Status::error(ErrorCode::kTimeout,
-                           "node %u: 0x6061 shows mode %d %.0f ms after writing 0x6060 = %d (%s)",
-                           unsigned{id}, int{shown}, to_ms(timeout), static_cast<int>(mode),
-                           to_string(mode).data());
+                           "node %u: 0x%04X shows mode %d %.0f ms after writing 0x6060 = %d (%s)",
+                           unsigned{id}, display ? 0x6061u : 0x6060u, int{shown}, to_ms(timeout),
+                           static_cast<int>(mode), to_string(mode).data());
     }
     const Timestamp until = hooks_.now() + std::chrono::milliseconds(10);
     (void)wait_for([&] { return hooks_.now() >= until; }, std::chrono::seconds(1), "mode poll");
@@ -536,6 +541,13 @@ Status Master::set_actual_position(NodeId id, double position, std::chrono::nano
     return Status::error(ErrorCode::kFailedPrecondition,
                          "node %u: set actual position needs OPERATION_ENABLED (drive in %s)",
                          unsigned{id}, cia402::to_string(drive.state()).data());
+  }
+  if (const auto& e = n->config.eds_data; e && (e->find(cia402::obj::kHomingMethod) == nullptr ||
+                                                e->find(cia402::obj::kHomeOffset) == nullptr)) {
+    return Status::error(ErrorCode::kFailedPrecondition,
+                         "node %u: set actual position needs the drive's homing, but %s has no "
+                         "0x6098 (homing method) or 0x607C (home offset)",
+                         unsigned{id}, e->source().c_str());
   }
   const Mode previous = drive.mode();
   const std::int32_t counts = drive.to_counts(position);
@@ -605,42 +617,6 @@ Status Master::enable_all(std::chrono::nanoseconds timeout) {
     }
   }
   return s;
-}
-
-Status Master::shutdown(std::chrono::nanoseconds timeout) {
-  Status first;
-  if (running_) {
-    quick_stop_all();
-    Status s = wait_for(
-        [&] {
-          for (const Drive& d : drives_) {
-            if (d.received() && !d.supervisor().reached() && !d.supervisor().in_fault()) {
-              return false;
-            }
-          }
-          return true;
-        },
-        timeout, "quick stop of the drives");
-    if (!s.ok()) first = s;
-    for (Drive& d : drives_) d.disable();
-    s = wait_for(
-        [&] {
-          for (const Drive& d : drives_) {
-            if (d.received() && !d.supervisor().reached() && !d.supervisor().in_fault()) {
-              return false;
-            }
-          }
-          return true;
-        },
-        timeout, "disable voltage of the drives");
-    if (!s.ok() && first.ok()) first = s;
-  }
-  running_ = false;
-  sync_.stop();
-  own_state_ = NmtState::kPreOperational;
-  Status s = nmt(NmtCommand::kEnterPreOperational, 0);
-  if (!s.ok() && first.ok()) first = s;
-  return first;
 }
 
 BusLoad Master::bus_load() const {

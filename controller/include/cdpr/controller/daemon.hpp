@@ -38,6 +38,7 @@
 #include "cdpr/controller/canopen_robot_io.hpp"
 #include "cdpr/controller/control_protocol.hpp"
 #include "cdpr/controller/daemon_config.hpp"
+#include "cdpr/controller/log_coalescer.hpp"
 #include "cdpr/controller/rt_controller.hpp"
 #include "cdpr/controller/state_store.hpp"
 #include "cdpr/controller/supervisor.hpp"
@@ -232,6 +233,7 @@ class Daemon {
   std::unique_ptr<CanopenRobotIO> robot_io_;
   std::unique_ptr<RtController> rt_;
   can::Timestamp running_since_{0};  // end of start-up: boot-ups after it are reboots
+  LogCoalescer bus_log_;  // the RT loop's CANopen events for the log: service()'s thread only
 
   // Under mu_: what status shows and the supervisor, requests and worker decide on.
   mutable std::mutex mu_;

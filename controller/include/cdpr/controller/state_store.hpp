@@ -15,6 +15,7 @@
 //                                model_after.yaml, calibration.json
 #pragma once
 
+#include <cstddef>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
@@ -25,6 +26,9 @@
 
 namespace cdpr::controller {
 
+// A file of the state directory (geometry, reports served to clients, recordings): a regular
+// file of at most kMaxStateFileBytes (io::read_regular_file), else an error naming it.
+inline constexpr std::size_t kMaxStateFileBytes = 256u << 20;
 Result<std::string> read_text_file(const std::string& path);
 
 class StateStore {

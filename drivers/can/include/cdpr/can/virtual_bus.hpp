@@ -88,6 +88,9 @@ class VirtualCanEndpoint final : public CanBus {
   Status receive(Frame& frame, std::chrono::nanoseconds timeout) override;
   const std::string& name() const override { return name_; }
   BusStats stats() const override;
+  // While set, send() fails (kUnavailable) and nothing goes on the bus: a controller that lost
+  // the bus, for tests of what the sender does then. Thread-safe.
+  void set_transmit_failing(bool on) { tx_failing_.store(on, std::memory_order_relaxed); }
 
   struct Queue;
 
@@ -99,6 +102,7 @@ class VirtualCanEndpoint final : public CanBus {
   std::shared_ptr<VirtualCanBus::State> state_;
   std::string name_;
   std::unique_ptr<Queue> queue_;
+  std::atomic<bool> tx_failing_{false};
 };
 
 }  // namespace cdpr::can

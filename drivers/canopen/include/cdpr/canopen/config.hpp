@@ -47,7 +47,26 @@ struct DriveConfig {
       0;  // 0x6081 in counts/s for profile position moves (0: not written)
   std::uint32_t profile_acceleration = 0;  // 0x6083/0x6084 in counts/s^2 (0: not written)
   std::int8_t homing_method = 37;  // 0x6098: 37 (35 in old drives) = current position is home
+  // The drive's own homing is configured (`mode: homing` or `homing_method` in the YAML): its
+  // EDS must then have 0x6098 and 0x607C. A CSP-only drive needs neither.
+  bool homing = false;
+  std::uint32_t quirks = 0;  // DriveQuirk bits (`quirks:` in the YAML)
 };
+
+// What some drives need beside CiA 402 (`quirks: [name, ...]` on a cia402 node). One table entry
+// each (config.cc, kQuirks): its name, its bit, what it changes.
+enum class DriveQuirk : std::uint32_t {
+  // 0x6061 does not follow 0x6060 (or the drive has no 0x6061): after writing 0x6060 the master
+  // reads 0x6060 back instead of waiting for 0x6061.
+  kNoModeDisplay = 1u << 0,
+  // No 0x60C2 (the drive takes the interpolation period from the SYNC it sees): not written.
+  kNoInterpolationPeriod = 1u << 1,
+};
+constexpr bool has(const DriveConfig& d, DriveQuirk q) {
+  return (d.quirks & static_cast<std::uint32_t>(q)) != 0;
+}
+// The names of the quirks, for documentation and errors ("no_mode_display, ...").
+std::string quirk_names();
 
 struct ForceConfig {
   // Channel k is the k-th value the node's TPDOs map, in order. raw = gain * tension + offset.
@@ -59,6 +78,7 @@ struct SdoWrite {
   ObjectAddress object;
   DataType type = DataType::kU8;
   std::int64_t value = 0;
+  std::string where;  // "net.yaml:31: profiles.winch.sdo[0]" (file:line: field) for errors
 };
 
 struct NodeConfig {

@@ -135,6 +135,9 @@ class Eds {
 
   // Adds or replaces an object (to build descriptions in code, e.g. a DCF of a node without EDS).
   void put(Object o);
+  // To build descriptions in code: the [DeviceInfo] values and the name used in messages.
+  void set_device_info(Section s) { device_info_ = std::move(s); }
+  void set_source(std::string s) { source_ = std::move(s); }
 
  private:
   std::string source_;

@@ -4,6 +4,7 @@
 // master assumes. Errors name the node, the object and the EDS file and line.
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include "cdpr/canopen/config.hpp"
@@ -18,11 +19,13 @@ struct PlannedAccess {
   Kind kind = Kind::kWrite;
   const char* what = "";  // "producer heartbeat", "TPDO1 mapping entry", ...
   int pdo = 0;            // PDO number of a mapping access or PDO parameter, else 0
+  std::string where;      // the YAML place of a configured write ("net.yaml:31: nodes[2].sdo[0]")
 };
 
 // What the master does on `node` of `config`: the boot configuration in order (without the
 // disabling of unused PDOs, which depends on what the node has), then the maintenance accesses of
-// a cia402 drive (homing for set_actual_position, mode switches).
+// a cia402 drive (mode switches; homing objects only when the drive's homing is configured,
+// DriveConfig::homing), as its quirks change them.
 std::vector<PlannedAccess> planned_accesses(const MasterConfig& config, const NodeConfig& node);
 
 // Checks one node against an EDS (the node's own eds_data when `eds` is null).

@@ -22,6 +22,7 @@
 #include "cdpr/canopen/bus_supervisor.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/canopen/devices.hpp"
+#include "cdpr/canopen/eds.hpp"
 #include "cdpr/canopen/events.hpp"
 #include "cdpr/canopen/nmt.hpp"
 #include "cdpr/canopen/pdo.hpp"
@@ -106,7 +107,9 @@ class Master {
   // Requests OPERATION_ENABLED on every drive and waits; fails with the drive supervisor's
   // message ("node 4: stuck in SWITCH_ON_DISABLED for 500 ms after shutdown").
   Status enable_all(std::chrono::nanoseconds timeout);
-  // Quick stop to every drive, wait for it, disable voltage, stop SYNC, NMT pre-operational.
+  // Quick stop to every drive, wait for it, disable voltage, 0x1016:01 = 0 on every node that
+  // consumes the master's heartbeat (so none applies 0x6007 when the master is gone), stop SYNC,
+  // NMT pre-operational. Goes through every step; returns the first error.
   Status shutdown(std::chrono::nanoseconds timeout);
 
   // Quick stop to every drive (RT-safe; taken at the next cycle).
@@ -145,8 +148,13 @@ class Master {
     std::map<std::uint32_t, std::int64_t> applied;  // confirmed downloads (for the DCF)
     std::map<std::uint32_t, std::uint8_t> applied_size;
     std::vector<std::uint16_t> disabled;  // comm indices of PDOs disabled at boot
+    // Without an EDS: 0x1000 and 0x1018:01..04 as the node answered at boot (for the DCF).
+    std::map<std::uint32_t, std::int64_t> identity;
   };
   Status disable_unused_pdos(NodeRt& n);
+  void read_identity(NodeRt& n);
+  eds::Eds describe_without_eds(const NodeRt& n) const;
+  Status stop_heartbeat_consumers();
   static void restart_link(void* self);
 
   class MasterPump final : public Pump {

@@ -43,8 +43,12 @@ struct Entry {
   bool mappable = true;        // may be mapped into a PDO (EDS PDOMapping)
   // Called before a write is accepted; returns 0 or the SDO abort code.
   std::function<std::uint32_t(std::span<const std::uint8_t>)> validate;
-  // Called after a write was stored.
+  // Called after a write was stored: every SDO write, and an RPDO write that changed the value
+  // (a PDO repeats its values cyclically; a change is the event).
   std::function<void()> on_write;
+  // false: on_write is not called for RPDO writes (the device model takes the object from every
+  // applied RPDO itself, in on_rpdo_applied: the controlword).
+  bool on_write_from_pdo = true;
 };
 
 class ObjectDictionary {
@@ -108,6 +112,10 @@ class SlaveNode {
                  std::array<std::uint8_t, 5> manufacturer = {});
   // The error is gone: 0x1001 := 0 and EMCY 0x0000 "error reset / no error" (CiA 301, 7.2.7.1).
   void clear_errors();
+  // The application acknowledges errors (a CiA 402 fault reset): a pending communication error
+  // (EMCY 0x8210 short RPDO, 0x8240 unexpected SYNC length) is cleared with clear_errors().
+  void acknowledge_communication_error();
+  bool communication_error() const { return comm_error_; }
 
   // Makes the dictionary the one an EDS describes: every EDS entry exists with the EDS's type
   // size, access, PDO mapping flag and default value ($NODEID resolved); entries the device model
@@ -120,6 +128,8 @@ class SlaveNode {
   std::uint64_t rpdos_applied() const { return rpdos_applied_; }
   std::uint64_t tpdos_sent() const { return tpdos_sent_; }
   std::uint64_t emcys_sent() const { return emcys_sent_; }
+  // RPDO values a mapped object's check refused (e.g. an unsupported 0x6060 mode): not stored.
+  std::uint64_t rpdo_values_refused() const { return rpdo_values_refused_; }
   bool master_lost() const { return master_lost_; }
 
  protected:
@@ -177,6 +187,8 @@ class SlaveNode {
   Timestamp master_last_{0};
   bool master_heard_ = false;
   bool master_lost_ = false;
+  bool comm_error_ = false;  // EMCY 0x8210/0x8240 sent and not yet cleared
+  std::uint64_t rpdo_values_refused_ = 0;
   std::array<Pdo, kPdos> rpdos_{}, tpdos_{};
   std::uint64_t syncs_ = 0, rpdos_applied_ = 0, sdo_requests_ = 0, tpdos_sent_ = 0, emcys_sent_ = 0;
   Timestamp now_{0};
