@@ -390,6 +390,124 @@ constexpr const char* kExitNote =
 
 }  // namespace
 
+namespace {
+
+// What the subcommands' options fill in; it outlives the parse (the callbacks write into it).
+struct CliValues {
+  bool dry_run = false;
+  std::int64_t show_version = 0, diff_a = 0, diff_b = 0, rollback_version = 0;
+  std::int64_t report_version = 0;
+  std::vector<double> move_pose;
+};
+
+CLI::App* add_simple(CLI::App& app, Invocation& inv, const char* name, const char* cmd,
+                     const char* help) {
+  auto* s = app.add_subcommand(name, help);
+  s->callback([&inv, name, cmd] {
+    inv.name = name;
+    inv.cmd = cmd;
+  });
+  return s;
+}
+
+void add_calibration_commands(CLI::App& app, Invocation& inv, CliValues& v) {
+  auto* cal = add_simple(app, inv, "calibrate", "calibrate",
+                         "start a calibration (moves the robot; privileged)");
+  auto* dry = cal->add_flag("--dry-run", v.dry_run,
+                            "plan and check the poses against the current model; nothing moves");
+  cal->add_option("--poses", inv.poses_file, "pose list CSV (read here, sent as its content)")
+      ->check(CLI::ExistingFile);
+  auto* wait = cal->add_flag("--wait", inv.wait,
+                             "follow the calibration and wait for its outcome (exit 0/5/6)");
+  dry->excludes(wait);
+  cal->callback([&inv, &v] {
+    inv.name = "calibrate";
+    inv.cmd = "calibrate";
+    if (v.dry_run) inv.args["dry_run"] = true;
+  });
+  auto* w = add_simple(app, inv, "watch", "watch", "follow the daemon's events (Ctrl-C ends)");
+  w->callback([&inv] {
+    inv.name = "watch";
+    inv.cmd = "watch";
+    inv.watch = true;
+  });
+  add_simple(app, inv, "abort", "abort", "abort the running calibration and hold (privileged)");
+  add_simple(app, inv, "accept", "accept",
+             "accept the calibration awaiting acceptance (privileged)");
+  add_simple(app, inv, "reject", "reject",
+             "reject the calibration awaiting acceptance (privileged)");
+}
+
+void add_geometry_commands(CLI::App& app, Invocation& inv, CliValues& v) {
+  auto* geo = app.add_subcommand("geometry", "the versions of the robot geometry");
+  geo->require_subcommand(1);
+  auto* show = geo->add_subcommand("show", "a geometry version (default: the active one)");
+  show->add_option("VERSION", v.show_version, "version")->check(CLI::PositiveNumber);
+  show->callback([&inv, &v] {
+    inv.name = "geometry show";
+    inv.cmd = "geometry_show";
+    if (v.show_version > 0) inv.args["version"] = v.show_version;
+  });
+  auto* diff = geo->add_subcommand("diff", "what changed between two versions");
+  diff->add_option("A", v.diff_a, "from version")->required()->check(CLI::PositiveNumber);
+  diff->add_option("B", v.diff_b, "to version")->required()->check(CLI::PositiveNumber);
+  diff->callback([&inv, &v] {
+    inv.name = "geometry diff";
+    inv.cmd = "geometry_diff";
+    inv.args = {{"from", v.diff_a}, {"to", v.diff_b}};
+  });
+  auto* history = geo->add_subcommand("history", "every version with its origin");
+  history->callback([&inv] {
+    inv.name = "geometry history";
+    inv.cmd = "geometry_history";
+  });
+  auto* rollback =
+      geo->add_subcommand("rollback", "make an earlier version active (bumpless; privileged)");
+  rollback->add_option("VERSION", v.rollback_version, "version")
+      ->required()
+      ->check(CLI::PositiveNumber);
+  rollback->callback([&inv, &v] {
+    inv.name = "geometry rollback";
+    inv.cmd = "geometry_rollback";
+    inv.args = {{"version", v.rollback_version}};
+  });
+}
+
+void add_report_and_motion_commands(CLI::App& app, Invocation& inv, CliValues& v) {
+  auto* rep = app.add_subcommand("report", "a calibration's report (default: the latest)");
+  rep->add_option("VERSION", v.report_version, "version")->check(CLI::PositiveNumber);
+  rep->add_option("--html", inv.html_file, "write the HTML page to this file (atomically)");
+  rep->callback([&inv, &v] {
+    inv.name = "report";
+    inv.cmd = "report";
+    if (v.report_version > 0) inv.args["version"] = v.report_version;
+    inv.args["html"] = !inv.html_file.empty();
+  });
+  auto* mv = app.add_subcommand(
+      "move", "move the platform to a pose: X Y Z [ROLL PITCH YAW] (m, rad; privileged)");
+  mv->add_option("POSE", v.move_pose, "x y z in m, then optionally roll pitch yaw in rad")
+      ->required()
+      ->expected(3, 6);
+  mv->callback([&inv, &v] {
+    // Exactly a position (orientation 0) or a full pose: 4 or 5 numbers are a typo, not a pose.
+    if (v.move_pose.size() != 3 && v.move_pose.size() != 6) {
+      throw CLI::ValidationError(
+          "POSE", "takes exactly 3 (x y z) or 6 (x y z roll pitch yaw) numbers, got " +
+                      std::to_string(v.move_pose.size()));
+    }
+    inv.name = "move";
+    inv.cmd = "move";
+    std::vector<double> p = v.move_pose;
+    p.resize(6, 0.0);
+    inv.args = {{"pose", p}};
+  });
+  add_simple(app, inv, "stop", "stop", "quick stop (privileged)");
+  add_simple(app, inv, "fault-reset", "fault_reset",
+             "clear a fault after its cause is gone (privileged)");
+}
+
+}  // namespace
+
 int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err,
         const Environment& env) {
   CLI::App app{"cdprctl: the maintenance command of the cable robot daemon cdprd"};
@@ -406,108 +524,12 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err,
                  "seconds to wait for the answer (default 10; calibrate --wait and watch: no "
                  "limit, watch ends after S seconds with status 0)")
       ->check(CLI::NonNegativeNumber);
-
-  auto simple = [&](const char* name, const char* cmd, const char* help) {
-    auto* s = app.add_subcommand(name, help);
-    s->callback([&inv, name, cmd] {
-      inv.name = name;
-      inv.cmd = cmd;
-    });
-    return s;
-  };
-  simple("status", "status",
-         "state, fault, geometry version, calibration progress, RT loop figures");
-
-  bool dry_run = false;
-  auto* cal = simple("calibrate", "calibrate", "start a calibration (moves the robot; privileged)");
-  auto* dry = cal->add_flag("--dry-run", dry_run,
-                            "plan and check the poses against the current model; nothing moves");
-  cal->add_option("--poses", inv.poses_file, "pose list CSV (read here, sent as its content)")
-      ->check(CLI::ExistingFile);
-  auto* wait = cal->add_flag("--wait", inv.wait,
-                             "follow the calibration and wait for its outcome (exit 0/5/6)");
-  dry->excludes(wait);
-  cal->callback([&] {
-    inv.name = "calibrate";
-    inv.cmd = "calibrate";
-    if (dry_run) inv.args["dry_run"] = true;
-  });
-
-  auto* w = simple("watch", "watch", "follow the daemon's events (Ctrl-C ends)");
-  w->callback([&] {
-    inv.name = "watch";
-    inv.cmd = "watch";
-    inv.watch = true;
-  });
-  simple("abort", "abort", "abort the running calibration and hold (privileged)");
-  simple("accept", "accept", "accept the calibration awaiting acceptance (privileged)");
-  simple("reject", "reject", "reject the calibration awaiting acceptance (privileged)");
-
-  auto* geo = app.add_subcommand("geometry", "the versions of the robot geometry");
-  geo->require_subcommand(1);
-  std::int64_t show_version = 0, diff_a = 0, diff_b = 0, rollback_version = 0;
-  auto* show = geo->add_subcommand("show", "a geometry version (default: the active one)");
-  show->add_option("VERSION", show_version, "version")->check(CLI::PositiveNumber);
-  show->callback([&] {
-    inv.name = "geometry show";
-    inv.cmd = "geometry_show";
-    if (show_version > 0) inv.args["version"] = show_version;
-  });
-  auto* diff = geo->add_subcommand("diff", "what changed between two versions");
-  diff->add_option("A", diff_a, "from version")->required()->check(CLI::PositiveNumber);
-  diff->add_option("B", diff_b, "to version")->required()->check(CLI::PositiveNumber);
-  diff->callback([&] {
-    inv.name = "geometry diff";
-    inv.cmd = "geometry_diff";
-    inv.args = {{"from", diff_a}, {"to", diff_b}};
-  });
-  auto* history = geo->add_subcommand("history", "every version with its origin");
-  history->callback([&] {
-    inv.name = "geometry history";
-    inv.cmd = "geometry_history";
-  });
-  auto* rollback =
-      geo->add_subcommand("rollback", "make an earlier version active (bumpless; privileged)");
-  rollback->add_option("VERSION", rollback_version, "version")
-      ->required()
-      ->check(CLI::PositiveNumber);
-  rollback->callback([&] {
-    inv.name = "geometry rollback";
-    inv.cmd = "geometry_rollback";
-    inv.args = {{"version", rollback_version}};
-  });
-
-  std::int64_t report_version = 0;
-  auto* rep = app.add_subcommand("report", "a calibration's report (default: the latest)");
-  rep->add_option("VERSION", report_version, "version")->check(CLI::PositiveNumber);
-  rep->add_option("--html", inv.html_file, "write the HTML page to this file (atomically)");
-  rep->callback([&] {
-    inv.name = "report";
-    inv.cmd = "report";
-    if (report_version > 0) inv.args["version"] = report_version;
-    inv.args["html"] = !inv.html_file.empty();
-  });
-  std::vector<double> move_pose;
-  auto* mv = app.add_subcommand(
-      "move", "move the platform to a pose: X Y Z [ROLL PITCH YAW] (m, rad; privileged)");
-  mv->add_option("POSE", move_pose, "x y z in m, then optionally roll pitch yaw in rad")
-      ->required()
-      ->expected(3, 6);
-  mv->callback([&] {
-    // Exactly a position (orientation 0) or a full pose: 4 or 5 numbers are a typo, not a pose.
-    if (move_pose.size() != 3 && move_pose.size() != 6) {
-      throw CLI::ValidationError(
-          "POSE", "takes exactly 3 (x y z) or 6 (x y z roll pitch yaw) numbers, got " +
-                      std::to_string(move_pose.size()));
-    }
-    inv.name = "move";
-    inv.cmd = "move";
-    std::vector<double> p = move_pose;
-    p.resize(6, 0.0);
-    inv.args = {{"pose", p}};
-  });
-  simple("stop", "stop", "quick stop (privileged)");
-  simple("fault-reset", "fault_reset", "clear a fault after its cause is gone (privileged)");
+  CliValues values;
+  add_simple(app, inv, "status", "status",
+             "state, fault, geometry version, calibration progress, RT loop figures");
+  add_calibration_commands(app, inv, values);
+  add_geometry_commands(app, inv, values);
+  add_report_and_motion_commands(app, inv, values);
 
   try {
     app.parse(argc, argv);

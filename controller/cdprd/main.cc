@@ -126,6 +126,45 @@ void supervise(Daemon& d, const RtLoop& loop, SystemdNotifier& notify) {
   }
 }
 
+// The RT thread's settings from the daemon's configuration.
+RtOptions rt_thread_options(const DaemonConfig& cfg, std::chrono::nanoseconds period) {
+  RtOptions ro;
+  ro.priority = cfg.realtime.priority;
+  ro.cpu = cfg.realtime.cpu;
+  ro.period = period;
+  ro.lock_memory = cfg.realtime.lock_memory;
+  return ro;
+}
+
+// The control socket, its requests handed to the daemon and the daemon's events published on it.
+Result<std::unique_ptr<control::ControlServer>> start_control(const DaemonConfig& cfg, Daemon& d) {
+  control::ControlServerOptions so;
+  so.path = cfg.control.socket;
+  so.group = cfg.control.group;
+  auto server = control::ControlServer::start(so, [&d](const control::ControlRequest& r) {
+    const PeerInfo peer{static_cast<int>(r.peer.pid), static_cast<int>(r.peer.uid),
+                        static_cast<int>(r.peer.gid)};
+    return d.handle(r.cmd, r.args, peer).to_control();
+  });
+  if (!server.ok()) return server.status();
+  control::ControlServer& srv = **server;
+  d.set_event_sink([&srv](const json& e) { srv.publish(e); });
+  spdlog::info("control socket {}", so.path);
+  return server;
+}
+
+// The orderly end: hold, quick stop and disable, then the socket, the RT loop, the bus, the laser.
+void stop_all(Daemon& d, control::ControlServer& srv, RtLoop& loop, modbus::LaserSensor* laser) {
+  spdlog::info("stopping: holding, then quick stop and disable");
+  d.shutdown();
+  srv.stop();
+  loop.stop();
+  if (Status s = d.master().shutdown(std::chrono::seconds(2)); !s.ok()) {
+    spdlog::warn("shutdown: {}", s.to_string());
+  }
+  if (laser != nullptr) laser->stop();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -188,13 +227,8 @@ int main(int argc, char** argv) {
   }
 
   // The RT loop: from here on only it talks to the master.
-  RtOptions ro;
-  ro.priority = cfg->realtime.priority;
-  ro.cpu = cfg->realtime.cpu;
-  ro.period = period;
-  ro.lock_memory = cfg->realtime.lock_memory;
   Cycle cycle(d);
-  RtLoop loop(ro, cycle);
+  RtLoop loop(rt_thread_options(*cfg, period), cycle);
   if (Status s = loop.start(); !s.ok()) {
     spdlog::error("RT loop: {}", s.to_string());
     return 1;
@@ -203,22 +237,12 @@ int main(int argc, char** argv) {
   spdlog::info("RT loop: {} every {:.1f} ms", loop.setup().describe(),
                std::chrono::duration<double, std::milli>(period).count());
 
-  control::ControlServerOptions so;
-  so.path = cfg->control.socket;
-  so.group = cfg->control.group;
-  auto server = control::ControlServer::start(so, [&d](const control::ControlRequest& r) {
-    const PeerInfo peer{static_cast<int>(r.peer.pid), static_cast<int>(r.peer.uid),
-                        static_cast<int>(r.peer.gid)};
-    return d.handle(r.cmd, r.args, peer).to_control();
-  });
+  auto server = start_control(*cfg, d);
   if (!server.ok()) {
     spdlog::error("control socket: {}", server.status().to_string());
     loop.stop();
     return 1;
   }
-  control::ControlServer& srv = **server;
-  d.set_event_sink([&srv](const json& e) { srv.publish(e); });
-  spdlog::info("control socket {}", so.path);
 
   std::signal(SIGTERM, on_signal);
   std::signal(SIGINT, on_signal);
@@ -226,15 +250,8 @@ int main(int argc, char** argv) {
                      std::to_string(d.status()["geometry_version"].get<int>()));
 
   supervise(d, loop, notify);
-  spdlog::info("stopping: holding, then quick stop and disable");
   (void)notify.stopping("stopping");
-  d.shutdown();
-  srv.stop();
-  loop.stop();
-  if (Status s = d.master().shutdown(std::chrono::seconds(2)); !s.ok()) {
-    spdlog::warn("shutdown: {}", s.to_string());
-  }
-  if (laser) laser->stop();
+  stop_all(d, **server, loop, laser.get());
   std::printf("cdprd: stopped\n");
   return 0;
 }

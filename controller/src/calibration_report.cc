@@ -40,6 +40,88 @@ double anchor_std(const IdentificationReport* fit, int cable, char axis) {
 
 }  // namespace
 
+namespace {
+
+// Fit: the chi-square test every front end uses (calibration_verdict.hpp).
+Gate fit_gate(const IdentificationReport& fit, const AcceptanceGates& gates) {
+  Gate g;
+  g.name = "fit";
+  const FitTest test = chi_square_fit_test(fit.chi2, fit.dof, gates.min_fit_p_value);
+  g.value = test.p_value;
+  g.limit = gates.min_fit_p_value;
+  g.passed = fit.converged && test.passed;
+  g.text = fmt("chi2 %.1f", fit.chi2) + " on " + std::to_string(fit.dof) +
+           " dof, p = " + fmt("%.3g", g.value) + (g.passed ? " >= " : " < ") +
+           fmt("%.3g", g.limit) + (fit.converged ? "" : " (the solver did not converge)");
+  return g;
+}
+
+// Largest frame-anchor change.
+Gate anchor_change_gate(const RobotModel& before, const RobotModel& after,
+                        const AcceptanceGates& gates) {
+  Gate g;
+  g.name = "anchor_change";
+  for (std::size_t i = 0; i < before.cables.size() && i < after.cables.size(); ++i) {
+    g.value = std::max(g.value, (after.frame_anchors.col(static_cast<Eigen::Index>(i)) -
+                                 before.frame_anchors.col(static_cast<Eigen::Index>(i)))
+                                    .norm());
+  }
+  g.limit = gates.max_anchor_change_m;
+  g.passed = g.value <= g.limit;
+  g.text = "largest frame-anchor change " + fmt("%.2f", g.value * 1e3) + " mm" +
+           (g.passed ? " <= " : " > ") + fmt("%.1f", g.limit * 1e3) + " mm";
+  return g;
+}
+
+// Predicted position accuracy over the ISO 9283 box (Cramer-Rao bound of this pose set).
+Gate predicted_accuracy_gate(const RobotModel& before, const RobotModel& after,
+                             const MeasurementSet& set, const IdentificationOptions& options,
+                             const AcceptanceGates& gates, double* predicted_rms_m) {
+  Gate g;
+  g.name = "predicted_accuracy";
+  std::vector<Pose> poses;
+  for (const PoseMeasurement& p : set.poses) poses.push_back(p.commanded);
+  PredictedAccuracyOptions pa;
+  pa.identification = options;
+  pa.box.center = after.home.position;
+  // The pose set was planned feasible for the model it was measured with; the bound hardly
+  // depends on the geometry's few millimetres of change.
+  auto acc = predict_accuracy(CalibratedModel::from_robot(before), poses, set.noise, pa);
+  if (!acc.ok()) acc = predict_accuracy(CalibratedModel::from_robot(after), poses, set.noise, pa);
+  g.limit = gates.max_predicted_position_error_m;
+  if (acc.ok()) {
+    g.value = acc->position_rms_m;
+    *predicted_rms_m = g.value;
+    g.passed = g.value <= g.limit;
+    g.text = "predicted RMS position error " + fmt("%.3f", g.value * 1e3) + " mm over " +
+             std::to_string(acc->grid_points) + " box points" + (g.passed ? " <= " : " > ") +
+             fmt("%.3f", g.limit * 1e3) + " mm";
+  } else {
+    g.value = std::numeric_limits<double>::quiet_NaN();
+    g.passed = false;
+    g.text = "predicted accuracy unavailable: " + acc.status().to_string();
+  }
+  return g;
+}
+
+// No unresolved mismatch (unless the config allows it).
+Gate mismatch_gate(const Diagnosis* diagnosis, const std::string& verdict_key,
+                   const AcceptanceGates& gates) {
+  Gate g;
+  g.name = "mismatch";
+  const bool unresolved =
+      diagnosis != nullptr && (diagnosis->verdict == Diagnosis::Verdict::kMismatchUnexplained ||
+                               diagnosis->verdict == Diagnosis::Verdict::kInconclusive);
+  g.value = unresolved ? 1.0 : 0.0;
+  g.limit = 0.0;
+  g.passed = !unresolved || gates.allow_unresolved_mismatch;
+  g.text = std::string("mismatch locator: ") + verdict_key +
+           (unresolved && gates.allow_unresolved_mismatch ? " (allowed by the config)" : "");
+  return g;
+}
+
+}  // namespace
+
 CalibrationOutcome evaluate_calibration(const RobotModel& before, const MeasurementSet& set,
                                         const IdentificationReport& standard,
                                         const Diagnosis* diagnosis, const AcceptanceGates& gates,
@@ -63,78 +145,11 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
     o.verdict = "identification only (the mismatch locator is off)";
     o.verdict_key = "not_diagnosed";
   }
-
-  // Fit: the chi-square test every front end uses (calibration_verdict.hpp).
-  {
-    Gate g;
-    g.name = "fit";
-    const FitTest test = chi_square_fit_test(o.fit->chi2, o.fit->dof, gates.min_fit_p_value);
-    g.value = test.p_value;
-    g.limit = gates.min_fit_p_value;
-    g.passed = o.fit->converged && test.passed;
-    g.text = fmt("chi2 %.1f", o.fit->chi2) + " on " + std::to_string(o.fit->dof) +
-             " dof, p = " + fmt("%.3g", g.value) + (g.passed ? " >= " : " < ") +
-             fmt("%.3g", g.limit) + (o.fit->converged ? "" : " (the solver did not converge)");
-    o.gates.push_back(g);
-  }
-  // Largest anchor change.
-  {
-    Gate g;
-    g.name = "anchor_change";
-    for (std::size_t i = 0; i < before.cables.size() && i < o.model.cables.size(); ++i) {
-      g.value = std::max(g.value, (o.model.frame_anchors.col(static_cast<Eigen::Index>(i)) -
-                                   before.frame_anchors.col(static_cast<Eigen::Index>(i)))
-                                      .norm());
-    }
-    g.limit = gates.max_anchor_change_m;
-    g.passed = g.value <= g.limit;
-    g.text = "largest frame-anchor change " + fmt("%.2f", g.value * 1e3) + " mm" +
-             (g.passed ? " <= " : " > ") + fmt("%.1f", g.limit * 1e3) + " mm";
-    o.gates.push_back(g);
-  }
-  // Predicted position accuracy over the ISO 9283 box (Cramer-Rao bound of this pose set).
-  {
-    Gate g;
-    g.name = "predicted_accuracy";
-    std::vector<Pose> poses;
-    for (const PoseMeasurement& p : set.poses) poses.push_back(p.commanded);
-    PredictedAccuracyOptions pa;
-    pa.identification = options;
-    pa.box.center = o.model.home.position;
-    // The pose set was planned feasible for the model it was measured with; the bound hardly
-    // depends on the geometry's few millimetres of change.
-    auto acc = predict_accuracy(CalibratedModel::from_robot(before), poses, set.noise, pa);
-    if (!acc.ok())
-      acc = predict_accuracy(CalibratedModel::from_robot(o.model), poses, set.noise, pa);
-    g.limit = gates.max_predicted_position_error_m;
-    if (acc.ok()) {
-      g.value = acc->position_rms_m;
-      o.predicted_position_rms_m = g.value;
-      g.passed = g.value <= g.limit;
-      g.text = "predicted RMS position error " + fmt("%.3f", g.value * 1e3) + " mm over " +
-               std::to_string(acc->grid_points) + " box points" + (g.passed ? " <= " : " > ") +
-               fmt("%.3f", g.limit * 1e3) + " mm";
-    } else {
-      g.value = std::numeric_limits<double>::quiet_NaN();
-      g.passed = false;
-      g.text = "predicted accuracy unavailable: " + acc.status().to_string();
-    }
-    o.gates.push_back(g);
-  }
-  // No unresolved mismatch.
-  {
-    Gate g;
-    g.name = "mismatch";
-    const bool unresolved =
-        diagnosis != nullptr && (diagnosis->verdict == Diagnosis::Verdict::kMismatchUnexplained ||
-                                 diagnosis->verdict == Diagnosis::Verdict::kInconclusive);
-    g.value = unresolved ? 1.0 : 0.0;
-    g.limit = 0.0;
-    g.passed = !unresolved || gates.allow_unresolved_mismatch;
-    g.text = std::string("mismatch locator: ") + o.verdict_key +
-             (unresolved && gates.allow_unresolved_mismatch ? " (allowed by the config)" : "");
-    o.gates.push_back(g);
-  }
+  o.gates.push_back(fit_gate(*o.fit, gates));
+  o.gates.push_back(anchor_change_gate(before, o.model, gates));
+  o.gates.push_back(
+      predicted_accuracy_gate(before, o.model, set, options, gates, &o.predicted_position_rms_m));
+  o.gates.push_back(mismatch_gate(diagnosis, o.verdict_key, gates));
   o.gates_passed = true;
   for (const Gate& g : o.gates) {
     if (!g.passed) {
