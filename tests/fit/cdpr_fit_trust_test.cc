@@ -93,7 +93,7 @@ TEST_F(Trust, RecordingWithoutAHomeRowIsRefusedWithWhatToDo) {
   const ProcessResult c = fit({"calibrate", "--config", kCrane, "--recording", rec});
   EXPECT_EQ(c.status, 1) << c.out;
   EXPECT_THAT(c.err, HasSubstr("row 0, which the gauge holds at the config's home pose"));
-  EXPECT_THAT(c.err, HasSubstr("No row of the recording is at the home pose"));
+  EXPECT_THAT(c.err, HasSubstr("no row is at home"));
   EXPECT_THAT(c.err, HasSubstr("--gauge start"));
   // diagnose has the same gauge and refuses the same way.
   const ProcessResult d = fit({"diagnose", "--config", kCrane, "--recording", rec});
@@ -213,17 +213,15 @@ TEST_F(Trust, CalibratedModelBeatsTheNominalOnAHeldOutCampaign) {
   EXPECT_EQ(c.status, 0) << c.out << c.err;
   EXPECT_THAT(c.out, HasSubstr("calibrated model beats the nominal one"));
   const ProcessResult v = fit({"--json", "validate", "--config", kNominal, "--recording", b,
-                               "--model", kNominal, "--model", cal, "--model", kTruth});
+                               "--model", kNominal, "--model", cal});
   ASSERT_EQ(v.status, 0) << v.err;
   const nlohmann::json j = nlohmann::json::parse(v.out);
   const auto& models = j.at("models");
-  ASSERT_EQ(models.size(), 3u);
+  ASSERT_EQ(models.size(), 2u);
   const double nominal = models[0].at("chi2").get<double>();
   const double calibrated = models[1].at("chi2").get<double>();
-  const double truth = models[2].at("chi2").get<double>();
   EXPECT_LT(calibrated, nominal);
-  EXPECT_LT(truth, nominal);
-  EXPECT_LT(truth / models[2].at("residuals").get<double>(), 1.5);
+  EXPECT_LT(calibrated / models[1].at("residuals").get<double>(), 1.5);
   // A "calibration" that changes nothing does not beat the nominal model: exit 5, said.
   const ProcessResult same = fit(
       {"calibrate", "--config", kNominal, "--recording", a, "--estimate", "none", "--validate", b});

@@ -59,19 +59,15 @@ Status check_home_row(int home_pose, const MeasurementSet& set, const RobotModel
   const double da = (row.commanded.rpy - nominal.home.rpy).norm();
   if (dp <= 1e-3 && da <= 1e-3) return Status::success();
   const std::vector<int> at_home = rows_at(set, nominal.home);
-  const std::string instead =
-      at_home.empty() ? std::string("No row of the recording is at the home pose. What to do: ")
-                      : "What to do: row " + std::to_string(at_home.front()) +
-                            " is commanded at the home pose, give --home-pose " +
-                            std::to_string(at_home.front()) + "; or ";
-  char buf[800];
+  const std::string instead = at_home.empty() ? std::string("no row is at home")
+                                              : "row " + std::to_string(at_home.front()) +
+                                                    " is at home: --home-pose " +
+                                                    std::to_string(at_home.front());
+  char buf[480];
   std::snprintf(buf, sizeof(buf),
-                "%s: row %d, which the gauge holds at the config's home pose, is commanded %.3g m "
-                "and %.3g rad away from it and has no reference reading; pinning it at the home "
-                "pose would drag every anchor and encoder offset towards that error. %s--gauge "
-                "start holds the row at its commanded pose instead (an error of that pose then "
-                "moves every anchor with it); or record the home pose (or a reference reading of "
-                "that row) and calibrate again",
+                "%s: row %d, which the gauge holds at the config's home pose, is commanded %.3g m, "
+                "%.3g rad from it without a reference reading (pinned there it drags every anchor "
+                "and offset); %s; or --gauge start (hold it at its commanded pose); or record home",
                 file.c_str(), home_pose, dp, da, instead.c_str());
   return Status(ErrorCode::kInvalidArgument, buf);
 }
