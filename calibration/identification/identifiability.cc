@@ -134,14 +134,28 @@ bool is_gauge(const GeometryInformation& gi, const Eigen::VectorXd& v, const Eig
   const Eigen::VectorXd x = G.colPivHouseholderQr().solve(d);
   if ((G * x - d).norm() > 0.1 * d.norm()) return false;
   const Eigen::Vector3d t = x.head<3>(), w = x.tail<3>();
-  char buf[200];
+  char buf[400];
   // Express the translation in metres per unit rotation scale for the words.
   const double scale = std::max(1e-12, d.norm());
-  std::snprintf(buf, sizeof(buf),
-                "gauge freedom: the whole frame moves rigidly with the poses (translation "
-                "%.2f %.2f %.2f, rotation %.2f %.2f %.2f); fix the home pose or anchor coordinates",
-                t.x() / scale, t.y() / scale, t.z() / scale, w.x() / scale, w.y() / scale,
-                w.z() / scale);
+  if (gi.home_pose_fixed) {
+    // The home pose is held already: the readings do not see this motion (a rigid motion of the
+    // frame about the held pose, e.g. a turn about the vertical that no reading depends on).
+    std::snprintf(buf, sizeof(buf),
+                  "the whole frame moves rigidly (translation %.2f %.2f %.2f, rotation %.2f %.2f "
+                  "%.2f) and the held home pose does not stop it: no reading of these poses sees "
+                  "this motion; measure poses spread in position and heading, add a channel that "
+                  "sees it (swivel encoders, an IMU heading, a laser) or estimate fewer anchor "
+                  "coordinates",
+                  t.x() / scale, t.y() / scale, t.z() / scale, w.x() / scale, w.y() / scale,
+                  w.z() / scale);
+  } else {
+    std::snprintf(buf, sizeof(buf),
+                  "gauge freedom: the whole frame moves rigidly with the poses (translation "
+                  "%.2f %.2f %.2f, rotation %.2f %.2f %.2f); fix the home pose or anchor "
+                  "coordinates",
+                  t.x() / scale, t.y() / scale, t.z() / scale, w.x() / scale, w.y() / scale,
+                  w.z() / scale);
+  }
   *what = buf;
   return true;
 }
@@ -297,6 +311,7 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
   const int P = static_cast<int>(gi->ids.size());
   auto stds = [&](const Eigen::MatrixXd& S) {
     const int n = static_cast<int>(S.rows());
+    if (n == 0) return Eigen::VectorXd();  // nothing estimated without the channel
     Eigen::VectorXd d(n);
     for (int q = 0; q < n; ++q) d(q) = S(q, q) > 0 ? std::sqrt(S(q, q)) : 1.0;
     const Eigen::MatrixXd N = d.cwiseInverse().asDiagonal() * S * d.cwiseInverse().asDiagonal();

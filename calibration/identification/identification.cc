@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <set>
 #include <span>
 #include <sstream>
@@ -466,6 +467,9 @@ struct Built {
   int num_residuals = 0;
   bool shared_stiffness = false;
   bool home_tilt_free = false;  // suspended gauge: home roll and pitch are geometry columns
+  // Suspended gauge held at a commanded pose (IdentificationOptions::home_at_commanded): the
+  // calibrated home hangs at the config's home position and heading, not at the held pose.
+  std::optional<Pose> hang_home_at;
 };
 
 // A geometry block of `size` coordinates; `half_range` bounds each free coordinate to its
@@ -714,7 +718,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     Pose p = poses[static_cast<std::size_t>(j)];
     if (fix_home && j == opt.home_pose_index) {
       const PoseMeasurement& pm = set.poses[static_cast<std::size_t>(j)];
-      p = pm.reference ? *pm.reference : robot.home;
+      p = pm.reference ? *pm.reference : opt.home_at_commanded ? pm.commanded : robot.home;
       B->pose_free[static_cast<std::size_t>(j)] = false;
     }
     const auto v = p.vector();
@@ -739,6 +743,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
                         {ParameterKind::kHomePose, -1, 5}},
                        "rad", true, {bounds.home_tilt_rad});
     B->home_tilt_free = true;
+    if (opt.home_at_commanded) B->hang_home_at = robot.home;
     B->num_geometry = static_cast<int>(B->names.size());
   }
 
@@ -1162,8 +1167,9 @@ CalibratedModel extract(const Built& B, const CalibratedModel& initial) {
       if (B.pose_free[j]) continue;
       const Pose estimated =
           Pose::from_vector(Eigen::Map<const Eigen::Matrix<double, 6, 1>>(B.poses[j].data()));
-      const Result<SuspendedState> hang = suspended_equilibrium_pose(out.robot, estimated);
-      out.robot.home = hang.ok() ? hang->pose : estimated;
+      const Pose target = B.hang_home_at ? *B.hang_home_at : estimated;
+      const Result<SuspendedState> hang = suspended_equilibrium_pose(out.robot, target);
+      out.robot.home = hang.ok() ? hang->pose : target;
     }
   }
   for (std::size_t l = 0; l < B.lasers.size(); ++l) {
@@ -1190,6 +1196,12 @@ std::vector<Pose> initial_poses(const MeasurementSet& set) {
 Eigen::MatrixXd pseudo_inverse_normalized(const Eigen::MatrixXd& S, double rel_tol, int* rank,
                                           double* condition, Eigen::MatrixXd* null_basis) {
   const int P = static_cast<int>(S.rows());
+  if (P == 0) {  // nothing estimated (a fixed model: only the poses are fitted)
+    if (rank) *rank = 0;
+    if (condition) *condition = 0.0;
+    if (null_basis) *null_basis = Eigen::MatrixXd();
+    return Eigen::MatrixXd();
+  }
   Eigen::VectorXd d(P);
   for (int q = 0; q < P; ++q) d(q) = S(q, q) > 0 ? std::sqrt(S(q, q)) : 1.0;
   const Eigen::MatrixXd N = d.cwiseInverse().asDiagonal() * S * d.cwiseInverse().asDiagonal();
@@ -1297,10 +1309,9 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   auto built = build(initial, set, initial_poses(set), options);
   if (!built) return built.status();
   Built& B = **built;
+  // P == 0 is a fixed model: only the free poses are fitted (a model checked on a recording,
+  // pose_refit.hpp).
   const int P = B.num_geometry;
-  if (P == 0) {
-    return Status(ErrorCode::kInvalidArgument, "identification: no parameter is estimated");
-  }
   // The initial values, before the solver moves them (the problem is built once).
   std::vector<double> initial_values(static_cast<std::size_t>(P));
   for (int q = 0; q < P; ++q) {
@@ -1316,8 +1327,8 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
         "(%d parameters + %d pose coordinates); measure more poses",
         set.num_poses(), B.num_residuals, num_params, P, free_pose_params);
   }
-  // Identifiability at the initial guess.
-  {
+  // Identifiability at the initial guess (nothing to check for a fixed model).
+  if (P > 0) {
     auto info0 = information(B, false);
     if (!info0) return info0.status();
     IdentifiabilityOptions io;
@@ -1345,7 +1356,7 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
   } iteration_progress;
   iteration_progress.o = &options;
   if (options.progress) so.callbacks.push_back(&iteration_progress);
-  if (free_pose_params > 0) {
+  if (free_pose_params > 0 && P > 0) {
     so.linear_solver_type = ceres::DENSE_SCHUR;
     // Poses are eliminated first (group 0). Every other block gets a group of its own, in the
     // order the problem was built: within one group Ceres orders blocks by their address, which
@@ -1591,10 +1602,17 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
                   rep.condition_number, options.condition_warning);
     rep.warnings.emplace_back(buf);
   }
+  const Eigen::Matrix3Xd& anchors = robot.frame_anchors;
+  const double frame_size =
+      anchors.cols() ? (anchors.rowwise().maxCoeff() - anchors.rowwise().minCoeff()).norm() : 0.0;
+  const double huge = std::max(options.huge_std_anchor, options.huge_std_fraction * frame_size);
   for (const ParameterEstimate& pe : rep.parameters) {
-    if (options.compute_covariance && pe.unit == "m" && pe.std_dev > options.huge_std_anchor) {
-      std::snprintf(buf, sizeof(buf), "%s has a huge standard deviation (%.3g m)", pe.name.c_str(),
-                    pe.std_dev);
+    if (options.compute_covariance && pe.unit == "m" && pe.std_dev > huge) {
+      std::snprintf(buf, sizeof(buf),
+                    "%s has a huge standard deviation (%.3g m, above %.3g m: %.3g %% of the "
+                    "%.3g m frame)",
+                    pe.name.c_str(), pe.std_dev, huge, 100.0 * options.huge_std_fraction,
+                    frame_size);
       rep.warnings.emplace_back(buf);
     }
   }

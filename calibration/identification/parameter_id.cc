@@ -111,7 +111,15 @@ Status set_estimate(const std::vector<std::string>& words, int num_cables,
   if (words.empty()) return Status::success();
   IdentificationOptions o = options;
   for (const EstimateItem& item : estimate_items()) item.set(o, false);
+  if (words.size() == 1 && words[0] == "none") {  // a fixed model: only the poses are fitted
+    options = o;
+    return Status::success();
+  }
   for (const std::string& w : words) {
+    if (w == "none") {
+      return Status(ErrorCode::kInvalidArgument,
+                    "none is a fixed model: give it alone, not with other items");
+    }
     const EstimateItem* item = find_estimate_item(w);
     if (item == nullptr) {
       std::string all;

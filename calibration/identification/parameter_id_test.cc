@@ -136,6 +136,9 @@ TEST(SetEstimate, SwitchesOnExactlyTheNamedItemsAndNamesAnUnknownWord) {
   EXPECT_FALSE(set_estimate({"paper-anchors"}, 4, o).ok());
   EXPECT_TRUE(set_estimate({"paper-anchors"}, 8, o).ok());
   EXPECT_TRUE(set_estimate({"paper-anchors"}, 0, o).ok());  // cable count not known yet
+  ASSERT_TRUE(set_estimate({"none"}, 8, o).ok());           // a fixed model
+  EXPECT_TRUE(estimate_words(o).empty());
+  EXPECT_FALSE(set_estimate({"none", "anchors"}, 8, o).ok());
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 #include "cdpr/calibration/calibration_verdict.hpp"
 
+#include <cmath>
 #include <cstdio>
 
 #include "cdpr/calibration/mismatch.hpp"
@@ -74,6 +75,19 @@ CalibrationVerdict judge_calibration(const IdentificationReport& report,
     v.kind = CalibrationVerdict::Kind::kNotTrustworthy;
   }
   return v;
+}
+
+double scale_uncertainty_for_misfit(const CalibrationVerdict& verdict,
+                                    IdentificationReport* report) {
+  if (!(verdict.p_value < verdict.alpha) || verdict.dof <= 0 || !(verdict.chi2 > verdict.dof)) {
+    return 1.0;
+  }
+  const double ratio = verdict.chi2 / verdict.dof;
+  const double factor = std::sqrt(ratio);
+  for (ParameterEstimate& p : report->parameters) p.std_dev *= factor;
+  report->covariance *= ratio;
+  for (auto& s : report->pose_std) s *= factor;
+  return factor;
 }
 
 }  // namespace cdpr

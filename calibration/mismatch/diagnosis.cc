@@ -14,8 +14,10 @@
 #include <utility>
 
 #include "cdpr/calibration/effect_library.hpp"
+#include "cdpr/calibration/model_validation.hpp"
 #include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/simulate.hpp"
+#include "cdpr/calibration/suspended_statics.hpp"
 #include "text_format.hpp"
 
 namespace cdpr {
@@ -657,30 +659,6 @@ MeasurementSet without_catenary(const State& st) {
     pm.external_wrench -= st.catenary_wrenches[j];
     if (j < st.catenary_compliance.size()) {
       pm.extra_compliance = compliance_difference(pm.extra_compliance, st.catenary_compliance[j]);
-    }
-  }
-  return out;
-}
-
-// `set`'s tension readings, made with the force sensors of `made_with`, as `read_with`'s sensors
-// read the same raw values (raw = gain F + offset). With `made_with` the nominal and `read_with` an
-// identification's estimate (gain g0 (1 + g), offset o0 + c), this is the tension the fit reads
-// (true_tension in identification.cc): the catenary depends on the true tension (the arc ~1/T^2),
-// and with 2 % gain errors the raw readings put ~4 % of the sag in the wrong place. A cable whose
-// sensors are the same keeps its readings as they are.
-MeasurementSet tensions_read_with(const MeasurementSet& set, const RobotModel& made_with,
-                                  const RobotModel& read_with) {
-  MeasurementSet out = set;
-  const auto m = made_with.force_sensors.size();
-  if (read_with.force_sensors.size() != m) return out;
-  for (PoseMeasurement& pm : out.poses) {
-    if (static_cast<std::size_t>(pm.tensions.size()) != m) continue;
-    for (std::size_t i = 0; i < m; ++i) {
-      const ForceSensorModel& a = made_with.force_sensors[i];
-      const ForceSensorModel& b = read_with.force_sensors[i];
-      if (a.gain == b.gain && a.offset == b.offset) continue;
-      const auto k = static_cast<Eigen::Index>(i);
-      pm.tensions(k) = (a.gain * pm.tensions(k) + a.offset - b.offset) / b.gain;
     }
   }
   return out;
@@ -2064,6 +2042,14 @@ Status model_the_effects(Diagnosis& d, const State& current, const CvRms& cv_bef
     d.model_after = current.report.estimate;
     for (std::size_t q = 0; q < current.gn_ids.size(); ++q) {
       write_effect(current.gn_ids[q], current.gn_theta[q], d.model_after);
+    }
+    RobotModel& after = d.model_after.robot;
+    if (after.suspended && after.num_cables() < 6 && !current.gn_ids.empty()) {
+      // The effects written may move where the platform hangs: the config's home must stay an
+      // equilibrium (the model check of the config loader), at the same position and heading.
+      if (const auto hang = suspended_equilibrium_pose(after, after.home); hang.ok()) {
+        after.home = hang->pose;
+      }
     }
     d.held_out_rms_after = current.cv.length_m;
   }

@@ -252,10 +252,13 @@ Status check_suspended_home(const RobotModel& model, const ModelCheckOptions& op
                            "to hold the platform: a suspended platform cannot hang there",
                            i, f);
     }
-    if (f < c.f_min || f > c.f_max) {
+    // Below f_min is accepted: the platform hangs there on its own (a calibrated geometry may put
+    // a cable a little below the planner's floor at home; the planner keeps f_min elsewhere). A
+    // cable that cannot hold its share is refused.
+    if (f > c.f_max) {
       return Status::error(ErrorCode::kInvalidArgument,
                            "cables[%d]: hanging at home needs %.4g N, outside [f_min, f_max] = "
-                           "[%g, %g] N",
+                           "[%g, %g] N: more than the cable may carry",
                            i, f, c.f_min, c.f_max);
     }
   }

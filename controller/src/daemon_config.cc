@@ -120,7 +120,7 @@ Status read_estimate(const YamlField& e, IdentificationOptions& o) {
   std::vector<std::string> words;
   for (std::size_t i = 0; i < e.size(); ++i) {
     CDPR_ASSIGN_OR_RETURN(std::string w, e[i].text());
-    if (find_estimate_item(w) == nullptr) {
+    if (w != "none" && find_estimate_item(w) == nullptr) {
       std::string all;
       for (const EstimateItem& k : estimate_items()) {
         all += (all.empty() ? "" : ", ") + std::string(k.word);

@@ -55,6 +55,24 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err)
 
 namespace {
 
+// The sensor sigmas of calibrate, diagnose and validate (NaN: the recording's).
+void add_noise_options(CLI::App* c, NoiseOverrides* n) {
+  const std::pair<const char*, double NoiseOverrides::*> options[] = {
+      {"--noise-length", &NoiseOverrides::length},
+      {"--noise-laser", &NoiseOverrides::laser},
+      {"--noise-force", &NoiseOverrides::force},
+      {"--noise-swivel", &NoiseOverrides::swivel},
+      {"--noise-inclination", &NoiseOverrides::inclination},
+      {"--noise-imu-yaw", &NoiseOverrides::imu_yaw},
+      {"--noise-ref-position", &NoiseOverrides::reference_position},
+      {"--noise-ref-angle", &NoiseOverrides::reference_angle}};
+  for (const auto& [name, field] : options) {
+    c->add_option(name, n->*field,
+                  "sensor sigma replacing the recording's noise_* metadata (m, N or rad)")
+        ->check(CLI::PositiveNumber);
+  }
+}
+
 int run_command(int argc, const char* const* argv, std::ostream& out, std::ostream& err) {
   CLI::App app{"cdpr-fit: offline identification of cable-driven parallel robots"};
   app.footer(kFileNote);
@@ -162,7 +180,7 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
   std::string estimate_help =
       "comma-separated parameters to estimate (default: anchors, offsets and the mounting of "
       "each channel the recording has: laser-plane, swivel-zeros, inclinometer-mounting, "
-      "imu-yaw-zero); any of:";
+      "imu-yaw-zero); none for a fixed model (only the poses are fitted); any of:";
   for (const std::string& n : estimate_names()) estimate_help += " " + n;
   auto* c = app.add_subcommand("calibrate",
                                "identify the robot from a recording (exit status: 0 passed, 3 fit "
@@ -177,7 +195,9 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
       ->capture_default_str()
       ->check(CLI::IsMember({"ours", "paper"}));
   c->add_option("--estimate", cal.estimate, estimate_help)->delimiter(',');
-  c->add_option("--gauge", cal.gauge, "what fixes the world frame: home, laser-plane, both, none")
+  c->add_option("--gauge", cal.gauge,
+                "what fixes the world frame: home, start (the --home-pose row at its commanded "
+                "pose), laser-plane, both, none")
       ->capture_default_str();
   c->add_option("--home-pose", cal.home_pose, "row (0-based) of the home pose for --gauge home")
       ->capture_default_str();
@@ -194,9 +214,17 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
   c->add_option("--truth", cal.truth,
                 "true robot (simulation studies): report the frame anchor errors before and after")
       ->check(CLI::ExistingFile);
+  c->add_option("--validate", cal.validate,
+                "held-out recording: exit 5 when the calibrated model does not predict it better "
+                "than --config")
+      ->check(CLI::ExistingFile);
+  add_noise_options(c, &cal.noise);
   c->callback([&] {
     command = "calibrate";
-    inputs = {{"--config", cal.config}, {"--recording", cal.recording}, {"--truth", cal.truth}};
+    inputs = {{"--config", cal.config},
+              {"--recording", cal.recording},
+              {"--truth", cal.truth},
+              {"--validate", cal.validate}};
     outputs = {{"--out", cal.out}, {"--report", cal.report}};
     action = [&] { return calibrate(cal); };
   });
@@ -380,15 +408,9 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
   dg->add_option("--estimate", diag.estimate,
                  "parameters of the standard identification (as calibrate --estimate)")
       ->delimiter(',');
-  dg->add_option("--noise-length", diag.noise_length,
-                 "length sigma, m (default: the recording's noise_length_m)")
-      ->check(CLI::PositiveNumber);
-  dg->add_option("--noise-laser", diag.noise_laser,
-                 "laser sigma, m (default: the recording's noise_laser_m)")
-      ->check(CLI::PositiveNumber);
-  dg->add_option("--noise-force", diag.noise_force,
-                 "tension sigma, N (default: the recording's noise_force_n)")
-      ->check(CLI::PositiveNumber);
+  add_noise_options(dg, &diag.noise);
+  dg->add_option("--gauge", diag.gauge, "as calibrate --gauge")->capture_default_str();
+  dg->add_option("--home-pose", diag.home_pose, "as calibrate --home-pose")->capture_default_str();
   dg->add_option("--seed", diag.seed, "seed of the bootstrap and the folds")->capture_default_str();
   dg->add_option("--bootstrap", diag.bootstrap, "bootstrap resamples over poses")
       ->capture_default_str()
@@ -417,6 +439,26 @@ int run_command(int argc, const char* const* argv, std::ostream& out, std::ostre
         {"--config", diag.config}, {"--recording", diag.recording}, {"--validate", diag.validate}};
     outputs = {{"--out", diag.out}, {"--json", diag.json_report}, {"--html", diag.html}};
     action = [&] { return diagnose(diag); };
+  });
+
+  // ---- validate -------------------------------------------------------------------------------
+  ValidateArgs val;
+  auto* va = app.add_subcommand(
+      "validate", "models predicting a held-out recording (poses re-fitted, each model fixed)");
+  va->add_option("--config", val.config, "the config the recording was made with (its readings)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  va->add_option("--recording", val.recording, "held-out recording CSV")
+      ->required()
+      ->check(CLI::ExistingFile);
+  va->add_option("--model", val.models, "a model to compare (repeat: nominal, calibrated, ...)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  add_noise_options(va, &val.noise);
+  va->callback([&] {
+    command = "validate";
+    inputs = {{"--config", val.config}, {"--recording", val.recording}};
+    action = [&] { return validate_models(val); };
   });
 
   try {

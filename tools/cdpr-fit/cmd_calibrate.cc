@@ -13,6 +13,7 @@
 #include "cdpr/report/report.hpp"
 #include "commands.hpp"
 #include "common.hpp"
+#include "recording_options.hpp"
 
 namespace cdpr::fit {
 
@@ -162,6 +163,25 @@ std::string next_step(const CalibrationVerdict& v, const CalibrateArgs& args) {
          diagnose_command(args);
 }
 
+// What the standard deviations of the report mean, in words ("" when the fit passed).
+std::string uncertainty_words(double scale, const CalibrationVerdict& v) {
+  if (!(scale > 1.0)) return "";
+  char buf[480];
+  std::snprintf(buf, sizeof(buf),
+                "\nuncertainty: the fit failed its chi-square test (chi2/dof %.3g), so the noise "
+                "the recording states does not explain the residuals; every standard deviation "
+                "above is scaled by sqrt(chi2/dof) = %.3g (the misfit taken as noise). The model "
+                "misses something: the estimates may be biased by more than that, and on another "
+                "campaign they may move by several of these standard deviations.\n",
+                v.dof > 0 ? v.chi2 / v.dof : 0.0, scale);
+  return buf;
+}
+
+// The verdict's word: the library's, or worse_than_nominal for the held-out gate (exit 5).
+std::string verdict_key(const CalibrationVerdict& v, int status) {
+  return status == kExitWorseThanNominal ? "worse_than_nominal" : to_string(v.kind);
+}
+
 nlohmann::json verdict_json(const CalibrationVerdict& v, const std::string& next, int status) {
   nlohmann::json j;
   j["verdict"] = to_string(v.kind);
@@ -186,12 +206,14 @@ std::string verdict_text(const CalibrationVerdict& v, const std::string& next, i
                 "(the fit is rejected below %.3g)\n",
                 v.chi2, v.dof, v.dof > 0 ? v.chi2 / v.dof : 0.0, v.p_value, v.alpha);
   h << buf;
-  if (v.passed()) {
+  if (status == 0) {
     h << "verdict: PASSED (exit status 0)\n";
     return h.str();
   }
   h << "verdict: "
-    << (v.kind == CalibrationVerdict::Kind::kFitRejected ? "FIT REJECTED" : "NOT TRUSTWORTHY")
+    << (status == kExitWorseThanNominal                    ? "WORSE THAN NOMINAL"
+        : v.kind == CalibrationVerdict::Kind::kFitRejected ? "FIT REJECTED"
+                                                           : "NOT TRUSTWORTHY")
     << " (exit status " << status << "): the calibrated model did not pass\n";
   for (const std::string& r : v.reasons) h << "  - " << r << "\n";
   h << "next step: " << next << "\n";
@@ -260,6 +282,35 @@ Result<Output> calibrate_paper(const CalibrateArgs& args, const RobotModel& nomi
   return out;
 }
 
+// The held-out gate of --validate: the calibrated model must predict the other recording better
+// than the nominal one, both with the poses re-fitted (model_validation.hpp). Without --validate:
+// passed, nothing said.
+struct HeldOutGate {
+  bool better = true;
+  std::string why, text;
+  nlohmann::json json;
+};
+
+Result<HeldOutGate> held_out_gate(const CalibrateArgs& args, const RobotModel& nominal,
+                                  const RobotModel& calibrated,
+                                  std::vector<std::string>* warnings) {
+  HeldOutGate g;
+  if (args.validate.empty()) return g;
+  auto held = load_held_out(nominal, args.config, args.validate, args.noise, warnings);
+  if (!held.ok()) return held.status();
+  auto h =
+      held_out_predictions(nominal, *held, {{args.config, nominal}, {"calibrated", calibrated}});
+  if (!h.ok()) return h.status();
+  g.better = beats(h->predictions[1], h->predictions[0], &g.why);
+  g.json = held_out_json(args.validate, *h);
+  g.json["beats_nominal"] = g.better;
+  g.json["why"] = g.why;
+  g.text = "\nheld-out prediction of " + args.validate + " (poses re-fitted):\n" +
+           held_out_table(*h) + "calibrated model " + (g.better ? "beats" : "DOES NOT BEAT") +
+           " the nominal one: " + g.why + "\n";
+  return g;
+}
+
 }  // namespace
 
 Result<Output> calibrate(const CalibrateArgs& args) {
@@ -282,43 +333,17 @@ Result<Output> calibrate(const CalibrateArgs& args) {
     warnings.push_back("the recording is of robot '" + recorded_robot + "' but " + args.config +
                        " is '" + nominal->name + "'");
   }
-  for (const char* k : {recording::key::kNoiseLength, recording::key::kNoiseLaser,
-                        recording::key::kNoiseForce, recording::key::kNoiseSwivel,
-                        recording::key::kNoiseInclination, recording::key::kNoiseImuYaw}) {
-    // Only the channels the recording has.
-    const std::string key(k);
-    if ((key == recording::key::kNoiseLaser && rec->num_lasers == 0) ||
-        (key == recording::key::kNoiseSwivel && !rec->has_swivel) ||
-        (key == recording::key::kNoiseInclination && !rec->has_inclinometer) ||
-        (key == recording::key::kNoiseImuYaw && !rec->has_imu_yaw)) {
-      continue;
-    }
-    if (!rec->metadata.has(k)) {
-      warnings.push_back(std::string("the recording states no '") + k +
-                         "'; the default sigma is used");
-    }
-  }
   auto set = recording::to_measurement_set(*rec);
   if (!set.ok()) return with_context(set.status(), args.recording);
+  apply_noise_overrides(args.noise, *rec, args.recording, &*set, &warnings);
   if (Status s = validate(*set, *nominal); !s.ok()) return with_context(s, args.recording);
   if (args.method == "paper") return calibrate_paper(args, *nominal, *rec, *set, warnings);
 
   IdentificationOptions options;
   CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, nominal->num_cables(), &options));
   adapt_to_channels(*set, args.estimate, &options);
-  if (args.gauge == "home") {
-    options.gauge = Gauge::kHomePose;
-  } else if (args.gauge == "laser-plane") {
-    options.gauge = Gauge::kLaserPlane;
-  } else if (args.gauge == "both") {
-    options.gauge = Gauge::kHomePoseAndLaserPlane;
-  } else if (args.gauge == "none") {
-    options.gauge = Gauge::kNone;
-  } else {
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "--gauge %s: expected home, laser-plane, both or none",
-                         args.gauge.c_str());
-  }
+  CDPR_RETURN_IF_ERROR(
+      apply_gauge(args.gauge, args.home_pose, *set, *nominal, args.recording, &options));
   if (args.loss == "none") {
     options.loss = RobustLoss::kNone;
   } else if (args.loss == "huber") {
@@ -329,25 +354,11 @@ Result<Output> calibrate(const CalibrateArgs& args) {
     return Status::error(ErrorCode::kInvalidArgument, "--loss %s: expected none, huber or cauchy",
                          args.loss.c_str());
   }
-  if (args.home_pose < 0 || args.home_pose >= set->num_poses()) {
-    return Status::error(ErrorCode::kInvalidArgument,
-                         "--home-pose %d: the recording has rows 0..%d", args.home_pose,
-                         set->num_poses() - 1);
-  }
-  options.home_pose_index = args.home_pose;
   options.max_iterations = args.max_iterations;
   options.progress = console().progress;
   if (set->num_poses() > kManyPoses) {
     console().warn(std::to_string(set->num_poses()) +
                    " poses: the identification and its report take minutes and gigabytes");
-  }
-  if (options.gauge == Gauge::kHomePose || options.gauge == Gauge::kHomePoseAndLaserPlane) {
-    const auto& home = set->poses[static_cast<std::size_t>(args.home_pose)];
-    if (!home.reference && (home.commanded.vector() - nominal->home.vector()).norm() > 1e-6) {
-      warnings.push_back("row " + std::to_string(args.home_pose) +
-                         " (the gauge's home pose) is not commanded at the config's home pose and "
-                         "has no reference reading; the frame is fixed at the config's home");
-    }
   }
   auto truth = load_truth(args, *nominal);
   if (!truth.ok()) return truth.status();
@@ -359,8 +370,20 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   if (!result.ok()) {
     return with_context(result.status(), "calibrating " + args.config + " from " + args.recording);
   }
-  const IdentificationReport& r = *result;
+  IdentificationReport& r = *result;
   for (const std::string& w : r.warnings) warnings.push_back(w);
+  // The verdict: fit test, convergence, physical ranges, the identification's own checks.
+  CalibrationVerdictOptions vo;
+  vo.alpha = args.fit_alpha;
+  CalibrationVerdict verdict = judge_calibration(r, vo);
+  // A calibration that did not pass: is it a wild reading (a mistyped cell, a glitch)? Then that
+  // is the reason to state first, and the next step is the reading, not a missing effect.
+  const std::vector<GrossReading> wild = verdict.passed()
+                                             ? std::vector<GrossReading>{}
+                                             : find_gross_readings(initial, *set, r, options);
+  // Honest uncertainty: a fit that failed its test has its standard deviations scaled by
+  // sqrt(chi2/dof) before anything reports them (calibration_verdict.hpp).
+  const double uncertainty_scale = scale_uncertainty_for_misfit(verdict, &r);
   // identify() and paper_method() already fold the identified reading model into the winches
   // (IdentificationReport::estimate); folding it again would double the offsets.
   const RobotModel& calibrated = r.estimate.robot;
@@ -379,43 +402,54 @@ Result<Output> calibrate(const CalibrateArgs& args) {
   in.context = context_of(args, *rec, warnings);
   in.context.estimated = estimated_items(options);
   nlohmann::json j = report::identification_json(in);
-
-  // The verdict: fit test, convergence, physical ranges, the identification's own checks.
-  CalibrationVerdictOptions vo;
-  vo.alpha = args.fit_alpha;
-  CalibrationVerdict verdict = judge_calibration(r, vo);
-  // A calibration that did not pass: is it a wild reading (a mistyped cell, a glitch)? Then that
-  // is the reason to state first, and the next step is the reading, not a missing effect.
-  const std::vector<GrossReading> wild = verdict.passed()
-                                             ? std::vector<GrossReading>{}
-                                             : find_gross_readings(initial, *set, r, options);
+  const std::string uncertainty_note = uncertainty_words(uncertainty_scale, verdict);
+  j["uncertainty"] = {{"scaled_for_misfit", uncertainty_scale > 1.0},
+                      {"scale", uncertainty_scale},
+                      {"note", uncertainty_note}};
   std::vector<std::string> gross;
   for (const GrossReading& g : wild) gross.push_back(describe(g));
   if (!wild.empty()) verdict.reasons.insert(verdict.reasons.begin(), describe(wild));
-  const int status = exit_status_of(verdict);
-  const std::string next =
-      gross.empty()
-          ? next_step(verdict, args)
-          : "check " + std::string(gross.size() == 1 ? "that reading" : "those readings") +
-                ", measure the pose again or leave it out, and calibrate again";
+  int status = exit_status_of(verdict);
+  std::string next = gross.empty()
+                         ? next_step(verdict, args)
+                         : "check " +
+                               std::string(gross.size() == 1 ? "that reading" : "those readings") +
+                               ", measure the pose again or leave it out, and calibrate again";
   j["fit_test"] = verdict_json(verdict, next, status);
   j["fit_test"]["gross_readings"] = gross;
+  auto gate = held_out_gate(args, *nominal, calibrated, &warnings);
+  if (!gate.ok()) return gate.status();
+  if (!args.validate.empty()) j["validation"] = gate->json;
+  if (!gate->better) {
+    status = kExitWorseThanNominal;
+    verdict.reasons.insert(verdict.reasons.begin(),
+                           "the calibrated model predicts the held-out recording " + args.validate +
+                               " worse than the nominal model (" + gate->why + ")");
+    next =
+        "do not use this calibration: diagnose the recording (cdpr-fit diagnose) and compare "
+        "the models with cdpr-fit validate";
+    j["fit_test"]["verdict"] = verdict_key(verdict, status);
+    j["fit_test"]["passed"] = false;
+    j["fit_test"]["exit_status"] = status;
+    j["fit_test"]["reasons"] = verdict.reasons;
+    j["fit_test"]["next_step"] = next;
+  }
   j["exit_status"] = status;
-  const std::string verdict_line = verdict.passed()
+  const std::string verdict_line = status == 0
                                        ? std::string("# Verdict: passed.\n")
-                                       : "# Verdict: " + std::string(to_string(verdict.kind)) +
+                                       : "# Verdict: " + verdict_key(verdict, status) +
                                              ": this model DID NOT PASS the calibration checks (" +
                                              verdict.reasons.front() + ").\n";
   CDPR_RETURN_IF_ERROR(write_outputs(args, calibrated, j, verdict_line));
   Output out;
   out.exit_status = status;
   out.json = std::move(j);
-  out.human =
-      report::identification_text(in) + verdict_text(verdict, next, status) + wrote_text(args);
-  if (!verdict.passed()) {
+  out.human = report::identification_text(in) + uncertainty_note + gate->text +
+              verdict_text(verdict, next, status) + wrote_text(args);
+  if (status != 0) {
     std::string n = "cdpr-fit calibrate: the calibrated model did not pass (" +
-                    std::string(to_string(verdict.kind)) + ", exit status " +
-                    std::to_string(status) + "): " + verdict.reasons.front() + "\n";
+                    verdict_key(verdict, status) + ", exit status " + std::to_string(status) +
+                    "): " + verdict.reasons.front() + "\n";
     if (!args.out.empty()) {
       n += "cdpr-fit calibrate: " + args.out +
            " was written anyway, as asked; do not use it on the robot before the cause is "

@@ -12,6 +12,7 @@
 #include "cdpr/report/report.hpp"
 #include "commands.hpp"
 #include "common.hpp"
+#include "recording_options.hpp"
 
 namespace cdpr::fit {
 
@@ -37,21 +38,9 @@ Result<Loaded> load_recording(const std::string& file, const DiagnoseArgs& args,
     warnings->push_back(file + " is a recording of robot '" + recorded_robot + "' but " +
                         args.config + " is '" + nominal.name + "'");
   }
-  const std::pair<const char*, double> overrides[] = {
-      {recording::key::kNoiseLength, args.noise_length},
-      {recording::key::kNoiseLaser, args.noise_laser},
-      {recording::key::kNoiseForce, args.noise_force}};
-  for (const auto& [k, value] : overrides) {
-    if (std::string(k) == recording::key::kNoiseLaser && rec->num_lasers == 0) continue;
-    if (!rec->metadata.has(k) && !std::isfinite(value)) {
-      warnings->push_back(file + " states no '" + k + "'; the default sigma is used");
-    }
-  }
   auto set = recording::to_measurement_set(*rec);
   if (!set.ok()) return with_context(set.status(), file);
-  if (std::isfinite(args.noise_length)) set->noise.sigma_length = args.noise_length;
-  if (std::isfinite(args.noise_laser)) set->noise.sigma_laser = args.noise_laser;
-  if (std::isfinite(args.noise_force)) set->noise.sigma_force = args.noise_force;
+  apply_noise_overrides(args.noise, *rec, file, &*set, warnings);
   if (Status s = validate(*set, nominal); !s.ok()) return with_context(s, file);
   return Loaded{std::move(*rec), std::move(*set)};
 }
@@ -95,6 +84,8 @@ Result<Output> diagnose(const DiagnoseArgs& args) {
   IdentificationOptions identification;
   CDPR_RETURN_IF_ERROR(apply_estimate(args.estimate, nominal->num_cables(), &identification));
   adapt_to_channels(primary->set, args.estimate, &identification);
+  CDPR_RETURN_IF_ERROR(apply_gauge(args.gauge, args.home_pose, primary->set, *nominal,
+                                   args.recording, &identification));
   DiagnosisOptions options;
   options.seed = args.seed;
   options.bootstrap_samples = args.bootstrap;

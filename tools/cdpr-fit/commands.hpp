@@ -10,12 +10,15 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/model_validation.hpp"
 #include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/robot_model.hpp"
 #include "cdpr/status.hpp"
+#include "recording_options.hpp"
 
 namespace cdpr::fit {
 
@@ -67,7 +70,14 @@ struct CalibrateArgs {
   std::string report;       // JSON report to write (optional)
   std::string truth;        // optional true robot (simulation studies): anchor errors in the report
   double fit_alpha = 0.01;  // significance level of the chi^2 fit test (calibration_verdict.hpp)
+  NoiseOverrides noise;     // sensor sigmas replacing the recording's
+  // A held-out recording of the same robot (made with `config`): the calibrated model must
+  // predict it better than `config` (model_validation.hpp), else exit status 5.
+  std::string validate;
 };
+// Exit status of calibrate when the calibrated model does not beat the nominal one on the
+// held-out recording of --validate.
+inline constexpr int kExitWorseThanNominal = 5;
 // Exit status: 0 the calibration passed; 3 the fit test failed (the residuals are larger than the
 // noise explains: a missing effect); 4 not trustworthy (not converged, a parameter on the bound of
 // its physical range, or an identification warning). --out and --report are written for 0, 3 and
@@ -154,14 +164,40 @@ struct DiagnoseArgs {
   std::string html;         // HTML report file to write (optional)
   std::string out;          // calibrated config YAML carrying the named effects (optional)
   std::vector<std::string> estimate;  // as calibrate --estimate; empty = defaults
-  // Sensor sigmas replacing the recording's noise_* metadata; NaN = the recording's (or default).
-  double noise_length = std::numeric_limits<double>::quiet_NaN();  // m
-  double noise_laser = std::numeric_limits<double>::quiet_NaN();   // m
-  double noise_force = std::numeric_limits<double>::quiet_NaN();   // N
+  NoiseOverrides noise;               // sensor sigmas replacing the recording's noise_* metadata
+  std::string gauge = "home";         // as calibrate --gauge
+  int home_pose = 0;
   unsigned seed = 1;
   int bootstrap = 100;
   int folds = 0;  // 0: leave one pose out
 };
+// ---------------------------------------------------------------------------------------------
+// validate (model_validation.hpp): models predicting a held-out recording
+// ---------------------------------------------------------------------------------------------
+struct ValidateArgs {
+  std::string config;               // the config the recording was made with (its readings)
+  std::string recording;            // the held-out recording
+  std::vector<std::string> models;  // configs to compare (nominal, calibrated, diagnosed)
+  NoiseOverrides noise;
+};
+Result<Output> validate_models(const ValidateArgs& args);
+
+// The held-out predictions of `models` on a recording whose readings were made with `made_with`
+// (validate and calibrate --validate).
+struct HeldOut {
+  std::vector<std::string> models;
+  std::vector<ModelPrediction> predictions;
+};
+using NamedModel = std::pair<std::string, RobotModel>;
+// Reads and checks a held-out recording as calibrate reads its recording.
+Result<MeasurementSet> load_held_out(const RobotModel& made_with, const std::string& config,
+                                     const std::string& file, const NoiseOverrides& noise,
+                                     std::vector<std::string>* warnings);
+Result<HeldOut> held_out_predictions(const RobotModel& made_with, const MeasurementSet& set,
+                                     const std::vector<NamedModel>& models);
+std::string held_out_table(const HeldOut& h);  // RMS per channel in mm, mrad, N
+nlohmann::json held_out_json(const std::string& recording_file, const HeldOut& h);  // SI
+
 // Exit statuses of diagnose (Output::exit_status).
 inline constexpr int kExitNoMismatch = 0;
 inline constexpr int kExitMismatch = 3;

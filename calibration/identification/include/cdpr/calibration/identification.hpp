@@ -147,6 +147,10 @@ struct IdentificationOptions {
   // --- Gauge and robustness ------------------------------------------------------------------
   Gauge gauge = Gauge::kHomePose;
   int home_pose_index = 0;
+  // With a home gauge, hold the row home_pose_index at its commanded pose instead of
+  // RobotModel::home (its reference reading still wins): for a recording that does not start at
+  // the home pose (`cdpr-fit --gauge start`). An error of that pose moves every anchor with it.
+  bool home_at_commanded = false;
   RobustLoss loss = RobustLoss::kNone;
   double loss_scale = 3.0;  // in units of sigma (residuals are normalised)
 
@@ -166,8 +170,12 @@ struct IdentificationOptions {
   double rank_tolerance = 1e-7;
   bool refuse_unidentifiable = true;
   bool compute_covariance = true;
-  double condition_warning = 1e4;    // warn above this condition number (column-normalised)
-  double huge_std_anchor = 0.01;     // m: warn when a length-like parameter's std exceeds it
+  double condition_warning = 1e4;  // warn above this condition number (column-normalised)
+  // Warn when a length-like parameter's std exceeds the larger of huge_std_anchor (m) and
+  // huge_std_fraction of the frame size (the diagonal of the box around the frame anchors): what
+  // is huge depends on the robot (1 cm on a 1.6 m frame, 12 cm on a 25 m one).
+  double huge_std_anchor = 0.01;
+  double huge_std_fraction = 0.005;
   double chi2_warning_sigmas = 4.0;  // warn when |chi2 - dof| > this * sqrt(2 dof)
 
   // --- Physical ranges ---------------------------------------------------------------------------
@@ -227,8 +235,9 @@ const EstimateItem* find_estimate_item(std::string_view word);  // nullptr: not 
 const EstimateItem* estimate_item_of(ParameterKind kind);
 // Switches on exactly the items `words` name and every other item off: the one vocabulary of
 // cdpr-fit's --estimate and cdprd's identification.estimate. An empty list changes nothing (the
-// caller's defaults). The error names the unknown word with the table's words, or the item a
-// robot of `num_cables` cannot use (0: not known yet, that check left to identify()).
+// caller's defaults); ["none"] alone switches every item off (a fixed model: only the poses). The
+// error names the unknown word with the table's words, or the item a robot of `num_cables` cannot
+// use (0: not known yet, that check left to identify()).
 Status set_estimate(const std::vector<std::string>& words, int num_cables,
                     IdentificationOptions& options);
 // The words of the items switched on in `options`, in the table's order.

@@ -59,4 +59,14 @@ FitTest chi_square_fit_test(double chi2, int dof, double alpha);
 CalibrationVerdict judge_calibration(const IdentificationReport& report,
                                      const CalibrationVerdictOptions& options = {});
 
+// Honest uncertainty under misfit. When the fit test failed (p below alpha, chi^2 above dof), the
+// stated noise explains only dof / chi^2 of the residuals' spread, and the standard deviations
+// that assume the model right are too small by about sqrt(chi^2 / dof). Scales the parameters'
+// and the poses' standard deviations by that factor and the covariance by its square (the Birge
+// ratio: the misfit taken as noise, spread like the stated noise). Returns the factor applied
+// (1: the fit passed, nothing changed). It does not make a wrong model right: an effect the model
+// misses biases the estimate, and the scaled figures only say how far it may be off.
+double scale_uncertainty_for_misfit(const CalibrationVerdict& verdict,
+                                    IdentificationReport* report);
+
 }  // namespace cdpr
