@@ -21,8 +21,9 @@ const char* to_string(CalibrationVerdict::Kind kind) {
 
 FitTest chi_square_fit_test(double chi2, int dof, double alpha) {
   FitTest t;
-  t.p_value = dof > 0 ? chi2_upper_tail(chi2, dof) : 0.0;
-  t.passed = t.p_value >= alpha;  // false for a NaN chi2
+  // A chi^2 that is not a number (a diverged fit) is no evidence of a fit: p = 0.
+  t.p_value = dof > 0 && std::isfinite(chi2) ? chi2_upper_tail(chi2, dof) : 0.0;
+  t.passed = t.p_value >= alpha;
   return t;
 }
 

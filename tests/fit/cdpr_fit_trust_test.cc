@@ -128,7 +128,7 @@ TEST_F(Trust, EstimateNoneChecksAFixedModel) {
   const ProcessResult mixed =
       fit({"calibrate", "--config", kCrane, "--recording", crane, "--estimate", "none,anchors"});
   EXPECT_EQ(mixed.status, 1);
-  EXPECT_THAT(mixed.err, HasSubstr("--estimate none is a fixed model"));
+  EXPECT_THAT(mixed.err, HasSubstr("--estimate: none is a fixed model"));
 }
 
 // Every channel's sigma can be given on the command line of calibrate and diagnose: ten times

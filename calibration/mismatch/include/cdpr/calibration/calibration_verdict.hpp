@@ -49,7 +49,8 @@ const char* to_string(CalibrationVerdict::Kind kind);  // "passed", "fit_rejecte
 
 // The chi-square test of a weighted least-squares fit, the one used by every front end (cdpr-fit's
 // verdict, the daemon's acceptance gate): p = P(chi^2(dof) > chi2), passed when p >= alpha. With no
-// degrees of freedom left (dof <= 0) nothing is tested: p = 0, not passed.
+// degrees of freedom left (dof <= 0), or a chi2 that is not finite, nothing is tested: p = 0, not
+// passed.
 struct FitTest {
   double p_value = 0.0;
   bool passed = false;
