@@ -126,8 +126,8 @@ Status set_estimate(const std::vector<std::string>& words, int num_cables,
       for (const EstimateItem& k : estimate_items()) {
         all += (all.empty() ? "" : ", ") + std::string(k.word);
       }
-      return Status::error(ErrorCode::kInvalidArgument, "unknown item '%s' (one of %s)", w.c_str(),
-                           all.c_str());
+      return Status::error(ErrorCode::kInvalidArgument, "unknown estimate item '%s' (one of %s)",
+                           w.c_str(), all.c_str());
     }
     if (item->required_cables > 0 && num_cables > 0 && num_cables != item->required_cables) {
       return Status::error(ErrorCode::kInvalidArgument,

@@ -120,12 +120,10 @@ Status read_estimate(const YamlField& e, IdentificationOptions& o) {
   std::vector<std::string> words;
   for (std::size_t i = 0; i < e.size(); ++i) {
     CDPR_ASSIGN_OR_RETURN(std::string w, e[i].text());
-    if (w != "none" && find_estimate_item(w) == nullptr) {
-      std::string all;
-      for (const EstimateItem& k : estimate_items()) {
-        all += (all.empty() ? "" : ", ") + std::string(k.word);
-      }
-      return e[i].error("unknown estimate item '" + w + "' (one of " + all + ")");
+    // Each word alone first, so that an unknown one is named at its own line.
+    IdentificationOptions scratch;
+    if (Status s = set_estimate({w}, 0, scratch); !s.ok()) {
+      return e[i].error(s.message());
     }
     words.push_back(std::move(w));
   }
