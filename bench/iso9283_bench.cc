@@ -25,11 +25,11 @@
 #include <vector>
 
 #include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/path.hpp"
+#include "cdpr/calibration/path_check.hpp"
 #include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/config/robot_config.hpp"
-#include "cdpr/controller/path.hpp"
-#include "cdpr/controller/path_check.hpp"
 #include "cdpr/recording/recording.hpp"
 #include "cdpr/sim/lockstep_io.hpp"
 #include "cdpr/sim/physics.hpp"

@@ -13,11 +13,11 @@
 #include "alloc_counter.hpp"
 #include "bench_util.hpp"
 #include "cdpr/calibration/ik_compensation.hpp"
+#include "cdpr/calibration/path.hpp"
+#include "cdpr/calibration/path_check.hpp"
 #include "cdpr/calibration/simulate.hpp"
-#include "cdpr/controller/path.hpp"
-#include "cdpr/controller/path_check.hpp"
-#include "cdpr/controller/slew.hpp"
-#include "cdpr/controller/trajectory.hpp"
+#include "cdpr/calibration/slew.hpp"
+#include "cdpr/calibration/trajectory.hpp"
 #include "testing/test_robots.hpp"
 
 namespace {

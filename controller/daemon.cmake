@@ -19,7 +19,7 @@ add_library(cdpr_daemon STATIC
   ${_d}/src/log_coalescer.cc)
 target_include_directories(cdpr_daemon PUBLIC ${_d}/include)
 target_link_libraries(cdpr_daemon
-  PUBLIC cdpr_io cdpr_control cdpr_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording
+  PUBLIC cdpr_io cdpr_control cdpr_calibration_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording
          cdpr_calibration nlohmann_json::nlohmann_json Threads::Threads cdpr_version
   PRIVATE spdlog::spdlog cdpr_yaml cdpr_report cdpr_options)
 

@@ -5,7 +5,7 @@
 #include <cstdint>
 #include <string_view>
 
-#include "cdpr/controller/path_file.hpp"
+#include "cdpr/calibration/path_program.hpp"
 #include "fuzz_util.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {

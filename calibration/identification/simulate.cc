@@ -29,15 +29,6 @@ Eigen::Matrix<double, 6, 1> platform_weight_wrench(const RobotModel& model, cons
   return w;
 }
 
-double default_reference_tension(const RobotModel& model) {
-  double lo = 0.0, hi = std::numeric_limits<double>::infinity();
-  for (const CableModel& c : model.cables) {
-    lo = std::max(lo, c.f_min);
-    hi = std::min(hi, c.f_max);
-  }
-  return std::min(0.5 * (lo + hi), 4.0 * std::max(lo, 1.0));
-}
-
 Result<Eigen::VectorXd> simple_tension_distribution(const RobotModel& model, const Pose& pose,
                                                     double reference_tension) {
   if (model.suspended && model.num_cables() < 6) {

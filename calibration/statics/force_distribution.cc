@@ -357,4 +357,13 @@ ForceDistributionResult distribute_forces(const RobotModel& model, const Pose& p
                            gravity_wrench(model, data.kinematics.rotation), f_min, f_max, options);
 }
 
+double default_reference_tension(const RobotModel& model) {
+  double lo = 0.0, hi = std::numeric_limits<double>::infinity();
+  for (const CableModel& c : model.cables) {
+    lo = std::max(lo, c.f_min);
+    hi = std::min(hi, c.f_max);
+  }
+  return std::min(0.5 * (lo + hi), 4.0 * std::max(lo, 1.0));
+}
+
 }  // namespace cdpr

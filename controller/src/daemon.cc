@@ -9,9 +9,9 @@
 #include <thread>
 
 #include "cdpr/calibration/forward_kinematics.hpp"
+#include "cdpr/calibration/path_check.hpp"
 #include "cdpr/calibration/winch.hpp"
 #include "cdpr/config/robot_config.hpp"
-#include "cdpr/controller/path_check.hpp"
 #include "daemon_text.hpp"
 
 namespace cdpr::controller {

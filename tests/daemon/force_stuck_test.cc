@@ -14,9 +14,9 @@
 #include <tuple>
 
 #include "alloc_counter.hpp"
+#include "cdpr/calibration/path_check.hpp"
 #include "cdpr/calibration/winch.hpp"
 #include "cdpr/controller/daemon.hpp"
-#include "cdpr/controller/path_check.hpp"
 #include "cell_fixture.hpp"
 #include "virtual_cell.hpp"
 

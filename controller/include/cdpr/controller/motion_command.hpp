@@ -8,7 +8,7 @@
 #include <optional>
 
 #include "cdpr/calibration/robot_model.hpp"
-#include "cdpr/controller/trajectory.hpp"
+#include "cdpr/calibration/trajectory.hpp"
 
 namespace cdpr::controller {
 

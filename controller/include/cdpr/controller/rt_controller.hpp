@@ -36,14 +36,14 @@
 #include <memory>
 #include <optional>
 
+#include "cdpr/calibration/path_check.hpp"
 #include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/calibration/slew.hpp"
+#include "cdpr/calibration/trajectory.hpp"
 #include "cdpr/canopen/events.hpp"
 #include "cdpr/controller/motion_command.hpp"
-#include "cdpr/controller/path_check.hpp"
 #include "cdpr/controller/robot_io.hpp"
-#include "cdpr/controller/slew.hpp"
 #include "cdpr/controller/spsc_ring.hpp"
-#include "cdpr/controller/trajectory.hpp"
 #include "cdpr/core/seqlock.hpp"
 
 namespace cdpr::controller {

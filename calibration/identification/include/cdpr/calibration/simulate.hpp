@@ -20,6 +20,7 @@
 #include <limits>
 #include <vector>
 
+#include "cdpr/calibration/force_distribution.hpp"
 #include "cdpr/calibration/measurement.hpp"
 #include "cdpr/calibration/robot_model.hpp"
 #include "cdpr/status.hpp"
@@ -43,10 +44,6 @@ Eigen::Matrix<double, 6, 1> platform_weight_wrench(const RobotModel& model, cons
 // tension is not used).
 Result<Eigen::VectorXd> simple_tension_distribution(const RobotModel& model, const Pose& pose,
                                                     double reference_tension);
-
-// The reference tension used when none is given: the midpoint of the largest f_min and the
-// smallest f_max over the cables, capped at 4 f_min_max (a moderate pretension).
-double default_reference_tension(const RobotModel& model);
 
 // Unstretched length of every cable at `pose` under `tensions` (kinematic length minus the
 // elongation of elongation.hpp's model).

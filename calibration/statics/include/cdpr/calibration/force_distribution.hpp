@@ -92,4 +92,8 @@ ForceDistributionResult distribute_forces(
     const Wrench6& wrench, const Eigen::Ref<const Eigen::VectorXd>& f_min,
     const Eigen::Ref<const Eigen::VectorXd>& f_max, const ForceDistributionOptions& options);
 
+// The reference tension used when none is given: the midpoint of the largest f_min and the
+// smallest f_max over the cables, capped at 4 f_min_max (a moderate pretension).
+double default_reference_tension(const RobotModel& model);
+
 }  // namespace cdpr

@@ -1,4 +1,4 @@
-#include "cdpr/controller/slew.hpp"
+#include "cdpr/calibration/slew.hpp"
 
 #include <gtest/gtest.h>
 

@@ -1,4 +1,4 @@
-#include "cdpr/controller/trajectory.hpp"
+#include "cdpr/calibration/trajectory.hpp"
 
 #include <Eigen/Geometry>
 #include <algorithm>

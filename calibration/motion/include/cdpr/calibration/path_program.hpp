@@ -1,5 +1,6 @@
-// Path files (docs/motion.md "Path files"): a small G-code-like subset in SI units, one
-// instruction per line, read into the segments of a Path (path.hpp).
+// Path programs (docs/motion.md "Path files"): a small G-code-like subset in SI units, one
+// instruction per line, parsed into the segments of a Path (path.hpp). Reading a file is
+// cdpr/config/path_file.hpp's (drivers/).
 //
 //   ; a square with a rounded corner and a pause (metres, radians, m/s, s)
 //   G1 X0.10 Y0.00 Z0.05 F0.05     ; straight line to the pose; omitted axes keep their value
@@ -26,8 +27,8 @@
 #include <string_view>
 #include <vector>
 
+#include "cdpr/calibration/path.hpp"
 #include "cdpr/calibration/robot_model.hpp"
-#include "cdpr/controller/path.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr {
@@ -40,9 +41,5 @@ inline constexpr std::size_t kMaxPathSegments = 100000;
 // kParseError "<name>:<line>: <word>: <reason>" on the first bad line (never throws).
 Result<std::vector<PathSegment>> parse_path_program(std::string_view text, std::string_view name,
                                                     const Pose& start);
-
-// Reads and parses a path file: kNotFound / kIoError naming the file, kParseError when it is
-// larger than kMaxPathFileBytes or a line is bad.
-Result<std::vector<PathSegment>> load_path_file(const std::string& path, const Pose& start);
 
 }  // namespace cdpr

@@ -22,7 +22,7 @@
 #include <span>
 
 #include "cdpr/calibration/robot_model.hpp"
-#include "cdpr/controller/trajectory.hpp"
+#include "cdpr/calibration/trajectory.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr {

@@ -1,15 +1,8 @@
-#include "cdpr/controller/path_file.hpp"
+#include "cdpr/calibration/path_program.hpp"
 
 #include <gtest/gtest.h>
-#include <unistd.h>
 
-#include <cstdio>
-#include <filesystem>
-#include <fstream>
 #include <string>
-
-#include "cdpr/controller/path_check.hpp"
-#include "testing/test_robots.hpp"
 
 namespace cdpr {
 namespace {
@@ -22,7 +15,7 @@ Pose origin() {
   return Pose{};
 }
 
-TEST(PathFile, ReadsLinesArcsSplinesAndDwellsWithModalWords) {
+TEST(PathProgram, ReadsLinesArcsSplinesAndDwellsWithModalWords) {
   const std::string text =
       "; a demo (SI units)\n"
       "G1 X0.10 Y0.00 Z0.05 F0.05   ; a line\n"
@@ -62,7 +55,7 @@ TEST(PathFile, ReadsLinesArcsSplinesAndDwellsWithModalWords) {
   EXPECT_TRUE(Path::plan(origin(), *segs, PathLimits{}, nullptr, "demo.path").ok());
 }
 
-TEST(PathFile, RefusesBadLinesNamingFileLineAndWord) {
+TEST(PathProgram, RefusesBadLinesNamingFileLineAndWord) {
   const struct {
     const char* text;
     const char* message;
@@ -96,7 +89,7 @@ TEST(PathFile, RefusesBadLinesNamingFileLineAndWord) {
   }
 }
 
-TEST(PathFile, BoundsTheInputSize) {
+TEST(PathProgram, BoundsTheInputSize) {
   const std::string long_line = "G1 X0 ; " + std::string(kMaxPathLineBytes, 'x') + "\n";
   auto r = parse_path_program("G1 X0\n" + long_line, "p.path", origin());
   ASSERT_FALSE(r.ok());
@@ -112,46 +105,6 @@ TEST(PathFile, BoundsTheInputSize) {
     ASSERT_FALSE(m.ok());
     EXPECT_TRUE(contains(m.status(), "more than 100000 instructions")) << m.status().to_string();
   }
-}
-
-TEST(PathFile, LoadsAFileAndNamesAMissingOne) {
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / ("cdpr_path_file_" + std::to_string(::getpid()));
-  std::filesystem::create_directories(dir);
-  const std::string file = (dir / "square.path").string();
-  std::ofstream(file) << "G1 X0.1 F0.05\nG1 Y0.1\nG1 X0\nG1 Y0\n";
-  auto segs = load_path_file(file, origin());
-  ASSERT_TRUE(segs.ok()) << segs.status().to_string();
-  EXPECT_EQ(segs->size(), 4u);
-  std::ofstream(file) << "G1 X0.1\nG1 Q1\n";
-  auto bad = load_path_file(file, origin());
-  ASSERT_FALSE(bad.ok());
-  EXPECT_TRUE(contains(bad.status(), file + ":2: Q1: unknown word")) << bad.status().to_string();
-  auto missing = load_path_file((dir / "none.path").string(), origin());
-  EXPECT_EQ(missing.status().code(), ErrorCode::kNotFound);
-  std::filesystem::remove_all(dir);
-}
-
-TEST(PathFile, TheShippedDemoPlansAndPassesTheMiniCheck) {
-  const std::string file = std::string(CDPR_SOURCE_DIR) + "/config/examples/mini-demo.path";
-  const RobotModel mini = testing::mini_robot();
-  auto segs = load_path_file(file, mini.home);
-  ASSERT_TRUE(segs.ok()) << segs.status().to_string();
-  auto path = Path::plan(mini.home, *segs, PathLimits{}, nullptr, file);
-  ASSERT_TRUE(path.ok()) << path.status().to_string();
-  // Stops: line, circle (after it the dwell), spline, helix, line home.
-  EXPECT_EQ(path->motions().size(), 5u);
-  PathCheckOptions options;
-  options.tension_margin = 5.0;
-  options.workspace_box =
-      Eigen::AlignedBox3d(Eigen::Vector3d::Constant(-0.156), Eigen::Vector3d::Constant(0.156));
-  PathCheckSummary summary;
-  const Status s = check_path(mini, *path, options, &summary);
-  EXPECT_TRUE(s.ok()) << s.to_string();
-  EXPECT_GT(summary.points, 200);
-  Pose end;
-  path->sample(path->duration(), end);
-  EXPECT_LT(end.position.norm(), 1e-12);
 }
 
 }  // namespace

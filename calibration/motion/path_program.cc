@@ -1,12 +1,10 @@
-#include "cdpr/controller/path_file.hpp"
+#include "cdpr/calibration/path_program.hpp"
 
 #include <array>
 #include <cctype>
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstring>
-#include <fstream>
 #include <optional>
 
 namespace cdpr {
@@ -254,22 +252,6 @@ Result<std::vector<PathSegment>> parse_path_program(std::string_view text, std::
     if (Status s = parser.parse_line(l, line, out); !s.ok()) return s;
   }
   return out;
-}
-
-Result<std::vector<PathSegment>> load_path_file(const std::string& path, const Pose& start) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) {
-    const int e = errno;
-    return Status::error(e == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIoError,
-                         "%s: cannot open: %s", path.c_str(), std::strerror(e));
-  }
-  std::string text(kMaxPathFileBytes + 1, '\0');
-  in.read(text.data(), static_cast<std::streamsize>(text.size()));
-  if (in.bad()) {
-    return Status::error(ErrorCode::kIoError, "%s: read error", path.c_str());
-  }
-  text.resize(static_cast<std::size_t>(in.gcount()));
-  return parse_path_program(text, path, start);
 }
 
 }  // namespace cdpr

@@ -1,4 +1,4 @@
-#include "cdpr/controller/path_check.hpp"
+#include "cdpr/calibration/path_check.hpp"
 
 #include <gtest/gtest.h>
 

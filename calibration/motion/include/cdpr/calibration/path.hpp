@@ -46,7 +46,7 @@
 #include <vector>
 
 #include "cdpr/calibration/robot_model.hpp"
-#include "cdpr/controller/trajectory.hpp"
+#include "cdpr/calibration/trajectory.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr {

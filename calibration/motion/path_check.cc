@@ -1,9 +1,9 @@
-#include "cdpr/controller/path_check.hpp"
+#include "cdpr/calibration/path_check.hpp"
 
 #include <algorithm>
 #include <cmath>
 
-#include "cdpr/calibration/simulate.hpp"
+#include "cdpr/calibration/force_distribution.hpp"
 
 namespace cdpr {
 namespace {

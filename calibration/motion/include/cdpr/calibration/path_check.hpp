@@ -24,9 +24,9 @@
 #include "cdpr/calibration/force_distribution.hpp"
 #include "cdpr/calibration/ik_compensation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/path.hpp"
 #include "cdpr/calibration/robot_model.hpp"
-#include "cdpr/controller/path.hpp"
-#include "cdpr/controller/trajectory.hpp"
+#include "cdpr/calibration/trajectory.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr {

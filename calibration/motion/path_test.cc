@@ -1,4 +1,4 @@
-#include "cdpr/controller/path.hpp"
+#include "cdpr/calibration/path.hpp"
 
 #include <gtest/gtest.h>
 
