@@ -3,6 +3,7 @@
 set(_d ${CDPR_CONTROLLER_DIR})
 add_library(cdpr_daemon STATIC
   ${_d}/src/daemon_config.cc
+  ${_d}/src/config_check.cc
   ${_d}/src/canopen_robot_io.cc
   ${_d}/src/rt_controller.cc
   ${_d}/src/rt_controller_watch.cc
@@ -50,3 +51,12 @@ endforeach()
 add_executable(cdprd ${_d}/cdprd/main.cc)
 target_link_libraries(cdprd PRIVATE cdpr_daemon cdpr_rt cdpr_control CLI11::CLI11 spdlog::spdlog
                                     cdpr_options)
+
+# cdprd --check-config: the checks in-process and through the cdprd binary (no bus is touched).
+cdpr_add_gtest(NAME daemon_config_check_test SOURCES ${_d}/src/config_check_test.cc
+               LIBS cdpr_daemon cdpr_test_support)
+if(TARGET daemon_config_check_test)
+  target_compile_definitions(daemon_config_check_test PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}"
+                                                              CDPR_CDPRD_BIN="$<TARGET_FILE:cdprd>")
+  add_dependencies(daemon_config_check_test cdprd)
+endif()

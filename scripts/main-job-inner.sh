@@ -18,7 +18,7 @@ priority=80
 # force sensor watch confirms over 2 s instead of 0.2 s (docs/daemon.md, tension_watch).
 stuck_confirm=0.2
 case "${CDPR_VCAN_PATH:-}" in
-  user-mode-linux*) period=20; network="$src/tests/sim/sim-master-network.yaml"; priority=0
+  user-mode-linux*) period=20; network="$src/config/sim/canopen.yaml"; priority=0
                     stuck_confirm=2 ;;
 esac
 port=$((15020 + RANDOM % 1000))

@@ -1,8 +1,10 @@
 #include "cdpr/controller/daemon_config.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 
+#include "cdpr/canopen/config.hpp"
 #include "cdpr/config/yaml_reader.hpp"
 
 namespace cdpr::controller {
@@ -32,7 +34,13 @@ Status read_realtime(const YamlField& n, RealtimeSettings& rt) {
   CDPR_RETURN_IF_ERROR(n.optional("priority", rt.priority, 0, 99));
   CDPR_RETURN_IF_ERROR(n.optional("cpu", rt.cpu, -1, 1023));
   double ms = 0.0;
-  CDPR_RETURN_IF_ERROR(in_range(n, "sync_period_ms", 0.0, 1000.0, "ms", ms));
+  CDPR_RETURN_IF_ERROR(in_range(n, "sync_period_ms", 0.0, canopen::kMaxSyncPeriodMs, "ms", ms));
+  if (ms != 0.0 && ms < canopen::kMinSyncPeriodMs) {
+    char why[96];
+    std::snprintf(why, sizeof why, "must be 0 (the network's) or within [%g, %g] ms",
+                  canopen::kMinSyncPeriodMs, canopen::kMaxSyncPeriodMs);
+    return n["sync_period_ms"].error(why);
+  }
   rt.sync_period = std::chrono::nanoseconds(static_cast<std::int64_t>(std::llround(ms * 1e6)));
   return n.optional("lock_memory", rt.lock_memory);
 }

@@ -204,6 +204,45 @@ TEST(EdsCheck, RefusesAMappingOfAnObjectTheEdsSaysIsNotMappable) {
                 ": 0x607C:00 (Home offset) is not mappable (PDOMapping=0)");
 }
 
+// Issue 39: a start-up write's type is the EDS's when the YAML gives none, and a given type that is
+// not the EDS's is named at its file, line and field.
+TEST(EdsCheck, AStartUpWriteTakesItsTypeFromTheEdsOrMustMatchIt) {
+  const std::string drive = kEdsDir + "/cdpr-sim-drive.eds";
+  const std::string tpdo = "\"0x6041:00 u16\", \"0x6064:00 i32\"";
+  auto taken = parse_config(
+      network(drive, tpdo, "    sdo:\n      - {object: \"0x6083:00\", value: 100000}\n"),
+      "net.yaml");
+  ASSERT_TRUE(taken.ok()) << taken.status().to_string();
+  ASSERT_EQ(taken->nodes[0].sdo_writes.size(), 1u);
+  EXPECT_EQ(taken->nodes[0].sdo_writes[0].type, DataType::kU32);  // UNSIGNED32 in the EDS
+  EXPECT_EQ(taken->nodes[0].sdo_writes[0].value, 100000);
+  // The EDS's type bounds the value: -1 does not fit UNSIGNED32.
+  auto negative = parse_config(
+      network(drive, tpdo, "    sdo:\n      - {object: \"0x6083:00\", value: -1}\n"), "net.yaml");
+  ASSERT_FALSE(negative.ok());
+  EXPECT_NE(negative.status().message().find("net.yaml:10: profiles.winch.sdo[0].value"),
+            std::string::npos)
+      << negative.status().message();
+  // A size that is not the EDS's.
+  auto wrong = parse_config(
+      network(drive, tpdo, "    sdo:\n      - {object: \"0x6083:00\", type: u16, value: 1}\n"),
+      "net.yaml");
+  ASSERT_FALSE(wrong.ok());
+  EXPECT_EQ(wrong.status().message().rfind("net.yaml:10: profiles.winch.sdo[0]: node 3 (winch3): "
+                                           "the master writes 0x6083:00 (sdo write) as u16, but ",
+                                           0),
+            0u)
+      << wrong.status().message();
+  EXPECT_NE(wrong.status().message().find("is UNSIGNED32"), std::string::npos);
+  // Without a type, an object the EDS does not have cannot be written.
+  auto unknown = parse_config(
+      network(drive, tpdo, "    sdo:\n      - {object: \"0x2100:00\", value: 1}\n"), "net.yaml");
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.status().message().find("has no object 0x2100:00: give its type"),
+            std::string::npos)
+      << unknown.status().message();
+}
+
 TEST(EdsCheck, RefusesWrongTypesReadOnlyObjectsAndMissingObjects) {
   const std::string drive = kEdsDir + "/cdpr-sim-drive.eds";
   const std::string tpdo = "\"0x6041:00 u16\", \"0x6064:00 i32\"";

@@ -20,6 +20,8 @@ class MasterTest : public ::testing::Test {
     auto c = load_config(CDPR_SOURCE_DIR "/config/canopen-mini.yaml");
     ASSERT_TRUE(c.ok()) << c.status().to_string();
     config = *c;
+    // Round figures for the moves in SI units below (the file's are the MINI's winches').
+    for (NodeConfig& n : config.nodes) n.drive.counts_per_unit = 1e6;
     for (NodeId id = 1; id <= 8; ++id) {
       drives[id] = &net.add<slave::Drive402>(id, 1000 * id + 17);  // arbitrary start positions
     }

@@ -297,7 +297,7 @@ TEST_F(CanRobotTest, NodesComeFromTheEdsWithDefaultPdosThatTheMasterDisables) {
 TEST(CanRobotNetworks, TheVcanTestNetworkUsesTheShippedEdsFiles) {
   auto shipped = co::load_config(CDPR_SOURCE_DIR "/config/canopen-mini.yaml");
   ASSERT_TRUE(shipped.ok()) << shipped.status().to_string();
-  auto test = co::load_config(CDPR_SOURCE_DIR "/tests/sim/sim-master-network.yaml");
+  auto test = co::load_config(CDPR_SOURCE_DIR "/config/sim/canopen.yaml");
   ASSERT_TRUE(test.ok()) << test.status().to_string();
   ASSERT_EQ(test->nodes.size(), shipped->nodes.size());
   for (std::size_t i = 0; i < test->nodes.size(); ++i) {

@@ -2,7 +2,7 @@
 // native vcan or user-mode-linux).
 //
 // The real cdpr-sim binary runs as a separate process on vcan0 with the MINI network
-// (tests/sim/sim-master-network.yaml: 8 CiA 402 drives, force node 9, SYNC 20 ms) and a scenario
+// (config/sim/canopen.yaml: 8 CiA 402 drives, force node 9, SYNC 20 ms) and a scenario
 // with a drive fault at a known time (tests/sim/sim-master-fault.yaml). Our Master on
 // SocketCanBus("vcan0") boots every node (reset communication, PDO mapping over SDO, start),
 // enables the drives in CSP without a jump, streams a small ramp of counts to every winch and
@@ -140,7 +140,7 @@ class SimMasterVcan : public ::testing::Test {
 TEST_F(SimMasterVcan, BootsEnablesMovesReadsForcesAndSeesTheInjectedDriveFault) {
   ASSERT_FALSE(dir.path().empty()) << "mkdtemp: " << std::strerror(errno);
   const std::string tests = CDPR_SOURCE_DIR "/tests/sim";
-  const std::string network = tests + "/sim-master-network.yaml";
+  const std::string network = CDPR_SOURCE_DIR "/config/sim/canopen.yaml";
 
   // 1. cdpr-sim on vcan0; it prints its node list (flushed) just before the slaves power on.
   Process sim({CDPR_SIM_EXE, "--config", CDPR_SOURCE_DIR "/config/mini.yaml", "--scenario",

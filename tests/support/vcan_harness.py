@@ -28,7 +28,7 @@ class Cell:
         self.cdprd, self.cdprctl, self.sim_bin, self.src, self.work = sys.argv[1:6]
         self.uml = os.environ.get("CDPR_VCAN_PATH", "").startswith("user-mode-linux")
         self.period_ms = 20 if self.uml else 4
-        self.network = (f"{self.src}/tests/sim/sim-master-network.yaml" if self.uml else
+        self.network = (f"{self.src}/config/sim/canopen.yaml" if self.uml else
                         f"{self.src}/config/canopen-mini.yaml")
         self.sock = f"{self.work}/cdprd.sock"
         self.port = port_base + os.getpid() % 1000

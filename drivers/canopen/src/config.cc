@@ -75,6 +75,11 @@ using config::Sign;
 using config::YamlDocument;
 using config::YamlField;
 
+// "net.yaml:31: profiles.winch.sdo[0]": the field's place, for errors found after parsing.
+std::string where(const YamlField& f) {
+  return f.file() + ":" + std::to_string(f.line()) + ": " + f.path();
+}
+
 // A duration in milliseconds within 0..max_ms.
 Status millis(const YamlField& f, double max_ms, nanoseconds& out) {
   if (!f.present()) return Status::success();
@@ -129,9 +134,9 @@ Status parse_master(const YamlField& m, MasterConfig& c) {
   CDPR_RETURN_IF_ERROR(m.optional("node_id", c.master_id, 1, 127));
   CDPR_RETURN_IF_ERROR(m.optional("heartbeat_cob_id", c.master_heartbeat_cob_id, 1, 0x7FF));
   CDPR_RETURN_IF_ERROR(millis(m["heartbeat_ms"], 65535, c.master_heartbeat_period));
-  CDPR_RETURN_IF_ERROR(millis(m["sync_period_ms"], 1000, c.sync_period));
-  if (m["sync_period_ms"].present() && c.sync_period.count() <= 0) {
-    return m["sync_period_ms"].error("must be > 0");
+  if (const YamlField f = m["sync_period_ms"]; f.present()) {
+    CDPR_ASSIGN_OR_RETURN(const double ms, f.number_in(kMinSyncPeriodMs, kMaxSyncPeriodMs, "ms"));
+    c.sync_period = from_ms(ms);
   }
   CDPR_RETURN_IF_ERROR(m.optional("sync_counter_overflow", c.sync_counter_overflow, 0, 240));
   if (m["sync_counter_overflow"].present() && c.sync_counter_overflow == 1) {
@@ -198,18 +203,38 @@ struct NodeFields {
   }
 };
 
-Status parse_sdo_writes(const YamlField& list, std::vector<SdoWrite>& out) {
+// The type of an SDO write without `type:`: the EDS's type of the object.
+Status type_from_eds(const YamlField& e, const eds::Eds* device, SdoWrite& w) {
+  if (device == nullptr)
+    return e.error("needs a type (i8 u8 i16 u16 i32 u32): the node has no EDS");
+  const eds::SubObject* s = device->find(w.object);
+  if (s == nullptr) {
+    return e["object"].error(device->source() + " has no object " + e["object"].scalar() +
+                             ": give its type");
+  }
+  for (DataType t : {DataType::kI8, DataType::kU8, DataType::kI16, DataType::kU16, DataType::kI32,
+                     DataType::kU32}) {
+    if (eds::same_type(s->data_type, t)) {
+      w.type = t;
+      return Status::success();
+    }
+  }
+  return e["object"].error(device->where(*s) + " is " + std::string(eds::type_name(s->data_type)) +
+                           ": an SDO write takes i8 u8 i16 u16 i32 u32");
+}
+
+Status parse_sdo_writes(const YamlField& list, const eds::Eds* device, std::vector<SdoWrite>& out) {
   CDPR_RETURN_IF_ERROR(list.expect_list("a list"));
   for (std::size_t i = 0; i < list.size(); ++i) {
     const YamlField e = list[i];
     CDPR_RETURN_IF_ERROR(e.check_keys({"object", "type", "value"}));
     SdoWrite w;
     const YamlField object = e["object"], type = e["type"], value = e["value"];
-    if (!object.present() || !type.present() || !value.present()) {
-      return e.error("needs object, type and value");
-    }
+    if (!object.present() || !value.present()) return e.error("needs object and value");
     CDPR_RETURN_IF_ERROR(address(object, object.scalar(), w.object));
-    if (!parse_data_type(type.scalar(), w.type)) {
+    if (!type.present()) {
+      CDPR_RETURN_IF_ERROR(type_from_eds(e, device, w));
+    } else if (!parse_data_type(type.scalar(), w.type)) {
       return type.error("not one of i8 u8 i16 u16 i32 u32");
     }
     const int bits = 8 * size_of(w.type);
@@ -217,7 +242,7 @@ Status parse_sdo_writes(const YamlField& list, std::vector<SdoWrite>& out) {
     const std::int64_t hi =
         is_signed(w.type) ? (std::int64_t{1} << (bits - 1)) - 1 : (std::int64_t{1} << bits) - 1;
     CDPR_ASSIGN_OR_RETURN(w.value, value.integer(lo, hi));
-    w.where = e.file() + ":" + std::to_string(e.line()) + ": " + e.path();
+    w.where = where(e);
     out.push_back(w);
   }
   return Status::success();
@@ -309,8 +334,10 @@ Status parse_node(const NodeFields& f, EdsCache& eds_cache, NodeConfig& c) {
   if (const YamlField tpdo = f["tpdo"]; tpdo.present()) {
     CDPR_RETURN_IF_ERROR(parse_pdo_list(tpdo, PdoDirection::kTpdo, c.tpdos));
   }
+  // The EDS first: an SDO write without a type takes the EDS's.
+  if (const YamlField e = f["eds"]; e.present()) CDPR_RETURN_IF_ERROR(device_eds(e, eds_cache, c));
   if (const YamlField sdo = f["sdo"]; sdo.present()) {
-    CDPR_RETURN_IF_ERROR(parse_sdo_writes(sdo, c.sdo_writes));
+    CDPR_RETURN_IF_ERROR(parse_sdo_writes(sdo, c.eds_data.get(), c.sdo_writes));
   }
   DriveConfig& d = c.drive;
   if (const YamlField mode = f["mode"]; mode.present()) {
@@ -320,6 +347,7 @@ Status parse_node(const NodeFields& f, EdsCache& eds_cache, NodeConfig& c) {
   }
   if (const YamlField cpu = f["counts_per_unit"]; cpu.present()) {
     CDPR_ASSIGN_OR_RETURN(d.counts_per_unit, cpu.number(Sign::kNonZero, "counts per unit"));
+    d.counts_per_unit_where = where(cpu);
   }
   CDPR_RETURN_IF_ERROR(millis(f["transition_timeout_ms"], 60000, d.transition_timeout));
   CDPR_RETURN_IF_ERROR(millis(f["mode_switch_timeout_ms"], 60000, d.mode_switch_timeout));
@@ -341,13 +369,14 @@ Status parse_node(const NodeFields& f, EdsCache& eds_cache, NodeConfig& c) {
   if (const YamlField q = f["quirks"]; q.present()) {
     CDPR_RETURN_IF_ERROR(parse_quirks(q, d.quirks));
   }
-  if (const YamlField e = f["eds"]; e.present()) CDPR_RETURN_IF_ERROR(device_eds(e, eds_cache, c));
   // One value for every channel (expanded in parse_config) or one per channel.
   if (const YamlField gain = f["gain"]; gain.present()) {
     CDPR_ASSIGN_OR_RETURN(c.force.gain, gain.numbers(Sign::kAny, "", /*scalar_allowed=*/true));
+    c.force.gain_where = where(gain);
   }
   if (const YamlField offset = f["offset"]; offset.present()) {
     CDPR_ASSIGN_OR_RETURN(c.force.offset, offset.numbers(Sign::kAny, "", /*scalar_allowed=*/true));
+    c.force.offset_where = where(offset);
   }
   return Status::success();
 }

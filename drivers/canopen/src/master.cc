@@ -620,29 +620,33 @@ Status Master::enable_all(std::chrono::nanoseconds timeout) {
 }
 
 BusLoad Master::bus_load() const {
+  return canopen::bus_load(config_);
+}
+
+BusLoad bus_load(const MasterConfig& config) {
   std::vector<PeriodicFrame> frames;
-  const double cycle_ms = to_ms(config_.sync_period);
-  frames.push_back({static_cast<std::uint8_t>(config_.sync_counter_overflow >= 2 ? 1 : 0), 1.0});
+  const double cycle_ms = to_ms(config.sync_period);
+  frames.push_back({static_cast<std::uint8_t>(config.sync_counter_overflow >= 2 ? 1 : 0), 1.0});
   auto per_cycle = [&](const PdoConfig& p) {
     if (p.transmission_type >= 1 && p.transmission_type <= 240) return 1.0 / p.transmission_type;
     if (p.transmission_type >= 254 && p.event_timer_ms > 0) return cycle_ms / p.event_timer_ms;
     return 1.0;  // acyclic or event driven without timer: assume once per cycle (worst case)
   };
-  for (const auto& n : nodes_) {
-    for (const auto* list : {&n->config.rpdos, &n->config.tpdos}) {
+  for (const NodeConfig& n : config.nodes) {
+    for (const auto* list : {&n.rpdos, &n.tpdos}) {
       for (const auto& p : *list) {
         if (p.entries.empty()) continue;
         frames.push_back({static_cast<std::uint8_t>(p.byte_size()), per_cycle(p)});
       }
     }
-    if (n->config.heartbeat_period.count() > 0) {
-      frames.push_back({1, cycle_ms / to_ms(n->config.heartbeat_period)});
+    if (n.heartbeat_period.count() > 0) {
+      frames.push_back({1, cycle_ms / to_ms(n.heartbeat_period)});
     }
   }
-  if (config_.master_heartbeat_period.count() > 0) {
-    frames.push_back({1, cycle_ms / to_ms(config_.master_heartbeat_period)});
+  if (config.master_heartbeat_period.count() > 0) {
+    frames.push_back({1, cycle_ms / to_ms(config.master_heartbeat_period)});
   }
-  return compute_bus_load(frames, config_.sync_period, config_.bitrate, config_.bus_load_warning);
+  return compute_bus_load(frames, config.sync_period, config.bitrate, config.bus_load_warning);
 }
 
 }  // namespace cdpr::canopen

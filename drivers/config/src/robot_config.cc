@@ -530,8 +530,7 @@ std::string flow_map(const std::vector<std::pair<std::string, std::string>>& fie
   return s + "}";
 }
 
-Result<RobotModel> parse_document(const YamlDocument& doc) {
-  Parser parser;
+Result<RobotModel> parse_document(const YamlDocument& doc, Parser& parser) {
   RobotModel model;
   try {
     model = parser.parse(doc.root());
@@ -541,6 +540,11 @@ Result<RobotModel> parse_document(const YamlDocument& doc) {
   const Status check = check_model(model);
   if (!check.ok()) return parser.locate(check, doc.file());
   return model;
+}
+
+Result<RobotModel> parse_document(const YamlDocument& doc) {
+  Parser parser;
+  return parse_document(doc, parser);
 }
 
 }  // namespace
@@ -553,6 +557,17 @@ Result<RobotModel> parse_robot_config(std::string_view text, std::string_view na
 Result<RobotModel> load_robot_config(const std::string& path) {
   CDPR_ASSIGN_OR_RETURN(const YamlDocument doc, YamlDocument::load(path, "robot config"));
   return parse_document(doc);
+}
+
+Result<CheckedRobot> check_robot_config(const std::string& path, const ModelPlausibility& limits) {
+  CDPR_ASSIGN_OR_RETURN(const YamlDocument doc, YamlDocument::load(path, "robot config"));
+  Parser parser;
+  CheckedRobot out;
+  CDPR_ASSIGN_OR_RETURN(out.model, parse_document(doc, parser));
+  for (Status& s : check_model_plausible(out.model, limits)) {
+    out.findings.push_back(parser.locate(std::move(s), doc.file()));
+  }
+  return out;
 }
 
 Status write_robot_config(const std::string& path, const RobotModel& model,

@@ -38,6 +38,7 @@ std::string_view to_string(Mode m);
 struct DriveConfig {
   Mode mode = Mode::kCyclicSyncPosition;  // mode set at boot
   double counts_per_unit = 1.0;           // drive position counts per SI unit (m or rad)
+  std::string counts_per_unit_where;  // "net.yaml:26: profiles.winch.counts_per_unit"; "": default
   nanoseconds transition_timeout{std::chrono::milliseconds(500)};
   nanoseconds mode_switch_timeout{std::chrono::milliseconds(1000)};
   std::int16_t abort_connection_option =
@@ -72,8 +73,11 @@ struct ForceConfig {
   // Channel k is the k-th value the node's TPDOs map, in order. raw = gain * tension + offset.
   std::vector<double> gain;
   std::vector<double> offset;
+  std::string gain_where, offset_where;  // "net.yaml:53: profiles.force.gain"; "": the default
 };
 
+// A start-up write (`sdo:`). Its type is the YAML's `type`, or the EDS's for the object when the
+// YAML gives none; a given type must be the EDS's (check_eds).
 struct SdoWrite {
   ObjectAddress object;
   DataType type = DataType::kU8;
@@ -135,5 +139,9 @@ Result<MasterConfig> load_config(const std::string& path);
 // mappings, heartbeat timeouts longer than the producer period. (parse_config also checks every
 // node that names an EDS against it: check_eds in eds_check.hpp.)
 Status validate(const MasterConfig& config);
+
+// The SYNC periods a network may have: 1 ms to 1 s. Below, a CAN bus cannot carry a cycle of a
+// robot's PDOs (a 1 us period was once accepted and failed later as an SDO timeout).
+inline constexpr double kMinSyncPeriodMs = 1.0, kMaxSyncPeriodMs = 1000.0;
 
 }  // namespace cdpr::canopen

@@ -49,6 +49,10 @@ struct MasterStats {
   std::uint64_t link_restart_failures = 0;
 };
 
+// Bus load of SYNC + all configured PDOs + heartbeats per SYNC period of `config`, without a bus
+// (cdprd --check-config refuses a network whose cycle does not fit on the bus).
+BusLoad bus_load(const MasterConfig& config);
+
 class Master {
  public:
   // Builds process images, PDO layouts and devices from the configuration (allocates here only).
@@ -133,7 +137,7 @@ class Master {
   const SyncProducer& sync() const { return sync_; }
   const MasterStats& stats() const { return stats_; }
   const MasterConfig& config() const { return config_; }
-  // Bus load of SYNC + all configured PDOs + heartbeats per SYNC period.
+  // Bus load of SYNC + all configured PDOs + heartbeats per SYNC period (canopen::bus_load).
   BusLoad bus_load() const;
 
  private:

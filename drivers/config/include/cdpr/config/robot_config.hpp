@@ -15,7 +15,9 @@
 
 #include <string>
 #include <string_view>
+#include <vector>
 
+#include "cdpr/calibration/model_plausibility.hpp"
 #include "cdpr/calibration/robot_model.hpp"
 #include "cdpr/status.hpp"
 
@@ -27,6 +29,17 @@ Result<RobotModel> load_robot_config(const std::string& path);
 
 // The same for text already in memory; `name_for_messages` stands for the file name in errors.
 Result<RobotModel> parse_robot_config(std::string_view text, std::string_view name_for_messages);
+
+// load_robot_config, then check_model_plausible (model_plausibility.hpp) on the model: every
+// finding located at the file, line and field it names ("mini.yaml:55: cables[0].frame_anchor:
+// the frame anchors span 1538.31 m, ... (looks like mm, expected m)"). An error: the file does not
+// load at all. cdprd --check-config.
+struct CheckedRobot {
+  RobotModel model;
+  std::vector<Status> findings;  // empty: plausible
+};
+Result<CheckedRobot> check_robot_config(const std::string& path,
+                                        const ModelPlausibility& limits = {});
 
 // Writes `model` as YAML that parse_robot_config reads back into exactly the same model (numbers
 // in the shortest form that round-trips, so up to 17 significant digits). Properties shared by
