@@ -15,6 +15,7 @@ add_library(cdpr_daemon STATIC
   ${_d}/src/daemon.cc
   ${_d}/src/daemon_state.cc
   ${_d}/src/daemon_service.cc
+  ${_d}/src/daemon_homing.cc
   ${_d}/src/daemon_calibration.cc
   ${_d}/src/daemon_commands.cc
   ${_d}/src/log_coalescer.cc)

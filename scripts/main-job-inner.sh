@@ -50,6 +50,7 @@ measuring: {poses: 25, laser_samples: 10, average_cycles: 10, settle_window_s: 0
 tension_watch: {slack_below: 1, overload_above: 0, cycles: 5, stuck_raw_units: 12,
                 stuck_confirm_s: $stuck_confirm}
 acceptance: {mode: manual}
+start: {enable: at-start, home_without_record: reference}   # the virtual robot powers up homed
 control: {socket: $sock}
 YAML
 

@@ -16,6 +16,7 @@
 #include <functional>
 #include <optional>
 #include <sstream>
+#include <thread>
 
 #include "cdpr/controller/control_client.hpp"
 #include "cdpr/controller/control_protocol.hpp"
@@ -149,10 +150,36 @@ class Session {
     Result<ControlReply> reply = client_->call(inv_.cmd, inv_.args, deadline_, env_.interrupted);
     if (!reply.ok()) return transport_failed(reply.status());
     if (!reply->is_ok()) return refused(*reply);
+    if (inv_.cmd == "fault_reset") return await_fault_reset(reply->result());
     return print_result(reply->result());
   }
 
  private:
+  // After fault_reset: the state, until it leaves `fault` (or the timeout): exit 1 naming what
+  // still blocks while the robot stays in fault.
+  int await_fault_reset(const json& result) {
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(3);
+    json st;
+    for (;;) {
+      Result<ControlReply> s = client_->call("status", json::object(), deadline_, env_.interrupted);
+      if (!s.ok()) return transport_failed(s.status());
+      if (!s->is_ok()) return refused(*s);
+      st = s->result();
+      if (st.value("state", "") != "fault") break;
+      if (std::chrono::steady_clock::now() > until) {
+        const json f = st.value("fault", json());
+        const std::string why =
+            f.is_object() ? f.value("message", st.value("reason", "")) : st.value("reason", "");
+        return fail(kExitFailed, "fault-reset: the robot stays in fault: " + why);
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    json r = result;
+    r["state"] = st.value("state", "");
+    r["reason"] = st.value("reason", "");
+    return print_result(r);
+  }
+
   int fail(int code, const std::string& message) {
     err_ << "cdprctl: " << message << "\n";
     return code;
@@ -398,6 +425,7 @@ struct CliValues {
   std::int64_t show_version = 0, diff_a = 0, diff_b = 0, rollback_version = 0;
   std::int64_t report_version = 0;
   std::vector<double> move_pose;
+  std::string home_method = "reference";
 };
 
 CLI::App* add_simple(CLI::App& app, Invocation& inv, const char* name, const char* cmd,
@@ -503,7 +531,22 @@ void add_report_and_motion_commands(CLI::App& app, Invocation& inv, CliValues& v
   });
   add_simple(app, inv, "stop", "stop", "quick stop (privileged)");
   add_simple(app, inv, "fault-reset", "fault_reset",
-             "clear a fault after its cause is gone (privileged)");
+             "clear a fault after its cause is gone; exit 1 while the robot stays in fault "
+             "(privileged)");
+  add_simple(app, inv, "enable", "enable",
+             "enable the drives; the robot holds where it is (privileged)");
+  add_simple(app, inv, "disable", "disable", "disable the drives while holding (privileged)");
+  auto* home = app.add_subcommand(
+      "home",
+      "home: reference platform (the platform on it at home) or absolute encoders (the "
+      "record's offsets, pose checked); privileged");
+  home->add_option("--method", v.home_method, "reference or absolute")
+      ->check(CLI::IsMember({"reference", "absolute"}));
+  home->callback([&inv, &v] {
+    inv.name = "home";
+    inv.cmd = "home";
+    inv.args = {{"method", v.home_method}};
+  });
 }
 
 }  // namespace

@@ -181,7 +181,10 @@ TEST_F(CdprctlTest, EverySubcommandSendsItsRequest) {
       {{"report"}, "report", {{"html", false}}},
       {{"report", "2"}, "report", {{"version", 2}, {"html", false}}},
       {{"stop"}, "stop", json::object()},
-      {{"fault-reset"}, "fault_reset", json::object()},
+      {{"enable"}, "enable", json::object()},
+      {{"disable"}, "disable", json::object()},
+      {{"home"}, "home", {{"method", "reference"}}},
+      {{"home", "--method", "absolute"}, "home", {{"method", "absolute"}}},
       {{"move", "0.1", "0.2", "0.3"}, "move", {{"pose", {0.1, 0.2, 0.3, 0.0, 0.0, 0.0}}}},
       {{"move", "0.1", "0.2", "0.3", "0", "0", "0.05"},
        "move",
@@ -198,6 +201,13 @@ TEST_F(CdprctlTest, EverySubcommandSendsItsRequest) {
     EXPECT_EQ(reqs.back().cmd, c.cmd);
     EXPECT_EQ(reqs.back().args, c.args);
   }
+  // fault-reset sends its request, then follows the state with status.
+  const std::size_t before = requests().size();
+  const Outcome o = ctl({"fault-reset"});
+  EXPECT_EQ(o.code, kExitOk) << o.err;
+  ASSERT_GE(requests().size(), before + 2);
+  EXPECT_EQ(requests()[before].cmd, "fault_reset");
+  EXPECT_EQ(requests().back().cmd, "status");
 }
 
 TEST_F(CdprctlTest, PrintsResultsForHumansAndRawJsonWithTheFlag) {

@@ -168,6 +168,7 @@ Result<std::unique_ptr<control::ControlServer>> start_control(const DaemonConfig
 // The orderly end: hold, quick stop and disable, then the socket, the RT loop, the bus, the laser.
 void stop_all(Daemon& d, control::ControlServer& srv, RtLoop& loop, modbus::LaserSensor* laser) {
   spdlog::info("stopping: holding, then quick stop and disable");
+  d.persist_stop();
   d.shutdown();
   srv.stop();
   loop.stop();

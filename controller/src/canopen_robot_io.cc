@@ -125,6 +125,9 @@ void CanopenRobotIO::write(const RobotCommand& c) noexcept {
   if (c.enable) {
     for (int i = 0; i < n_; ++i) drives_[static_cast<std::size_t>(i)]->enable();
   }
+  if (c.disable) {
+    for (int i = 0; i < n_; ++i) drives_[static_cast<std::size_t>(i)]->disable();
+  }
   if (c.quick_stop) master_.quick_stop_all();
   if (c.send_targets) {
     for (int i = 0; i < n_; ++i) {

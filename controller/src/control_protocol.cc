@@ -31,6 +31,7 @@ constexpr ArgSpec kReportArgs[] = {{"version", ArgType::kVersion, false},
                                    {"html", ArgType::kBool, false}};
 
 constexpr ArgSpec kMoveArgs[] = {{"pose", ArgType::kPose, true}};
+constexpr ArgSpec kHomeArgs[] = {{"method", ArgType::kString, false}};
 
 constexpr std::array<CommandSpec, kCommandCount> kCommands{{
     {"status", false, {}, Command::kStatus},
@@ -47,6 +48,9 @@ constexpr std::array<CommandSpec, kCommandCount> kCommands{{
     {"stop", true, {}, Command::kStop},
     {"fault_reset", true, {}, Command::kFaultReset},
     {"move", true, kMoveArgs, Command::kMove},
+    {"enable", true, {}, Command::kEnable},
+    {"disable", true, {}, Command::kDisable},
+    {"home", true, kHomeArgs, Command::kHome},
 }};
 
 constexpr bool commands_in_enum_order() {

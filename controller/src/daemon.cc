@@ -148,6 +148,7 @@ void Daemon::shutdown() {
 
 Status Daemon::check_identities() {
   const IdentitySettings& want = config_.identity;
+  identities_.clear();
   for (const canopen::NodeConfig& n : network_.nodes) {
     canopen::SdoClient* sdo = master_->sdo(n.id);
     if (sdo == nullptr) continue;
@@ -160,6 +161,14 @@ Status Daemon::check_identities() {
     if (!product.ok()) {
       Status s = product.status();
       return s.prepend("identity of node " + std::to_string(n.id) + " (" + n.name + "): ");
+    }
+    if (n.kind == canopen::NodeKind::kCia402Drive) {
+      auto serial = sdo->read<std::uint32_t>({0x1018, 4}, master_->pump());
+      if (!serial.ok()) {
+        Status s = serial.status();
+        return s.prepend("serial number of node " + std::to_string(n.id) + " (" + n.name + "): ");
+      }
+      identities_.push_back({int{n.id}, *vendor, *product, *serial});
     }
     std::uint32_t expected_product = 0;
     if (n.kind == canopen::NodeKind::kCia402Drive) expected_product = want.drive_product_code;
@@ -210,25 +219,43 @@ Status Daemon::enable_drives() {
 
 Status Daemon::start() {
   transition(SupervisorEvent::kBoot, "booting the CANopen network on " + network_.interface);
+  const bool at_start = config_.start.enable == StartSettings::Enable::kAtStart;
   Status s = master_->boot();
   if (s.ok()) s = check_identities();
-  if (s.ok()) s = enable_drives();
-  if (s.ok()) s = home();
+  if (s.ok()) s = restore_homing();
+  if (s.ok() && at_start) s = enable_drives();
   if (!s.ok()) {
     transition(SupervisorEvent::kStartFailed, "start-up: " + s.to_string());
     return s;
   }
+  PoseTrust trust;
+  {
+    std::lock_guard lock(mu_);
+    trust = trust_;
+  }
+  // Taken by the RT loop once every drive is enabled (now, or at `enable`): it holds the actual
+  // positions, nothing moves.
+  post_hold(trust);
   running_since_ = io_.clock->now();  // boot-ups after this are reboots
-  transition(SupervisorEvent::kStarted,
-             "started with geometry version " + std::to_string(active_version()));
+  std::string why = "started with geometry version " + std::to_string(active_version());
+  why += trust.trusted ? "; pose from " + trust.source
+                       : "; motion refused until cdprctl home: " + trust.reason;
+  if (at_start) {
+    transition(SupervisorEvent::kStarted, why + "; holding where the drives are");
+  } else {
+    transition(SupervisorEvent::kStartedDisabled, why + "; drives disabled until cdprctl enable");
+  }
   return Status::success();
 }
 
-Result<Pose> Daemon::pose_from_encoders(const RobotModel& model) {
+// The cable lengths the encoders read now (the RT loop's last reading, or the master's before
+// the loop runs) with `offsets`, and the measured tensions (0 without force readings).
+void Daemon::encoder_lengths(const RobotModel& model, const std::array<double, kMaxAxes>& offsets,
+                             Eigen::VectorXd& lengths, Eigen::VectorXd& tensions) {
   const RtSnapshot snap = rt_->snapshot();
   const int m = model.num_cables();
-  Eigen::VectorXd lengths(m), tensions(m);
-  const auto& offsets = rt_->encoder_offsets();
+  lengths.resize(m);
+  tensions.resize(m);
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
     const double counts = snap.cycle > 0
@@ -241,6 +268,17 @@ Result<Pose> Daemon::pose_from_encoders(const RobotModel& model) {
     }
     tensions(i) = std::max(f, 0.0);
   }
+}
+
+Result<Pose> Daemon::pose_from_encoders(const RobotModel& model) {
+  const RtSnapshot snap = rt_->snapshot();
+  std::array<double, kMaxAxes> offsets;
+  {
+    std::lock_guard lock(mu_);
+    offsets = offsets_;
+  }
+  Eigen::VectorXd lengths, tensions;
+  encoder_lengths(model, offsets, lengths, tensions);
   ForwardKinematicsOptions options;
   options.initial_pose = snap.cycle > 0 ? snap.pose() : model.home;
   // Another geometry (hot swap, rollback) may not reach the encoders' lengths exactly: the
@@ -254,47 +292,6 @@ Result<Pose> Daemon::pose_from_encoders(const RobotModel& model) {
     return s.prepend("pose from the encoders: ");
   }
   return fk.pose;
-}
-
-Status Daemon::home() {
-  const int m = nominal_.num_cables();
-  std::array<double, kMaxAxes> offsets{};
-  auto stored = store_->load_offsets();
-  Pose pose = active_->model.home;
-  if (stored.ok() && static_cast<int>(stored->size()) == m) {
-    for (int i = 0; i < m; ++i)
-      offsets[static_cast<std::size_t>(i)] = (*stored)[static_cast<std::size_t>(i)];
-    rt_->set_encoder_offsets(offsets);
-    auto p = pose_from_encoders(active_->model);
-    if (!p.ok()) return p.status();
-    pose = *p;
-    spdlog::info(
-        "homing: stored encoder offsets; pose from the encoders ({:.4f}, {:.4f}, {:.4f}) m",
-        pose.position.x(), pose.position.y(), pose.position.z());
-  } else {
-    // The platform stands on the reference platform at home: the encoders read the active
-    // model's commands there.
-    CommandData data(active_->model);
-    if (Status s = command_counts(active_->model, pose, active_->reference_tension, data);
-        !s.ok()) {
-      return s.prepend("homing at the home pose: ");
-    }
-    std::vector<double> list;
-    for (int i = 0; i < m; ++i) {
-      const auto k = static_cast<std::size_t>(i);
-      offsets[k] = static_cast<double>(master_->drives()[k].actual_counts()) - data.cable.counts(i);
-      list.push_back(offsets[k]);
-    }
-    rt_->set_encoder_offsets(offsets);
-    if (Status s = store_->save_offsets(list, "reference platform at home"); !s.ok()) return s;
-    spdlog::info("homing: platform on the reference platform at home; encoder offsets stored");
-  }
-  auto c = std::make_unique<MotionCommand>();
-  c->type = MotionCommand::Type::kReference;
-  c->pose = pose;
-  c->from_actual = true;
-  post(std::move(c));
-  return Status::success();
 }
 
 // ---- Motion -----------------------------------------------------------------------------------

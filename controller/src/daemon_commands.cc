@@ -49,6 +49,9 @@ Daemon::Handler Daemon::handler(Command command) {
       {Command::kStop, &Daemon::cmd_stop},
       {Command::kFaultReset, &Daemon::cmd_fault_reset},
       {Command::kMove, &Daemon::cmd_move},
+      {Command::kEnable, &Daemon::cmd_enable},
+      {Command::kDisable, &Daemon::cmd_disable},
+      {Command::kHome, &Daemon::cmd_home},
   }};
   static_assert(
       [] {
@@ -116,6 +119,14 @@ json Daemon::status() const {
                                       std::chrono::duration<double>(network_.sync_period).count() /
                                       winch_metres_per_count(active_->model.winches[0])}};
   j["warning"] = warning_.empty() ? json(nullptr) : json(warning_);
+  j["drives"] = {{"enabled", s.all_enabled}};
+  j["pose"] = {{"trusted", trust_.trusted},
+               {"source", trust_.trusted ? json(trust_.source) : json(nullptr)},
+               {"reason", trust_.trusted ? json(nullptr) : json(trust_.reason)}};
+  j["homing"] = record_ ? json{{"method", record_->method},
+                               {"time", record_->time},
+                               {"geometry_version", record_->geometry_version}}
+                        : json(nullptr);
   j["loop"] = loop_figures_;
   if (calibration_) {
     j["calibration"] = {{"id", calibration_->id},
@@ -152,6 +163,9 @@ Reply Daemon::cmd_calibrate(const json& args, const PeerInfo& peer) {
     return Reply::failure(ControlErrorCode::kFault, "the robot is in fault (" +
                                                         status()["reason"].get<std::string>() +
                                                         "): run fault-reset first");
+  }
+  if (const std::string why = motion_refusal(); !dry_run && !why.empty()) {
+    return Reply::failure(ControlErrorCode::kInvalidState, "calibrate: " + why);
   }
   if (!dry_run && (st != DaemonState::kHolding || worker_running_.load())) {
     return Reply::failure(
@@ -277,6 +291,9 @@ Reply Daemon::cmd_rollback(const json& args, const PeerInfo& peer) {
         ControlErrorCode::kInvalidState,
         std::string("rollback only while holding (state ") + to_string(state()) + ")");
   }
+  if (const std::string why = motion_refusal(); !why.empty()) {
+    return Reply::failure(ControlErrorCode::kInvalidState, "rollback: " + why);
+  }
   if (!store_->load_geometry(version).ok()) {
     return Reply::failure(ControlErrorCode::kNotFound,
                           "geometry version " + std::to_string(version) + " does not exist");
@@ -396,6 +413,9 @@ Reply Daemon::cmd_move(const json& args, const PeerInfo& peer) {
   const DaemonState st = state();
   if (st == DaemonState::kFault) {
     return Reply::failure(ControlErrorCode::kFault, "the robot is in fault");
+  }
+  if (const std::string why = motion_refusal(); !why.empty()) {
+    return Reply::failure(ControlErrorCode::kInvalidState, "move: " + why);
   }
   if (st != DaemonState::kHolding || worker_running_.load() ||
       rt_->snapshot().mode != RtMode::kHolding) {

@@ -168,6 +168,25 @@ Status read_acceptance(const YamlField& n, AcceptanceGates& g) {
   return n.optional("allow_unresolved_mismatch", g.allow_unresolved_mismatch);
 }
 
+Status read_start(const YamlField& n, StartSettings& st) {
+  if (!n.present()) return Status::success();
+  CDPR_RETURN_IF_ERROR(n.check_keys({"enable", "home_without_record", "model_uncertainty_m"}));
+  std::string enable = "operator";
+  CDPR_RETURN_IF_ERROR(n.optional("enable", enable));
+  if (enable != "operator" && enable != "at-start") {
+    return n["enable"].error("expected operator or at-start");
+  }
+  st.enable =
+      enable == "operator" ? StartSettings::Enable::kOperator : StartSettings::Enable::kAtStart;
+  std::string home = "refuse";
+  CDPR_RETURN_IF_ERROR(n.optional("home_without_record", home));
+  if (home != "refuse" && home != "reference") {
+    return n["home_without_record"].error("expected refuse or reference");
+  }
+  st.home_without_record = home == "reference";
+  return in_range(n, "model_uncertainty_m", 0.0, 0.1, "m", st.model_uncertainty_m);
+}
+
 Status read_control(const YamlField& n, const std::string& dir, ControlSettings& c) {
   if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(n.check_keys({"socket", "group"}));
@@ -181,9 +200,10 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   c.file = doc.file();
   const YamlField root = doc.root();
   CDPR_RETURN_IF_ERROR(root.expect_map("a mapping of daemon settings"));
-  CDPR_RETURN_IF_ERROR(root.check_keys(
-      {"robot", "canopen", "laser", "can_interface", "state_directory", "realtime", "identity",
-       "motion", "tension_watch", "measuring", "identification", "acceptance", "control"}));
+  CDPR_RETURN_IF_ERROR(
+      root.check_keys({"robot", "canopen", "laser", "can_interface", "state_directory", "realtime",
+                       "identity", "motion", "tension_watch", "measuring", "identification",
+                       "acceptance", "start", "control"}));
   const std::string dir = std::filesystem::path(c.file).parent_path().string();
   CDPR_ASSIGN_OR_RETURN(YamlField robot, root.required("robot", "the robot description"));
   CDPR_ASSIGN_OR_RETURN(c.robot, robot.text());
@@ -203,6 +223,7 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   CDPR_RETURN_IF_ERROR(read_measuring(root["measuring"], dir, c.measuring));
   CDPR_RETURN_IF_ERROR(read_identification(root["identification"], c.identification));
   CDPR_RETURN_IF_ERROR(read_acceptance(root["acceptance"], c.acceptance));
+  CDPR_RETURN_IF_ERROR(read_start(root["start"], c.start));
   CDPR_RETURN_IF_ERROR(read_control(root["control"], dir, c.control));
   return c;
 }

@@ -30,6 +30,7 @@ void Daemon::service() {
     complete_swap(s);
     return;
   }
+  follow_enable(s);
   if (!worker_running_.load() && (st == DaemonState::kHolding || st == DaemonState::kMoving)) {
     const bool moving = s.mode == RtMode::kMoving;
     transition(moving ? SupervisorEvent::kRtMoving : SupervisorEvent::kRtHolding,
@@ -125,24 +126,34 @@ void Daemon::latch_fault(const RtSnapshot& s) {
   transition(SupervisorEvent::kFaultLatched, text);
 }
 
-// After fault_reset: the platform is where the quick stop left it.
+// After fault_reset: the platform is where the quick stop left it. The RT loop holds the drives
+// there (nothing moves); the pose is checked again, and when it cannot be trusted the daemon
+// holds the counts and refuses motion until `home`.
 void Daemon::after_fault_reset() {
   const Geometry* g = active_geometry();
-  auto pose = pose_from_encoders(g->model);
-  if (!pose.ok()) {
-    transition(SupervisorEvent::kFaultResetFailed,
-               "after fault reset: " + pose.status().to_string());
-    return;
+  std::array<double, kMaxAxes> offsets;
+  bool was_trusted = false;
+  Pose before;
+  {
+    std::lock_guard lock(mu_);
+    offsets = offsets_;
+    was_trusted = trust_.trusted;
+    before = trust_.pose;
   }
-  auto c = std::make_unique<MotionCommand>();
-  c->type = MotionCommand::Type::kReference;
-  c->pose = *pose;
-  c->from_actual = true;
-  // The active geometry explicitly: a hot swap the fault interrupted may have handed the RT loop
-  // the new one already.
-  c->geometry = g;
-  post(std::move(c));
-  transition(SupervisorEvent::kFaultCleared, "fault reset; holding where the platform stopped");
+  PoseTrust t = verify_pose(g->model, offsets, nullptr, nullptr);
+  if (!was_trusted && t.trusted) {
+    // A pose that was not trusted before the fault is not trusted by a fault reset either.
+    t.trusted = false;
+    t.reason = "not homed since the start-up";
+  }
+  if (!t.trusted) t.pose = before;
+  set_trust(t, "after the fault reset");
+  post_hold(t);
+  transition(SupervisorEvent::kFaultCleared,
+             t.trusted ? "fault reset; holding where the platform stopped"
+                       : "fault reset; holding the drives where they stopped, motion refused "
+                         "until cdprctl home: " +
+                             t.reason);
 }
 
 }  // namespace cdpr::controller

@@ -187,6 +187,19 @@ void Daemon::complete_swap(const RtSnapshot& s) {
   }
   spdlog::info("geometry version {} applied; largest target step {:.1f} counts", *target,
                s.largest_reference_step);
+  std::optional<HomingRecord> record;
+  {
+    std::lock_guard lock(mu_);
+    if (record_) {
+      record_->geometry_version = *target;  // the offsets hold for every version
+      record = record_;
+    }
+  }
+  if (record) {
+    if (Status st = store_->save_homing(*record); !st.ok()) {
+      spdlog::error("homing record: {}", st.to_string());
+    }
+  }
   publish("calibration", {{"version", *target},
                           {"calibration", calibration > 0 ? json(calibration) : json(nullptr)},
                           {"outcome", to_string(CalibrationRunOutcome::kApplied)},

@@ -19,6 +19,8 @@ const char* to_string(RtMode m) {
       return "moving";
     case RtMode::kSlewing:
       return "slewing";
+    case RtMode::kHoldingCounts:
+      return "holding_counts";
   }
   return "?";
 }
@@ -130,7 +132,7 @@ bool RtController::solve(const Pose& pose) noexcept {
 
 void RtController::read_inputs(canopen::Timestamp now) noexcept {
   io_.read(now, in_);
-  out_.send_targets = out_.fault_reset = out_.enable = out_.quick_stop = false;
+  out_.send_targets = out_.fault_reset = out_.enable = out_.disable = out_.quick_stop = false;
   snap_.all_enabled = true;
   for (int i = 0; i < m_; ++i) {
     snap_.all_enabled = snap_.all_enabled && in_.drives[static_cast<std::size_t>(i)].enabled;
@@ -151,6 +153,15 @@ void RtController::take_requests(canopen::Timestamp now) noexcept {
     overload_count_.fill(0);
     reset_stuck_watch();
   }
+  if (disable_.exchange(false, std::memory_order_acq_rel)) {
+    out_.disable = true;
+    mode_ = RtMode::kDisabled;
+    trim_.fill(0.0);
+    trim_goal_.fill(0.0);
+  }
+  if (enable_.exchange(false, std::memory_order_acq_rel) && fault_.kind == FaultKind::kNone) {
+    out_.enable = true;
+  }
 }
 
 void RtController::take_command(canopen::Timestamp now) noexcept {
@@ -167,7 +178,8 @@ void RtController::take_command(canopen::Timestamp now) noexcept {
       break;
     case MotionCommand::Type::kReference:
       take = (mode_ == RtMode::kHolding && settled_) ||
-             (mode_ == RtMode::kDisabled && c->from_actual && snap_.all_enabled);
+             (mode_ == RtMode::kDisabled && c->from_actual && snap_.all_enabled) ||
+             (c->hold_actual && (mode_ == RtMode::kHolding || mode_ == RtMode::kHoldingCounts));
       break;
   }
   if (!take) return;
@@ -217,6 +229,10 @@ void RtController::start_reference(const MotionCommand& c, canopen::Timestamp no
     geometry_ = c.geometry;
     in_use_geometry_.store(geometry_->version, std::memory_order_release);
   }
+  if (c.hold_actual) {
+    hold_actual(c);
+    return;
+  }
   ref_tension_ = geometry_->reference_tension;
   hold_pose_ = pose_ = c.pose;
   reset_stuck_watch();  // the commanded lengths are derived again: the expected tensions jump
@@ -252,6 +268,32 @@ void RtController::start_reference(const MotionCommand& c, canopen::Timestamp no
   mode_ = RtMode::kSlewing;
 }
 
+// Hold where the drives are: targets = actual counts; the pose's targets plus trims equal them.
+void RtController::hold_actual(const MotionCommand& c) noexcept {
+  if (c.offsets) offsets_ = *c.offsets;
+  ref_tension_ = geometry_->reference_tension;
+  hold_pose_ = pose_ = c.pose;
+  reset_stuck_watch();
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    target_[k] = static_cast<double>(in_.drives[k].actual_counts);
+  }
+  snap_.largest_reference_step = 0.0;
+  done_ = c.seq;
+  if (c.counts_only || !solve(pose_)) {
+    trim_.fill(0.0);
+    trim_goal_.fill(0.0);
+    mode_ = RtMode::kHoldingCounts;
+    return;
+  }
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    trim_[k] = target_[k] - desired_[k];
+  }
+  trim_goal_ = trim_;
+  mode_ = RtMode::kHolding;
+}
+
 void RtController::sample_trajectory(canopen::Timestamp now) noexcept {
   if (mode_ == RtMode::kHolding || mode_ == RtMode::kSlewing) {
     pose_ = hold_pose_;
@@ -278,7 +320,13 @@ void RtController::sample_trajectory(canopen::Timestamp now) noexcept {
 }
 
 void RtController::compute_targets(canopen::Timestamp now) noexcept {
-  if (active()) {
+  if (mode_ == RtMode::kHoldingCounts) {  // the targets stay where hold_actual put them
+    out_.send_targets = true;
+    for (int i = 0; i < m_; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      out_.target_counts[k] = static_cast<std::int32_t>(std::llround(target_[k]));
+    }
+  } else if (active()) {
     if (solve(pose_)) {
       slew_targets();
     } else {

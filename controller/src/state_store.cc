@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -195,30 +196,115 @@ Result<std::vector<nlohmann::json>> StateStore::history() const {
   return out;
 }
 
-Status StateStore::save_offsets(const std::vector<double>& offsets, std::string_view how) {
-  nlohmann::json j = {
-      {"offsets_counts", offsets}, {"how", std::string(how)}, {"time", recording::utc_timestamp()}};
-  return io::write_file_atomically((fs::path(dir_) / "homing.json").string(), j.dump(2) + "\n");
+Status StateStore::save_homing(const HomingRecord& r) {
+  nlohmann::json drives = nlohmann::json::array();
+  for (const DriveIdentity& d : r.drives) {
+    drives.push_back(
+        {{"node", d.node}, {"vendor", d.vendor}, {"product", d.product}, {"serial", d.serial}});
+  }
+  nlohmann::json j = {{"format", HomingRecord::kFormat},
+                      {"method", r.method},
+                      {"time", r.time},
+                      {"geometry_version", r.geometry_version},
+                      {"offsets_counts", r.offsets_counts},
+                      {"drives", drives}};
+  if (!r.counts.empty()) {
+    j["last"] = {{"counts", r.counts},
+                 {"pose", r.pose},
+                 {"clean_stop", r.clean_stop},
+                 {"time", r.persisted}};
+  }
+  return io::write_file_atomically(
+      (fs::path(dir_) / "homing.json").string(),
+      j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
 }
 
-Result<std::vector<double>> StateStore::load_offsets() const {
-  const std::string path = (fs::path(dir_) / "homing.json").string();
-  if (!fs::exists(path)) return Status(ErrorCode::kNotFound, "not homed yet (no homing.json)");
-  auto text = read_text_file(path);
-  if (!text.ok()) return text.status();
-  nlohmann::json j = nlohmann::json::parse(*text, nullptr, false);
-  if (j.is_discarded() || !j.contains("offsets_counts") || !j["offsets_counts"].is_array()) {
-    return Status::error(ErrorCode::kParseError, "%s: expected {\"offsets_counts\": [...]}",
-                         path.c_str());
+namespace {
+
+Status numbers(const nlohmann::json& j, const char* key, const std::string& path,
+               std::vector<double>& out) {
+  if (!j.contains(key) || !j[key].is_array()) {
+    return Status::error(ErrorCode::kParseError, "%s: %s: expected an array of numbers",
+                         path.c_str(), key);
   }
-  std::vector<double> out;
-  for (const auto& v : j["offsets_counts"]) {
-    if (!v.is_number()) {
-      return Status::error(ErrorCode::kParseError, "%s: offsets must be numbers", path.c_str());
+  for (const auto& v : j[key]) {
+    if (!v.is_number() || !std::isfinite(v.get<double>())) {
+      return Status::error(ErrorCode::kParseError, "%s: %s: expected finite numbers", path.c_str(),
+                           key);
     }
     out.push_back(v.get<double>());
   }
-  return out;
+  return Status::success();
+}
+
+Status read_drives(const nlohmann::json& j, const std::string& path, HomingRecord& r) {
+  if (!j.contains("drives") || !j["drives"].is_array()) {
+    return Status::error(ErrorCode::kParseError, "%s: drives: expected an array", path.c_str());
+  }
+  for (const auto& d : j["drives"]) {
+    DriveIdentity id;
+    const auto u32 = [&](const char* k, std::uint32_t& out) {
+      if (!d.is_object() || !d.contains(k) || !d[k].is_number_unsigned()) return false;
+      out = static_cast<std::uint32_t>(d[k].get<std::uint64_t>());
+      return true;
+    };
+    std::uint32_t node = 0;
+    if (!u32("node", node) || !u32("vendor", id.vendor) || !u32("product", id.product) ||
+        !u32("serial", id.serial)) {
+      return Status::error(ErrorCode::kParseError,
+                           "%s: drives: each is {node, vendor, product, serial} (unsigned)",
+                           path.c_str());
+    }
+    id.node = static_cast<int>(node);
+    r.drives.push_back(id);
+  }
+  return Status::success();
+}
+
+}  // namespace
+
+Result<HomingRecord> StateStore::load_homing() const {
+  const std::string path = (fs::path(dir_) / "homing.json").string();
+  if (!fs::exists(path)) return Status(ErrorCode::kNotFound, "not homed (no homing.json)");
+  auto text = read_text_file(path);
+  if (!text.ok()) return text.status();
+  const nlohmann::json j = nlohmann::json::parse(*text, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) {
+    return Status::error(ErrorCode::kParseError, "%s: not a JSON object", path.c_str());
+  }
+  HomingRecord r;
+  CDPR_RETURN_IF_ERROR(numbers(j, "offsets_counts", path, r.offsets_counts));
+  r.time = j.value("time", std::string());
+  if (!j.contains("format")) {  // format 1: {"offsets_counts", "how", "time"}
+    r.format = 1;
+    r.method = j.value("how", std::string());
+    return r;
+  }
+  if (!j["format"].is_number_integer() || j["format"].get<int>() != HomingRecord::kFormat) {
+    return Status::error(ErrorCode::kParseError, "%s: format: %d is the one this cdprd reads",
+                         path.c_str(), HomingRecord::kFormat);
+  }
+  r.method = j.value("method", std::string());
+  if (!j.contains("geometry_version") || !j["geometry_version"].is_number_integer()) {
+    return Status::error(ErrorCode::kParseError, "%s: geometry_version: expected an integer",
+                         path.c_str());
+  }
+  r.geometry_version = j["geometry_version"].get<int>();
+  CDPR_RETURN_IF_ERROR(read_drives(j, path, r));
+  if (j.contains("last")) {
+    const nlohmann::json& last = j["last"];
+    std::vector<double> pose;
+    CDPR_RETURN_IF_ERROR(numbers(last, "counts", path, r.counts));
+    CDPR_RETURN_IF_ERROR(numbers(last, "pose", path, pose));
+    if (pose.size() != 6) {
+      return Status::error(ErrorCode::kParseError, "%s: last.pose: expected 6 numbers",
+                           path.c_str());
+    }
+    std::copy(pose.begin(), pose.end(), r.pose.begin());
+    r.clean_stop = last.value("clean_stop", false);
+    r.persisted = last.value("time", std::string());
+  }
+  return r;
 }
 
 Result<int> StateStore::new_calibration() {

@@ -58,14 +58,52 @@ TEST_F(StateStoreTest, VersionsAreNumberedActivatedAndReadBackExactly) {
   EXPECT_FALSE(s->activate(7, {}).ok());
 }
 
-TEST_F(StateStoreTest, OffsetsRoundTripAndAbsentOffsetsAreNotFound) {
+TEST_F(StateStoreTest, HomingRecordRoundTripsAndAnAbsentOneIsNotFound) {
   auto s = StateStore::open(dir_.string());
   ASSERT_TRUE(s.ok());
-  EXPECT_EQ(s->load_offsets().status().code(), ErrorCode::kNotFound);
-  ASSERT_TRUE(s->save_offsets({1.5, -2.25, 1e6}, "test").ok());
-  auto o = s->load_offsets();
-  ASSERT_TRUE(o.ok());
-  EXPECT_EQ(*o, (std::vector<double>{1.5, -2.25, 1e6}));
+  EXPECT_EQ(s->load_homing().status().code(), ErrorCode::kNotFound);
+  HomingRecord r;
+  r.method = "reference";
+  r.time = "2026-01-01T00:00:00Z";
+  r.geometry_version = 3;
+  r.offsets_counts = {1.5, -2.25, 1e6};
+  r.drives = {{1, 0xCD9001, 0x402, 0x51000001}, {2, 0xCD9001, 0x402, 0x51000002}};
+  r.counts = {10, 20, 30};
+  r.pose = {0.1, 0.2, 0.3, 0.01, 0.02, 0.03};
+  r.clean_stop = true;
+  ASSERT_TRUE(s->save_homing(r).ok());
+  auto o = s->load_homing();
+  ASSERT_TRUE(o.ok()) << o.status().to_string();
+  EXPECT_EQ(o->format, HomingRecord::kFormat);
+  EXPECT_EQ(o->offsets_counts, r.offsets_counts);
+  EXPECT_EQ(o->drives, r.drives);
+  EXPECT_EQ(o->geometry_version, 3);
+  EXPECT_EQ(o->counts, r.counts);
+  EXPECT_EQ(o->pose, r.pose);
+  EXPECT_TRUE(o->clean_stop);
+}
+
+TEST_F(StateStoreTest, TheOldHomingFormatReadsAsFormatOneWithoutWhatItBelongsTo) {
+  auto s = StateStore::open(dir_.string());
+  ASSERT_TRUE(s.ok());
+  std::ofstream(dir_ / "homing.json")
+      << R"({"offsets_counts": [1, 2], "how": "reference platform at home", "time": "t"})";
+  auto o = s->load_homing();
+  ASSERT_TRUE(o.ok()) << o.status().to_string();
+  EXPECT_EQ(o->format, 1);
+  EXPECT_EQ(o->offsets_counts, (std::vector<double>{1, 2}));
+  EXPECT_TRUE(o->drives.empty());
+  EXPECT_TRUE(o->counts.empty());
+}
+
+TEST_F(StateStoreTest, ABrokenHomingRecordIsAParseErrorNamingTheField) {
+  auto s = StateStore::open(dir_.string());
+  ASSERT_TRUE(s.ok());
+  std::ofstream(dir_ / "homing.json") << R"({"format": 2, "offsets_counts": [1], "drives": 3})";
+  auto o = s->load_homing();
+  ASSERT_FALSE(o.ok());
+  EXPECT_EQ(o.status().code(), ErrorCode::kParseError);
+  EXPECT_NE(o.status().message().find("geometry_version"), std::string::npos);
 }
 
 TEST_F(StateStoreTest, AppendedRecordsSurviveAndATornLastHistoryLineIsSkipped) {

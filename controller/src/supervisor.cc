@@ -11,10 +11,15 @@ using E = SupervisorEvent;
 using A = SupervisorAction;
 
 // The daemon's state machine: one row per (state, event) it accepts, grouped by event.
-constexpr std::array<SupervisorRow, 29> kTable{{
+constexpr std::array<SupervisorRow, 35> kTable{{
     {S::kStarting, E::kBoot, S::kStarting, A::kNone},
     {S::kStarting, E::kStartFailed, S::kFault, A::kNone},
     {S::kStarting, E::kStarted, S::kHolding, A::kNone},
+    {S::kStarting, E::kStartedDisabled, S::kDisabled, A::kNone},
+    {S::kDisabled, E::kEnabled, S::kHolding, A::kNone},
+    {S::kHolding, E::kDisable, S::kDisabled, A::kNone},
+    {S::kHolding, E::kHomed, S::kHolding, A::kNone},
+    {S::kDisabled, E::kHomed, S::kDisabled, A::kNone},
     {S::kHolding, E::kMoveRequested, S::kMoving, A::kNone},
     {S::kHolding, E::kRtMoving, S::kMoving, A::kNone},
     {S::kMoving, E::kRtMoving, S::kMoving, A::kNone},
@@ -40,6 +45,7 @@ constexpr std::array<SupervisorRow, 29> kTable{{
     {S::kAwaitingAcceptance, E::kFaultLatched, S::kFault, A::kStopSequence},
     {S::kApplying, E::kFaultLatched, S::kFault, A::kStopSequence},
     {S::kStopped, E::kFaultLatched, S::kFault, A::kStopSequence},
+    {S::kDisabled, E::kFaultLatched, S::kFault, A::kStopSequence},
     {S::kFault, E::kFaultCleared, S::kHolding, A::kNone},
     {S::kFault, E::kFaultResetFailed, S::kFault, A::kNone},
 }};
@@ -66,6 +72,8 @@ const char* to_string(DaemonState s) {
       return "fault";
     case S::kStopped:
       return "stopped";
+    case S::kDisabled:
+      return "disabled";
   }
   return "?";
 }
@@ -98,6 +106,14 @@ const char* to_string(SupervisorEvent e) {
       return "start_failed";
     case E::kStarted:
       return "started";
+    case E::kStartedDisabled:
+      return "started_disabled";
+    case E::kEnabled:
+      return "enabled";
+    case E::kDisable:
+      return "disable";
+    case E::kHomed:
+      return "homed";
     case E::kMoveRequested:
       return "move_requested";
     case E::kRtMoving:

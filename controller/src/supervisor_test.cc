@@ -17,12 +17,16 @@ using S = DaemonState;
 using E = SupervisorEvent;
 using A = SupervisorAction;
 
-constexpr S kAllStates[] = {S::kStarting,  S::kHolding,     S::kMoving,
-                            S::kMeasuring, S::kIdentifying, S::kAwaitingAcceptance,
-                            S::kApplying,  S::kFault,       S::kStopped};
+constexpr S kAllStates[] = {
+    S::kStarting,           S::kHolding,  S::kMoving, S::kMeasuring, S::kIdentifying,
+    S::kAwaitingAcceptance, S::kApplying, S::kFault,  S::kStopped,   S::kDisabled};
 constexpr E kAllEvents[] = {E::kBoot,
                             E::kStartFailed,
                             E::kStarted,
+                            E::kStartedDisabled,
+                            E::kEnabled,
+                            E::kDisable,
+                            E::kHomed,
                             E::kMoveRequested,
                             E::kRtMoving,
                             E::kRtHolding,
@@ -56,6 +60,15 @@ TEST(Supervisor, StartsInStartingAndHoldsAfterStartUp) {
   EXPECT_EQ(s.state(), S::kStarting);
   EXPECT_EQ(run(S::kStarting, {E::kBoot, E::kStarted}).to, S::kHolding);
   EXPECT_EQ(run(S::kStarting, {E::kBoot, E::kStartFailed}).to, S::kFault);
+}
+
+TEST(Supervisor, StartsDisabledUntilTheOperatorEnablesAndDisablesOnlyWhileHolding) {
+  EXPECT_EQ(run(S::kStarting, {E::kBoot, E::kStartedDisabled}).to, S::kDisabled);
+  EXPECT_EQ(run(S::kDisabled, {E::kHomed, E::kEnabled, E::kHomed, E::kDisable}).to, S::kDisabled);
+  Supervisor moving(S::kMoving);
+  EXPECT_FALSE(moving.fire(E::kDisable).accepted);
+  Supervisor disabled(S::kDisabled);
+  EXPECT_FALSE(disabled.fire(E::kMoveRequested).accepted);
 }
 
 TEST(Supervisor, MovesAndHoldsAsTheRtLoopDoes) {

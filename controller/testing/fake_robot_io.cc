@@ -90,6 +90,7 @@ void FakeRobotIO::write(const RobotCommand& c) noexcept {
     const auto k = static_cast<std::size_t>(i);
     if (c.fault_reset && state[k] == DriveState::kFault) state[k] = DriveState::kDisabled;
     if (c.enable && state[k] != DriveState::kFault) state[k] = DriveState::kEnabled;
+    if (c.disable && state[k] != DriveState::kFault) state[k] = DriveState::kDisabled;
     if (c.quick_stop && state[k] == DriveState::kEnabled) state[k] = DriveState::kQuickStop;
     // A drive that is not enabled keeps its target at its position (enabling never jumps).
     if (state[k] != DriveState::kEnabled) {

@@ -46,6 +46,8 @@ struct CellSettings {
       "max_angular_velocity: 0.5, max_angular_acceleration: 2, max_angular_jerk: 20}";
   std::string identification = "{bootstrap: 30}";
   std::string acceptance = "{mode: manual}";
+  // The virtual robot powers up on its reference platform and is enabled at start.
+  std::string start = "{enable: at-start, home_without_record: reference}";
   std::string extra;
 };
 
@@ -86,7 +88,7 @@ class VirtualCell {
            "0x404}\n"
            "motion: " +
            s.motion + "\nmeasuring: " + s.measuring + "\nidentification: " + s.identification +
-           "\nacceptance: " + s.acceptance + "\n" + laser_line() + s.extra;
+           "\nacceptance: " + s.acceptance + "\nstart: " + s.start + "\n" + laser_line() + s.extra;
   }
 
   // The same from YAML lines: a `measuring:`, `identification:` or `acceptance:` line replaces
@@ -107,7 +109,7 @@ class VirtualCell {
         return true;
       };
       if (!group("measuring", s.measuring) && !group("identification", s.identification) &&
-          !group("acceptance", s.acceptance) && !line.empty()) {
+          !group("acceptance", s.acceptance) && !group("start", s.start) && !line.empty()) {
         rest += line + "\n";
       }
     }
@@ -115,13 +117,11 @@ class VirtualCell {
     return start_daemon(s);
   }
 
-  // Creates and starts the daemon (the state directory is kept between calls: a restart), then
-  // cycles until it holds.
+  // Creates and starts the daemon (the state directory is kept between calls: a restart, as
+  // abrupt as a kill -9: nothing orderly is done; kill_daemon() alone does the same), then
+  // cycles until it holds (its drives enabled at start) or it started with disabled drives.
   Status start_daemon(const Settings& settings = {}) {
-    if (daemon) {
-      daemon->shutdown();
-      daemon.reset();
-    }
+    kill_daemon();
     auto cfg = parse_daemon_config(config_text(settings), (dir_ / "cdprd.yaml").string());
     if (!cfg.ok()) return cfg.status();
     config = *cfg;
@@ -139,10 +139,23 @@ class VirtualCell {
       events_.push_back(e);
     });
     if (Status s = daemon->start(); !s.ok()) return s;
-    if (!run_until([&] { return daemon->rt().snapshot().mode == RtMode::kHolding; }, 5.0)) {
+    if (config.start.enable == StartSettings::Enable::kOperator) return Status::success();
+    if (!run_until(
+            [&] {
+              const RtMode m = daemon->rt().snapshot().mode;
+              return m == RtMode::kHolding || m == RtMode::kHoldingCounts;
+            },
+            5.0)) {
       return Status(ErrorCode::kTimeout, "the daemon did not hold within 5 s after start-up");
     }
     return Status::success();
+  }
+
+  // The daemon gone without an orderly stop (the robot and the bus stay).
+  void kill_daemon() {
+    if (!daemon) return;
+    daemon->shutdown();
+    daemon.reset();
   }
 
   // The robot between two SYNCs (and the laser's distance follows the physics). While

@@ -115,6 +115,7 @@ class Cell:
                     f"realtime: {{priority: {priority}, sync_period_ms: {self.period_ms}}}\n"
                     "identity: {vendor_id: 0x00CD9001, drive_product_code: 0x402, "
                     "force_product_code: 0x404}\n" + daemon_groups +
+                    "start: {enable: at-start, home_without_record: reference}\n" +
                     f"control: {{socket: {self.sock}}}\n")
         self.sim_log = open(f"{self.work}/cdpr-sim.log", "w")
         self.daemon_log = open(f"{self.work}/cdprd.log", "w")

@@ -106,8 +106,11 @@ enum class Command {
   kStop,
   kFaultReset,
   kMove,
+  kEnable,
+  kDisable,
+  kHome,
 };
-inline constexpr std::size_t kCommandCount = 14;
+inline constexpr std::size_t kCommandCount = 17;
 
 struct CommandSpec {
   std::string_view name;

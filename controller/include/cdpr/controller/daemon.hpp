@@ -100,11 +100,16 @@ class Daemon {
   Daemon(const Daemon&) = delete;
   Daemon& operator=(const Daemon&) = delete;
 
-  // Start-up: boots the CANopen network, checks every node's identity against the config,
-  // enables the drives (no jump) and homes: with stored encoder offsets the pose comes from the
-  // forward kinematics of the encoders; without, the platform stands on the reference platform
-  // at home and the offsets are taken and stored. The RT loop must not run yet.
+  // Start-up: boots the CANopen network, checks every node's identity against the config, reads
+  // the homing record and checks the pose from the encoders against it (daemon_homing.cc), then
+  // enables the drives when start.enable is at-start. It never moves the robot: the RT loop holds
+  // the drives' actual positions. A pose that cannot be trusted (no or mismatched record, pose
+  // check failed) is said in status "pose" and the log, and motion is refused until `home`.
+  // The RT loop must not run yet.
   Status start();
+  // The orderly stop's part: persists the drives' counts and the pose held in the homing record
+  // (clean_stop), when the pose is trusted and the robot holds still. Before shutdown().
+  void persist_stop();
   // The RT cycle (allocation-free).
   void cycle(can::Timestamp now) noexcept { rt_->cycle(now); }
   // The supervisor's tick: drains the RT loop's events, follows faults and the hot swap,
@@ -147,7 +152,25 @@ class Daemon {
   RtControllerOptions rt_options() const;
   Status check_identities();
   Status enable_drives();
-  Status home();
+
+  // Homing and the pose check (daemon_homing.cc).
+  struct PoseTrust {
+    bool trusted = false;
+    Pose pose;
+    std::string source;  // persisted | encoders | homed (reference | absolute)
+    std::string reason;  // why not trusted: what refuses motion
+  };
+  Status restore_homing();
+  PoseTrust verify_pose(const RobotModel& model, const std::array<double, kMaxAxes>& offsets,
+                        const std::vector<double>* counts, const Pose* persisted);
+  void set_trust(PoseTrust trust, const std::string& why);
+  HomingRecord new_record(const std::string& method, const std::array<double, kMaxAxes>& offsets);
+  Result<std::array<double, kMaxAxes>> reference_offsets();
+  void post_hold(const PoseTrust& trust);
+  void persist_hold(const RtSnapshot& s, bool clean_stop);
+  std::vector<double> actual_counts();
+  std::string motion_refusal() const;  // "" when motion may be commanded
+  void follow_enable(const RtSnapshot& s);
 
   // The one place a state changes: fires `event` in the supervisor table, runs the row's action,
   // logs and publishes the change (a refused event is logged and changes nothing).
@@ -182,6 +205,8 @@ class Daemon {
   Status move_to(const Pose& pose, double reference_tension, bool abortable);
   Status hold_still(bool abortable);
   Result<Pose> pose_from_encoders(const RobotModel& model);
+  void encoder_lengths(const RobotModel& model, const std::array<double, kMaxAxes>& offsets,
+                       Eigen::VectorXd& lengths, Eigen::VectorXd& tensions);
 
   // The calibration run (worker thread; daemon_calibration.cc).
   void run_calibration(std::vector<Pose> poses, PeerInfo peer);
@@ -215,6 +240,9 @@ class Daemon {
   Reply cmd_stop(const nlohmann::json& args, const PeerInfo& peer);
   Reply cmd_fault_reset(const nlohmann::json& args, const PeerInfo& peer);
   Reply cmd_move(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_enable(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_disable(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_home(const nlohmann::json& args, const PeerInfo& peer);
 
   // Locking rule: the three mutexes are never held together, and none is held while calling the
   // RT controller (except post/command_in_use under motion_mu_), the store, the log or the event
@@ -251,6 +279,12 @@ class Daemon {
   std::uint64_t swap_seq_ = 0;
   std::string swap_why_;
   std::optional<Calibration> calibration_;
+  // The pose the daemon holds and whether it may command motion from it; the homing record in
+  // force (nullopt: none valid for these drives and this geometry); the encoder offsets of both.
+  PoseTrust trust_;
+  std::optional<HomingRecord> record_;
+  std::array<double, kMaxAxes> offsets_{};
+  std::vector<DriveIdentity> identities_;  // the drives as read at boot, in cable order
 
   // Under motion_mu_: the commands handed to the RT loop (post, reclaim).
   std::mutex motion_mu_;

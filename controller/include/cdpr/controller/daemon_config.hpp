@@ -121,6 +121,21 @@ struct AcceptanceGates {
   bool allow_unresolved_mismatch = false;         // "mismatch_unexplained" or "inconclusive" passes
 };
 
+// Start-up and homing (docs/daemon.md "Start-up", "Homing").
+struct StartSettings {
+  // Who enables the drives: the operator (`cdprctl enable`), or the daemon at start-up (the
+  // virtual robot's configurations).
+  enum class Enable { kOperator, kAtStart };
+  Enable enable = Enable::kOperator;
+  // Without a homing record: refuse motion until `cdprctl home` (false), or home with the
+  // reference method at start-up, logged (true: only for a robot that always powers up on its
+  // reference platform, e.g. the virtual robot).
+  bool home_without_record = false;
+  // Model uncertainty of the encoder pose check: the lengths of the pose from the encoders may
+  // miss the measured ones by the encoder tolerance plus this, m.
+  double model_uncertainty_m = 1e-3;
+};
+
 struct ControlSettings {
   std::string socket = "/run/cdpr/cdprd.sock";
   std::string group;  // owner group of the socket; "" = the daemon's group
@@ -140,6 +155,7 @@ struct DaemonConfig {
   MeasuringSettings measuring;
   IdentificationSettings identification;
   AcceptanceGates acceptance;
+  StartSettings start;
   ControlSettings control;
 };
 

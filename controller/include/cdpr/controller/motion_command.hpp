@@ -39,6 +39,15 @@ struct MotionCommand {
   Pose pose;
   const Geometry* geometry = nullptr;
   bool from_actual = false;
+  // kReference: no slew. The targets stay at the drives' actual positions (nothing moves); with
+  // a `pose` the inverse kinematics can solve, the loop holds that pose with the difference
+  // between the actual positions and its targets as trims (they fade out over the next move);
+  // otherwise, or with counts_only, it holds the counts without kinematics
+  // (RtMode::kHoldingCounts).
+  bool hold_actual = false;
+  bool counts_only = false;
+  // hold_actual: the encoder offsets (counts per cable) from this cycle on (a homing).
+  std::optional<std::array<double, kMaxAxes>> offsets;
   std::array<double, kMaxAxes> trim{};  // kTrim: counts per cable
 };
 

@@ -68,10 +68,11 @@ struct RobotCommand {
   bool send_targets = false;
   std::array<std::int32_t, kMaxAxes> target_counts{};
   // State requests of this cycle, applied in this order: fault reset (the latched fault and
-  // each drive in FAULT), enable (every drive towards OPERATION_ENABLED), quick stop (every
-  // drive).
+  // each drive in FAULT), enable (every drive towards OPERATION_ENABLED), disable (every drive
+  // towards SWITCH_ON_DISABLED), quick stop (every drive).
   bool fault_reset = false;
   bool enable = false;
+  bool disable = false;
   bool quick_stop = false;
 };
 

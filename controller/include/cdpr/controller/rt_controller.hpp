@@ -49,10 +49,11 @@
 namespace cdpr::controller {
 
 enum class RtMode : std::uint8_t {
-  kDisabled,  // drives not (yet) enabled, or stopped after a fault: targets follow the actuals
-  kHolding,   // holding a pose
-  kMoving,    // following a trajectory
-  kSlewing,   // re-referenced: the targets slew to the geometry's targets for the hold pose
+  kDisabled,       // drives not (yet) enabled, or stopped after a fault: targets follow the actuals
+  kHolding,        // holding a pose
+  kMoving,         // following a trajectory
+  kSlewing,        // re-referenced: the targets slew to the geometry's targets for the hold pose
+  kHoldingCounts,  // holding the drives' counts as they were, without kinematics (pose unknown)
 };
 const char* to_string(RtMode m);
 
@@ -163,6 +164,11 @@ class RtController {
   // Any thread: requests (taken at the next cycle).
   void request_quick_stop() noexcept { quick_stop_.store(true, std::memory_order_release); }
   void request_fault_reset() noexcept { fault_reset_.store(true, std::memory_order_release); }
+  // The operator's enable and disable: every drive towards OPERATION_ENABLED (the loop stays
+  // disabled, targets = actual, until a hold_actual reference is taken), or towards
+  // SWITCH_ON_DISABLED with the loop disabled (not a fault).
+  void request_enable() noexcept { enable_.store(true, std::memory_order_release); }
+  void request_disable() noexcept { disable_.store(true, std::memory_order_release); }
   // Starts a new average of encoder counts and tensions; returns its id (see RtSnapshot).
   std::uint64_t request_average() noexcept {
     return average_request_.fetch_add(1, std::memory_order_acq_rel) + 1;
@@ -201,13 +207,15 @@ class RtController {
   void reset_stuck_watch() noexcept { stuck_valid_.fill(false); }
   void start_move(const MotionCommand& c, canopen::Timestamp now) noexcept;
   void start_reference(const MotionCommand& c, canopen::Timestamp now) noexcept;
+  void hold_actual(const MotionCommand& c) noexcept;
   void step_trims() noexcept;
   void update_average() noexcept;
   void set_fault(const RtFault& f) noexcept;
   void hold_fault(const RtFault& f) noexcept;
   bool solve(const Pose& pose) noexcept;
   bool active() const noexcept {
-    return mode_ == RtMode::kMoving || mode_ == RtMode::kHolding || mode_ == RtMode::kSlewing;
+    return mode_ == RtMode::kMoving || mode_ == RtMode::kHolding || mode_ == RtMode::kSlewing ||
+           mode_ == RtMode::kHoldingCounts;
   }
   double cable_counts_per_metre(int i) const noexcept;
 
@@ -229,6 +237,8 @@ class RtController {
   std::atomic<int> in_use_geometry_{0};
   std::atomic<bool> quick_stop_{false};
   std::atomic<bool> fault_reset_{false};
+  std::atomic<bool> enable_{false};
+  std::atomic<bool> disable_{false};
   std::atomic<std::uint64_t> average_request_{0};
   std::uint64_t average_taken_ = 0;
 

@@ -8,14 +8,18 @@
 //   state/
 //     active                     "<version>\n": the geometry the daemon commands with
 //     history.jsonl              one line per activation (time, version, why, who)
-//     homing.json                encoder offsets (counts) of the last homing
+//     homing.json                the homing record: encoder offsets (counts), what they belong to
+//                                (drive identities, geometry version, method, time) and the
+//                                counts and pose last persisted while holding still
 //     geometry/000001.yaml       robot description of version 1 (docs/config.md)
 //     geometry/000001.json       its metadata (created, source, calibration, parent)
 //     calibrations/000001/       recording.csv, report.json, report.html, model_before.yaml,
 //                                model_after.yaml, calibration.json
 #pragma once
 
+#include <array>
 #include <cstddef>
+#include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
@@ -30,6 +34,32 @@ namespace cdpr::controller {
 // file of at most kMaxStateFileBytes (io::read_regular_file), else an error naming it.
 inline constexpr std::size_t kMaxStateFileBytes = 256u << 20;
 Result<std::string> read_text_file(const std::string& path);
+
+// One drive as identified at boot (object 0x1018).
+struct DriveIdentity {
+  int node = 0;
+  std::uint32_t vendor = 0, product = 0, serial = 0;
+  bool operator==(const DriveIdentity&) const = default;
+};
+
+// homing.json (docs/daemon.md "The homing record"). Format 2; format 1 (offsets, "how" and time
+// only, written before the record named what it belongs to) is read with `format` = 1 and the
+// fields it lacks left empty, so the daemon can refuse it with its reason.
+struct HomingRecord {
+  static constexpr int kFormat = 2;
+  int format = kFormat;
+  std::string method;  // reference | drive | absolute (format 1: its "how")
+  std::string time;    // UTC, when homed
+  int geometry_version = 0;
+  std::vector<double> offsets_counts;  // per cable
+  std::vector<DriveIdentity> drives;   // per cable, in cable order
+  // The last persisted state (a clean stop, or holding still): each drive's counts and the pose
+  // the daemon held there (x, y, z in m; roll, pitch, yaw in rad). Empty counts: none yet.
+  std::vector<double> counts;
+  std::array<double, 6> pose{};
+  bool clean_stop = false;  // written by an orderly stop (else while holding still)
+  std::string persisted;    // UTC, when counts and pose were written
+};
 
 class StateStore {
  public:
@@ -51,9 +81,10 @@ class StateStore {
   Status activate(int version, nlohmann::json why);
   Result<std::vector<nlohmann::json>> history() const;
 
-  // Encoder offsets of the last homing (counts per cable).
-  Status save_offsets(const std::vector<double>& offsets, std::string_view how);
-  Result<std::vector<double>> load_offsets() const;
+  // The homing record, written atomically; kNotFound when there is none, kParseError naming
+  // the file and field when it cannot be read.
+  Status save_homing(const HomingRecord& record);
+  Result<HomingRecord> load_homing() const;
 
   // Removes the temporary files of cdpr/io/atomic_file.hpp that a crash or a power loss between
   // a write and its rename left in the state directory (its folders, no symbolic link followed;

@@ -26,7 +26,8 @@ enum class DaemonState {
   kAwaitingAcceptance,
   kApplying,
   kFault,
-  kStopped,  // named in the protocol; no event leads to it
+  kStopped,   // named in the protocol; no event leads to it
+  kDisabled,  // the drives are disabled (after start-up until `enable`, or after `disable`)
 };
 const char* to_string(DaemonState s);
 
@@ -47,7 +48,11 @@ const char* to_string(CalibrationRunOutcome o);
 enum class SupervisorEvent {
   kBoot,                // start(): the network is being booted
   kStartFailed,         // boot, identities, enable or homing failed
-  kStarted,             // enabled and homed
+  kStarted,             // started with the drives enabled, holding where they are
+  kStartedDisabled,     // started with the drives disabled (start.enable: operator)
+  kEnabled,             // the operator enabled the drives; the RT loop holds where they are
+  kDisable,             // the operator disabled the drives
+  kHomed,               // `home` wrote a homing record; the pose is known again
   kMoveRequested,       // a `move` was accepted
   kRtMoving,            // the RT loop runs a trajectory (no sequence running)
   kRtHolding,           // the RT loop holds (no sequence running)
