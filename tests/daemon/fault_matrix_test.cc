@@ -1,8 +1,9 @@
 // The fault matrix (issue 17): every fault injected in every phase of cdprd's work, the outcome
 // observed and written as a table. The table is generated here and committed as
 // docs/reliability.md; the test fails when a cell's outcome differs from the committed table (run
-// with CDPR_UPDATE_RELIABILITY=1 to rewrite it after a deliberate change), and when a cell ends
-// unsafe (the robot not stopped or held, the geometry changed, the recording lost, no way back).
+// with CDPR_UPDATE_RELIABILITY=1 to rewrite the rows run after a deliberate change), and when a
+// cell ends unsafe (the robot not stopped or held, the geometry changed, the recording lost, no way
+// back).
 //
 // Most cells run in-process (tests/daemon/virtual_cell.hpp: cdprd's Daemon and the virtual robot
 // on the in-process bus with a manual clock, faults injected on demand at the chosen moment).
@@ -10,7 +11,11 @@
 // parent restarts the daemon on the same state directory; disk full is RLIMIT_FSIZE; a power loss
 // during a save is a forked writer killed while it writes the temporary file (before the rename).
 //
-// CDPR_MATRIX_ONLY=<substring of a fault's name> runs only those rows (and does not compare).
+// Each row is a test of its own
+// (Row/FaultMatrix.EveryPhaseEndsSafeAndMatchesDocsReliability/<Fault>), so that CTest runs rows
+// side by side; FaultMatrixTable checks that the committed table has the matrix's rows and no
+// other. CDPR_MATRIX_ONLY=<substring of a fault's name> runs only those rows (and does not
+// compare), as --gtest_filter=*<Fault> does with the comparison.
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <spdlog/sinks/ostream_sink.h>
@@ -20,6 +25,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -135,6 +141,67 @@ std::string numbers_hidden(std::string s) {
   return s;
 }
 
+// The measuring group of the identifying phase's 10-pose calibration.
+const std::string kIdentifyingMeasuring =
+    "{poses: 10, laser_samples: 3, laser_interval_s: 0.002, average_cycles: 25, noise_length_m: "
+    "4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 1}";
+
+// The scratch folder of this process's designed pose lists (removed at exit; a forked child
+// leaves with _exit and keeps it).
+class PoseFiles {
+ public:
+  PoseFiles()
+      : dir_(fs::temp_directory_path() / ("cdpr-matrix-poses-" + std::to_string(::getpid()))) {}
+  ~PoseFiles() {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  const fs::path& dir() const { return dir_; }
+  std::map<std::string, std::string> files;  // measuring group -> its pose list
+
+ private:
+  fs::path dir_;
+};
+
+// `measuring` (a flow mapping) with the poses cdprd designs for it as measuring.pose_file: the
+// design, made once per process by a dry run of a cell's daemon, is what every calibrate request
+// of a cell would design again (the phase's and the way back's), and it took most of a cell's
+// time; the faults act on the sequence, not on the design.
+std::string with_designed_poses(const std::string& measuring) {
+  static PoseFiles pf;
+  auto it = pf.files.find(measuring);
+  if (it == pf.files.end()) {
+    std::string file;
+    fs::create_directories(pf.dir());
+    const fs::path scratch = pf.dir() / "design";
+    if (auto c = testing::VirtualCell::create(kSource, scratch); c.ok()) {
+      testing::VirtualCell::Settings s;
+      s.measuring = measuring;
+      Reply dry;
+      dry.ok = false;
+      if ((*c)->start_daemon(s).ok()) dry = (*c)->request("calibrate", {{"dry_run", true}});
+      if (dry.ok && !dry.result["poses"].empty()) {
+        file = (pf.dir() / ("poses-" + std::to_string(pf.files.size()) + ".csv")).string();
+        std::ofstream out(file);
+        out << "# units: SI\npose,x,y,z,roll,pitch,yaw\n";
+        char line[256];
+        int j = 0;
+        for (const json& p : dry.result["poses"]) {
+          std::snprintf(line, sizeof line, "%d,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", j++,
+                        p[0].get<double>(), p[1].get<double>(), p[2].get<double>(),
+                        p[3].get<double>(), p[4].get<double>(), p[5].get<double>());
+          out << line;
+        }
+      }
+    }
+    fs::remove_all(scratch);
+    // (no file: the cells design their poses themselves, as cdprd does)
+    it = pf.files.emplace(measuring, file).first;
+  }
+  if (it->second.empty()) return measuring;
+  return measuring.substr(0, measuring.rfind('}')) + ", pose_file: " + it->second + "}";
+}
+
 // The state a cell is in, and the verdict.
 class MatrixCell {
  public:
@@ -142,6 +209,7 @@ class MatrixCell {
     dir_ = fs::temp_directory_path() / ("cdpr-matrix-" + std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
+    (void)extra_config();  // the poses designed before the cell's log is watched
   }
   ~MatrixCell() {
     cell_.reset();
@@ -312,12 +380,12 @@ class MatrixCell {
   }
   std::string extra_config() const {
     if (phase_ == Phase::kIdentifying) {
-      return row_.config +
-             "measuring: {poses: 10, laser_samples: 3, laser_interval_s: 0.002, average_cycles: "
-             "25, noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: "
-             "1}\nidentification: {diagnose: false}\n";
+      return row_.config + "measuring: " + with_designed_poses(kIdentifyingMeasuring) +
+             "\nidentification: {diagnose: false}\n";
     }
-    return row_.config;
+    // (the hot swap's way back calibrates on whichever geometry is then active: designed there)
+    if (phase_ == Phase::kHotSwap) return row_.config;
+    return "measuring: " + with_designed_poses(Cell::Settings{}.measuring) + "\n" + row_.config;
   }
   static std::string read(const std::string& path) {
     auto t = read_text_file(path);
@@ -827,86 +895,152 @@ std::map<std::pair<std::string, std::size_t>, std::string> parse_table(const std
   return out;
 }
 
-TEST(FaultMatrix, EveryFaultInEveryPhaseEndsSafeAndMatchesDocsReliability) {
-  (void)log_capture();
-  const char* only = std::getenv("CDPR_MATRIX_ONLY");
-  std::vector<FaultRow> rows = fault_rows();
-  std::map<std::pair<std::string, Phase>, std::string> cells;
-  const auto wall0 = std::chrono::steady_clock::now();
-  for (const FaultRow& row : rows) {
-    if (only != nullptr && row.name.find(only) == std::string::npos) continue;
-    for (Phase p : kPhases) {
-      std::string out;
-      if (auto na = row.not_applicable.find(p); na != row.not_applicable.end()) {
-        out = na->second;
-      } else {
-        const auto t0 = std::chrono::steady_clock::now();
-        if (row.custom) {
-          out = row.custom(p);
-        } else {
-          MatrixCell cell(row, p);
-          out = cell.run();
-        }
-        std::printf("[matrix] %-45s | %-22s | %5.1f s | %s\n", row.name.c_str(), phase_name(p),
-                    std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
-                    out.c_str());
-        std::fflush(stdout);
-      }
-      EXPECT_EQ(out.find("UNSAFE"), std::string::npos) << row.name << " / " << phase_name(p);
-      cells[{row.name, p}] = out;
-    }
+const std::vector<FaultRow>& all_rows() {
+  static const std::vector<FaultRow> rows = fault_rows();
+  return rows;
+}
+
+// The committed table (docs/reliability.md) by fault and phase; empty when the file is missing.
+std::map<std::pair<std::string, Phase>, std::string> committed_cells() {
+  std::map<std::pair<std::string, Phase>, std::string> out;
+  auto committed = read_text_file(kSource + "/docs/reliability.md");
+  if (!committed.ok()) return out;
+  for (const auto& [key, text] : parse_table(*committed)) {
+    if (key.second < kPhases.size()) out[{key.first, kPhases[key.second]}] = text;
   }
-  std::printf("[matrix] %zu cells in %.0f s wall\n", cells.size(),
-              std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count());
-  const std::string generated = table(rows, cells);
-  {
-    // The observed table, to compare with docs/reliability.md after a failure: in the test's
-    // working directory (the build tree under ctest).
-    std::ofstream out("reliability-matrix.md");
-    out << generated;
-    std::printf(
-        "[matrix] observed table written to reliability-matrix.md in the working directory\n");
+  return out;
+}
+
+// A committed cell's outcomes: a cell whose outcome depends on the timing of real threads (the
+// laser driver polls in real time while the robot's clock is manual) lists them separated by
+// " OR ".
+std::vector<std::string> alternatives(const std::string& cell) {
+  std::vector<std::string> allowed;
+  for (std::size_t from = 0;;) {
+    const std::size_t at = cell.find(" OR ", from);
+    allowed.push_back(cell.substr(from, at == std::string::npos ? std::string::npos : at - from));
+    if (at == std::string::npos) return allowed;
+    from = at + 4;
   }
-  if (only != nullptr) return;
+}
+
+// Replaces the generated table in docs/reliability.md by the committed cells with `row`'s
+// replaced (a committed cell whose alternatives include the new outcome is kept as it is).
+void rewrite_row(const FaultRow& row, const std::map<Phase, std::string>& got) {
   const std::string doc_path = kSource + "/docs/reliability.md";
   auto committed = read_text_file(doc_path);
+  ASSERT_TRUE(committed.ok()) << doc_path;
+  auto cells = committed_cells();
+  for (const auto& [phase, text] : got) {
+    auto it = cells.find({row.name, phase});
+    if (it != cells.end()) {
+      const auto allowed = alternatives(it->second);
+      if (std::find(allowed.begin(), allowed.end(), text) != allowed.end()) continue;
+    }
+    cells[{row.name, phase}] = text;
+  }
+  const std::string begin = "<!-- fault matrix: generated -->\n";
+  const std::string end = "<!-- end of the generated fault matrix -->\n";
+  const std::size_t a = committed->find(begin), b = committed->find(end);
+  ASSERT_TRUE(a != std::string::npos && b != std::string::npos && a < b) << doc_path;
+  const std::string text =
+      committed->substr(0, a + begin.size()) + table(all_rows(), cells) + committed->substr(b);
+  ASSERT_TRUE(io::write_file_atomically(doc_path, text).ok());
+  std::printf("[matrix] %s: row \"%s\" rewritten\n", doc_path.c_str(), row.name.c_str());
+}
+
+// One test per row of the matrix (CTest runs them side by side): its cell in every phase ends
+// safe and its outcome is the one docs/reliability.md gives.
+class FaultMatrix : public ::testing::TestWithParam<std::size_t> {};
+
+TEST_P(FaultMatrix, EveryPhaseEndsSafeAndMatchesDocsReliability) {
+  (void)log_capture();
+  const FaultRow& row = all_rows()[GetParam()];
+  const char* only = std::getenv("CDPR_MATRIX_ONLY");
+  if (only != nullptr && row.name.find(only) == std::string::npos) GTEST_SKIP() << row.name;
+  std::map<Phase, std::string> got;
+  const auto wall0 = std::chrono::steady_clock::now();
+  for (Phase p : kPhases) {
+    std::string out;
+    if (auto na = row.not_applicable.find(p); na != row.not_applicable.end()) {
+      out = na->second;
+    } else {
+      const auto t0 = std::chrono::steady_clock::now();
+      if (row.custom) {
+        out = row.custom(p);
+      } else {
+        MatrixCell cell(row, p);
+        out = cell.run();
+      }
+      std::printf("[matrix] %-45s | %-22s | %5.1f s | %s\n", row.name.c_str(), phase_name(p),
+                  std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(),
+                  out.c_str());
+      std::fflush(stdout);
+    }
+    EXPECT_EQ(out.find("UNSAFE"), std::string::npos) << row.name << " / " << phase_name(p);
+    got[p] = out;
+  }
+  std::printf("[matrix] %s: %zu cells in %.0f s wall\n", row.name.c_str(), got.size(),
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count());
+  if (only != nullptr) return;
   if (std::getenv("CDPR_UPDATE_RELIABILITY") != nullptr) {
-    ASSERT_TRUE(committed.ok()) << doc_path;
-    const std::string begin = "<!-- fault matrix: generated -->\n";
-    const std::string end = "<!-- end of the generated fault matrix -->\n";
-    const std::size_t a = committed->find(begin), b = committed->find(end);
-    ASSERT_TRUE(a != std::string::npos && b != std::string::npos && a < b) << doc_path;
-    const std::string text =
-        committed->substr(0, a + begin.size()) + generated + committed->substr(b);
-    ASSERT_TRUE(io::write_file_atomically(doc_path, text).ok());
-    std::printf("[matrix] %s rewritten\n", doc_path.c_str());
+    rewrite_row(row, got);
     return;
   }
-  ASSERT_TRUE(committed.ok()) << "docs/reliability.md is missing";
-  const auto want = parse_table(*committed);
-  const auto got = parse_table("<!-- fault matrix: generated -->\n" + generated);
-  for (const auto& [key, text] : got) {
-    auto it = want.find(key);
-    ASSERT_NE(it, want.end()) << "docs/reliability.md has no cell for " << key.first << " / "
-                              << phase_name(kPhases[key.second]);
-    // A cell whose outcome depends on the timing of real threads (the laser driver polls in real
-    // time while the robot's clock is manual) lists its possible outcomes separated by " OR ".
-    std::vector<std::string> allowed;
-    for (std::size_t from = 0;;) {
-      const std::size_t at = it->second.find(" OR ", from);
-      allowed.push_back(
-          it->second.substr(from, at == std::string::npos ? std::string::npos : at - from));
-      if (at == std::string::npos) break;
-      from = at + 4;
-    }
-    const bool one_of = std::find(allowed.begin(), allowed.end(), text) != allowed.end();
-    EXPECT_TRUE(one_of) << "got: " << text << "\nwant: " << it->second << "\n"
-                        << "the outcome of " << key.first << " / "
-                        << phase_name(kPhases[key.second])
-                        << " differs from docs/reliability.md (CDPR_UPDATE_RELIABILITY=1 "
-                           "rewrites it after a deliberate change)";
+  const auto want = committed_cells();
+  ASSERT_FALSE(want.empty()) << "docs/reliability.md is missing or has no generated table";
+  for (const auto& [phase, text] : got) {
+    auto it = want.find({row.name, phase});
+    ASSERT_NE(it, want.end()) << "docs/reliability.md has no cell for " << row.name << " / "
+                              << phase_name(phase);
+    const auto allowed = alternatives(it->second);
+    EXPECT_NE(std::find(allowed.begin(), allowed.end(), text), allowed.end())
+        << "got: " << text << "\nwant: " << it->second << "\n"
+        << "the outcome of " << row.name << " / " << phase_name(phase)
+        << " differs from docs/reliability.md (CDPR_UPDATE_RELIABILITY=1 rewrites it after a "
+           "deliberate change)";
   }
-  EXPECT_EQ(want.size(), got.size()) << "docs/reliability.md has cells the matrix does not make";
+}
+
+// The row's name as a test name: its letters and digits, each word capitalised.
+std::string row_test_name(const ::testing::TestParamInfo<std::size_t>& info) {
+  std::string name;
+  bool word = true;
+  for (const char c : all_rows()[info.param].name) {
+    if (std::isalnum(static_cast<unsigned char>(c)) == 0) {
+      word = true;
+      continue;
+    }
+    name += word ? static_cast<char>(std::toupper(static_cast<unsigned char>(c))) : c;
+    word = false;
+  }
+  return name;
+}
+
+INSTANTIATE_TEST_SUITE_P(Row, FaultMatrix, ::testing::Range<std::size_t>(0, all_rows().size()),
+                         row_test_name);
+
+// The committed table has the matrix's rows, in its order, each with a cell in every phase, and
+// no other: a row taken out of the matrix leaves no stale row in docs/reliability.md.
+TEST(FaultMatrixTable, DocsReliabilityHasEveryRowOfTheMatrixAndNoOther) {
+  const auto want = committed_cells();
+  ASSERT_FALSE(want.empty()) << "docs/reliability.md is missing or has no generated table";
+  std::map<std::pair<std::string, Phase>, std::string> expected;
+  for (const FaultRow& r : all_rows()) {
+    for (Phase p : kPhases) {
+      auto it = want.find({r.name, p});
+      EXPECT_NE(it, want.end()) << "docs/reliability.md has no cell for " << r.name << " / "
+                                << phase_name(p);
+      if (it != want.end()) expected[it->first] = it->second;
+    }
+  }
+  // The generated table of those cells is the committed one, row for row.
+  auto committed = read_text_file(kSource + "/docs/reliability.md");
+  ASSERT_TRUE(committed.ok());
+  EXPECT_NE(committed->find("<!-- fault matrix: generated -->\n" + table(all_rows(), expected) +
+                            "<!-- end of the generated fault matrix -->\n"),
+            std::string::npos)
+      << "docs/reliability.md's table has rows the matrix does not make, or another order";
 }
 
 }  // namespace

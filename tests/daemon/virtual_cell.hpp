@@ -53,6 +53,8 @@ struct CellSettings {
 
 class VirtualCell {
  public:
+  // Per try of the laser driver (of 3): the slave answers from a thread of this process.
+  static constexpr double kLaserAnswerTimeoutS = 0.5;
   // `source` is the project's root (config/), `dir` a scratch folder for the state directory.
   // How the laser reaches the daemon: Modbus TCP on loopback (the driver configured in code), or
   // Modbus RTU over a pseudo-terminal the virtual robot serves, read by the driver that cdprd's
@@ -324,6 +326,9 @@ class VirtualCell {
     modbus::TcpSettings tcp;
     tcp.port = slave->port();
     cfg.link.transport = tcp;
+    // Generous (the product's 0.1 s per try is missed when a loaded machine leaves the slave's
+    // thread unscheduled): a timeout seen here is the slave's injected one.
+    cfg.link.response_timeout_s = kLaserAnswerTimeoutS;
     cfg.poll_rate_hz = 200.0;
     laser = std::make_unique<modbus::LaserSensor>(cfg);
     return laser->start();
@@ -349,7 +354,9 @@ class VirtualCell {
     slave->set_distance(l.true_distance, l.status);
     const std::string file = (dir_ / "laser.yaml").string();
     std::ofstream(file) << "name: platform-laser\ntransport: rtu\ndevice: " << lc.pty_link
-                        << "\nbaud: 57600\nparity: even\nslave_id: 1\nresponse_timeout: 0.2\n"
+                        << "\nbaud: 57600\nparity: even\nslave_id: 1\nresponse_timeout: "
+                        << kLaserAnswerTimeoutS
+                        << "\n"
                            "retries: 2\npoll_rate: 200\nregister_map: "
                         << map_path << "\n";
     auto cfg = modbus::load_laser_config(file);

@@ -534,7 +534,9 @@ TEST(CompoundEffects, AnEffectStandingInForCreepBesideDrumScalesIsReportedAsConf
 // column made a third, absent effect pass every test beside the two (winch compliance per winch
 // here; seeds 1002 and 1003 the same or EA per cable; on LARGE creep stayed significant at p 1e-27
 // beside itself). Refitted beside the drum scales, creep's column is not significant on what the
-// model leaves, and the two present effects are named, nothing else.
+// model leaves, and the two present effects are named, nothing else. With the polish off, three
+// effects are named on this recording and the test fails (that diagnosis is not run here: it
+// took half of the test's minutes).
 TEST(CompoundEffects, ACreepFittedBeforeTheDrumScalesIsRefittedBesideThem) {
   const std::vector<double> scale = {0.01, -0.008, 0.006, -0.01, 0.008, -0.006, 0.01, -0.005};
   const double ea = mini().truth.cables[0].ea;
@@ -544,12 +546,6 @@ TEST(CompoundEffects, ACreepFittedBeforeTheDrumScalesIsRefittedBesideThem) {
         e.creep->coefficient = 1.0 / (ea * std::log1p(500.0 / e.creep->tau_s));
       },
       true, 1001);
-  DiagnosisOptions stale = options(true);
-  stale.polish_gauss_newton = false;
-  Result<Diagnosis> before = diagnose(mini().nominal, set, nullptr, {}, stale);
-  ASSERT_TRUE(before.ok()) << before.status().to_string();
-  EXPECT_EQ(before->accepted.size(), 3u) << before->headline;
-
   ASSERT_TRUE(options(true).polish_gauss_newton);  // the default
   Result<Diagnosis> d = diagnose(mini().nominal, set, nullptr, {}, options(true));
   ASSERT_TRUE(d.ok()) << d.status().to_string();
