@@ -173,9 +173,10 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   c.file = doc.file();
   const YamlField root = doc.root();
   CDPR_RETURN_IF_ERROR(root.expect_map("a mapping of daemon settings"));
-  CDPR_RETURN_IF_ERROR(root.check_keys(
-      {"robot", "canopen", "laser", "can_interface", "state_directory", "realtime", "identity",
-       "motion", "tension_watch", "measuring", "identification", "acceptance", "control"}));
+  CDPR_RETURN_IF_ERROR(
+      root.check_keys({"robot", "canopen", "laser", "can_interface", "state_directory", "realtime",
+                       "identity", "motion", "tension_watch", "measuring", "identification",
+                       "acceptance", "control", "safety"}));
   const std::string dir = std::filesystem::path(c.file).parent_path().string();
   CDPR_ASSIGN_OR_RETURN(YamlField robot, root.required("robot", "the robot description"));
   CDPR_ASSIGN_OR_RETURN(c.robot, robot.text());
@@ -196,6 +197,7 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   CDPR_RETURN_IF_ERROR(read_identification(root["identification"], c.identification));
   CDPR_RETURN_IF_ERROR(read_acceptance(root["acceptance"], c.acceptance));
   CDPR_RETURN_IF_ERROR(read_control(root["control"], dir, c.control));
+  CDPR_RETURN_IF_ERROR(read_safety_settings(root["safety"], c.safety));
   return c;
 }
 

@@ -14,6 +14,7 @@
 #include <string_view>
 
 #include "cdpr/calibration/identification.hpp"
+#include "cdpr/controller/safety_config.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr::controller {
@@ -141,6 +142,7 @@ struct DaemonConfig {
   IdentificationSettings identification;
   AcceptanceGates acceptance;
   ControlSettings control;
+  SafetySettings safety;  // e-stop inputs, brakes, winch limits, workspace box (safety_config.hpp)
 };
 
 Result<DaemonConfig> parse_daemon_config(std::string_view yaml, std::string_view file);
