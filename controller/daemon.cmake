@@ -4,9 +4,11 @@ set(_d ${CDPR_CONTROLLER_DIR})
 add_library(cdpr_daemon STATIC
   ${_d}/src/daemon_config.cc
   ${_d}/src/config_check.cc
+  ${_d}/src/safety_config.cc
   ${_d}/src/canopen_robot_io.cc
   ${_d}/src/rt_controller.cc
   ${_d}/src/rt_controller_watch.cc
+  ${_d}/src/rt_controller_safety.cc
   ${_d}/src/state_store.cc
   ${_d}/src/calibration_report.cc
   ${_d}/src/supervisor.cc

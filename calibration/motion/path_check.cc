@@ -146,12 +146,16 @@ Status check_cables(const RobotModel& model, const KinematicsData& k,
   const int m = model.num_cables();
   for (int i = 0; i < m; ++i) {
     const double L = k.lengths(i);
-    if (L < options.min_cable_length || L > options.max_cable_length) {
+    const auto u = static_cast<std::size_t>(i);
+    const double lo =
+        options.min_cable_lengths.empty() ? options.min_cable_length : options.min_cable_lengths[u];
+    const double hi =
+        options.max_cable_lengths.empty() ? options.max_cable_length : options.max_cable_lengths[u];
+    if (L < lo || L > hi) {
       failure = Failure::kLength;
-      const bool above = L > options.max_cable_length;
+      const bool above = L > hi;
       return Status::error(ErrorCode::kOutOfRange, "cable %d is %.4f m long %s %.4f m", i + 1, L,
-                           above ? ">" : "<",
-                           above ? options.max_cable_length : options.min_cable_length);
+                           above ? ">" : "<", above ? hi : lo);
     }
   }
   const double d = options.cable_diameter;
@@ -277,6 +281,21 @@ Status validate_options(const RobotModel& model, const PathCheckOptions& options
                          "and a finite cable_diameter >= 0 (got %g)",
                          options.min_cable_length, options.max_cable_length,
                          options.cable_diameter);
+  }
+  for (const std::vector<double>* v : {&options.min_cable_lengths, &options.max_cable_lengths}) {
+    if (!v->empty() && v->size() != static_cast<std::size_t>(m)) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "path check: %zu per-cable length limits for %d cables", v->size(), m);
+    }
+  }
+  for (std::size_t i = 0;
+       i < options.min_cable_lengths.size() && !options.max_cable_lengths.empty(); ++i) {
+    if (!(options.min_cable_lengths[i] >= 0.0 &&
+          options.max_cable_lengths[i] > options.min_cable_lengths[i])) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "path check: cable %zu: need 0 <= min < max length (got %g, %g)", i + 1,
+                           options.min_cable_lengths[i], options.max_cable_lengths[i]);
+    }
   }
   if (options.workspace_box &&
       (!options.workspace_box->min().allFinite() || !options.workspace_box->max().allFinite() ||

@@ -220,6 +220,32 @@ TEST(CheckPath, RefusesAMoveLeavingTheWorkspaceBox) {
   EXPECT_TRUE(check_path(mini, plan_move(mini.home, pose_at(0.15, -0.1, 0.1)), options).ok());
 }
 
+TEST(CheckPath, RefusesAMoveBeyondOneWinchsOwnLengthLimitNamingTheCable) {
+  const RobotModel mini = testing::mini_robot();
+  const PoseTrajectory move = plan_move(mini.home, pose_at(0.1, 0.0, 0.0));
+  KinematicsData k(mini.num_cables());
+  ASSERT_TRUE(inverse_kinematics(mini, mini.home, k));
+  PathCheckOptions options;
+  options.min_cable_lengths.assign(static_cast<std::size_t>(mini.num_cables()), 0.0);
+  options.max_cable_lengths.assign(static_cast<std::size_t>(mini.num_cables()), 10.0);
+  EXPECT_TRUE(check_path(mini, move, options).ok());
+  // Every cable whose length the move changes by more than 1 cm, limited to 5 mm from home: the
+  // first one is named.
+  KinematicsData end(mini.num_cables());
+  ASSERT_TRUE(inverse_kinematics(mini, pose_at(0.1, 0.0, 0.0), end));
+  int limited = -1;
+  for (int i = 0; i < mini.num_cables() && limited < 0; ++i) {
+    if (end.lengths(i) - k.lengths(i) > 0.01) limited = i;
+  }
+  ASSERT_GE(limited, 0);
+  options.max_cable_lengths[static_cast<std::size_t>(limited)] = k.lengths(limited) + 0.005;
+  const Status s = check_path(mini, move, options);
+  EXPECT_EQ(s.code(), ErrorCode::kOutOfRange);
+  EXPECT_TRUE(contains(s, "cable " + std::to_string(limited + 1) + " is")) << s.to_string();
+  options.max_cable_lengths.pop_back();
+  EXPECT_EQ(check_path(mini, move, options).code(), ErrorCode::kInvalidArgument);
+}
+
 TEST(CheckPath, RejectsBadOptionsNamingTheField) {
   const RobotModel mini = testing::mini_robot();
   const PoseTrajectory move = plan_move(mini.home, pose_at(0.1, 0, 0));

@@ -171,6 +171,10 @@ void stop_all(Daemon& d, control::ControlServer& srv, RtLoop& loop, modbus::Lase
   d.persist_stop();
   d.shutdown();
   srv.stop();
+  if (Status s = d.apply_brakes_and_disable(2.0 + d.config().safety.brakes.apply_delay_s);
+      !s.ok()) {
+    spdlog::warn("shutdown: {}", s.to_string());
+  }
   loop.stop();
   if (Status s = d.master().shutdown(std::chrono::seconds(2)); !s.ok()) {
     spdlog::warn("shutdown: {}", s.to_string());

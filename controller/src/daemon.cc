@@ -32,6 +32,7 @@ Result<std::unique_ptr<Daemon>> Daemon::create(DaemonConfig config, DaemonIo io)
   auto robot = config::load_robot_config(d->config_.robot);
   if (!robot.ok()) return robot.status();
   d->nominal_ = std::move(*robot);
+  CDPR_RETURN_IF_ERROR(check_safety_limits(d->config_.safety, d->nominal_.num_cables()));
   auto network = canopen::load_config(d->config_.canopen);
   if (!network.ok()) return network.status();
   d->network_ = std::move(*network);
@@ -49,7 +50,7 @@ Result<std::unique_ptr<Daemon>> Daemon::create(DaemonConfig config, DaemonIo io)
   if (!master.ok()) return master.status();
   d->master_ = std::move(*master);
 
-  auto robot_io = CanopenRobotIO::create(*d->master_, d->io_.laser);
+  auto robot_io = CanopenRobotIO::create(*d->master_, d->io_.laser, d->config_.safety);
   if (!robot_io.ok()) return robot_io.status();
   d->robot_io_ = std::move(*robot_io);
   auto rt = RtController::create(*d->robot_io_, *d->active_, d->rt_options());
@@ -75,7 +76,42 @@ RtControllerOptions Daemon::rt_options() const {
   ro.settle_tension = ms.settle_tension_tolerance;
   ro.slew_velocity = config_.motion.max_cable_speed;
   ro.slew_acceleration = config_.motion.max_cable_acceleration;
+  safety_options(ro);
   return ro;
+}
+
+void Daemon::safety_options(RtControllerOptions& ro) const {
+  const SafetySettings& s = config_.safety;
+  const auto cycles = [&ro](double seconds) {
+    return std::clamp(static_cast<int>(std::ceil(seconds / ro.cycle_s)), 0, 1000000);
+  };
+  ro.brakes = s.brakes.control != BrakeControl::kNone;
+  ro.brake_release_cycles = cycles(s.brakes.release_delay_s);
+  ro.brake_apply_cycles = cycles(s.brakes.apply_delay_s);
+  for (int i = 0; i < active_->model.num_cables(); ++i) {
+    ro.min_cable_length[static_cast<std::size_t>(i)] = cable_length_limit(s, i, false);
+    ro.max_cable_length[static_cast<std::size_t>(i)] = cable_length_limit(s, i, true);
+  }
+  ro.cable_length_tolerance = s.cable_length_tolerance;
+  ro.workspace_box = s.workspace;
+  ro.box_min = s.workspace_min;
+  ro.box_max = s.workspace_max;
+}
+
+PathCheckOptions Daemon::path_check_options() const {
+  const SafetySettings& s = config_.safety;
+  PathCheckOptions pc;
+  pc.tension_margin = config_.motion.tension_margin;
+  if (s.workspace) {
+    pc.workspace_box = Eigen::AlignedBox3d(Eigen::Vector3d(s.workspace_min.data()),
+                                           Eigen::Vector3d(s.workspace_max.data()));
+  }
+  const int m = nominal_.num_cables();
+  for (int i = 0; i < m && (!s.min_cable_length.empty() || !s.max_cable_length.empty()); ++i) {
+    pc.min_cable_lengths.push_back(cable_length_limit(s, i, false));
+    pc.max_cable_lengths.push_back(cable_length_limit(s, i, true));
+  }
+  return pc;
 }
 
 void Daemon::transition(SupervisorEvent event, const std::string& reason) {
@@ -144,6 +180,21 @@ void Daemon::shutdown() {
   if (worker_.joinable()) worker_.join();
 }
 
+Status Daemon::apply_brakes_and_disable(double timeout_s) {
+  if (config_.safety.brakes.control == BrakeControl::kNone) return Status::success();
+  rt_->request_disable();
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  while (!rt_->snapshot().disabled) {
+    if (std::chrono::steady_clock::now() > end) {
+      return Status::error(ErrorCode::kTimeout, "brakes and disable: not done within %.1f s",
+                           timeout_s);
+    }
+    std::this_thread::sleep_for(io_.poll);
+  }
+  spdlog::info("stopping: brakes applied, drives disabled");
+  return Status::success();
+}
+
 // ---- Start-up ---------------------------------------------------------------------------------
 
 Status Daemon::check_identities() {
@@ -192,6 +243,32 @@ Status Daemon::check_identities() {
   return Status::success();
 }
 
+std::string Daemon::estop_sources(std::uint32_t open) const {
+  std::string which;
+  for (std::size_t j = 0; j < config_.safety.estop.size(); ++j) {
+    if (((open >> j) & 1u) == 0) continue;
+    which += (which.empty() ? "" : "; ") + std::string("source ") + std::to_string(j + 1) + " (" +
+             config_.safety.estop[j].where + ")";
+  }
+  return which;
+}
+
+Status Daemon::check_estop() {
+  if (config_.safety.estop.empty()) return Status::success();
+  // A fresh TPDO of each source's node first (an event-driven one comes within its timer).
+  double stale_s = 0.0;
+  for (const EStopSource& e : config_.safety.estop) stale_s = std::max(stale_s, e.stale_s);
+  (void)master_->wait_for([&] { return robot_io_->safety_open(io_.clock->now()) == 0; },
+                          std::chrono::duration_cast<std::chrono::nanoseconds>(
+                              std::chrono::duration<double>(2.0 * stale_s)),
+                          "e-stop inputs");
+  const std::uint32_t open = robot_io_->safety_open(io_.clock->now());
+  if (open == 0) return Status::success();
+  return Status(ErrorCode::kFailedPrecondition,
+                "e-stop input open, silent or stale: " + estop_sources(open) +
+                    ": close it, then start cdprd again");
+}
+
 Status Daemon::enable_drives() {
   Status enabled = master_->enable_all(std::chrono::seconds(10));
   bool any_fault = false;
@@ -222,6 +299,7 @@ Status Daemon::start() {
   const bool at_start = config_.start.enable == StartSettings::Enable::kAtStart;
   Status s = master_->boot();
   if (s.ok()) s = check_identities();
+  if (s.ok()) s = check_estop();
   if (s.ok()) s = restore_homing();
   if (s.ok() && at_start) s = enable_drives();
   if (!s.ok()) {
@@ -346,8 +424,7 @@ Result<std::uint64_t> Daemon::start_move(const Pose& pose, double reference_tens
   limits.max_angular_jerk = ms.max_angular_jerk;
   auto traj = PoseTrajectory::plan(s.pose(), pose, limits);
   if (!traj.ok()) return traj.status();
-  PathCheckOptions pc;
-  pc.tension_margin = ms.tension_margin;
+  PathCheckOptions pc = path_check_options();
   pc.reference_tension = std::isnan(reference_tension) ? g->reference_tension : reference_tension;
   if (Status st = check_path(g->model, *traj, pc); !st.ok()) return st;
   auto c = std::make_unique<MotionCommand>();

@@ -109,8 +109,7 @@ Result<std::vector<Pose>> Daemon::plan_poses(const std::string& poses_csv) {
   }
   // Every pose must be reachable with the tension margin; a designed pose that is not is dropped
   // (the design's own test has no margin), a pose the operator gave is refused.
-  PathCheckOptions pc;
-  pc.tension_margin = config_.motion.tension_margin;
+  PathCheckOptions pc = path_check_options();
   std::vector<Pose> kept;
   const bool designed = poses_csv.empty() && config_.measuring.pose_file.empty();
   for (std::size_t j = 0; j < poses.size(); ++j) {

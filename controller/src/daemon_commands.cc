@@ -113,6 +113,10 @@ json Daemon::status() const {
       {"actual_counts", actual},
       {"largest_reference_step_counts", s.largest_reference_step},
       {"largest_move_step_counts", s.largest_move_step},
+      // The safety chain: e-stop sources read open (bit j: source j + 1), brakes, disabled.
+      {"estop_open", s.safety_open},
+      {"brakes_released", s.brakes_released},
+      {"disabled", s.disabled},
       // One cycle of the fastest normal cable motion (max_cable_speed), the bound a
       // re-reference step must stay under.
       {"one_cycle_motion_counts", config_.motion.max_cable_speed *
@@ -400,6 +404,12 @@ Reply Daemon::cmd_fault_reset(const json&, const PeerInfo& peer) {
     return Reply::failure(
         ControlErrorCode::kFault,
         "node(s) " + nodes + " rebooted and lost their configuration: restart cdprd");
+  }
+  if (const std::uint32_t open = rt_->snapshot().safety_open; open != 0) {
+    const std::string which = estop_sources(open);
+    spdlog::warn("fault reset refused: e-stop input open: {}", which);
+    return Reply::failure(ControlErrorCode::kFault,
+                          "e-stop input open, silent or stale: " + which + ": close it first");
   }
   spdlog::info("fault reset requested by pid {} uid {} gid {}", peer.pid, peer.uid, peer.gid);
   if (worker_.joinable() && !worker_running_.load()) worker_.join();

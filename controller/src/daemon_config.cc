@@ -203,7 +203,7 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   CDPR_RETURN_IF_ERROR(
       root.check_keys({"robot", "canopen", "laser", "can_interface", "state_directory", "realtime",
                        "identity", "motion", "tension_watch", "measuring", "identification",
-                       "acceptance", "start", "control"}));
+                       "acceptance", "start", "control", "safety"}));
   const std::string dir = std::filesystem::path(c.file).parent_path().string();
   CDPR_ASSIGN_OR_RETURN(YamlField robot, root.required("robot", "the robot description"));
   CDPR_ASSIGN_OR_RETURN(c.robot, robot.text());
@@ -225,6 +225,7 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   CDPR_RETURN_IF_ERROR(read_acceptance(root["acceptance"], c.acceptance));
   CDPR_RETURN_IF_ERROR(read_start(root["start"], c.start));
   CDPR_RETURN_IF_ERROR(read_control(root["control"], dir, c.control));
+  CDPR_RETURN_IF_ERROR(read_safety_settings(root["safety"], c.safety));
   return c;
 }
 

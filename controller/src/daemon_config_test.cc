@@ -106,6 +106,53 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
   EXPECT_NE(bad_yaml.status().to_string().find("d.yaml:"), std::string::npos);
 }
 
+TEST(DaemonConfig, SafetyReadsSourcesBrakesLimitsAndTheBox) {
+  auto c = parse_daemon_config(
+      "robot: r\ncanopen: n\nsafety:\n"
+      "  estop:\n"
+      "    - {kind: drive_input, node: 1, bit: 16}\n"
+      "    - {kind: pdo_bit, node: 10, index: 0x6000, sub: 1, bit: 3, stale_s: 0.05}\n"
+      "  brakes: {control: output, bit: 0, release_delay_s: 0.3, apply_delay_s: 0.1}\n"
+      "  cable_length: {min: 0.05, max: [1, 2], tolerance: 0.001}\n"
+      "  workspace: {min: [-0.3, -0.3, -0.2], max: [0.3, 0.3, 0.4]}\n",
+      "d.yaml");
+  ASSERT_TRUE(c.ok()) << c.status().to_string();
+  const SafetySettings& s = c->safety;
+  ASSERT_EQ(s.estop.size(), 2u);
+  EXPECT_EQ(s.estop[0].index, 0x60FD) << "drive_input reads the drive's digital inputs";
+  EXPECT_EQ(s.estop[0].bit, 16);
+  EXPECT_EQ(s.estop[1].index, 0x6000);
+  EXPECT_EQ(s.estop[1].sub, 1);
+  EXPECT_DOUBLE_EQ(s.estop[1].stale_s, 0.05);
+  EXPECT_NE(s.estop[1].where.find("d.yaml:6"), std::string::npos) << s.estop[1].where;
+  EXPECT_EQ(s.brakes.control, BrakeControl::kOutput);
+  EXPECT_EQ(s.brakes.index, 0x60FE);
+  EXPECT_DOUBLE_EQ(s.brakes.release_delay_s, 0.3);
+  EXPECT_DOUBLE_EQ(cable_length_limit(s, 1, false), 0.05) << "one minimum for all";
+  EXPECT_DOUBLE_EQ(cable_length_limit(s, 1, true), 2.0);
+  EXPECT_TRUE(s.workspace);
+  EXPECT_DOUBLE_EQ(s.workspace_max[2], 0.4);
+  EXPECT_TRUE(check_safety_limits(s, 2).ok());
+  const Status three = check_safety_limits(s, 3);
+  EXPECT_NE(three.to_string().find("2 cable lengths for a robot of 3 cables"), std::string::npos)
+      << three.to_string();
+
+  const std::pair<std::string, std::string> refused[] = {
+      {"estop: [{kind: relay, node: 1, bit: 0}]", "'relay' is not one of drive_input, pdo_bit"},
+      {"estop: [{kind: pdo_bit, node: 1, bit: 0}]", "index: missing"},
+      {"estop: [{kind: drive_input, node: 1, bit: 32}]", "safety.estop[0].bit"},
+      {"estop: [{kind: drive_input, node: 1, index: 0x6000, bit: 1}]", "no index or sub"},
+      {"brakes: {control: sometimes}", "safety.brakes.control"},
+      {"workspace: {min: [0, 0, 0], max: [1, 1, 0]}", "max must exceed min on every axis (z)"},
+      {"cable_length: {min: -1}", "safety.cable_length.min"},
+  };
+  for (const auto& [group, text] : refused) {
+    auto r = parse_daemon_config("robot: r\ncanopen: n\nsafety:\n  " + group + "\n", "d.yaml");
+    ASSERT_FALSE(r.ok()) << group;
+    EXPECT_NE(r.status().to_string().find(text), std::string::npos) << r.status().to_string();
+  }
+}
+
 // identification.estimate takes cdpr-fit's --estimate words: every word of the one table, and the
 // same options as set_estimate() gives the CLI; an unknown word is refused at its line.
 TEST(DaemonConfig, EstimateUsesTheWordsOfCdprFitsEstimate) {

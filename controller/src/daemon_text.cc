@@ -28,6 +28,21 @@ std::string fault_text(const RtFault& f) {
   std::string s = to_string(f.kind);
   if (f.node > 0) s += " at node " + std::to_string(f.node);
   if (f.cable >= 0) s += " on cable " + std::to_string(f.cable + 1);
+  char safety[80] = "";
+  switch (f.kind) {
+    case FaultKind::kEStop:
+      std::snprintf(safety, sizeof safety, ": source %d open, silent or stale", int{f.code});
+      return s + safety;
+    case FaultKind::kCableLimit:
+      std::snprintf(safety, sizeof safety, " (length %.4f m outside the winch's limits)", f.value);
+      return s + safety;
+    case FaultKind::kWorkspace:
+      std::snprintf(safety, sizeof safety, ": %c = %.4f m outside the workspace box",
+                    "xyz"[f.code % 3], f.value);
+      return s + safety;
+    default:
+      break;
+  }
   if (f.code != 0) {
     char buf[16];
     std::snprintf(buf, sizeof buf, "0x%04X", f.code);

@@ -47,6 +47,12 @@ const char* to_string(FaultKind f) {
       return "force_sensor";
     case FaultKind::kForceStuck:
       return "force_stuck";
+    case FaultKind::kEStop:
+      return "estop";
+    case FaultKind::kCableLimit:
+      return "cable_limit";
+    case FaultKind::kWorkspace:
+      return "workspace";
   }
   return "?";
 }
@@ -76,6 +82,7 @@ RtController::RtController(RobotIO& io, const Geometry& initial, const RtControl
   out_.num_axes = m_;
   hold_pose_ = pose_ = initial.model.home;
   ref_tension_ = initial.reference_tension;
+  snap_.brakes_released = !options.brakes;  // without brakes nothing holds a command back
   in_use_geometry_.store(initial.version, std::memory_order_release);
   snap_.num_cables = m_;
   snap_.geometry_version = initial.version;
@@ -94,6 +101,8 @@ void RtController::cycle(canopen::Timestamp now) noexcept {
   take_command(now);
   sample_trajectory(now);
   compute_targets(now);
+  check_limits(now);
+  sequence_brakes();
   write_outputs();
   update_settle();
   publish(now);
@@ -143,30 +152,26 @@ void RtController::take_requests(canopen::Timestamp now) noexcept {
   if (quick_stop_.exchange(false, std::memory_order_acq_rel)) {
     set_fault({FaultKind::kQuickStop, 0, -1, 0, 0.0, now.count()});
   }
-  if (fault_reset_.exchange(false, std::memory_order_acq_rel) && fault_.kind != FaultKind::kNone) {
+  take_enable_requests();
+  // While an e-stop input reads open a fault reset is refused: the fault stays latched.
+  if (fault_reset_.exchange(false, std::memory_order_acq_rel) && fault_.kind != FaultKind::kNone &&
+      in_.safety_open == 0) {
     fault_ = RtFault{};
     // The reset supersedes a quick stop requested before it in this cycle; a fault watched
     // after it quick-stops again.
     out_.quick_stop = false;
-    out_.fault_reset = out_.enable = true;
+    out_.fault_reset = true;
+    out_.enable = !disable_requested_;
     slack_count_.fill(0);
     overload_count_.fill(0);
     reset_stuck_watch();
-  }
-  if (disable_.exchange(false, std::memory_order_acq_rel)) {
-    out_.disable = true;
-    mode_ = RtMode::kDisabled;
-    trim_.fill(0.0);
-    trim_goal_.fill(0.0);
-  }
-  if (enable_.exchange(false, std::memory_order_acq_rel) && fault_.kind == FaultKind::kNone) {
-    out_.enable = true;
   }
 }
 
 void RtController::take_command(canopen::Timestamp now) noexcept {
   MotionCommand* c = inbox_.load(std::memory_order_acquire);
   if (c == nullptr || fault_.kind != FaultKind::kNone) return;  // a faulted loop takes nothing
+  if (!snap_.brakes_released) return;  // no motion against an applied brake
   // A move or a trim starts from holding; a re-reference only while holding still, or while
   // disabled from the actual positions once every drive is enabled. Otherwise the command
   // waits in the inbox for a later cycle.

@@ -105,6 +105,12 @@ class RtRig : public ::testing::Test {
     ASSERT_TRUE(
         run_until([&](const RtSnapshot& s) { return s.command_done == seq && s.settled; }, 2000));
   }
+  // Kinematic cable lengths at `pose` (m).
+  Eigen::VectorXd lengths_at(const Pose& pose) {
+    CommandData data(geometry_.model);
+    EXPECT_TRUE(command_counts(geometry_.model, pose, geometry_.reference_tension, data).ok());
+    return data.kinematics.lengths;
+  }
   double counts_per_metre() const {
     return 1.0 / winch_metres_per_count(geometry_.model.winches[0]);
   }
@@ -345,6 +351,181 @@ TEST_F(RtRig, CycleAllocatesNothingWhileHoldingMovingOrFaulted) {
   }
   EXPECT_EQ(allocations, 0u);
   EXPECT_GT(rt_->snapshot().largest_move_step, 0.0) << "the platform moved";
+}
+
+// ---- The safety chain (rt_controller_safety.cc) -------------------------------------------------
+
+TEST_F(RtRig, OpenEStopLatchesAQuickStopThatResetsOnlyOnceTheInputCloses) {
+  io_.safety_inputs = 2;
+  hold_home();
+  io_.safety_open = 0b10;  // the second source opens
+  cycle();
+  RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.fault.kind, FaultKind::kEStop);
+  EXPECT_EQ(s.fault.code, 2) << "the source, from 1";
+  EXPECT_EQ(s.mode, RtMode::kDisabled);
+  EXPECT_EQ(io_.quick_stops(), 1) << "quick stop in the cycle that read it";
+  EXPECT_EQ(s.safety_open, 0b10u);
+  rt_->request_fault_reset();
+  cycle();
+  EXPECT_EQ(rt_->snapshot().fault.kind, FaultKind::kEStop) << "refused while the input is open";
+  EXPECT_EQ(io_.fault_resets(), 0);
+  io_.safety_open = 0;
+  cycle(10);
+  EXPECT_EQ(rt_->snapshot().fault.kind, FaultKind::kEStop) << "closing it alone clears nothing";
+  rt_->request_fault_reset();
+  cycle();
+  s = rt_->snapshot();
+  EXPECT_EQ(s.fault.kind, FaultKind::kNone);
+  EXPECT_EQ(io_.fault_resets(), 1);
+  EXPECT_EQ(s.safety_open, 0u);
+}
+
+TEST_F(RtRig, BrakesReleaseOnlyAfterTheDriveHoldsTorqueAndApplyBeforeItIsDisabled) {
+  RtControllerOptions o;
+  o.brakes = true;
+  o.brake_release_cycles = 10;
+  o.brake_apply_cycles = 7;
+  make(o);
+  io_.brakes = true;
+  io_.state.fill(FakeRobotIO::DriveState::kDisabled);
+  const std::uint64_t seq = post_reference(geometry_.model.home, true);
+  cycle(3);
+  EXPECT_FALSE(io_.brake_released(0)) << "not enabled: applied";
+  rt_->request_disable();
+  cycle();
+  rt_->request_enable();
+  int enabled_cycles = 0, released_at = -1;
+  for (int c = 0; c < 40 && released_at < 0; ++c) {
+    cycle();
+    enabled_cycles = io_.state[0] == FakeRobotIO::DriveState::kEnabled ? enabled_cycles + 1 : 0;
+    if (io_.brake_released(0)) released_at = enabled_cycles;
+    EXPECT_EQ(rt_->snapshot().command_taken, 0u) << "no motion against an applied brake";
+  }
+  EXPECT_GT(released_at, o.brake_release_cycles) << "released after the delay, drive enabled";
+  ASSERT_TRUE(run_until([&](const RtSnapshot& s) { return s.command_done == seq; }, 2000));
+  EXPECT_TRUE(rt_->snapshot().brakes_released);
+  // Disable: the brakes at once, the drives only after the apply delay.
+  rt_->request_disable();
+  int applied_for = 0;
+  while (io_.state[0] == FakeRobotIO::DriveState::kEnabled && applied_for < 40) {
+    cycle();
+    EXPECT_FALSE(io_.brake_released(0));
+    if (!io_.last().disable) ++applied_for;
+  }
+  EXPECT_EQ(applied_for, o.brake_apply_cycles) << "the disable follows the apply delay";
+  EXPECT_EQ(io_.state[0], FakeRobotIO::DriveState::kDisabled);
+  EXPECT_TRUE(rt_->snapshot().disabled);
+  EXPECT_EQ(rt_->snapshot().mode, RtMode::kDisabled);
+}
+
+TEST_F(RtRig, AFaultAppliesTheBrakesAtOnceAndTheResetReleasesThemOnlyAfterTheDelay) {
+  RtControllerOptions o;
+  o.brakes = true;
+  o.brake_release_cycles = 5;
+  make(o);
+  io_.brakes = true;
+  hold_home();
+  ASSERT_TRUE(io_.brake_released(3));
+  io_.fault(1, 0x2310);
+  cycle();
+  for (int i = 0; i < m_; ++i) EXPECT_FALSE(io_.brake_released(i)) << "cable " << i + 1;
+  EXPECT_FALSE(rt_->snapshot().brakes_released);
+  rt_->request_fault_reset();
+  cycle(o.brake_release_cycles);
+  EXPECT_FALSE(io_.brake_released(0)) << "the drives are enabled again, not yet holding";
+  cycle(3);
+  EXPECT_TRUE(io_.brake_released(0));
+}
+
+TEST_F(RtRig, ACommandedCableLengthBeyondItsWinchLimitLatchesWithoutSendingIt) {
+  // The cable that a 3 cm move down lengthens most gets a limit 1 cm above its home length.
+  Pose to = geometry_.model.home;
+  to.position.z() -= 0.03;
+  const Eigen::VectorXd home = lengths_at(geometry_.model.home), there = lengths_at(to);
+  int c = 0;
+  (there - home).maxCoeff(&c);
+  ASSERT_GT(there(c) - home(c), 0.015);
+  RtControllerOptions o;
+  o.max_cable_length[static_cast<std::size_t>(c)] = home(c) + 0.01;
+  make(o);
+  hold_home();
+  post_move(to);
+  ASSERT_TRUE(
+      run_until([](const RtSnapshot& s) { return s.fault.kind != FaultKind::kNone; }, 3000));
+  const RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.fault.kind, FaultKind::kCableLimit);
+  EXPECT_EQ(s.fault.cable, c);
+  EXPECT_EQ(s.fault.node, c + 1);
+  EXPECT_GT(s.fault.value, o.max_cable_length[static_cast<std::size_t>(c)]);
+  EXPECT_EQ(s.mode, RtMode::kDisabled);
+  EXPECT_FALSE(io_.last().send_targets) << "the target beyond the limit is not sent";
+  EXPECT_EQ(io_.quick_stops(), 1);
+}
+
+TEST_F(RtRig, AnActualCableLengthBeyondItsLimitLatchesNamingTheWinch) {
+  RtControllerOptions o;
+  o.cable_length_tolerance = 0.001;
+  o.min_cable_length[6] = lengths_at(geometry_.model.home)(6) - 0.0005;
+  make(o);
+  hold_home();
+  EXPECT_EQ(rt_->snapshot().fault.kind, FaultKind::kNone) << "within the tolerance";
+  // The drive of cable 7 no longer follows its target and stands 2 mm of cable shorter.
+  io_.state[6] = FakeRobotIO::DriveState::kQuickStop;
+  io_.position[6] -= 0.002 * counts_per_metre() * geometry_.model.winches[6].direction;
+  cycle();
+  const RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.fault.kind, FaultKind::kCableLimit);
+  EXPECT_EQ(s.fault.cable, 6);
+  EXPECT_EQ(s.fault.node, 7);
+  EXPECT_NEAR(s.fault.value, o.min_cable_length[6] - 0.0015, 2e-4);
+}
+
+TEST_F(RtRig, ACommandedPositionOutsideTheWorkspaceBoxLatches) {
+  RtControllerOptions o;
+  o.workspace_box = true;
+  for (int j = 0; j < 3; ++j) {
+    o.box_min[static_cast<std::size_t>(j)] = geometry_.model.home.position(j) - 0.02;
+    o.box_max[static_cast<std::size_t>(j)] = geometry_.model.home.position(j) + 0.02;
+  }
+  make(o);
+  hold_home();
+  Pose to = geometry_.model.home;
+  to.position.z() += 0.05;
+  post_move(to);
+  ASSERT_TRUE(
+      run_until([](const RtSnapshot& s) { return s.fault.kind != FaultKind::kNone; }, 3000));
+  const RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.fault.kind, FaultKind::kWorkspace);
+  EXPECT_EQ(s.fault.code, 2) << "axis z";
+  EXPECT_LE(s.pose_vector[2], o.box_max[2] + 0.001);
+}
+
+TEST_F(RtRig, SafetyStagesAllocateNothing) {
+  RtControllerOptions o;
+  o.brakes = true;
+  o.brake_release_cycles = 3;
+  o.workspace_box = true;
+  o.box_min = {-10, -10, -10};
+  o.box_max = {10, 10, 10};
+  make(o);
+  io_.safety_inputs = 1;
+  hold_home();
+  std::uint64_t allocations = 0;
+  {
+    test::AllocationCounter count;
+    io_.safety_open = 1;
+    cycle(5);
+    io_.safety_open = 0;
+    rt_->request_fault_reset();
+    rt_->request_disable();
+    cycle(40);
+    rt_->request_enable();
+    cycle(10);
+    allocations = count.allocations();
+  }
+  EXPECT_EQ(allocations, 0u);
+  EXPECT_EQ(io_.fault_resets(), 1);
 }
 
 TEST(RtController, CreateRefusesAnIoThatDoesNotFitTheRobot) {

@@ -10,6 +10,7 @@ namespace cdpr::controller {
 
 void RtController::watch_faults(canopen::Timestamp now) noexcept {
   watch_events(now);
+  watch_safety(now);
   watch_tensions(now);
   watch_stuck(now);
 }

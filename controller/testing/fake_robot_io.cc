@@ -56,7 +56,10 @@ void FakeRobotIO::read(canopen::Timestamp now, RobotReading& r) noexcept {
     const auto k = static_cast<std::size_t>(i);
     const double before = position[k];
     if (!has_target_[k]) target_[k] = static_cast<std::int32_t>(std::lround(position[k]));
-    if (state[k] == DriveState::kEnabled) position[k] += (target_[k] - position[k]) * follow;
+    const bool braked = brakes && !last_.release_brake[k];
+    if (state[k] == DriveState::kEnabled && !braked) {
+      position[k] += (target_[k] - position[k]) * follow;
+    }
     DriveReading& d = r.drives[k];
     d.node = i + 1;
     d.received = true;
@@ -76,6 +79,8 @@ void FakeRobotIO::read(canopen::Timestamp now, RobotReading& r) noexcept {
   r.master_faulted = master_faulted;
   r.bus_off = false;
   r.lost_node = 0;
+  r.num_safety_inputs = safety_inputs;
+  r.safety_open = safety_open;
   r.num_events = num_pending_;
   for (int j = 0; j < num_pending_; ++j) {
     r.events[static_cast<std::size_t>(j)] = pending_[static_cast<std::size_t>(j)];
@@ -92,6 +97,7 @@ void FakeRobotIO::write(const RobotCommand& c) noexcept {
     if (c.enable && state[k] != DriveState::kFault) state[k] = DriveState::kEnabled;
     if (c.disable && state[k] != DriveState::kFault) state[k] = DriveState::kDisabled;
     if (c.quick_stop && state[k] == DriveState::kEnabled) state[k] = DriveState::kQuickStop;
+    if (c.disable && state[k] != DriveState::kFault) state[k] = DriveState::kDisabled;
     // A drive that is not enabled keeps its target at its position (enabling never jumps).
     if (state[k] != DriveState::kEnabled) {
       has_target_[k] = false;

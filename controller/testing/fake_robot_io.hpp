@@ -4,7 +4,8 @@
 // the time between two read() calls; the tension sensor reads `tension` with a one raw unit
 // dither (a live reading changes), unless its channel is frozen. Drive state requests take
 // effect at once: quick stop leaves OPERATION_ENABLED, fault reset clears FAULT, enable enters
-// OPERATION_ENABLED. read() and write() allocate nothing.
+// OPERATION_ENABLED, disable leaves it. With `brakes`, a drive whose holding brake is applied
+// (release_brake not set in the last command) does not move. read() and write() allocate nothing.
 #pragma once
 
 #include <array>
@@ -29,6 +30,9 @@ class FakeRobotIO final : public RobotIO {
   double tau_s = 0.01;                       // the drives' response
   bool tensions_arrive = true;               // false: no fresh tension reading
   bool master_faulted = false;               // the bus's latched fault (cleared by fault reset)
+  int safety_inputs = 0;                     // e-stop / STO sources
+  std::uint32_t safety_open = 0;             // bit j: source j reads open
+  bool brakes = false;                       // each winch has a holding brake
   // A drive falls into FAULT (with the bus's latched fault and its events, as the master
   // reports them: a drive fault, then the EMCY).
   void fault(int axis, std::uint16_t emcy_code);
@@ -40,6 +44,9 @@ class FakeRobotIO final : public RobotIO {
   int writes() const { return writes_; }
   int quick_stops() const { return quick_stops_; }
   int fault_resets() const { return fault_resets_; }
+  bool brake_released(int axis) const {
+    return last_.release_brake[static_cast<std::size_t>(axis)];
+  }
   std::array<std::int32_t, kMaxAxes> target() const { return target_; }
 
   Status fits(const RobotModel& model) const override;

@@ -288,6 +288,27 @@ TEST_F(SlaveTest, CspStatuswordBit12IsSetWhileFollowingTargets) {
   EXPECT_EQ(drive.statusword() & 0x1000, 0) << "bit 12 set although targets are ignored";
 }
 
+// The safety chain's objects: the e-stop bit of the digital inputs, the holding brake output.
+TEST_F(SlaveTest, AnAppliedBrakeHoldsTheShaftAgainstCspTargetsAndTheEStopBitIsAnInput) {
+  constexpr std::int64_t kClosed = std::int64_t{1} << slave::Drive402::kSafetyInputBit;
+  EXPECT_EQ(drive.od().get({0x60FD, 0}), kClosed) << "the chain is closed at power-on";
+  drive.set_digital_input(slave::Drive402::kSafetyInputBit, false);
+  EXPECT_EQ(drive.od().get({0x60FD, 0}), 0);
+  write<std::int8_t>({0x6060, 0}, 8);
+  start();
+  sync();
+  for (std::uint16_t cw : {0x06, 0x07, 0x0F}) write<std::uint16_t>({0x6040, 0}, cw);
+  write<std::uint32_t>({0x60FE, 1}, 1);  // set brake
+  write<std::int32_t>({0x607A, 0}, 5000);
+  sync();
+  EXPECT_TRUE(drive.brake_applied());
+  EXPECT_EQ(drive.position(), 1234) << "a braked winch does not turn";
+  EXPECT_EQ(drive.braked_syncs(), 1u);
+  write<std::uint32_t>({0x60FE, 1}, 0);
+  sync();
+  EXPECT_EQ(drive.position(), 5000) << "released: it follows its target";
+}
+
 // Item 7: 0x6502 supported drive modes.
 TEST_F(SlaveTest, SupportedDriveModesListProfilePositionHomingAndCsp) {
   auto modes = sdo.read<std::uint32_t>({0x6502, 0}, pump);

@@ -365,6 +365,10 @@ void CanRobot::on_sync(Timestamp now) {
   for (auto* n : force_nodes_) n->step(now);
 }
 
+void CanRobot::set_estop(bool open) {
+  for (auto* d : drives_) d->set_digital_input(canopen::slave::Drive402::kSafetyInputBit, !open);
+}
+
 void CanRobot::step(Timestamp now) {
   if (!powered_) return;
   const double t = scenario_time(now);

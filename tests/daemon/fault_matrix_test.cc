@@ -124,11 +124,14 @@ struct FaultRow {
   bool inject_before_save = false;
   // Extra daemon configuration for this row's cells.
   std::string config = {};
+  // The daemon runs on the network with the safety chain's objects mapped
+  // (VirtualCell::write_safety_network).
+  bool safety_network = false;
 };
 
 std::string numbers_hidden(std::string s) {
   static const std::regex number(R"([-+]?[0-9]+\.[0-9]+(e[-+]?[0-9]+)?)");
-  static const std::regex cell_dir(R"(/[^ ]*/cdpr-matrix-[0-9]+/state/)");
+  static const std::regex cell_dir(R"(/[^ ]*/cdpr-matrix-[0-9]+/(state/)?)");
   // Temporary files of cdpr/io/atomic_file.hpp: ".<name>.tmp-<pid>-<n>".
   static const std::regex temp(R"(\.tmp-[0-9]+-[0-9]+)");
   s = std::regex_replace(s, cell_dir, "");
@@ -379,13 +382,18 @@ class MatrixCell {
     for (;;) ::pause();
   }
   std::string extra_config() const {
+    std::string config = row_.config;
+    if (row_.safety_network && cell_ != nullptr) {
+      auto network = cell_->write_safety_network();
+      if (network.ok()) config += "canopen: " + *network + "\n";
+    }
     if (phase_ == Phase::kIdentifying) {
-      return row_.config + "measuring: " + with_designed_poses(kIdentifyingMeasuring) +
+      return config + "measuring: " + with_designed_poses(kIdentifyingMeasuring) +
              "\nidentification: {diagnose: false}\n";
     }
     // (the hot swap's way back calibrates on whichever geometry is then active: designed there)
-    if (phase_ == Phase::kHotSwap) return row_.config;
-    return "measuring: " + with_designed_poses(Cell::Settings{}.measuring) + "\n" + row_.config;
+    if (phase_ == Phase::kHotSwap) return config;
+    return "measuring: " + with_designed_poses(Cell::Settings{}.measuring) + "\n" + config;
   }
   static std::string read(const std::string& path) {
     auto t = read_text_file(path);
@@ -793,6 +801,20 @@ std::vector<FaultRow> fault_rows() {
                   {},
                   nullptr};
     rows.push_back(over);
+  }
+  {
+    // The safety chain: the e-stop input of cable 3's drive (its digital inputs in an event-driven
+    // TPDO of the cell's safety network), with the holding brakes by output.
+    FaultRow estop{"e-stop opened (input of drive 3), brakes by output",
+                   [](Cell& c) { c.robot->set_estop(true); },
+                   [](Cell& c) { c.robot->set_estop(false); },
+                   {},
+                   nullptr};
+    estop.config =
+        "safety: {estop: [{kind: drive_input, node: 3, bit: 16}], brakes: {control: "
+        "output, release_delay_s: 0.05, apply_delay_s: 0.05}}\n";
+    estop.safety_network = true;
+    rows.push_back(estop);
   }
   rows.push_back({"cdpr-sim killed: every node and the laser silent, then the sim restarts",
                   [](Cell& c) {

@@ -25,6 +25,7 @@
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/controller/daemon.hpp"
+#include "cdpr/controller/state_store.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
 #include "cdpr/modbus/register_map.hpp"
 #include "cdpr/sim/can_robot.hpp"
@@ -48,6 +49,7 @@ struct CellSettings {
   std::string acceptance = "{mode: manual}";
   // The virtual robot powers up on its reference platform and is enabled at start.
   std::string start = "{enable: at-start, home_without_record: reference}";
+  std::string canopen;  // the daemon's network file; "": config/canopen-mini.yaml (as the sim's)
   std::string extra;
 };
 
@@ -83,8 +85,9 @@ class VirtualCell {
   // (a flow mapping); `extra` adds other top-level groups.
   using Settings = CellSettings;
   std::string config_text(const Settings& s) const {
-    return "robot: " + source_ + "/config/mini.yaml\n" + "canopen: " + source_ +
-           "/config/canopen-mini.yaml\n" + "state_directory: " + (dir_ / "state").string() +
+    return "robot: " + source_ + "/config/mini.yaml\n" +
+           "canopen: " + (s.canopen.empty() ? source_ + "/config/canopen-mini.yaml" : s.canopen) +
+           "\n" + "state_directory: " + (dir_ / "state").string() +
            "\n"
            "identity: {vendor_id: 0x00CD9001, drive_product_code: 0x402, force_product_code: "
            "0x404}\n"
@@ -93,8 +96,38 @@ class VirtualCell {
            "\nacceptance: " + s.acceptance + "\nstart: " + s.start + "\n" + laser_line() + s.extra;
   }
 
-  // The same from YAML lines: a `measuring:`, `identification:` or `acceptance:` line replaces
-  // that group, other lines are added.
+  // The shipped MINI network with what the safety chain reads and drives, written into the cell's
+  // folder: each winch's digital inputs 0x60FD in an event-driven TPDO2 (on change and every
+  // 20 ms; the virtual drives report the e-stop chain in bit 16) and its digital outputs 0x60FE:01
+  // (bit 0: the holding brake applied) in a synchronous RPDO2. Returns its path.
+  Result<std::string> write_safety_network() const {
+    auto shipped = read_text_file(source_ + "/config/canopen-mini.yaml");
+    if (!shipped.ok()) return shipped.status();
+    std::string text = *shipped;
+    const std::pair<std::string, std::string> edits[] = {
+        {"eds: eds/", "eds: " + source_ + "/config/eds/"},
+        {"eds: eds/", "eds: " + source_ + "/config/eds/"},
+        {"map: [\"0x6040:00 u16\", \"0x607A:00 i32\"]\n",
+         "map: [\"0x6040:00 u16\", \"0x607A:00 i32\"]\n"
+         "      - {number: 2, transmission: 1, map: [\"0x60FE:01 u32\"]}\n"},
+        {"map: [\"0x6041:00 u16\", \"0x6064:00 i32\"]\n",
+         "map: [\"0x6041:00 u16\", \"0x6064:00 i32\"]\n"
+         "      - {number: 2, transmission: 255, event_timer_ms: 20, map: [\"0x60FD:00 u32\"]}\n"},
+    };
+    for (const auto& [from, to] : edits) {
+      const std::size_t at = text.find(from);
+      if (at == std::string::npos) {
+        return Status(ErrorCode::kNotFound, "config/canopen-mini.yaml has no '" + from + "'");
+      }
+      text.replace(at, from.size(), to);
+    }
+    const std::string path = (dir_ / "canopen-safety.yaml").string();
+    std::ofstream(path) << text;
+    return path;
+  }
+
+  // The same from YAML lines: a `measuring:`, `identification:`, `acceptance:` or `canopen:` line
+  // replaces that group, other lines are added.
   Status start_daemon(const std::string& lines) {
     Settings s;
     std::string rest;
@@ -111,7 +144,8 @@ class VirtualCell {
         return true;
       };
       if (!group("measuring", s.measuring) && !group("identification", s.identification) &&
-          !group("acceptance", s.acceptance) && !group("start", s.start) && !line.empty()) {
+          !group("acceptance", s.acceptance) && !group("start", s.start) &&
+          !group("canopen", s.canopen) && !line.empty()) {
         rest += line + "\n";
       }
     }

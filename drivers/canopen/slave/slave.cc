@@ -762,6 +762,9 @@ Drive402::Drive402(can::CanBus& bus, NodeId id, std::int32_t initial_position)
   ipi.on_write = ip.on_write;
   // Supported drive modes (CiA 402): bit 0 profile position, bit 5 homing, bit 7 CSP.
   d.add({0x6502, 0}, DataType::kU32, (1u << 0) | (1u << 5) | (1u << 7), Access::kRo);
+  d.add({0x60FD, 0}, DataType::kU32, std::int64_t{1} << kSafetyInputBit, Access::kRo);
+  d.add({0x60FE, 0}, DataType::kU8, 1, Access::kRo);
+  d.add({0x60FE, 1}, DataType::kU32, 0);
   publish();
 }
 
@@ -908,6 +911,16 @@ void Drive402::apply_controlword(std::uint16_t cw) {
   publish();
 }
 
+void Drive402::set_digital_input(int bit, bool on) {
+  const std::int64_t v = od().get({0x60FD, 0});
+  const std::int64_t b = std::int64_t{1} << bit;
+  od().set({0x60FD, 0}, on ? (v | b) : (v & ~b));
+}
+
+bool Drive402::brake_applied() const {
+  return (od().get({0x60FE, 1}) & 1) != 0;
+}
+
 void Drive402::on_rpdo_applied(Timestamp) {
   apply_controlword(static_cast<std::uint16_t>(od().get({0x6040, 0})));
 }
@@ -926,8 +939,12 @@ void Drive402::on_sync(Timestamp) {
         if (jump > max_jump_on_enable_) max_jump_on_enable_ = jump;
         enable_sync_pending_ = false;
       }
-      position_ = target;
-    } else if (mode == 1 && pp_moving_) {
+      if (brake_applied()) {
+        if (target != position_) ++braked_syncs_;
+      } else {
+        position_ = target;
+      }
+    } else if (mode == 1 && pp_moving_ && !brake_applied()) {
       const double v = static_cast<double>(od().get({0x6081, 0}));
       const auto step =
           v > 0 ? static_cast<std::int64_t>(std::ceil(v * sync_period_s_)) : std::int64_t{1} << 40;

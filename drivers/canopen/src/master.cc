@@ -140,6 +140,7 @@ void Master::dispatch(const can::Frame& f, Timestamp now) {
     NodeRt& n = *nodes_[static_cast<std::size_t>(ref.node)];
     if (n.tpdos[static_cast<std::size_t>(ref.pdo)].decode(f, n.image)) {
       ++stats_.tpdos_received;
+      last_tpdo_[n.config.id] = now;
       if (n.drive >= 0) drives_[static_cast<std::size_t>(n.drive)].on_pdo();
       if (n.force >= 0) forces_[static_cast<std::size_t>(n.force)].on_pdo();
     } else {

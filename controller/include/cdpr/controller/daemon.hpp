@@ -121,6 +121,11 @@ class Daemon {
   void set_event_sink(std::function<void(const nlohmann::json&)> sink);
   // Stops a running sequence, holds, joins the worker. The RT loop may keep cycling.
   void shutdown();
+  // Before the RT loop stops (SIGTERM): with holding brakes, the RT loop applies them and
+  // disables the drives after the apply delay (RtController::request_disable); waits for that up
+  // to `timeout_s` of wall time while the loop runs. Without brakes: nothing (the master's
+  // shutdown quick-stops and disables).
+  Status apply_brakes_and_disable(double timeout_s);
 
   DaemonState state() const;
   nlohmann::json status() const;
@@ -150,6 +155,9 @@ class Daemon {
 
   Daemon(DaemonConfig config, DaemonIo io);
   RtControllerOptions rt_options() const;
+  // The safety chain's part of them, and the limits every move and pose is checked against.
+  void safety_options(RtControllerOptions& ro) const;
+  PathCheckOptions path_check_options() const;
   Status check_identities();
   Status enable_drives();
 
@@ -171,6 +179,10 @@ class Daemon {
   std::vector<double> actual_counts();
   std::string motion_refusal() const;  // "" when motion may be commanded
   void follow_enable(const RtSnapshot& s);
+  // Start-up: every e-stop source reads closed, else the start is refused naming the open ones.
+  Status check_estop();
+  // "source 1 (cdprd.yaml:41: safety.estop[0]); ..." for the sources open in `open`.
+  std::string estop_sources(std::uint32_t open) const;
 
   // The one place a state changes: fires `event` in the supervisor table, runs the row's action,
   // logs and publishes the change (a refused event is logged and changes nothing).

@@ -14,6 +14,7 @@
 #include <string_view>
 
 #include "cdpr/calibration/identification.hpp"
+#include "cdpr/controller/safety_config.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr::controller {
@@ -157,6 +158,7 @@ struct DaemonConfig {
   AcceptanceGates acceptance;
   StartSettings start;
   ControlSettings control;
+  SafetySettings safety;  // e-stop inputs, brakes, winch limits, workspace box (safety_config.hpp)
 };
 
 Result<DaemonConfig> parse_daemon_config(std::string_view yaml, std::string_view file);

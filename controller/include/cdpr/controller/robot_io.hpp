@@ -56,6 +56,10 @@ struct RobotReading {
   bool master_faulted = false;  // latched by a drive fault or a lost node until a fault reset
   bool bus_off = false;         // the CAN controller is bus-off (transmission suspended)
   int lost_node = 0;            // a node whose heartbeat is lost (0: none)
+  // The safety chain: the e-stop / STO inputs (the configured sources, in order). Bit j of
+  // safety_open is set while source j reads open, or its node is silent or its reading stale.
+  int num_safety_inputs = 0;
+  std::uint32_t safety_open = 0;
   // Events of the bus and the drives since the previous read(), oldest first (more than
   // kMaxEvents wait for the next read()).
   int num_events = 0;
@@ -68,12 +72,16 @@ struct RobotCommand {
   bool send_targets = false;
   std::array<std::int32_t, kMaxAxes> target_counts{};
   // State requests of this cycle, applied in this order: fault reset (the latched fault and
-  // each drive in FAULT), enable (every drive towards OPERATION_ENABLED), disable (every drive
-  // towards SWITCH_ON_DISABLED), quick stop (every drive).
+  // each drive in FAULT), enable (every drive towards OPERATION_ENABLED), quick stop (every
+  // drive), disable (every drive towards SWITCH_ON_DISABLED; sent only once the holding brakes
+  // are applied).
   bool fault_reset = false;
   bool enable = false;
-  bool disable = false;
   bool quick_stop = false;
+  bool disable = false;
+  // Holding brakes: release_brake[k] releases winch k's brake; false applies it. An I/O whose
+  // brakes the drives manage themselves (or that has none) ignores it.
+  std::array<bool, kMaxAxes> release_brake{};
 };
 
 class RobotIO {

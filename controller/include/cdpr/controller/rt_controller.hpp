@@ -8,16 +8,24 @@
 //
 // cycle(now) is a list of named stages, each a private function, on this cycle's readings:
 //   read_inputs        io.read(now): actual counts, tensions, drive states, bus events
-//   take_requests      an operator's quick stop or fault reset (atomics, any thread)
-//   watch_faults       drive faults, lost nodes, bus-off, overloaded or slack cables, a stuck
-//                      force reading: a fault quick-stops every drive and is latched until
-//                      fault_reset()
+//   take_requests      an operator's quick stop or fault reset (refused while an e-stop input
+//                      reads open), a disable or enable (atomics, any thread)
+//   watch_faults       drive faults, lost nodes, bus-off, an open e-stop input (or its node
+//                      silent or stale), overloaded or slack cables, a stuck force reading: a
+//                      fault quick-stops every drive and is latched until fault_reset() (an
+//                      e-stop's only once every input reads closed again)
 //   take_command       a posted command at the cycle boundary (move, trim, re-reference)
 //   sample_trajectory  the pose to command (the active trajectory, or the pose held)
 //   compute_targets    tension plan (QP, allocation-free) and compensated inverse kinematics
 //                      with the active geometry
 //   slew_targets       the drive targets: the re-reference slew, or the IK plus the
 //                      rate-limited tension-regulation trims
+//   check_limits       the commanded pose inside the workspace box, each commanded cable length
+//                      (and the actual one, within a tolerance) inside its winch's limits; else a
+//                      latched quick stop naming the winch, and this cycle's target is not sent
+//   sequence_brakes    each holding brake released only once its drive has been OPERATION_ENABLED
+//                      for the release delay; applied at once on a fault, an e-stop or a disable
+//                      request, the drives disabled only after the apply delay
 //   write_outputs      io.write(command): the targets and the state requests of this cycle
 //   update_settle      the stillness window and the averages the sequence asked for
 //   publish            the snapshot (seqlock); the bus events go to an SPSC ring
@@ -33,6 +41,7 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <optional>
 
@@ -68,6 +77,9 @@ enum class FaultKind : std::uint8_t {
   kQuickStop,    // an operator's quick stop
   kForceSensor,  // no force readings while they are required
   kForceStuck,   // a force reading did not change while its cable's tension was made to change
+  kEStop,        // an e-stop / STO input open, silent or stale (`code`: the source, from 1)
+  kCableLimit,   // a commanded or actual cable length outside its winch's limits (`value`, m)
+  kWorkspace,    // the commanded platform position outside the workspace box (`code`: axis 0..2)
 };
 const char* to_string(FaultKind f);
 
@@ -79,6 +91,13 @@ struct RtFault {
   double value = 0.0;      // the tension that tripped, N
   std::int64_t time_ns = 0;
 };
+
+// An array with every axis set to `v`.
+constexpr std::array<double, kMaxAxes> axes_filled(double v) {
+  std::array<double, kMaxAxes> a{};
+  for (double& x : a) x = v;
+  return a;
+}
 
 struct RtControllerOptions {
   double slack_below = 1.0;        // N
@@ -97,6 +116,19 @@ struct RtControllerOptions {
   // (the cable's response lags the command). 0: off.
   double stuck_raw_units = 12.0;
   int stuck_confirm_cycles = 50;
+  // Holding brakes (one per winch): none to sequence when false (release_brake is always set).
+  bool brakes = false;
+  int brake_release_cycles = 25;  // a drive enabled this long holds torque: its brake releases
+  int brake_apply_cycles = 25;    // the brakes applied this long before the drives are disabled
+  // Kinematic cable lengths allowed to each winch (frame anchor to platform anchor, m), and how
+  // far an actual length may lie beyond them (the drives' following error).
+  std::array<double, kMaxAxes> min_cable_length{};
+  std::array<double, kMaxAxes> max_cable_length =
+      axes_filled(std::numeric_limits<double>::infinity());
+  double cable_length_tolerance = 0.002;
+  // Allowed commanded positions of the platform origin (world, m); off when !workspace_box.
+  bool workspace_box = false;
+  std::array<double, 3> box_min{}, box_max{};
 };
 
 // What any thread may read about the loop (trivially copyable, published every cycle).
@@ -106,6 +138,11 @@ struct RtSnapshot {
   RtMode mode = RtMode::kDisabled;
   RtFault fault;
   bool all_enabled = false;
+  // The safety chain: inputs read open (bit j: source j), every holding brake released, the
+  // drives disabled on request (request_disable) with their brakes applied.
+  std::uint32_t safety_open = 0;
+  bool brakes_released = false;
+  bool disabled = false;
   std::uint64_t command_taken = 0;  // sequence number of the active command
   std::uint64_t command_done = 0;   // of the last command that finished (move ended, slew done)
   int geometry_version = 0;
@@ -163,12 +200,15 @@ class RtController {
   }
   // Any thread: requests (taken at the next cycle).
   void request_quick_stop() noexcept { quick_stop_.store(true, std::memory_order_release); }
+  // A fault reset is refused (the fault stays latched) while an e-stop input reads open.
   void request_fault_reset() noexcept { fault_reset_.store(true, std::memory_order_release); }
-  // The operator's enable and disable: every drive towards OPERATION_ENABLED (the loop stays
-  // disabled, targets = actual, until a hold_actual reference is taken), or towards
-  // SWITCH_ON_DISABLED with the loop disabled (not a fault).
-  void request_enable() noexcept { enable_.store(true, std::memory_order_release); }
+  // The operator's disable and enable. Disable: the holding brakes are applied, then
+  // (brake_apply_cycles later) every drive goes to SWITCH_ON_DISABLED and the loop stays disabled
+  // (not a fault) until request_enable(). Enable: every drive towards OPERATION_ENABLED, the
+  // brakes released once each holds torque; the loop stays disabled (targets = actual) until a
+  // hold_actual reference is taken.
   void request_disable() noexcept { disable_.store(true, std::memory_order_release); }
+  void request_enable() noexcept { enable_.store(true, std::memory_order_release); }
   // Starts a new average of encoder counts and tensions; returns its id (see RtSnapshot).
   std::uint64_t request_average() noexcept {
     return average_request_.fetch_add(1, std::memory_order_acq_rel) + 1;
@@ -196,6 +236,8 @@ class RtController {
   void sample_trajectory(canopen::Timestamp now) noexcept;
   void compute_targets(canopen::Timestamp now) noexcept;
   void slew_targets() noexcept;
+  void check_limits(canopen::Timestamp now) noexcept;
+  void sequence_brakes() noexcept;
   void write_outputs() noexcept;
   void update_settle() noexcept;
   void publish(canopen::Timestamp now) noexcept;
@@ -203,6 +245,8 @@ class RtController {
   void watch_events(canopen::Timestamp now) noexcept;
   void watch_tensions(canopen::Timestamp now) noexcept;
   void watch_stuck(canopen::Timestamp now) noexcept;
+  void watch_safety(canopen::Timestamp now) noexcept;
+  void take_enable_requests() noexcept;
   double stuck_evidence(int i) noexcept;
   void reset_stuck_watch() noexcept { stuck_valid_.fill(false); }
   void start_move(const MotionCommand& c, canopen::Timestamp now) noexcept;
@@ -237,8 +281,8 @@ class RtController {
   std::atomic<int> in_use_geometry_{0};
   std::atomic<bool> quick_stop_{false};
   std::atomic<bool> fault_reset_{false};
-  std::atomic<bool> enable_{false};
   std::atomic<bool> disable_{false};
+  std::atomic<bool> enable_{false};
   std::atomic<std::uint64_t> average_request_{0};
   std::uint64_t average_taken_ = 0;
 
@@ -264,6 +308,11 @@ class RtController {
   bool restart_plan_window_ = false;
   std::array<int, kMaxAxes> stuck_count_{};
   std::uint64_t force_pdos_ = 0;  // the tension readings' count the watch saw last
+  // Safety chain: disabled on request; cycles each drive has been enabled; cycles since the
+  // brakes were applied for a disable.
+  bool disable_requested_ = false;
+  std::array<int, kMaxAxes> enabled_cycles_{};
+  int applied_cycles_ = 0;
 
   // Stillness window: ring of the last settle_cycles actual counts and tensions.
   static constexpr int kMaxWindow = 512;

@@ -31,7 +31,8 @@
 //   cable_overload  the physics latches the trip; the cable's drive then faults with EMCY `emcy`
 // On demand (tests choose the moment, e.g. the fault matrix): set_bus_off, a force channel stuck
 // at its last reading or forced to a raw value (set_force_fault), a cable slipping on its drum
-// (set_cable_slip: the physics sees the drive's position plus the slip, the encoder does not), and
+// (set_cable_slip: the physics sees the drive's position plus the slip, the encoder does not), the
+// e-stop chain opened and closed (set_estop), and
 // through drive()/node() the slaves' own faults (inject_fault, faults().silent, abort_on).
 // Single-threaded; not real-time (it allocates), it stands in for devices.
 #pragma once
@@ -105,6 +106,10 @@ class CanRobot {
   void set_bus_off(bool on);
   void set_force_fault(int cable, ForceChannelFault fault, double raw = 0.0);
   void set_cable_slip(int cable, double counts);
+  // The e-stop / STO chain, wired through every drive: open clears the safety bit of each drive's
+  // digital inputs (0x60FD bit Drive402::kSafetyInputBit), closed sets it. A drive's holding
+  // brake (0x60FE:01 bit 0, as its RPDO sets it) keeps its winch from turning.
+  void set_estop(bool open);
 
   double scenario_time(Timestamp now) const;
   int num_cables() const { return static_cast<int>(drives_.size()); }

@@ -20,6 +20,7 @@
 #include <limits>
 #include <numbers>
 #include <optional>
+#include <vector>
 
 #include "cdpr/calibration/force_distribution.hpp"
 #include "cdpr/calibration/ik_compensation.hpp"
@@ -60,6 +61,9 @@ struct PathCheckOptions {
   // m: e.g. what the drum holds and the shortest length the cable may be reeled to.
   double min_cable_length = 0.0;
   double max_cable_length = std::numeric_limits<double>::infinity();
+  // The same per cable (each winch's software limits, cdprd.yaml `safety.cable_length`): one
+  // entry per cable of the model, or empty (the two above for every cable).
+  std::vector<double> min_cable_lengths, max_cable_lengths;
   // Cable-cable interference: the straight spans frame anchor a_i -> platform anchor r + R b_i of
   // two cables must stay at least this far apart (the cable diameter, m; 0: not checked). A pair
   // whose spans meet at an end by design (anchors closer than the diameter) is not checked. The

@@ -129,6 +129,8 @@ class Master {
   std::span<ForceSensor> force_sensors() { return forces_; }
   SdoClient* sdo(NodeId id);
   ProcessImage* image(NodeId id);
+  // When a TPDO of the node was last decoded (0: none since the master was created).
+  Timestamp last_tpdo(NodeId id) const { return id <= kMaxNodeId ? last_tpdo_[id] : Timestamp{0}; }
   Pump& pump() { return pump_; }
   Events& events() { return events_; }
   const NodeMonitor& nodes() const { return monitor_; }
@@ -190,6 +192,7 @@ class Master {
     std::int16_t pdo = -1;
   };
   std::array<TpdoRef, 0x800> tpdo_table_{};
+  std::array<Timestamp, kMaxNodeId + 1> last_tpdo_{};
   std::vector<Drive> drives_;
   std::vector<ForceSensor> forces_;
   NodeMonitor monitor_;

@@ -100,6 +100,7 @@ class SlaveNode {
 
   NodeId id() const { return id_; }
   ObjectDictionary& od() { return od_; }
+  const ObjectDictionary& od() const { return od_; }
   NmtState nmt_state() const { return state_; }
   Faults& faults() { return faults_; }
 
@@ -211,10 +212,20 @@ class SlaveNode {
 // of bit 4), delayed or missing 0x6061 confirmation, quick stop,
 // fault injection with EMCY (and EMCY 0x0000 after the fault reset), 0x6007 reaction to a lost
 // master. Statusword bit 12 in CSP: target position used (1 while OPERATION_ENABLED). 0x6502
-// lists the modes it supports (PP, HM, CSP).
+// lists the modes it supports (PP, HM, CSP). Digital inputs 0x60FD: bit kSafetyInputBit is the
+// e-stop / STO chain's status (1: closed, at power-on). Digital outputs 0x60FE:01: bit 0 is
+// CiA 402's "set brake" (1: the holding brake is applied and the shaft does not turn).
 class Drive402 : public SlaveNode {
  public:
+  static constexpr int kSafetyInputBit = 16;
+
   Drive402(can::CanBus& bus, NodeId id, std::int32_t initial_position = 0);
+
+  // Sets or clears a bit of the digital inputs 0x60FD.
+  void set_digital_input(int bit, bool on);
+  bool brake_applied() const;
+  // SYNCs at which the brake held the shaft against a target that would have moved it.
+  std::uint64_t braked_syncs() const { return braked_syncs_; }
 
   // Goes to FAULT (through FAULT_REACTION_ACTIVE) and sends an EMCY with `emcy_code`.
   void inject_fault(std::uint16_t emcy_code);
@@ -282,6 +293,7 @@ class Drive402 : public SlaveNode {
   bool enable_sync_pending_ = false;
   int fault_reaction_syncs_ = 0;
   double sync_period_s_ = 0.004;
+  std::uint64_t braked_syncs_ = 0;
 };
 
 }  // namespace cdpr::canopen::slave
