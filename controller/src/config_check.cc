@@ -15,6 +15,8 @@
 
 #include "cdpr/calibration/winch.hpp"
 #include "cdpr/canopen/master.hpp"
+#include "cdpr/controller/canopen_robot_io.hpp"
+#include "cdpr/controller/safety_config.hpp"
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
 
@@ -215,6 +217,12 @@ void check_state_directory(const LoadedFiles& f, Errors& out) {
   }
 }
 
+void check_safety(const LoadedFiles& f, Errors& out) {
+  const SafetySettings& s = f.daemon->safety;
+  if (Status st = check_safety_io(s, *f.network); !st.ok()) out.push_back(st);
+  if (Status st = check_safety_limits(s, f.robot->num_cables()); !st.ok()) out.push_back(st);
+}
+
 struct FileCheck {
   const char* what;
   bool needs_files;  // robot and network loaded
@@ -229,6 +237,8 @@ constexpr FileCheck kChecks[] = {
     {"tension settings inside [f_min, f_max]", true, check_tensions},
     {"control socket directory and group", false, check_control},
     {"state directory", false, check_state_directory},
+    {"safety chain: e-stop sources and brake outputs on the network, limits per cable", true,
+     check_safety},
 };
 
 }  // namespace
