@@ -71,14 +71,8 @@ TEST(PlatformWeight, NoiseFreeCraneRecoversMassAndComToNumericalPrecision) {
   ASSERT_TRUE(off.ok());
   s.truth.readings.length_offsets = *off;
   const std::vector<Pose> commands = scenario::random_hanging_poses(s.nominal.robot, s.box, 14, 21);
-  SimulationOptions so;
-  so.physics = SimulationOptions::Physics::kElastic;
-  so.controller = &s.nominal;
-  so.add_noise = false;
-  so.laser = false;
-  so.swivel = true;
-  so.inclinometer = true;
-  const SimulatedMeasurements sim = testing::simulated(s.truth, commands, so, 4);
+  const SimulatedMeasurements sim =
+      testing::simulated(s.truth, commands, scenario::crane_simulation(s, false), 4);
   IdentificationOptions o;
   o.estimate_laser_plane = false;
   o.estimate_swivel_zeros = true;
