@@ -36,6 +36,12 @@ std::string words(const ParameterId& id) {
                                : "the inclinometer's mounting pitch";
     case ParameterKind::kImuYawZero:
       return "the IMU's heading zero";
+    case ParameterKind::kPlatformMass:
+      return "the platform mass";
+    case ParameterKind::kPlatformCom:
+      return id.component == 2 ? "the height of the platform's centre of mass (seen only in "
+                                 "tilted poses: record poses with roll or pitch)"
+                               : "the platform's centre of mass " + parameter_name(id);
     default:
       return parameter_name(id);
   }

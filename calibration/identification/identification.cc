@@ -181,7 +181,8 @@ struct LaserCost {
 };
 
 // Static equilibrium (6 residuals). Blocks: pose, a_1..a_m, b_1..b_m, g_1..g_m, c_1..c_m,
-// o_1..o_m, s_1..s_m, then e (one block when the stiffness is shared, else e_1..e_m).
+// o_1..o_m, s_1..s_m, then e (one block when the stiffness is shared, else e_1..e_m), then the
+// platform mass (1) and centre of mass (3, platform frame): the weight's force and moment.
 //
 // The residual w = A^T F + w_gravity carries the force noise linearly: cov(w) = sigma_F^2 A^T A.
 // The same tension readings also enter the cable length residuals of the pose, through the
@@ -205,9 +206,8 @@ struct EquilibriumCost {
   std::vector<double> readings;          // cable length readings; NaN: the cable has no length row
   std::vector<double> extra_compliance;  // PoseMeasurement::extra_compliance (empty: none)
   bool shared_stiffness = false;
-  double mass = 1.0;
+  int mass_block = 0;  // index of the mass block in the parameter blocks (the centre of mass next)
   double gravity = 9.81;
-  Eigen::Vector3d com = Eigen::Vector3d::Zero();
   Eigen::Matrix<double, 6, 1> external = Eigen::Matrix<double, 6, 1>::Zero();  // world, N, N m
   // Suspended robots with m < 6 cables (issue 18): cov is singular (rank m), so w|l is split into
   // the m tension errors eps = (A^T A)^-1 A^T (w|l) (A = the cable wrench columns a_i), each
@@ -233,9 +233,11 @@ struct EquilibriumCost {
     Vec3<T> r;
     Mat3<T> R;
     pose_from_block(pose, r, R);
-    const Vec3<T> weight(T(0), T(0), T(-mass * gravity));
+    const T* mass = p[mass_block];
+    const T* com = p[mass_block + 1];
+    const Vec3<T> weight(T(0), T(0), -mass[0] * T(gravity));
     w.template head<3>() = weight;
-    w.template tail<3>() = (R * com.cast<T>()).cross(weight);
+    w.template tail<3>() = (R * Vec3<T>(com[0], com[1], com[2])).cross(weight);
     w += external.cast<T>();
     cov.setZero();
     if (correction) correction->setZero();
@@ -445,6 +447,9 @@ struct Built {
   bool incl_mount_free = false;
   double imu_yaw_zero = 0.0;  // rad
   bool imu_yaw_zero_free = false;
+  double mass = 1.0;            // platform mass, kg
+  std::array<double, 3> com{};  // platform centre of mass, platform frame, m
+  bool mass_free = false, com_free = false;
   std::vector<std::array<double, 6>> poses;
   std::vector<bool> pose_free;
   std::vector<CableConstants> constants;
@@ -510,6 +515,33 @@ void add_geometry_block(Built& B, double* ptr, int size, const std::vector<bool>
     if (std::isfinite(lo)) B.problem.SetParameterLowerBound(ptr, q, lo);
     if (std::isfinite(hi)) B.problem.SetParameterUpperBound(ptr, q, hi);
   }
+}
+
+// The platform mass and centre of mass blocks: free when estimated and some pose has every
+// tension measured (the equilibrium rows that see the weight).
+void add_platform_weight_blocks(Built& B, const RobotModel& robot, const MeasurementSet& set,
+                                const IdentificationOptions& opt) {
+  bool weighed = false;
+  for (const PoseMeasurement& pm : set.poses) {
+    weighed = weighed || (pm.tensions.size() == robot.num_cables() && pm.tensions.allFinite());
+  }
+  weighed = weighed && opt.use_equilibrium;
+  const ParameterBounds& bounds = opt.bounds;
+  B.mass = robot.platform.mass;
+  B.mass_free = opt.estimate_platform_mass && weighed;
+  BlockRange mr;
+  mr.absolute = true;
+  mr.lo = bounds.mass_factor_min * robot.platform.mass;
+  mr.hi = bounds.mass_factor_max * robot.platform.mass;
+  add_geometry_block(B, &B.mass, 1, {true}, {ParameterId{ParameterKind::kPlatformMass, -1, -1}},
+                     "kg", B.mass_free, mr);
+  for (int q = 0; q < 3; ++q) B.com[static_cast<std::size_t>(q)] = robot.platform.center_of_mass(q);
+  B.com_free = opt.estimate_platform_com && weighed;
+  const BlockRange cr{robot.platform_radius()};
+  using K = ParameterKind;
+  add_geometry_block(B, B.com.data(), 3, {true, true, true},
+                     {{K::kPlatformCom, -1, 0}, {K::kPlatformCom, -1, 1}, {K::kPlatformCom, -1, 2}},
+                     "m", B.com_free, cr);
 }
 
 Status check_mask(const AnchorMask& mask, int m, const char* what) {
@@ -708,6 +740,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
                        {ParameterId{ParameterKind::kImuYawZero, -1, -1}}, "rad",
                        B->imu_yaw_zero_free, {bounds.imu_yaw_zero_rad});
   }
+  add_platform_weight_blocks(*B, robot, set, opt);
   B->num_geometry = static_cast<int>(B->names.size());
 
   // Poses.
@@ -830,9 +863,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
       auto* f = new EquilibriumCost;
       f->k = B->constants;
       f->tensions = pm.tensions;
-      f->mass = robot.platform.mass;
       f->gravity = robot.gravity;
-      f->com = robot.platform.center_of_mass;
       f->external = pm.external_wrench;
       f->sigma_force = noise.sigma_force;
       f->sigma_length = noise.sigma_length;
@@ -896,6 +927,11 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
         cost->AddParameterBlock(1);
         blocks.push_back(&B->e[static_cast<std::size_t>(i)]);
       }
+      f->mass_block = static_cast<int>(blocks.size());
+      cost->AddParameterBlock(1);
+      blocks.push_back(&B->mass);
+      cost->AddParameterBlock(3);
+      blocks.push_back(B->com.data());
       cost->SetNumResiduals(6);
       B->equilibrium_blocks[uj] = blocks;
       auto id = B->problem.AddResidualBlock(cost, make_loss(), blocks);
@@ -1160,6 +1196,8 @@ CalibratedModel extract(const Built& B, const CalibratedModel& initial) {
         B.incl_mount0 * rotation_from_rpy<double>(B.incl_mount[0], B.incl_mount[1], 0.0));
   }
   if (B.imu_yaw_zero_free) out.robot.inclinometer.yaw_zero = B.imu_yaw_zero;
+  out.robot.platform.mass = B.mass;
+  out.robot.platform.center_of_mass = Eigen::Vector3d(B.com[0], B.com[1], B.com[2]);
   if (B.home_tilt_free) {
     // A suspended robot's home is where the calibrated model hangs at the home position and
     // heading (the estimated tilt, made an exact equilibrium so that the model check accepts it).

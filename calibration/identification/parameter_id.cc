@@ -89,6 +89,14 @@ std::vector<EstimateItem> make_estimate_items() {
                {K::kImuYawZero},
                [](O& o, bool on) { o.estimate_imu_yaw_zero = on; },
                [](const O& o) { return o.estimate_imu_yaw_zero; }});
+  v.push_back({"mass",
+               {K::kPlatformMass},
+               [](O& o, bool on) { o.estimate_platform_mass = on; },
+               [](const O& o) { return o.estimate_platform_mass; }});
+  v.push_back({"com",
+               {K::kPlatformCom},
+               [](O& o, bool on) { o.estimate_platform_com = on; },
+               [](const O& o) { return o.estimate_platform_com; }});
   return v;
 }
 
@@ -199,6 +207,10 @@ std::string parameter_name(const ParameterId& id) {
       static const char* const pose[] = {"x", "y", "z", "roll", "pitch", "yaw"};
       return "home" + part(pose);
     }
+    case ParameterKind::kPlatformMass:
+      return "platform.mass";
+    case ParameterKind::kPlatformCom:
+      return "platform.com" + part(xyz);
   }
   return "unknown";
 }

@@ -32,14 +32,7 @@ Crane crane(int n) {
 }
 
 SimulatedMeasurements simulate(const Crane& c, bool noise, std::uint64_t seed = 4) {
-  SimulationOptions so;
-  so.physics = SimulationOptions::Physics::kElastic;
-  so.controller = &c.s.nominal;
-  so.add_noise = noise;
-  so.laser = false;
-  so.swivel = true;
-  so.inclinometer = true;
-  return testing::simulated(c.s.truth, c.commands, so, seed);
+  return testing::simulated(c.s.truth, c.commands, scenario::crane_simulation(c.s, noise), seed);
 }
 
 IdentificationOptions crane_options() {
@@ -202,14 +195,8 @@ TEST(SuspendedIdentification, DesignedPosesAreEquilibriaWithTensionsWithinLimits
   outside.position.x() = 1.5;
   EXPECT_FALSE(feasible_design_pose(robot, outside, 0.0).has_value());
   // The designed poses calibrate the crane (noise-free: the truth).
-  SimulationOptions so;
-  so.physics = SimulationOptions::Physics::kElastic;
-  so.controller = &s.nominal;
-  so.add_noise = false;
-  so.laser = false;
-  so.swivel = true;
-  so.inclinometer = true;
-  auto sim = simulate_measurements(s.truth, d->poses, SensorNoise{}, 1, so);
+  auto sim = simulate_measurements(s.truth, d->poses, SensorNoise{}, 1,
+                                   scenario::crane_simulation(s, false));
   ASSERT_TRUE(sim.ok()) << sim.status().to_string();
   auto rep = identify(s.nominal, sim->set, crane_options());
   ASSERT_TRUE(rep.ok()) << rep.status().to_string();

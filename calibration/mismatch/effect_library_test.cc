@@ -40,7 +40,8 @@ TEST(EffectLibrary, EveryEntryIsCompleteForItsRefitKind) {
                     o.estimate_force_offsets != before.estimate_force_offsets ||
                     o.estimate_laser_origin != before.estimate_laser_origin ||
                     o.estimate_laser_direction != before.estimate_laser_direction ||
-                    o.estimate_laser_plane != before.estimate_laser_plane);
+                    o.estimate_laser_plane != before.estimate_laser_plane ||
+                    o.estimate_platform_mass != before.estimate_platform_mass);
         break;
       }
       case EffectRefit::kGaussNewton:

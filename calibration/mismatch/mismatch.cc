@@ -266,6 +266,8 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
   ext_opt.platform_anchor_mask = AnchorMask();
   ext_opt.estimate_force_gains = mopt.force_sensor_candidates || options.estimate_force_gains;
   ext_opt.estimate_force_offsets = mopt.force_sensor_candidates || options.estimate_force_offsets;
+  ext_opt.estimate_platform_mass = mopt.force_sensor_candidates || options.estimate_platform_mass;
+  ext_opt.estimate_platform_com = mopt.force_sensor_candidates || options.estimate_platform_com;
   ext_opt.estimate_laser_origin = nl > 0 || options.estimate_laser_origin;
   ext_opt.estimate_laser_direction = nl > 0 || options.estimate_laser_direction;
   ext_opt.estimate_laser_plane = nl > 0 || options.estimate_laser_plane;
@@ -655,9 +657,9 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
       }
       if (c.X.norm() > 0) lib.push_back(std::move(c));
     };
-    for (const char* id :
-         {"drum_scale_per_cable", "platform_anchors", "force_gain_per_cable",
-          "force_offset_per_cable", "laser_mounting", "laser_direction", "laser_plane"}) {
+    for (const char* id : {"drum_scale_per_cable", "platform_anchors", "force_gain_per_cable",
+                           "force_offset_per_cable", "platform_weight", "laser_mounting",
+                           "laser_direction", "laser_plane"}) {
       group(id);
     }
     // The shared drum scale: the sum of the per-cable columns.

@@ -191,6 +191,19 @@ inline Scenario crane_scenario(unsigned seed = 5) {
   return s;
 }
 
+// How the crane's recordings are simulated: elastic physics, commanded through `s`'s nominal
+// model (which must outlive the options), swivel angles and inclinometer, no laser.
+inline SimulationOptions crane_simulation(const Scenario& s, bool noise) {
+  SimulationOptions so;
+  so.physics = SimulationOptions::Physics::kElastic;
+  so.controller = &s.nominal;
+  so.add_noise = noise;
+  so.laser = false;
+  so.swivel = true;
+  so.inclinometer = true;
+  return so;
+}
+
 // `n` equilibrium poses of the suspended `model`: its home pose first, then random targets in
 // `box` (position; the yaw within +-0.03 rad) made equilibria (suspended_equilibrium_pose) with
 // every tension within [f_min, f_max]. These are the poses the controller commands.

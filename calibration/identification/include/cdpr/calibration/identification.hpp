@@ -48,7 +48,8 @@
 // (m, platform frame), laser direction (two small angles about the nominal direction, rad), plane
 // normal (two small angles, rad) and plane offset c (m, n.x = c), swivel encoder zero zero_i
 // (rad), inclinometer mounting correction (roll, pitch, rad, applied as R_m = R_m,config
-// rotation_from_rpy(roll, pitch, 0)) and IMU yaw zero (rad).
+// rotation_from_rpy(roll, pitch, 0)), IMU yaw zero (rad), platform mass (kg) and centre of mass
+// (m, platform frame; both enter the weight's force and moment in the equilibrium residuals).
 #pragma once
 
 #include <Eigen/Core>
@@ -102,6 +103,12 @@ struct ParameterBounds {
   double inclinometer_mount_rad = 0.2;  // inclinometer mounting roll and pitch, +-
   double imu_yaw_zero_rad = 3.2;        // IMU heading zero, +- (about half a turn: any heading)
   double home_tilt_rad = 0.2;  // suspended robots: home roll and pitch, +- around the start
+  // Platform mass within [min, max] x the config's mass (always > 0); each coordinate of the
+  // centre of mass (platform frame) within +- RobotModel::platform_radius() of the config's: the
+  // correction stays within the platform's extent (a config may place the centre of mass of a
+  // hanging load below the plate, outside the anchors' radius).
+  double mass_factor_min = 0.5;
+  double mass_factor_max = 2.0;
 };
 
 struct IdentificationOptions {
@@ -122,6 +129,11 @@ struct IdentificationOptions {
   bool estimate_swivel_zeros = false;           // zero_i of every cable with swivel readings
   bool estimate_inclinometer_mounting = false;  // roll and pitch of the mounting rotation
   bool estimate_imu_yaw_zero = false;
+  // Platform mass and centre of mass (the weight in the equilibrium residuals; they need measured
+  // tensions). The mass is seen in the vertical force; the centre of mass in the moment of the
+  // weight, its height only through tilted poses (the lever of the weight is horizontal).
+  bool estimate_platform_mass = false;
+  bool estimate_platform_com = false;
 
   // --- Which residuals are used --------------------------------------------------------------
   bool use_lengths = true;
@@ -206,6 +218,8 @@ enum class ParameterKind {
   kImuYawZero,         // imu.yaw_zero, rad
   kHomePose,           // home.x/y/z/roll/pitch/yaw (component 0..5); a suspended robot's home
                        // roll and pitch are estimated (m < 6), m / rad
+  kPlatformMass,       // platform.mass, kg
+  kPlatformCom,        // platform.com.x/y/z (platform frame), m
 };
 
 struct ParameterId {

@@ -72,9 +72,10 @@ struct MismatchOptions {
   double alpha = 0.01;              // significance level (family-wise for the candidates)
   double confound_threshold = 0.8;  // canonical correlation above which a pair is confounded
   double rank_tolerance = 1e-9;     // relative, for the rank of J and of projected candidates
-  // Screen force-sensor gain and offset (equilibrium rows). On since the equilibrium rows are
-  // whitened conditionally on the length rows (identification.hpp): before, the gain
-  // candidate's statistic on null data averaged 17.9 instead of its 8 degrees of freedom.
+  // Screen force-sensor gain and offset and the platform mass and centre of mass (equilibrium
+  // rows). On since the equilibrium rows are whitened conditionally on the length rows
+  // (identification.hpp): before, the gain candidate's statistic on null data averaged 17.9
+  // instead of its 8 degrees of freedom.
   bool force_sensor_candidates = true;
   // Screen the direction-dependent candidates: cable hysteresis (a length error that depends on
   // whether the cable was last paid out or reeled in) and pulley friction (a tension-reading error
