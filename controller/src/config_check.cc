@@ -15,9 +15,9 @@
 
 #include "cdpr/calibration/winch.hpp"
 #include "cdpr/canopen/master.hpp"
+#include "cdpr/config/robot_config.hpp"
 #include "cdpr/controller/canopen_robot_io.hpp"
 #include "cdpr/controller/safety_config.hpp"
-#include "cdpr/config/robot_config.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
 
 namespace cdpr::controller {
