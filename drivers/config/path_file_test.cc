@@ -9,6 +9,7 @@
 #include <string>
 
 #include "cdpr/calibration/path_check.hpp"
+#include "cdpr/calibration/path_program.hpp"
 #include "testing/test_robots.hpp"
 
 namespace cdpr {
