@@ -75,6 +75,11 @@ RtControllerOptions Daemon::rt_options() const {
   ro.settle_tension = ms.settle_tension_tolerance;
   ro.slew_velocity = config_.motion.max_cable_speed;
   ro.slew_acceleration = config_.motion.max_cable_acceleration;
+  const TensionControlSettings& tc = config_.tension_control;
+  ro.tension_control = TensionControlOptions{tc.gain,     config_.motion.tension_margin,
+                                             tc.deadband, tc.max_rate,
+                                             tc.max_trim, tc.stale_s,
+                                             tc.hold_s,   tc.decay_s};
   return ro;
 }
 

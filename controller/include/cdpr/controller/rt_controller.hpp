@@ -14,6 +14,9 @@
 //                      fault_reset()
 //   take_command       a posted command at the cycle boundary (move, trim, re-reference)
 //   sample_trajectory  the pose to command (the active trajectory, or the pose held)
+//   control_tensions   tension control in the null space of the structure matrix
+//                      (tension_control.hpp): the measured tensions trim the cable targets
+//                      towards the band, while holding and moving
 //   compute_targets    tension plan (QP, allocation-free) and compensated inverse kinematics
 //                      with the active geometry
 //   slew_targets       the drive targets: the re-reference slew, or the IK plus the
@@ -43,6 +46,7 @@
 #include "cdpr/controller/robot_io.hpp"
 #include "cdpr/controller/slew.hpp"
 #include "cdpr/controller/spsc_ring.hpp"
+#include "cdpr/controller/tension_control.hpp"
 #include "cdpr/controller/trajectory.hpp"
 #include "cdpr/core/seqlock.hpp"
 
@@ -96,6 +100,8 @@ struct RtControllerOptions {
   // (the cable's response lags the command). 0: off.
   double stuck_raw_units = 12.0;
   int stuck_confirm_cycles = 50;
+  // Tension control in the null space (gain 0: off; tension_control.hpp).
+  TensionControlOptions tension_control;
 };
 
 // What any thread may read about the loop (trivially copyable, published every cycle).
@@ -122,6 +128,7 @@ struct RtSnapshot {
   std::array<double, kMaxAxes> actual_counts{};  // drive position actual
   std::array<double, kMaxAxes> target_counts{};  // drive target sent
   std::array<double, kMaxAxes> trim_counts{};    // tension-regulation trims in force
+  TensionControlStatus tension_control;          // the null-space stage and its trims
   std::array<int, kMaxAxes> slack_cycles{};      // consecutive cycles below the slack limit
   // Stuck-reading watch: how far each cable's tension was made to change since its raw reading
   // last changed, in units of the watch's threshold (above 1: evidence of a stuck reading).
@@ -188,6 +195,7 @@ class RtController {
   void watch_faults(canopen::Timestamp now) noexcept;
   void take_command(canopen::Timestamp now) noexcept;
   void sample_trajectory(canopen::Timestamp now) noexcept;
+  void control_tensions() noexcept;
   void compute_targets(canopen::Timestamp now) noexcept;
   void slew_targets() noexcept;
   void write_outputs() noexcept;
@@ -222,6 +230,7 @@ class RtController {
   std::array<double, kMaxAxes> target_{};   // sent (fractional counts)
   std::array<double, kMaxAxes> desired_{};  // from the IK this cycle
   SlewLimiter slew_;
+  TensionControl tension_;
 
   std::atomic<MotionCommand*> inbox_{nullptr};
   MotionCommand* active_ = nullptr;
