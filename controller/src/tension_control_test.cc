@@ -111,6 +111,18 @@ class TensionRig : public ::testing::Test {
     rt_->post(&c);
     ASSERT_TRUE(run_until([&](const RtSnapshot& s) { return s.command_done == c.seq; }, 2000));
   }
+  // A 20 mm move along y from home.
+  void move_from_home() {
+    Pose to = geometry_.model.home;
+    to.position.y() += 0.02;
+    auto traj = PoseTrajectory::plan(geometry_.model.home, to, MotionLimits{});
+    ASSERT_TRUE(traj.ok());
+    MotionCommand& c = commands_.emplace_back();
+    c.type = MotionCommand::Type::kMove;
+    c.trajectory = std::move(*traj);
+    c.seq = ++seq_;
+    rt_->post(&c);
+  }
   // A disturbance of the internal forces that puts cable `slack` at `below` N under its plan.
   void disturb(int slack, double below) {
     const Eigen::VectorXd d = kernel_.col(0) / kernel_(slack, 0);
@@ -238,15 +250,7 @@ TEST_F(TensionRig, StaleReadingsFreezeTheTrimsThenTheyDecayAndAFreshReadingResum
 
 TEST_F(TensionRig, ActiveWhileMovingAndOffWhileDisabled) {
   hold_home();
-  Pose to = geometry_.model.home;
-  to.position.y() += 0.02;
-  auto traj = PoseTrajectory::plan(geometry_.model.home, to, MotionLimits{});
-  ASSERT_TRUE(traj.ok());
-  MotionCommand& c = commands_.emplace_back();
-  c.type = MotionCommand::Type::kMove;
-  c.trajectory = std::move(*traj);
-  c.seq = ++seq_;
-  rt_->post(&c);
+  move_from_home();
   cycle(20);
   RtSnapshot s = rt_->snapshot();
   ASSERT_EQ(s.mode, RtMode::kMoving);
@@ -262,15 +266,7 @@ TEST_F(TensionRig, ActiveWhileMovingAndOffWhileDisabled) {
 TEST_F(TensionRig, CycleWithTensionControlAllocatesNothing) {
   hold_home();
   disturb(0, planned_[0]);
-  Pose to = geometry_.model.home;
-  to.position.y() += 0.02;
-  auto traj = PoseTrajectory::plan(geometry_.model.home, to, MotionLimits{});
-  ASSERT_TRUE(traj.ok());
-  MotionCommand& c = commands_.emplace_back();
-  c.type = MotionCommand::Type::kMove;
-  c.trajectory = std::move(*traj);
-  c.seq = ++seq_;
-  rt_->post(&c);
+  move_from_home();
   std::uint64_t allocations = 0;
   for (int n = 0; n < 400; ++n) {
     if (n == 300) io_.tensions_arrive = false;  // frozen, then decaying
