@@ -72,7 +72,9 @@ RtController::RtController(RobotIO& io, const Geometry& initial, const RtControl
       geometry_(&initial),
       command_data_(initial.model),
       slew_() {
-  tension_.configure(options.tension_control, options.cycle_s);
+  TensionControlOptions tension = options.tension_control;
+  tension.slack_below = options.slack_below;  // one slack limit: the watch's
+  tension_.configure(tension, options.cycle_s);
   out_.num_axes = m_;
   hold_pose_ = pose_ = initial.model.home;
   ref_tension_ = initial.reference_tension;

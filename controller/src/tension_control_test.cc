@@ -156,7 +156,7 @@ class TensionRig : public ::testing::Test {
   canopen::Timestamp now_{1s};
 };
 
-TEST_F(TensionRig, ASlackCableIsTakenIntoTheBandByTheInternalForcesAlone) {
+TEST_F(TensionRig, ASlackCableIsTakenUpIntoTheBandAndStaysThere) {
   hold_home();
   disturb(0, planned_[0]);  // cable 1 at 0 N, the others off by the same internal force
   sense();
@@ -169,16 +169,9 @@ TEST_F(TensionRig, ASlackCableIsTakenIntoTheBandByTheInternalForcesAlone) {
   const RtSnapshot s = rt_->snapshot();
   EXPECT_EQ(s.tension_control.state, TensionControlState::kActive);
   EXPECT_LE(s.tension_control.largest_error, 2.0 * options_.tension_control.deadband + 0.5);
-  // The trims are a kernel direction through the stiffness: the forces they alone would cause
-  // balance (A^T df = 0), i.e. the platform is not pushed.
-  Eigen::VectorXd dl(m_);
-  for (int i = 0; i < m_; ++i) {
-    dl(i) = winch_length_change<double>(geometry_.model.winches[static_cast<size_t>(i)],
-                                        s.tension_control.trim_counts[static_cast<size_t>(i)]);
-  }
-  const Eigen::VectorXd df = -k_ * dl;  // with the platform held where it is
-  EXPECT_GT(df.norm(), 10.0);
-  EXPECT_LT((a_.transpose() * df).norm(), 1e-6 * df.norm() * a_.norm());
+  // The cable below the band was taken up on its own (shortened); the platform yielded to the
+  // part of that change outside the kernel.
+  EXPECT_LT(s.tension_control.trim_counts[0], 0.0);
 }
 
 TEST_F(TensionRig, TrimsMoveNoFasterThanTheRateLimit) {
@@ -218,7 +211,8 @@ TEST_F(TensionRig, ACableThatNeverTightensWindsTheTrimsUpOnlyToTheirBound) {
   stuck_[0] = false;
   sense();
   ASSERT_TRUE(run_until([&](const RtSnapshot& r) { return r.tension_control.in_band; }, 3000));
-  EXPECT_FALSE(rt_->snapshot().tension_control.saturated);
+  cycle(250);  // and stays there (a trim inside the band is left where it is)
+  EXPECT_TRUE(all_in_band());
 }
 
 TEST_F(TensionRig, StaleReadingsFreezeTheTrimsThenTheyDecayAndAFreshReadingResumes) {

@@ -106,9 +106,9 @@ TEST_F(DaemonNativeTension, WithoutTensionControlACableGoesSlackDuringTheSequenc
   EXPECT_TRUE(outside) << "the nominal geometry no longer drives a cable out of its band";
 }
 
-// NOT MET YET (disabled): with gain 5 the sequence completes but cables 2 and 3 still read
-// -0.5 N at some cycle; a higher gain or rate (20 /s, 0.02 m/s) keeps the trims moving on the
-// force noise and the settling times out. See docs/daemon.md "Tension control".
+// NOT MET YET (disabled): with gain 5 the sequence reaches pose 8, where a move overloads cable 2
+// (the trims taken at one pose are carried into the next); cable 2 reads 0 N during the first
+// move. See docs/daemon.md "Tension control".
 TEST_F(DaemonNativeTension,
        DISABLED_TensionControlKeepsEveryCableTautAndBelowItsBandThroughTheSequence) {
   const Extremes x = measure("{gain: 5}");

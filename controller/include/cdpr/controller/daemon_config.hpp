@@ -64,7 +64,7 @@ struct TensionWatch {
 // and the measuring sequence regulates pose by pose.
 struct TensionControlSettings {
   double gain = 0.0;        // 1/s
-  double deadband = 1.0;    // N
+  double deadband = 3.0;    // N
   double max_rate = 0.005;  // m/s of cable
   double max_trim = 0.03;   // m of cable
   double stale_s = 0.05;    // s

@@ -171,6 +171,11 @@ class RtController {
   void request_quick_stop() noexcept { quick_stop_.store(true, std::memory_order_release); }
   void request_fault_reset() noexcept { fault_reset_.store(true, std::memory_order_release); }
   // Starts a new average of encoder counts and tensions; returns its id (see RtSnapshot).
+  // Any thread: the tension control's trims stay where they are while `hold` (the measuring
+  // sequence, while a pose is averaged: the trims must not move the drives then).
+  void hold_tension_trims(bool hold) noexcept {
+    hold_tension_trims_.store(hold, std::memory_order_release);
+  }
   std::uint64_t request_average() noexcept {
     return average_request_.fetch_add(1, std::memory_order_acq_rel) + 1;
   }
@@ -239,6 +244,7 @@ class RtController {
   std::atomic<bool> quick_stop_{false};
   std::atomic<bool> fault_reset_{false};
   std::atomic<std::uint64_t> average_request_{0};
+  std::atomic<bool> hold_tension_trims_{false};
   std::uint64_t average_taken_ = 0;
 
   RtMode mode_ = RtMode::kDisabled;
