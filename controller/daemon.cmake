@@ -9,6 +9,8 @@ add_library(cdpr_daemon STATIC
   ${_d}/src/rt_controller.cc
   ${_d}/src/rt_controller_watch.cc
   ${_d}/src/rt_controller_safety.cc
+  ${_d}/src/rt_controller_tension.cc
+  ${_d}/src/tension_control.cc
   ${_d}/src/state_store.cc
   ${_d}/src/calibration_report.cc
   ${_d}/src/supervisor.cc
@@ -35,6 +37,8 @@ if(CDPR_BUILD_TESTS)
 endif()
 
 cdpr_add_gtest(NAME daemon_rt_controller_test SOURCES ${_d}/src/rt_controller_test.cc
+               LIBS cdpr_daemon cdpr_daemon_testing cdpr_calibration_testing cdpr_test_support)
+cdpr_add_gtest(NAME daemon_tension_control_test SOURCES ${_d}/src/tension_control_test.cc
                LIBS cdpr_daemon cdpr_daemon_testing cdpr_calibration_testing cdpr_test_support)
 cdpr_add_gtest(NAME daemon_config_test SOURCES ${_d}/src/daemon_config_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.cc LIBS cdpr_daemon)

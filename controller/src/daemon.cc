@@ -77,6 +77,11 @@ RtControllerOptions Daemon::rt_options() const {
   ro.slew_velocity = config_.motion.max_cable_speed;
   ro.slew_acceleration = config_.motion.max_cable_acceleration;
   safety_options(ro);
+  const TensionControlSettings& tc = config_.tension_control;
+  ro.tension_control = TensionControlOptions{tc.gain,     config_.motion.tension_margin,
+                                             tc.deadband, tc.max_rate,
+                                             tc.max_trim, tc.stale_s,
+                                             tc.hold_s,   tc.decay_s};
   return ro;
 }
 

@@ -46,12 +46,20 @@ struct Daemon::Identified {
 class Daemon::SequenceRobot final : public MeasuringRobot {
  public:
   SequenceRobot(Daemon& d, int id) : d_(d), id_(id) {}
+  // The tension control's trims are held from the regulate step (in band) to the end of the
+  // sample: they must not move the drives while a pose is averaged.
+  ~SequenceRobot() override { d_.rt_->hold_tension_trims(false); }
   Status move(const Pose& pose, double pretension) override {
+    d_.rt_->hold_tension_trims(false);
     return d_.move_to(pose, pretension, true);
   }
   Status settle() override { return d_.hold_still(true); }
   Status regulate(int pose_index) override { return d_.regulate_tensions(pose_index); }
-  Status sample(recording::RecordedPose& row) override { return d_.sample_pose(row); }
+  Status sample(recording::RecordedPose& row) override {
+    const Status s = d_.sample_pose(row);
+    d_.rt_->hold_tension_trims(false);
+    return s;
+  }
   double now_s() const override { return d_.now_s(); }
   void measured(const recording::RecordedPose& row, int done, int total, double elapsed_s,
                 double remaining_s) override {
@@ -123,9 +131,32 @@ Result<std::vector<Pose>> Daemon::plan_poses(const std::string& poses_csv) {
   return kept;
 }
 
+// With tension control in the RT cycle (config tension_control.gain > 0) the trims already act
+// during the move and the settling: the step waits until every cable is inside the controller's
+// band [f_min + margin, f_max - margin], then holds the trims (released after the sample) and
+// waits for stillness again. Without it, the old
+// pose-by-pose regulation below takes each cable into [f_min - band, f_max + band] by trims.
 Status Daemon::regulate_tensions(int pose_index) {
+  if (master_->force_sensors().empty()) return Status::success();
+  if (config_.tension_control.gain > 0.0) {
+    const Status s = wait_rt(
+        [](const RtSnapshot& r) {
+          return r.tension_control.state == TensionControlState::kActive &&
+                 r.tension_control.in_band;
+        },
+        config_.measuring.settle_timeout_s, "tension control", true);
+    if (s.code() == ErrorCode::kTimeout) {
+      spdlog::warn("pose {}: a tension is still outside [f_min + {:.1f}, f_max - {:.1f}] N: {}",
+                   pose_index, config_.motion.tension_margin, config_.motion.tension_margin,
+                   s.to_string());
+    } else if (!s.ok()) {
+      return s;
+    }
+    rt_->hold_tension_trims(true);
+    return hold_still(true);
+  }
   const double band = config_.measuring.tension_band;
-  if (band <= 0.0 || master_->force_sensors().empty()) return Status::success();
+  if (band <= 0.0) return Status::success();
   const Geometry* g = active_geometry();
   const int m = g->model.num_cables();
   std::array<double, kMaxAxes> trim{};

@@ -122,6 +122,17 @@ json Daemon::status() const {
       {"one_cycle_motion_counts", config_.motion.max_cable_speed *
                                       std::chrono::duration<double>(network_.sync_period).count() /
                                       winch_metres_per_count(active_->model.winches[0])}};
+  const TensionControlStatus& tc = s.tension_control;
+  json trims = json::array();
+  for (int i = 0; i < s.num_cables; ++i) {
+    trims.push_back(tc.trim_counts[static_cast<std::size_t>(i)]);
+  }
+  // The null-space tension control: off, active, frozen or decaying (stale or faulty readings).
+  j["rt"]["tension_control"] = {{"state", to_string(tc.state)},
+                                {"in_band", tc.in_band},
+                                {"saturated", tc.saturated},
+                                {"largest_error_n", tc.largest_error},
+                                {"trim_counts", trims}};
   j["warning"] = warning_.empty() ? json(nullptr) : json(warning_);
   j["drives"] = {{"enabled", s.all_enabled}};
   j["pose"] = {{"trusted", trust_.trusted},

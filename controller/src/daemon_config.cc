@@ -86,6 +86,19 @@ Status read_tension_watch(const YamlField& n, TensionWatch& t) {
   return n.optional("cycles", t.cycles, 1, 10000);
 }
 
+Status read_tension_control(const YamlField& n, TensionControlSettings& t) {
+  if (!n.present()) return Status::success();
+  CDPR_RETURN_IF_ERROR(
+      n.check_keys({"gain", "deadband", "max_rate", "max_trim", "stale_s", "hold_s", "decay_s"}));
+  CDPR_RETURN_IF_ERROR(in_range(n, "gain", 0.0, 1e3, "1/s", t.gain));
+  CDPR_RETURN_IF_ERROR(in_range(n, "deadband", 0.0, 1e5, "N", t.deadband));
+  CDPR_RETURN_IF_ERROR(in_range(n, "max_rate", 0.0, 10.0, "m/s", t.max_rate));
+  CDPR_RETURN_IF_ERROR(in_range(n, "max_trim", 0.0, 10.0, "m", t.max_trim));
+  CDPR_RETURN_IF_ERROR(in_range(n, "stale_s", 0.0, 60.0, "s", t.stale_s));
+  CDPR_RETURN_IF_ERROR(in_range(n, "hold_s", 0.0, 600.0, "s", t.hold_s));
+  return in_range(n, "decay_s", 1e-3, 600.0, "s", t.decay_s);
+}
+
 Status read_measuring(const YamlField& n, const std::string& dir, MeasuringSettings& m) {
   if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(n.check_keys(
@@ -202,8 +215,8 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   CDPR_RETURN_IF_ERROR(root.expect_map("a mapping of daemon settings"));
   CDPR_RETURN_IF_ERROR(
       root.check_keys({"robot", "canopen", "laser", "can_interface", "state_directory", "realtime",
-                       "identity", "motion", "tension_watch", "measuring", "identification",
-                       "acceptance", "start", "control", "safety"}));
+                       "identity", "motion", "tension_watch", "tension_control", "measuring",
+                       "identification", "acceptance", "start", "control", "safety"}));
   const std::string dir = std::filesystem::path(c.file).parent_path().string();
   CDPR_ASSIGN_OR_RETURN(YamlField robot, root.required("robot", "the robot description"));
   CDPR_ASSIGN_OR_RETURN(c.robot, robot.text());
@@ -220,6 +233,7 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   CDPR_RETURN_IF_ERROR(read_identity(root["identity"], c.identity));
   CDPR_RETURN_IF_ERROR(read_motion(root["motion"], c.motion));
   CDPR_RETURN_IF_ERROR(read_tension_watch(root["tension_watch"], c.tension_watch));
+  CDPR_RETURN_IF_ERROR(read_tension_control(root["tension_control"], c.tension_control));
   CDPR_RETURN_IF_ERROR(read_measuring(root["measuring"], dir, c.measuring));
   CDPR_RETURN_IF_ERROR(read_identification(root["identification"], c.identification));
   CDPR_RETURN_IF_ERROR(read_acceptance(root["acceptance"], c.acceptance));

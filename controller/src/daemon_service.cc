@@ -15,6 +15,7 @@ void Daemon::service() {
   log_rt_events();
   const RtSnapshot s = rt_->snapshot();
   watch_slack(s);
+  watch_tension_control(s);
   const DaemonState st = state();
   if (s.fault.kind != FaultKind::kNone && st != DaemonState::kFault &&
       st != DaemonState::kStarting) {
@@ -78,6 +79,26 @@ void Daemon::log_rt_events() {
 
 // A slack cable is named (status "warning", the log, a `warning` event) but does not stop the
 // robot: an 8-cable robot keeps control with one slack cable (docs/daemon.md).
+// The tension control frozen or decaying (stale or faulty force readings) is logged when it
+// starts and when the control is active again.
+void Daemon::watch_tension_control(const RtSnapshot& s) {
+  const TensionControlState now = s.tension_control.state;
+  if (now == tension_state_) return;
+  const TensionControlState was = tension_state_;
+  tension_state_ = now;
+  const bool degraded =
+      now == TensionControlState::kFrozen || now == TensionControlState::kDecaying;
+  if (!degraded && was != TensionControlState::kFrozen && was != TensionControlState::kDecaying) {
+    return;
+  }
+  const std::string line =
+      degraded ? std::string("tension control ") + to_string(now) +
+                     ": force readings stale or faulty, trims held then decaying to 0"
+               : std::string("tension control ") + to_string(now) + " again";
+  spdlog::warn("{}", line);
+  publish("log", {{"level", "warning"}, {"message", line}});
+}
+
 void Daemon::watch_slack(const RtSnapshot& s) {
   std::string warning;
   for (int i = 0; i < s.num_cables && warning.empty(); ++i) {

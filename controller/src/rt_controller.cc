@@ -65,6 +65,7 @@ Result<std::unique_ptr<RtController>> RtController::create(RobotIO& io, const Ge
                          m, kMaxAxes);
   }
   CDPR_RETURN_IF_ERROR(io.fits(initial.model));
+  CDPR_RETURN_IF_ERROR(TensionControl::validate(options.tension_control, options.cycle_s));
   if (options.settle_cycles < 1 || options.settle_cycles > kMaxWindow) {
     return Status::error(ErrorCode::kInvalidArgument, "settle window of %d cycles (1..%d)",
                          options.settle_cycles, kMaxWindow);
@@ -79,6 +80,9 @@ RtController::RtController(RobotIO& io, const Geometry& initial, const RtControl
       geometry_(&initial),
       command_data_(initial.model),
       slew_() {
+  TensionControlOptions tension = options.tension_control;
+  tension.slack_below = options.slack_below;  // one slack limit: the watch's
+  tension_.configure(tension, options.cycle_s);
   out_.num_axes = m_;
   hold_pose_ = pose_ = initial.model.home;
   ref_tension_ = initial.reference_tension;
@@ -100,6 +104,7 @@ void RtController::cycle(canopen::Timestamp now) noexcept {
   watch_faults(now);
   take_command(now);
   sample_trajectory(now);
+  control_tensions();
   compute_targets(now);
   check_limits(now);
   sequence_brakes();
@@ -243,6 +248,7 @@ void RtController::start_reference(const MotionCommand& c, canopen::Timestamp no
   reset_stuck_watch();  // the commanded lengths are derived again: the expected tensions jump
   trim_.fill(0.0);
   trim_goal_.fill(0.0);
+  tension_.reset();
   std::array<double, kMaxAxes> start{};
   for (int i = 0; i < m_; ++i) {
     const auto k = static_cast<std::size_t>(i);
@@ -367,7 +373,7 @@ void RtController::slew_targets() noexcept {
     if (mode_ == RtMode::kHolding) step_trims();
     for (int i = 0; i < m_; ++i) {
       const auto k = static_cast<std::size_t>(i);
-      const double goal = desired_[k] + trim_[k];
+      const double goal = desired_[k] + trim_[k] + tension_.trim(i);
       step = std::max(step, std::abs(goal - target_[k]));
       target_[k] = goal;
     }
@@ -407,6 +413,7 @@ void RtController::publish(canopen::Timestamp now) noexcept {
   snap_.command_taken = active_ != nullptr ? active_->seq : 0;
   snap_.command_done = done_;
   snap_.trim_counts = trim_;
+  snap_.tension_control = tension_.status();
   snap_.geometry_version = geometry_->version;
   snap_.settled = settled_;
   for (int j = 0; j < 3; ++j) {

@@ -204,6 +204,7 @@ class Daemon {
   // The supervisor's tick (daemon_service.cc).
   void log_rt_events();
   void watch_slack(const RtSnapshot& s);
+  void watch_tension_control(const RtSnapshot& s);
   void latch_fault(const RtSnapshot& s);
   void after_fault_reset();
 
@@ -283,6 +284,7 @@ class Daemon {
   std::string fault_text_;
   std::set<int> rebooted_nodes_;  // nodes that booted while the daemon ran (need a restart)
   std::string warning_;  // a condition that is named but does not stop the robot (a slack cable)
+  TensionControlState tension_state_ = TensionControlState::kOff;  // as last logged
   nlohmann::json loop_figures_ = nlohmann::json::object();
   int active_version_ = 0;
   std::vector<std::unique_ptr<Geometry>> geometries_;  // kept while the RT loop may use them

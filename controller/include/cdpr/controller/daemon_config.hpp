@@ -60,6 +60,19 @@ struct TensionWatch {
   double stuck_confirm_s = 0.2;
 };
 
+// Tension control in the null space (tension_control.hpp); its band's margin is
+// motion.tension_margin. gain 0 (the default until it passes issue 40's acceptance test): off,
+// and the measuring sequence regulates pose by pose.
+struct TensionControlSettings {
+  double gain = 0.0;        // 1/s
+  double deadband = 3.0;    // N
+  double max_rate = 0.005;  // m/s of cable
+  double max_trim = 0.03;   // m of cable
+  double stale_s = 0.05;    // s
+  double hold_s = 0.5;      // s
+  double decay_s = 2.0;     // s
+};
+
 struct MeasuringSettings {
   int poses = 25;         // designed poses (including home) when no pose file is given
   std::string pose_file;  // pose list CSV (docs/recording-format.md); "" = pose design
@@ -153,6 +166,7 @@ struct DaemonConfig {
   IdentitySettings identity;
   MotionSettings motion;
   TensionWatch tension_watch;
+  TensionControlSettings tension_control;
   MeasuringSettings measuring;
   IdentificationSettings identification;
   AcceptanceGates acceptance;

@@ -16,6 +16,9 @@
 //                      e-stop's only once every input reads closed again)
 //   take_command       a posted command at the cycle boundary (move, trim, re-reference)
 //   sample_trajectory  the pose to command (the active trajectory, or the pose held)
+//   control_tensions   tension control in the null space of the structure matrix
+//                      (tension_control.hpp): the measured tensions trim the cable targets
+//                      towards the band, while holding and moving
 //   compute_targets    tension plan (QP, allocation-free) and compensated inverse kinematics
 //                      with the active geometry
 //   slew_targets       the drive targets: the re-reference slew, or the IK plus the
@@ -53,6 +56,7 @@
 #include "cdpr/controller/motion_command.hpp"
 #include "cdpr/controller/robot_io.hpp"
 #include "cdpr/controller/spsc_ring.hpp"
+#include "cdpr/controller/tension_control.hpp"
 #include "cdpr/core/seqlock.hpp"
 
 namespace cdpr::controller {
@@ -129,6 +133,8 @@ struct RtControllerOptions {
   // Allowed commanded positions of the platform origin (world, m); off when !workspace_box.
   bool workspace_box = false;
   std::array<double, 3> box_min{}, box_max{};
+  // Tension control in the null space (gain 0: off; tension_control.hpp).
+  TensionControlOptions tension_control;
 };
 
 // What any thread may read about the loop (trivially copyable, published every cycle).
@@ -160,6 +166,7 @@ struct RtSnapshot {
   std::array<double, kMaxAxes> actual_counts{};  // drive position actual
   std::array<double, kMaxAxes> target_counts{};  // drive target sent
   std::array<double, kMaxAxes> trim_counts{};    // tension-regulation trims in force
+  TensionControlStatus tension_control;          // the null-space stage and its trims
   std::array<int, kMaxAxes> slack_cycles{};      // consecutive cycles below the slack limit
   // Stuck-reading watch: how far each cable's tension was made to change since its raw reading
   // last changed, in units of the watch's threshold (above 1: evidence of a stuck reading).
@@ -210,6 +217,11 @@ class RtController {
   void request_disable() noexcept { disable_.store(true, std::memory_order_release); }
   void request_enable() noexcept { enable_.store(true, std::memory_order_release); }
   // Starts a new average of encoder counts and tensions; returns its id (see RtSnapshot).
+  // Any thread: the tension control's trims stay where they are while `hold` (the measuring
+  // sequence, while a pose is averaged: the trims must not move the drives then).
+  void hold_tension_trims(bool hold) noexcept {
+    hold_tension_trims_.store(hold, std::memory_order_release);
+  }
   std::uint64_t request_average() noexcept {
     return average_request_.fetch_add(1, std::memory_order_acq_rel) + 1;
   }
@@ -234,6 +246,7 @@ class RtController {
   void watch_faults(canopen::Timestamp now) noexcept;
   void take_command(canopen::Timestamp now) noexcept;
   void sample_trajectory(canopen::Timestamp now) noexcept;
+  void control_tensions() noexcept;
   void compute_targets(canopen::Timestamp now) noexcept;
   void slew_targets() noexcept;
   void check_limits(canopen::Timestamp now) noexcept;
@@ -274,6 +287,7 @@ class RtController {
   std::array<double, kMaxAxes> target_{};   // sent (fractional counts)
   std::array<double, kMaxAxes> desired_{};  // from the IK this cycle
   SlewLimiter slew_;
+  TensionControl tension_;
 
   std::atomic<MotionCommand*> inbox_{nullptr};
   MotionCommand* active_ = nullptr;
@@ -284,6 +298,7 @@ class RtController {
   std::atomic<bool> disable_{false};
   std::atomic<bool> enable_{false};
   std::atomic<std::uint64_t> average_request_{0};
+  std::atomic<bool> hold_tension_trims_{false};
   std::uint64_t average_taken_ = 0;
 
   RtMode mode_ = RtMode::kDisabled;
