@@ -23,9 +23,9 @@
 #include <array>
 #include <cstdint>
 
+#include "cdpr/calibration/path_check.hpp"
 #include "cdpr/calibration/robot_model.hpp"
 #include "cdpr/controller/motion_command.hpp"
-#include "cdpr/calibration/path_check.hpp"
 #include "cdpr/controller/robot_io.hpp"
 #include "cdpr/status.hpp"
 
