@@ -324,14 +324,9 @@ class MatrixCell {
         unsafe = true;
       }
     }
-    const Reply cal = cell_->request("calibrate");
-    (void)cell_->request("abort");
-    if (!cal.ok || !holds_settled(60.0)) {
-      parts.push_back("NO WAY BACK: calibrate " + cal.code);
-      unsafe = true;
-    } else {
-      parts.push_back("recalibrates");
-    }
+    const std::string back = recalibrates();
+    if (back.rfind("NO WAY BACK", 0) == 0) unsafe = true;
+    parts.push_back(back);
     std::string out;
     for (std::size_t i = 0; i < parts.size(); ++i) out += (i ? "; " : "") + parts[i];
     return (unsafe ? "UNSAFE: " : "") + out;
@@ -619,6 +614,26 @@ class MatrixCell {
     const json c = daemon().status()["calibration"];
     return !c.is_null() && (c["outcome"] == "measuring" || c["outcome"] == "identifying");
   }
+  // The way back after a fault: a new calibration is taken (then aborted) and the robot holds
+  // again. A start that cannot trust its pose refuses motion naming the documented action
+  // (`cdprctl home`, docs/daemon.md "Start-up, enable, homing and restart"): holding and refusing
+  // with its reason is safe (issue 39), and the cell says so instead of recalibrating.
+  std::string recalibrates() {
+    const Reply cal = cell_->request("calibrate");
+    if (!cal.ok && cal.code == "invalid_state" &&
+        cal.message.find("cdprctl home") != std::string::npos) {
+      return "motion refused until homed";
+    }
+    if (!cal.ok) return "NO WAY BACK: calibrate " + cal.code;
+    (void)cell_->request("abort");
+    if (!holds_settled(60.0)) return "NO WAY BACK: the restarted sequence hangs";
+    return "recalibrates";
+  }
+  static std::string after(const std::string& how, const std::string& back) {
+    return back.rfind("NO WAY BACK", 0) == 0 ? "NO WAY BACK: " + how + ", " + back.substr(13)
+                                             : how + ", " + back;
+  }
+
   bool holds_settled(double max_s) {
     return cell_->run_until(
         [&] {
@@ -651,11 +666,7 @@ class MatrixCell {
           return "NO WAY BACK: fault_reset: " + r.message + "; restart: " + s.to_string();
         }
         how = "fault_reset refused (`" + numbers_hidden(r.message) + "`); cdprd restart → holding";
-        const Reply cal = cell_->request("calibrate");
-        if (!cal.ok) return "NO WAY BACK: " + how + ", calibrate: " + cal.code;
-        (void)cell_->request("abort");
-        if (!holds_settled(60.0)) return "NO WAY BACK: " + how + ", the restarted sequence hangs";
-        return how + ", recalibrates";
+        return after(how, recalibrates());
       }
       bool back = holds_settled(5.0);
       if (!back && daemon().state() == DaemonState::kFault) {
@@ -702,11 +713,7 @@ class MatrixCell {
       }
     }
     // Restart the sequence (it is taken, then aborted) and move.
-    const Reply cal = cell_->request("calibrate");
-    if (!cal.ok) return "NO WAY BACK: " + how + ", calibrate: " + cal.code;
-    (void)cell_->request("abort");
-    if (!holds_settled(60.0)) return "NO WAY BACK: " + how + ", the restarted sequence hangs";
-    return how + ", recalibrates";
+    return after(how, recalibrates());
   }
 
   const FaultRow& row_;
