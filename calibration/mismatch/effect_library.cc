@@ -317,11 +317,14 @@ std::vector<EffectDescriptor> make_library() {
                  R::kIdentification, estimate_force_offsets, nullptr,
                  "ParameterBounds::force_offset_fraction", nullptr, nullptr, kTension});
   lib.back().parameters = {ParameterKind::kForceOffset};
+  // The weight's force and moment and the per-cable gains both explain a misfit of the
+  // equilibrium (per-cable gains whose pattern is a wrench look like a wrong weight): one selection
+  // group, so that one path names the one that explains it better, not both.
   lib.push_back({"platform_weight",
                  "platform mass and centre of mass (the weight's force and moment in the "
                  "equilibrium)",
-                 "platform mass", "platform mass", C::kUnestimatedParameters, R::kIdentification,
-                 estimate_platform_weight, platform_mass_only,
+                 "platform mass", "force sensor gain", C::kUnestimatedParameters,
+                 R::kIdentification, estimate_platform_weight, platform_mass_only,
                  "ParameterBounds::mass_factor_min/max, centre of mass within the platform radius",
                  nullptr, nullptr, kPoseIndex});
   lib.back().parameters = {ParameterKind::kPlatformMass, ParameterKind::kPlatformCom};

@@ -147,6 +147,17 @@ void Daemon::set_trust(PoseTrust trust, const std::string& why) {
 // At start-up: the record, checked against these drives and this geometry, then the pose.
 Status Daemon::restore_homing() {
   const int m = nominal_.num_cables();
+  // The drives' positions come with their TPDOs once SYNC runs after the boot: the offsets and the
+  // pose check read none older than this call (on a slow bus they may not have come yet).
+  const can::Timestamp asked = io_.clock->now();
+  CDPR_RETURN_IF_ERROR(master_->wait_for(
+      [&] {
+        for (const canopen::Drive& d : master_->drives()) {
+          if (master_->last_tpdo(d.node()) <= asked) return false;
+        }
+        return true;
+      },
+      std::chrono::seconds(10), "start-up: every drive's position (a TPDO after the boot)"));
   auto rec = store_->load_homing();
   PoseTrust untrusted;
   untrusted.pose = active_->model.home;
