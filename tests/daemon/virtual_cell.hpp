@@ -181,8 +181,8 @@ class VirtualCell {
               const RtMode m = daemon->rt().snapshot().mode;
               return m == RtMode::kHolding || m == RtMode::kHoldingCounts;
             },
-            5.0)) {
-      return Status(ErrorCode::kTimeout, "the daemon did not hold within 5 s after start-up");
+            30.0)) {
+      return Status(ErrorCode::kTimeout, "the daemon did not hold within 30 s after start-up");
     }
     return Status::success();
   }
