@@ -657,9 +657,9 @@ Result<DesignData> build_design(const CalibratedModel& model, const MeasurementS
       }
       if (c.X.norm() > 0) lib.push_back(std::move(c));
     };
-    for (const char* id : {"drum_scale_per_cable", "platform_anchors", "force_gain_per_cable",
-                           "force_offset_per_cable", "laser_mounting",
-                           "laser_direction", "laser_plane"}) {
+    for (const char* id :
+         {"drum_scale_per_cable", "platform_anchors", "force_gain_per_cable",
+          "force_offset_per_cable", "laser_mounting", "laser_direction", "laser_plane"}) {
       group(id);
     }
     // The shared drum scale: the sum of the per-cable columns.
