@@ -35,6 +35,9 @@ test_times() {
 }
 summary() {
   local rc=$?
+  # The summary must not change the exit status: no -e, no pipefail (a reader that stops early
+  # would end the pipeline with SIGPIPE, 141), and the status of the run is returned explicitly.
+  set +e +o pipefail
   finish
   echo
   echo "== wall time per phase (preset $preset; exit status $rc) =="
@@ -53,8 +56,9 @@ summary() {
   printf '  %-28s %6d s  %8s\n' total "$total" "$(mmss "$total")"
   if [ -f "$ctest_log" ]; then
     echo "== the 15 slowest tests (s) =="
-    test_times | head -15 | awk '{ printf "  %8.1f  %s\n", $1, $2 }'
+    test_times | awk 'NR <= 15 { printf "  %8.1f  %s\n", $1, $2 }'
   fi
+  exit "$rc"
 }
 trap summary EXIT
 rm -f "$ctest_log"

@@ -182,7 +182,12 @@ class VirtualCell {
               return m == RtMode::kHolding || m == RtMode::kHoldingCounts;
             },
             30.0)) {
-      return Status(ErrorCode::kTimeout, "the daemon did not hold within 30 s after start-up");
+      const nlohmann::json st = daemon->status();
+      return Status(ErrorCode::kTimeout,
+                    "the daemon did not hold within 30 s after start-up (state " +
+                        st["state"].dump() + ", reason " + st["reason"].dump() + ", fault " +
+                        st["fault"].dump() + ", rt mode " +
+                        std::string(to_string(daemon->rt().snapshot().mode)) + ")");
     }
     return Status::success();
   }
