@@ -540,8 +540,8 @@ void add_report_and_motion_commands(CLI::App& app, Invocation& inv, CliValues& v
       "home",
       "home: reference platform (the platform on it at home) or absolute encoders (the "
       "record's offsets, pose checked); privileged");
-  home->add_option("--method", v.home_method, "reference or absolute")
-      ->check(CLI::IsMember({"reference", "absolute"}));
+  home->add_option("--method", v.home_method, "reference, drive or absolute")
+      ->check(CLI::IsMember({"reference", "drive", "absolute"}));
   home->callback([&inv, &v] {
     inv.name = "home";
     inv.cmd = "home";

@@ -379,12 +379,17 @@ Result<Pose> Daemon::pose_from_encoders(const RobotModel& model) {
 
 // ---- Motion -----------------------------------------------------------------------------------
 
-std::uint64_t Daemon::post(std::unique_ptr<MotionCommand> c) {
+std::uint64_t Daemon::post(std::unique_ptr<MotionCommand> c, bool first) {
   std::lock_guard lock(motion_mu_);
   c->seq = next_seq_++;
   MotionCommand* raw = c.get();
   commands_.push_back(std::move(c));
-  rt_->post(raw);  // a replaced, never-taken command is reclaimed with the older ones
+  // A replaced, never-taken command is reclaimed with the older ones.
+  if (first) {
+    rt_->post_first(raw);
+  } else {
+    rt_->post(raw);
+  }
   return raw->seq;
 }
 

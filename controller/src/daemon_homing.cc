@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <thread>
 
 #include "cdpr/calibration/forward_kinematics.hpp"
 #include "cdpr/calibration/winch.hpp"
@@ -251,7 +252,46 @@ Result<std::array<double, kMaxAxes>> Daemon::reference_offsets() {
   return offsets;
 }
 
-void Daemon::post_hold(const PoseTrust& trust) {
+Result<std::array<double, kMaxAxes>> Daemon::drive_homing() {
+  const Geometry* g = active_geometry();
+  CommandData data(g->model);
+  if (Status s = command_counts(g->model, g->model.home, g->reference_tension, data); !s.ok()) {
+    return s.prepend("homing at the home pose: ");
+  }
+  const int m = g->model.num_cables();
+  std::array<double, kMaxAxes> offsets{};
+  Status failed;
+  rt_paused_.store(true);
+  while (in_cycle_.load()) std::this_thread::yield();
+  for (int i = 0; i < m && failed.ok(); ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    const canopen::Drive& d = master_->drives()[k];
+    const auto counts = static_cast<std::int32_t>(std::lround(data.cable.counts(i)));
+    failed = master_->set_actual_counts(d.node(), counts, std::chrono::seconds(10));
+    offsets[k] = static_cast<double>(d.actual_counts()) - data.cable.counts(i);
+  }
+  // The RT loop's first cycle after the pause takes a hold of the counts the drives read now:
+  // with the new offsets, or (a drive failed: some counts changed, others not) untrusted.
+  PoseTrust t;
+  t.pose = g->model.home;
+  if (failed.ok()) {
+    t.trusted = true;
+    std::lock_guard lock(mu_);
+    offsets_ = offsets;
+  } else {
+    t.reason = "the drives' homing failed: " + failed.to_string();
+    std::lock_guard lock(mu_);
+    record_.reset();
+  }
+  t.source = "the drives' own homing";
+  set_trust(t, "home --method drive");
+  post_hold(t, true);
+  rt_paused_.store(false);
+  if (!failed.ok()) return failed.prepend("home --method drive: ");
+  return offsets;
+}
+
+void Daemon::post_hold(const PoseTrust& trust, bool first) {
   auto c = std::make_unique<MotionCommand>();
   c->type = MotionCommand::Type::kReference;
   c->hold_actual = true;
@@ -263,7 +303,7 @@ void Daemon::post_hold(const PoseTrust& trust) {
     std::lock_guard lock(mu_);
     c->offsets = offsets_;
   }
-  post(std::move(c));
+  post(std::move(c), first);
 }
 
 std::string Daemon::motion_refusal() const {
@@ -378,9 +418,21 @@ Reply Daemon::cmd_home(const json& args, const PeerInfo& peer) {
                             "home --method absolute: the pose check failed: " + t.reason);
     }
     t.source = "homing (absolute encoders, pose checked)";
+  } else if (method == "drive") {
+    if (st != DaemonState::kHolding) {
+      return Reply::failure(ControlErrorCode::kInvalidState,
+                            "home --method drive: a drive homes only while enabled (CiA 402 "
+                            "homing mode): cdprctl enable first");
+    }
+    auto o = drive_homing();
+    if (!o.ok()) return Reply::failure(ControlErrorCode::kFault, o.status().to_string());
+    offsets = *o;
+    t.trusted = true;
+    t.pose = active_geometry()->model.home;
+    t.source = "homing (the drives' own homing, platform on its reference)";
   } else {
     return Reply::failure(ControlErrorCode::kBadRequest,
-                          "home: method '" + method + "' (reference or absolute)");
+                          "home: method '" + method + "' (reference, drive or absolute)");
   }
   const HomingRecord r = new_record(method, offsets);
   if (Status s = store_->save_homing(r); !s.ok()) {

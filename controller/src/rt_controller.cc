@@ -174,7 +174,9 @@ void RtController::take_requests(canopen::Timestamp now) noexcept {
 }
 
 void RtController::take_command(canopen::Timestamp now) noexcept {
-  MotionCommand* c = inbox_.load(std::memory_order_acquire);
+  std::atomic<MotionCommand*>& box =
+      first_.load(std::memory_order_acquire) != nullptr ? first_ : inbox_;
+  MotionCommand* c = box.load(std::memory_order_acquire);
   if (c == nullptr || fault_.kind != FaultKind::kNone) return;  // a faulted loop takes nothing
   if (!snap_.brakes_released) return;  // no motion against an applied brake
   // A move or a trim starts from holding; a re-reference only while holding still, or while
@@ -193,7 +195,7 @@ void RtController::take_command(canopen::Timestamp now) noexcept {
       break;
   }
   if (!take) return;
-  if (!inbox_.compare_exchange_strong(c, nullptr)) return;  // replaced meanwhile: next cycle
+  if (!box.compare_exchange_strong(c, nullptr)) return;  // replaced meanwhile: next cycle
   active_ = c;
   in_use_command_.store(c->seq, std::memory_order_release);
   settled_ = false;

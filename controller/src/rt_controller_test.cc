@@ -186,6 +186,38 @@ TEST_F(RtRig, ReReferenceSlewsFromWhereTheDrivesAreWithoutAJump) {
   }
 }
 
+TEST_F(RtRig, AHoldPostedFirstIsTakenBeforeAMovePostedAfterItWithItsNewOffsets) {
+  hold_home();
+  // The drives' counters were set anew while the loop paused (the drives' own homing): every
+  // count shifted, the platform did not move.
+  const double shift = 12345.0;
+  for (int i = 0; i < m_; ++i) io_.position[static_cast<std::size_t>(i)] += shift;
+  MotionCommand& hold = make_command(MotionCommand::Type::kReference);
+  hold.hold_actual = hold.from_actual = true;
+  hold.pose = geometry_.model.home;
+  std::array<double, kMaxAxes> offsets{};
+  offsets.fill(shift);
+  hold.offsets = offsets;
+  hold.seq = ++seq_;
+  rt_->post_first(&hold);
+  const std::uint64_t move = post_move(Pose{Eigen::Vector3d(0.01, 0, 0), Eigen::Vector3d::Zero()});
+  cycle();
+  // The first cycle holds the new counts: no target jumps by the shift.
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    EXPECT_NEAR(io_.last().target_counts[k], io_.position[k], 1.0) << i;
+  }
+  EXPECT_EQ(rt_->encoder_offsets()[0], shift);
+  ASSERT_TRUE(
+      run_until([&](const RtSnapshot& s) { return s.command_done == move && s.settled; }, 2000));
+  const std::array<double, kMaxAxes> ik =
+      ik_counts(geometry_, Pose{Eigen::Vector3d(0.01, 0, 0), Eigen::Vector3d::Zero()});
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    EXPECT_NEAR(rt_->snapshot().target_counts[k], ik[k] + shift, 1.0) << "cable " << i;
+  }
+}
+
 TEST_F(RtRig, HotSwapTakesTheNewGeometryWithoutAJump) {
   hold_home();
   RobotModel moved = geometry_.model;

@@ -322,7 +322,7 @@ void CanRobot::step_physics(double t) {
   const int m = num_cables();
   Eigen::VectorXd counts(m);
   for (int i = 0; i < m; ++i) {
-    counts(i) = drive(i).position() + slip_counts_[static_cast<std::size_t>(i)];
+    counts(i) = static_cast<double>(drive(i).shaft()) + slip_counts_[static_cast<std::size_t>(i)];
   }
   const Status st = physics_.step(counts, t);
   if (!st.ok()) {

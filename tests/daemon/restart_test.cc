@@ -162,6 +162,59 @@ TEST_F(Restart, HomeWithAbsoluteEncodersKeepsTheOffsetsAfterThePoseCheck) {
   EXPECT_LT((true_pose().position - cell_->physics->truth().home.position).norm(), 1e-3);
 }
 
+TEST_F(Restart, HomeWithTheDrivesOwnHomingMakesThemReadTheModelAndMovesNothing) {
+  start_daemon();  // on the reference platform at home
+  ASSERT_TRUE(holds_settled(5.0));
+  const int m = cell_->robot->num_cables();
+  std::vector<std::uint32_t> homings;
+  for (int i = 0; i < m; ++i) homings.push_back(cell_->robot->drive(i).homings());
+  const Pose before = true_pose();
+  const Reply h = request("home", {{"method", "drive"}});
+  ASSERT_TRUE(h.ok) << h.message;
+  run_until([] { return false; }, 0.3);  // the RT loop holds the new counts
+  ASSERT_TRUE(holds_settled(5.0)) << daemon().status().dump();
+  expect_same(before, true_pose(), "after home --method drive");
+  for (int i = 0; i < m; ++i) {
+    EXPECT_EQ(cell_->robot->drive(i).homings(), homings[static_cast<size_t>(i)] + 1) << i;
+  }
+  // The drives read the model's counts at home: the record's offsets are under a count.
+  auto store = StateStore::open((dir_ / "state").string());
+  ASSERT_TRUE(store.ok());
+  auto rec = store->load_homing();
+  ASSERT_TRUE(rec.ok()) << rec.status().to_string();
+  EXPECT_EQ(rec->method, "drive");
+  for (double o : rec->offsets_counts) EXPECT_LE(std::abs(o), 0.5);
+  // Out and back lands at home.
+  ASSERT_TRUE(request("move", {{"pose", {0.03, 0, 0, 0, 0, 0}}}).ok);
+  ASSERT_TRUE(holds_settled(10.0));
+  ASSERT_TRUE(request("move", {{"pose", {0, 0, 0, 0, 0, 0}}}).ok);
+  ASSERT_TRUE(holds_settled(10.0));
+  EXPECT_LT((true_pose().position - before.position).norm(), 0.05e-3);
+}
+
+TEST_F(Restart, ADriveThatFailsItsHomingLeavesThePoseUntrustedAndNothingMoves) {
+  start_daemon();
+  ASSERT_TRUE(holds_settled(5.0));
+  cell_->robot->drive(2).set_ignore_mode_switch(true);  // node 3 never enters homing mode
+  const Pose before = true_pose();
+  const Reply h = request("home", {{"method", "drive"}});
+  ASSERT_FALSE(h.ok);
+  EXPECT_EQ(h.code, "fault");
+  EXPECT_NE(h.message.find("node 3"), std::string::npos) << h.message;
+  run_until([] { return false; }, 0.5);
+  expect_same(before, true_pose(), "after a failed drive homing");
+  EXPECT_EQ(daemon().status()["state"], "holding");
+  expect_holding_or_refusing("after a failed drive homing");
+  EXPECT_FALSE(daemon().status()["pose"]["trusted"].get<bool>());
+  // Disabled, the drives cannot home: enable first.
+  cell_->robot->drive(2).set_ignore_mode_switch(false);
+  ASSERT_TRUE(request("disable").ok);
+  ASSERT_TRUE(run_until([&] { return daemon().state() == DaemonState::kDisabled; }, 2.0));
+  const Reply d = request("home", {{"method", "drive"}});
+  EXPECT_EQ(d.code, "invalid_state");
+  EXPECT_NE(d.message.find("enable first"), std::string::npos) << d.message;
+}
+
 TEST_F(Restart, DrivesStayDisabledUntilEnableAndDisableHoldsNothing) {
   start_daemon();  // homed on the reference platform, record written
   ASSERT_TRUE(holds_settled(5.0));

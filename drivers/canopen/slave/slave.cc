@@ -776,6 +776,13 @@ void Drive402::on_reset_application() {
   publish();
 }
 
+// Methods 35/37: the current position becomes the home offset; the shaft stays where it is.
+void Drive402::home_here() {
+  const auto home = static_cast<std::int32_t>(od().get({0x607C, 0}, true));
+  home_shift_ += std::int64_t{home} - position_;
+  position_ = home;
+}
+
 void Drive402::on_step(Timestamp now) {
   // The drive's own initialisation is over once it runs: NOT_READY_TO_SWITCH_ON passes by
   // itself to SWITCH_ON_DISABLED (CiA 402 transition 1), in any NMT state, without a SYNC.
@@ -788,7 +795,7 @@ void Drive402::on_step(Timestamp now) {
   }
   if (homing_running_ && now >= homing_until_) {
     homing_running_ = false;
-    position_ = static_cast<std::int32_t>(od().get({0x607C, 0}, true));
+    home_here();
     homing_attained_ = true;
     changed = true;
   }
@@ -895,7 +902,7 @@ void Drive402::apply_controlword(std::uint16_t cw) {
       if (method != 35 && method != 37) {
         homing_error_ = true;  // the model knows only "the current position is home"
       } else if (homing_duration_.count() <= 0) {
-        position_ = static_cast<std::int32_t>(od().get({0x607C, 0}, true));
+        home_here();
         homing_attained_ = true;
       } else {
         homing_running_ = true;

@@ -533,6 +533,16 @@ Status Master::set_actual_position(NodeId id, double position, std::chrono::nano
     return Status::error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
                          unsigned{id});
   }
+  return set_actual_counts(id, drives_[static_cast<std::size_t>(n->drive)].to_counts(position),
+                           timeout);
+}
+
+Status Master::set_actual_counts(NodeId id, std::int32_t counts, std::chrono::nanoseconds timeout) {
+  NodeRt* n = node(id);
+  if (n == nullptr || n->drive < 0) {
+    return Status::error(ErrorCode::kNotFound, "node %u: not a configured cia402 drive",
+                         unsigned{id});
+  }
   Drive& drive = drives_[static_cast<std::size_t>(n->drive)];
   if (!running_) {
     return Status::error(ErrorCode::kFailedPrecondition,
@@ -551,7 +561,6 @@ Status Master::set_actual_position(NodeId id, double position, std::chrono::nano
                          unsigned{id}, e->source().c_str());
   }
   const Mode previous = drive.mode();
-  const std::int32_t counts = drive.to_counts(position);
   const std::int8_t method = n->config.drive.homing_method == 35 ? 35 : 37;
   SdoClient& sdo = *n->sdo;
   Status s = sdo.write<std::int8_t>(cia402::obj::kHomingMethod, method, pump_);

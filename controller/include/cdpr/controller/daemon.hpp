@@ -111,7 +111,13 @@ class Daemon {
   // (clean_stop), when the pose is trusted and the robot holds still. Before shutdown().
   void persist_stop();
   // The RT cycle (allocation-free).
-  void cycle(can::Timestamp now) noexcept { rt_->cycle(now); }
+  // While another thread has the master (the drives' own homing), the cycle does nothing: the
+  // master then cycles the bus itself.
+  void cycle(can::Timestamp now) noexcept {
+    in_cycle_.store(true);
+    if (!rt_paused_.load()) rt_->cycle(now);
+    in_cycle_.store(false);
+  }
   // The supervisor's tick: drains the RT loop's events, follows faults and the hot swap,
   // publishes progress. Call every few milliseconds from one thread.
   void service();
@@ -174,7 +180,7 @@ class Daemon {
   void set_trust(PoseTrust trust, const std::string& why);
   HomingRecord new_record(const std::string& method, const std::array<double, kMaxAxes>& offsets);
   Result<std::array<double, kMaxAxes>> reference_offsets();
-  void post_hold(const PoseTrust& trust);
+  void post_hold(const PoseTrust& trust, bool first = false);
   void persist_hold(const RtSnapshot& s, bool clean_stop);
   std::vector<double> actual_counts();
   std::string motion_refusal() const;  // "" when motion may be commanded
@@ -209,7 +215,7 @@ class Daemon {
   void after_fault_reset();
 
   // Motion (supervisor or worker thread).
-  std::uint64_t post(std::unique_ptr<MotionCommand> c);
+  std::uint64_t post(std::unique_ptr<MotionCommand> c, bool first = false);
   void reclaim();
   Status wait_rt(const std::function<bool(const RtSnapshot&)>& done, double timeout_s,
                  const char* what, bool abortable);
@@ -256,6 +262,10 @@ class Daemon {
   Reply cmd_enable(const nlohmann::json& args, const PeerInfo& peer);
   Reply cmd_disable(const nlohmann::json& args, const PeerInfo& peer);
   Reply cmd_home(const nlohmann::json& args, const PeerInfo& peer);
+  // The drives' own homing (CiA 402 mode 6, methods 35/37) with the platform on its reference:
+  // each drive's position actual becomes the active model's counts at home. The RT loop is
+  // paused meanwhile; it resumes holding the new counts (untrusted when a drive failed).
+  Result<std::array<double, kMaxAxes>> drive_homing();
 
   // Locking rule: the three mutexes are never held together, and none is held while calling the
   // RT controller (except post/command_in_use under motion_mu_), the store, the log or the event
@@ -312,6 +322,10 @@ class Daemon {
   // The calibration worker: the thread object is touched by the control requests (one at a time:
   // the control server calls handle() from one thread) and shutdown(); the flags are atomic.
   std::thread worker_;
+  // The RT loop leaves the master to the thread that set rt_paused_ once in_cycle_ reads false
+  // (both sequentially consistent: either the cycle sees the pause or the pauser sees the cycle).
+  std::atomic<bool> in_cycle_{false};
+  std::atomic<bool> rt_paused_{false};
   std::atomic<bool> abort_{false};
   std::atomic<bool> worker_running_{false};
 };

@@ -205,6 +205,12 @@ class RtController {
   MotionCommand* post(MotionCommand* command) noexcept {
     return inbox_.exchange(command, std::memory_order_acq_rel);
   }
+  // The same for a hold of the actual counts that the next cycle takes before the inbox's
+  // command (after the loop was paused while the drives' counts changed: a move posted meanwhile
+  // must not replace it).
+  MotionCommand* post_first(MotionCommand* command) noexcept {
+    return first_.exchange(command, std::memory_order_acq_rel);
+  }
   // Any thread: requests (taken at the next cycle).
   void request_quick_stop() noexcept { quick_stop_.store(true, std::memory_order_release); }
   // A fault reset is refused (the fault stays latched) while an e-stop input reads open.
@@ -290,6 +296,7 @@ class RtController {
   TensionControl tension_;
 
   std::atomic<MotionCommand*> inbox_{nullptr};
+  std::atomic<MotionCommand*> first_{nullptr};  // taken before inbox_'s
   MotionCommand* active_ = nullptr;
   std::atomic<std::uint64_t> in_use_command_{0};
   std::atomic<int> in_use_geometry_{0};

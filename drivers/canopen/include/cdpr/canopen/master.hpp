@@ -105,6 +105,8 @@ class Master {
   // with 0x607C = position in counts, then back to the previous mode. The drive must be
   // OPERATION_ENABLED (homing starts only there); the master must be running.
   Status set_actual_position(NodeId node, double position, std::chrono::nanoseconds timeout);
+  // The same in the drive's counts.
+  Status set_actual_counts(NodeId node, std::int32_t counts, std::chrono::nanoseconds timeout);
   // Cycles (or pumps) until done() or the timeout; `what` names the wait in the error.
   Status wait_for(const std::function<bool()>& done, std::chrono::nanoseconds timeout,
                   const char* what);

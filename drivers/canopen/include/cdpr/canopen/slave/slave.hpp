@@ -231,19 +231,24 @@ class Drive402 : public SlaveNode {
   void inject_fault(std::uint16_t emcy_code);
   // A drive that ignores the controlword (to test the master's supervisor).
   void set_ignore_controlword(bool v) { ignore_cw_ = v; }
-  // Moves the shaft by hand (the model's actual position) while not enabled.
+  // Moves the shaft by hand (the model's actual position, in the drive's counts) while not
+  // enabled.
   void set_actual_position(std::int32_t p) { position_ = p; }
   // 0x6061 follows a write of 0x6060 only after `d` (0: at once), or never.
   void set_mode_display_delay(std::chrono::nanoseconds d) { mode_delay_ = d; }
   void set_ignore_mode_switch(bool v) { ignore_mode_switch_ = v; }
   // Homing (mode 6) starts on a rising edge of controlword bit 4 while OPERATION_ENABLED and
   // clears "homing attained"; methods 35/37 set the position to 0x607C after `d` (0: at the
-  // edge), other methods end with "homing error".
+  // edge) without turning the shaft (the drive's counts shift against the shaft), other methods
+  // end with "homing error".
   void set_homing_duration(std::chrono::nanoseconds d) { homing_duration_ = d; }
   std::uint32_t homings() const { return homings_; }
 
   std::uint16_t statusword() const { return statusword_; }
+  // Position actual (0x6064) in the drive's counts, and the shaft's own position (what turns
+  // the drum: the position less the shift homing gave the counts).
   std::int32_t position() const { return position_; }
+  std::int64_t shaft() const { return std::int64_t{position_} - home_shift_; }
   // Largest |position change| in one SYNC seen right at a transition into OPERATION_ENABLED.
   std::int64_t max_jump_on_enable() const { return max_jump_on_enable_; }
   std::uint32_t enable_count() const { return enable_count_; }
@@ -269,11 +274,13 @@ class Drive402 : public SlaveNode {
   };
   void apply_controlword(std::uint16_t cw);
   void publish();
+  void home_here();
 
   S s_ = S::kNotReady;
   std::uint16_t last_cw_ = 0;
   std::uint16_t statusword_ = 0;
   std::int32_t position_ = 0;
+  std::int64_t home_shift_ = 0;  // position_ - shaft, changed by homing only
   bool ignore_cw_ = false;
   bool set_point_ack_ = false;
   bool homing_attained_ = false;
