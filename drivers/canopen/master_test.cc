@@ -585,25 +585,28 @@ TEST_F(MasterEdsTest, UnusedDefaultPdosAreDisabledAtBoot) {
   }
   const Status s = make_and_boot();
   ASSERT_TRUE(s.ok()) << s.to_string();
+  // The configuration uses RPDO1, TPDO1 and TPDO2 (the digital inputs) of each drive.
   for (NodeId id = 1; id <= 8; ++id) {
-    for (std::uint16_t comm : {0x1401, 0x1402, 0x1403, 0x1801, 0x1802, 0x1803}) {
+    for (std::uint16_t comm : {0x1401, 0x1402, 0x1403, 0x1802, 0x1803}) {
       EXPECT_NE(drives[id]->od().get({comm, 1}) & cob::kInvalidBit, 0u)
           << "node " << int{id} << " 0x" << std::hex << comm << " still enabled";
     }
+    EXPECT_EQ(drives[id]->od().get({0x1801, 1}) & cob::kInvalidBit, 0u) << int{id};
     EXPECT_EQ(master->disabled_pdos(id),
-              (std::vector<std::uint16_t>{0x1401, 0x1402, 0x1403, 0x1801, 0x1802, 0x1803}));
+              (std::vector<std::uint16_t>{0x1401, 0x1402, 0x1403, 0x1802, 0x1803}));
   }
   EXPECT_TRUE(master->disabled_pdos(9).empty());  // the force node's defaults are the used ones
-  EXPECT_EQ(master->stats().pdos_disabled, 8u * 6u);
+  EXPECT_EQ(master->stats().pdos_disabled, 8u * 5u);
   ASSERT_TRUE(master->enable_all(2s).ok());
   seen.clear();
   run(200ms);
   std::set<std::uint32_t> ids;
   for (const can::Frame& f : seen) ids.insert(f.id);
   for (NodeId id = 1; id <= 8; ++id) {
-    for (int n = 2; n <= 4; ++n) {
+    for (int n = 3; n <= 4; ++n) {
       EXPECT_EQ(ids.count(cob::tpdo(n, id)), 0u) << "TPDO" << n << " of node " << int{id};
     }
+    EXPECT_EQ(ids.count(cob::tpdo(2, id)), 1u) << "the digital inputs of node " << int{id};
   }
   EXPECT_EQ(ids.count(cob::tpdo(1, 1)), 1u);
 }
@@ -720,7 +723,8 @@ TEST_F(MasterEdsTest, WritesTheDcfOfTheAppliedConfiguration) {
   EXPECT_EQ(value({0x1016, 1}), (127 << 16) | 150);
   EXPECT_EQ(value({0x1600, 2}), 0x607A0020);
   EXPECT_EQ(value({0x1400, 1}), 0x203);
-  EXPECT_EQ(value({0x1801, 1}), 0x80000283);  // disabled default TPDO2
+  EXPECT_EQ(value({0x1801, 1}), 0x283);       // TPDO2 (digital inputs), configured
+  EXPECT_EQ(value({0x1802, 1}), 0x80000383);  // disabled default TPDO3
   EXPECT_EQ(value({0x6060, 0}), 8);
   EXPECT_EQ(value({0x60C2, 2}), -3);
   EXPECT_FALSE(dcf->find({0x6041, 0})->parameter_value.has_value());

@@ -270,7 +270,8 @@ TEST_F(CanRobotTest, NodesComeFromTheEdsWithDefaultPdosThatTheMasterDisables) {
   for (int cable = 0; cable < robot->num_cables(); ++cable) {
     auto& od = robot->drive(cable).od();
     const co::NodeId id = robot->drive(cable).id();
-    for (std::uint16_t comm : {0x1401, 0x1402, 0x1403, 0x1801, 0x1802, 0x1803}) {
+    // RPDO1, TPDO1 and TPDO2 (the digital inputs) are the configuration's.
+    for (std::uint16_t comm : {0x1401, 0x1402, 0x1403, 0x1802, 0x1803}) {
       const auto* e = od.find({comm, 1});
       ASSERT_NE(e, nullptr);
       EXPECT_EQ(e->default_data[3] & 0x80, 0)
@@ -278,7 +279,7 @@ TEST_F(CanRobotTest, NodesComeFromTheEdsWithDefaultPdosThatTheMasterDisables) {
       EXPECT_NE(od.get({comm, 1}) & co::cob::kInvalidBit, 0u)
           << "node " << int{id} << " 0x" << std::hex << comm << " left enabled";
     }
-    EXPECT_EQ(master->disabled_pdos(id).size(), 6u);
+    EXPECT_EQ(master->disabled_pdos(id).size(), 5u);
     EXPECT_EQ(od.get({0x6502, 0}), 0xA1);
     EXPECT_FALSE(od.find({0x607C, 0})->mappable);  // PDOMapping=0 in the EDS
   }

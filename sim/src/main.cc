@@ -50,12 +50,16 @@ constexpr int kExitInternal = 70;
 
 std::atomic<bool> g_stop{false};
 std::atomic<bool> g_report_pose{false};
+std::atomic<int> g_estop_toggles{0};
 
 void on_signal(int) {
   g_stop = true;
 }
 void on_report(int) {
   g_report_pose = true;
+}
+void on_estop(int) {
+  g_estop_toggles.fetch_add(1);
 }
 
 int fail(const std::string& what) {
@@ -307,6 +311,8 @@ int run(int argc, char** argv) {
   std::signal(SIGTERM, on_signal);
   // SIGUSR1: print where the true platform is (tests compare it with a commanded target).
   std::signal(SIGUSR1, on_report);
+  // SIGUSR2: the e-stop chain opens (and closes at the next SIGUSR2): every drive's 0x60FD bit 16.
+  std::signal(SIGUSR2, on_estop);
 
   const auto start = std::chrono::steady_clock::now();
   auto mono = [] {
@@ -318,6 +324,7 @@ int run(int argc, char** argv) {
   auto next = start;
   cdpr::sim::LaserFaultMode last_fault = cdpr::sim::LaserFaultMode::kNone;
   std::vector<bool> reported(static_cast<std::size_t>(counts.size()), false);
+  int estop_toggles = 0;
   while (!g_stop.load()) {
     if (robot) {
       // The physics steps at every SYNC of the master (inside the robot).
@@ -336,6 +343,13 @@ int run(int argc, char** argv) {
         std::fprintf(stderr, "cdpr-sim: %s\n", st.to_string().c_str());
         continue;
       }
+    }
+    if (robot && g_estop_toggles.load() != estop_toggles) {
+      estop_toggles = g_estop_toggles.load();
+      robot->set_estop(estop_toggles % 2 == 1);
+      std::printf("cdpr-sim: t = %.3f s: e-stop chain %s\n", t,
+                  estop_toggles % 2 == 1 ? "open" : "closed");
+      std::fflush(stdout);
     }
     if (g_report_pose.exchange(false)) {
       const cdpr::Pose& p = physics->state().pose;

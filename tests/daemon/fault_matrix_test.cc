@@ -644,6 +644,26 @@ class MatrixCell {
         max_s);
   }
 
+  // cdprd restarted on the same state directory, as an operator does it: when the new daemon
+  // comes up in fault (a reading or an event of the fault's aftermath at its first cycles), one
+  // fault reset, then it must hold. What the reset cleared is printed, not part of the cell.
+  Status restart_daemon() {
+    Status s = cell_->start_daemon(extra_config());
+    if (s.ok() || cell_->daemon == nullptr || daemon().state() != DaemonState::kFault) return s;
+    std::printf("[matrix-note] %s / %s: the restarted daemon came up in fault (%s); fault_reset\n",
+                row_.name.c_str(), phase_name(phase_), s.to_string().c_str());
+    (void)cell_->request("fault_reset");
+    if (!cell_->run_until(
+            [&] {
+              const RtMode m = daemon().rt().snapshot().mode;
+              return m == RtMode::kHolding || m == RtMode::kHoldingCounts;
+            },
+            30.0)) {
+      return s;
+    }
+    return Status::success();
+  }
+
   std::string way_back(const std::string& state) {
     if (row_.clear) row_.clear(*cell_);
     std::string how;
@@ -662,7 +682,7 @@ class MatrixCell {
       const Reply r = cell_->request("fault_reset");
       if (!r.ok) {
         // A refused fault reset must say why; the way back is then a restart of cdprd.
-        if (Status s = cell_->start_daemon(extra_config()); !s.ok()) {
+        if (Status s = restart_daemon(); !s.ok()) {
           return "NO WAY BACK: fault_reset: " + r.message + "; restart: " + s.to_string();
         }
         how = "fault_reset refused (`" + numbers_hidden(r.message) + "`); cdprd restart → holding";
@@ -678,7 +698,7 @@ class MatrixCell {
       } else {
         // A restart of cdprd is the way back when the network itself needs configuring again.
         const std::string after = daemon().status()["state"].get<std::string>();
-        if (Status s = cell_->start_daemon(extra_config()); !s.ok()) {
+        if (Status s = restart_daemon(); !s.ok()) {
           return "NO WAY BACK: fault_reset, then " + after + "; restart: " + s.to_string();
         }
         how = "fault_reset leaves " + after + "; cdprd restart → holding";

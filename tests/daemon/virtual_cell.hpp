@@ -96,10 +96,10 @@ class VirtualCell {
            "\nacceptance: " + s.acceptance + "\nstart: " + s.start + "\n" + laser_line() + s.extra;
   }
 
-  // The shipped MINI network with what the safety chain reads and drives, written into the cell's
-  // folder: each winch's digital inputs 0x60FD in an event-driven TPDO2 (on change and every
-  // 20 ms; the virtual drives report the e-stop chain in bit 16) and its digital outputs 0x60FE:01
-  // (bit 0: the holding brake applied) in a synchronous RPDO2. Returns its path.
+  // The shipped MINI network (which maps each winch's digital inputs 0x60FD in an event-driven
+  // TPDO2; the virtual drives report the e-stop chain in bit 16) with the holding brakes switched
+  // by the master: digital outputs 0x60FE:01 (bit 0: the brake applied) in a synchronous RPDO2,
+  // written into the cell's folder. Returns its path.
   Result<std::string> write_safety_network() const {
     auto shipped = read_text_file(source_ + "/config/canopen-mini.yaml");
     if (!shipped.ok()) return shipped.status();
@@ -110,9 +110,6 @@ class VirtualCell {
         {"map: [\"0x6040:00 u16\", \"0x607A:00 i32\"]\n",
          "map: [\"0x6040:00 u16\", \"0x607A:00 i32\"]\n"
          "      - {number: 2, transmission: 1, map: [\"0x60FE:01 u32\"]}\n"},
-        {"map: [\"0x6041:00 u16\", \"0x6064:00 i32\"]\n",
-         "map: [\"0x6041:00 u16\", \"0x6064:00 i32\"]\n"
-         "      - {number: 2, transmission: 255, event_timer_ms: 20, map: [\"0x60FD:00 u32\"]}\n"},
     };
     for (const auto& [from, to] : edits) {
       const std::size_t at = text.find(from);
