@@ -123,13 +123,12 @@ TEST_F(DaemonMotion, StreamsACircleHoldsOnAGapCountsSequenceFaultsAndRefusesAJum
   // Sends one setpoint and waits (wall clock, generous) until the receiver handed it over, then
   // runs one cycle.
   const auto step = [&](const Pose& p, std::uint64_t next_seq, bool counted = true) {
-    seq = next_seq;
-    ASSERT_TRUE(client.send(seq, cell_->clock.now().count(), p));
-    const json counters = st()["stream"];
+    if (counted) seq = next_seq;
+    const std::string key = counted ? "received" : "reordered";
+    const std::uint64_t base = st()["stream"].value(key, std::uint64_t{0});
+    ASSERT_TRUE(client.send(next_seq, cell_->clock.now().count(), p));
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
     const std::uint64_t want = handed + (counted ? 1 : 0);
-    const std::string key = counted ? "received" : "reordered";
-    const std::uint64_t base = counters.value(key, std::uint64_t{0});
     while (st()["stream"].value(key, std::uint64_t{0}) == base &&
            std::chrono::steady_clock::now() < deadline) {
       std::this_thread::sleep_for(std::chrono::microseconds(200));
