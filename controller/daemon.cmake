@@ -8,6 +8,7 @@ add_library(cdpr_daemon STATIC
   ${_d}/src/canopen_robot_io.cc
   ${_d}/src/rt_controller.cc
   ${_d}/src/rt_controller_watch.cc
+  ${_d}/src/rt_controller_motion.cc
   ${_d}/src/rt_controller_safety.cc
   ${_d}/src/rt_controller_tension.cc
   ${_d}/src/tension_control.cc
@@ -22,7 +23,9 @@ add_library(cdpr_daemon STATIC
   ${_d}/src/daemon_homing.cc
   ${_d}/src/daemon_calibration.cc
   ${_d}/src/daemon_commands.cc
-  ${_d}/src/log_coalescer.cc)
+  ${_d}/src/log_coalescer.cc
+  ${_d}/src/setpoint_stream.cc
+  ${_d}/src/daemon_motion.cc)
 target_include_directories(cdpr_daemon PUBLIC ${_d}/include)
 target_link_libraries(cdpr_daemon
   PUBLIC cdpr_io cdpr_control cdpr_calibration_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording

@@ -45,6 +45,7 @@ struct Invocation {
   bool wait = false;
   bool watch = false;
   std::string poses_file;
+  std::string program_file;  // run FILE
   std::string html_file;
 };
 
@@ -126,21 +127,11 @@ class Session {
                                         : (inv_.wait || inv_.watch) ? 0
                                                                     : kDefaultTimeoutS);
     if (!inv_.poses_file.empty()) {
-      // A regular file no larger than one request may carry: /dev/zero or a FIFO is refused at
-      // once (never read unboundedly, never waited on past --timeout).
-      Result<std::string> csv = io::read_regular_file(inv_.poses_file, control::kDefaultMaxLine);
-      if (!csv.ok()) return fail(kExitUsage, std::string(csv.status().message()));
-      if (const auto bad = control::find_invalid_utf8(*csv)) {
-        return fail(kExitUsage,
-                    inv_.poses_file + " is not UTF-8 text (byte " + std::to_string(*bad) + ")");
-      }
-      inv_.args["poses_csv"] = std::move(*csv);
-      const std::size_t size = control::encode_request(1, inv_.cmd, inv_.args).size();
-      if (size > control::kDefaultMaxLine) {
-        return fail(kExitUsage, inv_.poses_file + " is too large for one request (" +
-                                    std::to_string(size) + " bytes encoded, at most " +
-                                    std::to_string(control::kDefaultMaxLine) + ")");
-      }
+      if (int code = attach_file(inv_.poses_file, "poses_csv"); code != kExitOk) return code;
+    }
+    if (!inv_.program_file.empty()) {
+      inv_.args["source"] = inv_.program_file;  // for the daemon's messages only
+      if (int code = attach_file(inv_.program_file, "program"); code != kExitOk) return code;
     }
     auto client = ControlClient::connect(inv_.socket, deadline_);
     if (!client.ok()) return connect_failed(client.status());
@@ -178,6 +169,25 @@ class Session {
     r["state"] = st.value("state", "");
     r["reason"] = st.value("reason", "");
     return print_result(r);
+  }
+
+  // The content of a local file as args[field]: a regular file no larger than one request may
+  // carry (/dev/zero or a FIFO is refused at once: never read unboundedly, never waited on past
+  // --timeout), UTF-8 text. The daemon never opens a file a client names.
+  int attach_file(const std::string& file, const char* field) {
+    Result<std::string> text = io::read_regular_file(file, control::kDefaultMaxLine);
+    if (!text.ok()) return fail(kExitUsage, std::string(text.status().message()));
+    if (const auto bad = control::find_invalid_utf8(*text)) {
+      return fail(kExitUsage, file + " is not UTF-8 text (byte " + std::to_string(*bad) + ")");
+    }
+    inv_.args[field] = std::move(*text);
+    const std::size_t size = control::encode_request(1, inv_.cmd, inv_.args).size();
+    if (size > control::kDefaultMaxLine) {
+      return fail(kExitUsage, file + " is too large for one request (" + std::to_string(size) +
+                                  " bytes encoded, at most " +
+                                  std::to_string(control::kDefaultMaxLine) + ")");
+    }
+    return kExitOk;
   }
 
   int fail(int code, const std::string& message) {
@@ -426,6 +436,7 @@ struct CliValues {
   std::int64_t report_version = 0;
   std::vector<double> move_pose;
   std::string home_method = "reference";
+  std::string stream_action;
 };
 
 CLI::App* add_simple(CLI::App& app, Invocation& inv, const char* name, const char* cmd,
@@ -459,7 +470,9 @@ void add_calibration_commands(CLI::App& app, Invocation& inv, CliValues& v) {
     inv.cmd = "watch";
     inv.watch = true;
   });
-  add_simple(app, inv, "abort", "abort", "abort the running calibration and hold (privileged)");
+  add_simple(app, inv, "abort", "abort",
+             "abort the running calibration, path run or stream: a smooth stop, then hold "
+             "(privileged)");
   add_simple(app, inv, "accept", "accept",
              "accept the calibration awaiting acceptance (privileged)");
   add_simple(app, inv, "reject", "reject",
@@ -528,6 +541,26 @@ void add_report_and_motion_commands(CLI::App& app, Invocation& inv, CliValues& v
     std::vector<double> p = v.move_pose;
     p.resize(6, 0.0);
     inv.args = {{"pose", p}};
+  });
+  auto* run = app.add_subcommand(
+      "run", "run a path file from the pose held; the whole path is checked first (privileged)");
+  run->add_option("FILE", inv.program_file,
+                  "path file (docs/motion.md \"Path files\"; read here, sent as its content)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  run->callback([&inv] {
+    inv.name = "run";
+    inv.cmd = "run";
+  });
+  auto* stream = app.add_subcommand(
+      "stream", "start or stop following the setpoint stream (docs/motion.md; privileged)");
+  stream->add_option("ACTION", v.stream_action, "start or stop")
+      ->required()
+      ->check(CLI::IsMember({"start", "stop"}));
+  stream->callback([&inv, &v] {
+    inv.name = "stream";
+    inv.cmd = "stream";
+    inv.args = {{"action", v.stream_action}};
   });
   add_simple(app, inv, "stop", "stop", "quick stop (privileged)");
   add_simple(app, inv, "fault-reset", "fault_reset",

@@ -159,6 +159,9 @@ TEST_F(CdprctlTest, EverySubcommandSendsItsRequest) {
   const std::string poses = dir_ + "/poses.csv";
   const std::string csv = "pose,x,y,z,roll,pitch,yaw\n1,0.1,0.2,0.3,0,0,0\n";
   std::ofstream(poses) << csv;
+  const std::string program_file = dir_ + "/square.path";
+  const std::string program = "G1 X0.1 F0.05\nY0.1\n";
+  std::ofstream(program_file) << program;
   struct Case {
     std::vector<std::string> argv;
     const char* cmd;
@@ -189,6 +192,9 @@ TEST_F(CdprctlTest, EverySubcommandSendsItsRequest) {
       {{"move", "0.1", "0.2", "0.3", "0", "0", "0.05"},
        "move",
        {{"pose", {0.1, 0.2, 0.3, 0.0, 0.0, 0.05}}}},
+      {{"run", program_file}, "run", {{"program", program}, {"source", program_file}}},
+      {{"stream", "start"}, "stream", {{"action", "start"}}},
+      {{"stream", "stop"}, "stream", {{"action", "stop"}}},
       {{"status", "--json"}, "status", json::object()},  // global options after the command
   };
   for (const Case& c : cases) {
@@ -363,6 +369,10 @@ TEST_F(CdprctlTest, UsageErrorsExitTwoAndHelpExitsZero) {
       {"move", "0.1", "0.2", "0.3", "0", "0"},
       {"move", "0.1", "0.2", "0.3", "0", "0", "0", "0"},
       {"move", "0.1", "0.2", "0.3", "x"},
+      {"run"},
+      {"run", "/no/such/file.path"},
+      {"stream"},
+      {"stream", "pause"},
   };
   for (const auto& args : bad) {
     const Outcome o = ctl(args);

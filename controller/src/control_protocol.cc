@@ -32,6 +32,10 @@ constexpr ArgSpec kReportArgs[] = {{"version", ArgType::kVersion, false},
 
 constexpr ArgSpec kMoveArgs[] = {{"pose", ArgType::kPose, true}};
 constexpr ArgSpec kHomeArgs[] = {{"method", ArgType::kString, false}};
+// run: the path program's text (cdprctl reads the file) and the name its messages give it.
+constexpr ArgSpec kRunArgs[] = {{"program", ArgType::kString, true},
+                                {"source", ArgType::kString, false}};
+constexpr ArgSpec kStreamArgs[] = {{"action", ArgType::kString, true}};
 
 constexpr std::array<CommandSpec, kCommandCount> kCommands{{
     {"status", false, {}, Command::kStatus},
@@ -51,6 +55,8 @@ constexpr std::array<CommandSpec, kCommandCount> kCommands{{
     {"enable", true, {}, Command::kEnable},
     {"disable", true, {}, Command::kDisable},
     {"home", true, kHomeArgs, Command::kHome},
+    {"run", true, kRunArgs, Command::kRun},
+    {"stream", true, kStreamArgs, Command::kStream},
 }};
 
 constexpr bool commands_in_enum_order() {

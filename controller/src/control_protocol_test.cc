@@ -119,8 +119,9 @@ TEST(ControlProtocol, RefusesNestingDeeperThanTheLimit) {
 TEST(ControlProtocol, EveryPrivilegedCommandIsMarkedAndOnlyThose) {
   // Those that move the robot or change the geometry (docs/control-protocol.md, Permissions).
   const std::set<std::string> privileged = {
-      "calibrate", "abort",  "accept",  "reject", "geometry_rollback", "stop", "fault_reset",
-      "move",      "enable", "disable", "home"};
+      "calibrate", "abort",       "accept", "reject", "geometry_rollback",
+      "stop",      "fault_reset", "move",   "enable", "disable",
+      "home",      "run",         "stream"};
   const std::set<std::string> open = {"status",           "watch", "geometry_show", "geometry_diff",
                                       "geometry_history", "report"};
   std::set<std::string> seen;
@@ -255,7 +256,9 @@ TEST(ControlProtocol, NoCommandTakesAFieldThatCouldNameAFile) {
     }
   }
   // Every string argument in the table is reviewed here: a new one must be content, not a path.
-  const std::set<std::string> content_strings = {"poses_csv", "method"};
+  // (run's `source` only labels the program's messages, e.g. "demo.path:4: X1.2.3: ...")
+  const std::set<std::string> content_strings = {"poses_csv", "method", "program", "source",
+                                                 "action"};
   for (const CommandSpec& c : commands()) {
     for (const ArgSpec& a : c.args) {
       if (a.type == ArgType::kString) {

@@ -76,6 +76,10 @@ RtControllerOptions Daemon::rt_options() const {
   ro.settle_tension = ms.settle_tension_tolerance;
   ro.slew_velocity = config_.motion.max_cable_speed;
   ro.slew_acceleration = config_.motion.max_cable_acceleration;
+  ro.stop_limits = motion_limits();
+  ro.stream_max_step = config_.motion.stream_max_step;
+  ro.stream_max_step_angle = config_.motion.stream_max_step_angle;
+  ro.stream_deadline_cycles = config_.motion.stream_deadline_cycles;
   safety_options(ro);
   const TensionControlSettings& tc = config_.tension_control;
   ro.tension_control = TensionControlOptions{tc.gain,     config_.motion.tension_margin,
@@ -424,15 +428,7 @@ Status Daemon::wait_rt(const std::function<bool(const RtSnapshot&)>& done, doubl
 Result<std::uint64_t> Daemon::start_move(const Pose& pose, double reference_tension) {
   const RtSnapshot s = rt_->snapshot();
   const Geometry* g = active_geometry();
-  MotionLimits limits;
-  const MotionSettings& ms = config_.motion;
-  limits.max_linear_velocity = ms.max_linear_velocity;
-  limits.max_linear_acceleration = ms.max_linear_acceleration;
-  limits.max_linear_jerk = ms.max_linear_jerk;
-  limits.max_angular_velocity = ms.max_angular_velocity;
-  limits.max_angular_acceleration = ms.max_angular_acceleration;
-  limits.max_angular_jerk = ms.max_angular_jerk;
-  auto traj = PoseTrajectory::plan(s.pose(), pose, limits);
+  auto traj = PoseTrajectory::plan(s.pose(), pose, motion_limits());
   if (!traj.ok()) return traj.status();
   PathCheckOptions pc = path_check_options();
   pc.reference_tension = std::isnan(reference_tension) ? g->reference_tension : reference_tension;
@@ -442,6 +438,18 @@ Result<std::uint64_t> Daemon::start_move(const Pose& pose, double reference_tens
   c->trajectory = std::move(*traj);
   c->reference_tension = reference_tension;
   return post(std::move(c));
+}
+
+MotionLimits Daemon::motion_limits() const {
+  MotionLimits limits;
+  const MotionSettings& ms = config_.motion;
+  limits.max_linear_velocity = ms.max_linear_velocity;
+  limits.max_linear_acceleration = ms.max_linear_acceleration;
+  limits.max_linear_jerk = ms.max_linear_jerk;
+  limits.max_angular_velocity = ms.max_angular_velocity;
+  limits.max_angular_acceleration = ms.max_angular_acceleration;
+  limits.max_angular_jerk = ms.max_angular_jerk;
+  return limits;
 }
 
 Status Daemon::move_to(const Pose& pose, double reference_tension, bool abortable) {

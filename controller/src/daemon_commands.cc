@@ -52,6 +52,8 @@ Daemon::Handler Daemon::handler(Command command) {
       {Command::kEnable, &Daemon::cmd_enable},
       {Command::kDisable, &Daemon::cmd_disable},
       {Command::kHome, &Daemon::cmd_home},
+      {Command::kRun, &Daemon::cmd_run},
+      {Command::kStream, &Daemon::cmd_stream},
   }};
   static_assert(
       [] {
@@ -155,6 +157,7 @@ json Daemon::status() const {
   } else {
     j["calibration"] = nullptr;
   }
+  motion_status(s, j);
   if (io_.laser != nullptr) {
     const modbus::LaserReading l = io_.laser->latest();
     j["laser_m"] = l.ok() ? json(l.distance_m) : json(nullptr);
@@ -221,9 +224,7 @@ Reply Daemon::cmd_calibrate(const json& args, const PeerInfo& peer) {
 }
 
 Reply Daemon::cmd_abort(const json&, const PeerInfo& peer) {
-  if (!worker_running_.load()) {
-    return Reply::failure(ControlErrorCode::kInvalidState, "no calibration is running");
-  }
+  if (!worker_running_.load()) return abort_motion(peer);
   spdlog::info("abort requested by pid {} uid {} gid {}", peer.pid, peer.uid, peer.gid);
   abort_ = true;
   return Reply::success({{"aborting", true}});

@@ -59,7 +59,8 @@ Status read_motion(const YamlField& n, MotionSettings& m) {
   CDPR_RETURN_IF_ERROR(
       n.check_keys({"max_linear_velocity", "max_linear_acceleration", "max_linear_jerk",
                     "max_angular_velocity", "max_angular_acceleration", "max_angular_jerk",
-                    "tension_margin", "max_cable_speed", "max_cable_acceleration"}));
+                    "tension_margin", "max_cable_speed", "max_cable_acceleration",
+                    "stream_max_step", "stream_max_step_angle", "stream_deadline_cycles"}));
   CDPR_RETURN_IF_ERROR(
       in_range(n, "max_linear_velocity", 1e-4, 10.0, "m/s", m.max_linear_velocity));
   CDPR_RETURN_IF_ERROR(
@@ -72,7 +73,12 @@ Status read_motion(const YamlField& n, MotionSettings& m) {
   CDPR_RETURN_IF_ERROR(in_range(n, "max_angular_jerk", 1e-3, 1e4, "rad/s^3", m.max_angular_jerk));
   CDPR_RETURN_IF_ERROR(in_range(n, "tension_margin", 0.0, 1e5, "N", m.tension_margin));
   CDPR_RETURN_IF_ERROR(in_range(n, "max_cable_speed", 1e-4, 10.0, "m/s", m.max_cable_speed));
-  return in_range(n, "max_cable_acceleration", 1e-4, 100.0, "m/s^2", m.max_cable_acceleration);
+  CDPR_RETURN_IF_ERROR(
+      in_range(n, "max_cable_acceleration", 1e-4, 100.0, "m/s^2", m.max_cable_acceleration));
+  CDPR_RETURN_IF_ERROR(in_range(n, "stream_max_step", 1e-6, 0.1, "m", m.stream_max_step));
+  CDPR_RETURN_IF_ERROR(
+      in_range(n, "stream_max_step_angle", 1e-6, 0.5, "rad", m.stream_max_step_angle));
+  return n.optional("stream_deadline_cycles", m.stream_deadline_cycles, 1, 1000);
 }
 
 Status read_tension_watch(const YamlField& n, TensionWatch& t) {

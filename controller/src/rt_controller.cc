@@ -66,6 +66,12 @@ Result<std::unique_ptr<RtController>> RtController::create(RobotIO& io, const Ge
   }
   CDPR_RETURN_IF_ERROR(io.fits(initial.model));
   CDPR_RETURN_IF_ERROR(TensionControl::validate(options.tension_control, options.cycle_s));
+  CDPR_RETURN_IF_ERROR(options.stop_limits.validate());
+  if (!(options.stream_max_step > 0.0) || !(options.stream_max_step_angle > 0.0) ||
+      options.stream_deadline_cycles < 1) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "stream step limits must be > 0 and the deadline at least 1 cycle");
+  }
   if (options.settle_cycles < 1 || options.settle_cycles > kMaxWindow) {
     return Status::error(ErrorCode::kInvalidArgument, "settle window of %d cycles (1..%d)",
                          options.settle_cycles, kMaxWindow);
@@ -83,6 +89,16 @@ RtController::RtController(RobotIO& io, const Geometry& initial, const RtControl
   TensionControlOptions tension = options.tension_control;
   tension.slack_below = options.slack_below;  // one slack limit: the watch's
   tension_.configure(tension, options.cycle_s);
+  const MotionLimits& l = options.stop_limits;
+  const double rate = std::min(l.max_linear_acceleration / l.max_linear_velocity,
+                               l.max_angular_acceleration / l.max_angular_velocity);
+  const double rate2 = std::min(l.max_linear_jerk / l.max_linear_velocity,
+                                l.max_angular_jerk / l.max_angular_velocity);
+  const double rate3 = std::min(l.max_linear_jerk / l.max_linear_acceleration,
+                                l.max_angular_jerk / l.max_angular_acceleration) *
+                       rate2;
+  // (validated limits: the plan cannot fail)
+  if (auto p = DoubleSProfile::plan(1.0, rate, rate2, rate3); p.ok()) stop_profile_ = *p;
   out_.num_axes = m_;
   hold_pose_ = pose_ = initial.model.home;
   ref_tension_ = initial.reference_tension;
@@ -186,6 +202,7 @@ void RtController::take_command(canopen::Timestamp now) noexcept {
   switch (c->type) {
     case MotionCommand::Type::kMove:
     case MotionCommand::Type::kTrim:
+    case MotionCommand::Type::kStream:
       take = mode_ == RtMode::kHolding;
       break;
     case MotionCommand::Type::kReference:
@@ -212,10 +229,20 @@ void RtController::take_command(canopen::Timestamp now) noexcept {
     case MotionCommand::Type::kReference:
       start_reference(*c, now);
       break;
+    case MotionCommand::Type::kStream:
+      start_stream(*c, now);
+      break;
   }
 }
 
 void RtController::start_move(const MotionCommand& c, canopen::Timestamp now) noexcept {
+  snap_.move = MoveProgress{};
+  stopping_ = false;
+  if (stop_requested()) {  // stopped before it started: it never moves
+    done_ = c.seq;
+    snap_.move.stopped = true;
+    return;
+  }
   move_start_ = now;
   mode_ = RtMode::kMoving;
   snap_.largest_move_step = 0.0;
@@ -312,10 +339,14 @@ void RtController::sample_trajectory(canopen::Timestamp now) noexcept {
     pose_ = hold_pose_;
     return;
   }
+  if (streaming_) {
+    sample_stream(now);
+    return;
+  }
   if (mode_ != RtMode::kMoving || active_ == nullptr) return;
-  const double t = std::chrono::duration<double>(now - move_start_).count();
-  active_->trajectory->sample(t, pose_);
-  const double T = active_->trajectory->duration();
+  const double t = move_time(now);
+  const double T = move_duration();
+  sample_move(t);
   // The planner's pretension changes linearly along the move, the trims fade out.
   const double fade = T > 0.0 ? std::max(0.0, 1.0 - t / T) : 0.0;
   ref_tension_ = ref_goal_ + (ref_start_ - ref_goal_) * fade;
@@ -323,7 +354,7 @@ void RtController::sample_trajectory(canopen::Timestamp now) noexcept {
     const auto k = static_cast<std::size_t>(i);
     trim_[k] = trim_at_move_[k] * fade;
   }
-  if (t >= T) {
+  if (t >= T || snap_.move.stopped) {
     hold_pose_ = pose_;
     mode_ = RtMode::kHolding;
     done_ = active_->seq;

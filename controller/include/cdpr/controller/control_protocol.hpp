@@ -109,8 +109,10 @@ enum class Command {
   kEnable,
   kDisable,
   kHome,
+  kRun,
+  kStream,
 };
-inline constexpr std::size_t kCommandCount = 17;
+inline constexpr std::size_t kCommandCount = 19;
 
 struct CommandSpec {
   std::string_view name;

@@ -40,6 +40,7 @@
 #include "cdpr/controller/daemon_config.hpp"
 #include "cdpr/controller/log_coalescer.hpp"
 #include "cdpr/controller/rt_controller.hpp"
+#include "cdpr/controller/setpoint_stream.hpp"
 #include "cdpr/controller/state_store.hpp"
 #include "cdpr/controller/supervisor.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
@@ -164,6 +165,7 @@ class Daemon {
   // The safety chain's part of them, and the limits every move and pose is checked against.
   void safety_options(RtControllerOptions& ro) const;
   PathCheckOptions path_check_options() const;
+  MotionLimits motion_limits() const;
   Status check_identities();
   Status enable_drives();
 
@@ -267,6 +269,25 @@ class Daemon {
   // paused meanwhile; it resumes holding the new counts (untrusted when a drive failed).
   Result<std::array<double, kMaxAxes>> drive_homing();
 
+  // Path runs and the setpoint stream (daemon_motion.cc).
+  struct Run {
+    std::uint64_t seq = 0;
+    std::string file;
+    double duration_s = 0.0, length_m = 0.0;
+    std::string outcome = "running";  // running | done | aborted | fault
+    double reported_s = -1.0;         // robot time of the last progress event
+    int reported_line = -1;
+  };
+  Reply cmd_run(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_stream(const nlohmann::json& args, const PeerInfo& peer);
+  Reply abort_motion(const PeerInfo& peer);
+  std::optional<Reply> refuse_motion(const char* what);
+  Reply start_stream(const PeerInfo& peer);
+  Reply stop_stream(const PeerInfo& peer);
+  void follow_motion(const RtSnapshot& s);
+  void motion_status(const RtSnapshot& s, nlohmann::json& j) const;  // under mu_
+  std::string stream_socket_path() const;
+
   // Locking rule: the three mutexes are never held together, and none is held while calling the
   // RT controller (except post/command_in_use under motion_mu_), the store, the log or the event
   // sink. A field's group says which mutex guards it.
@@ -303,6 +324,10 @@ class Daemon {
   std::uint64_t swap_seq_ = 0;
   std::string swap_why_;
   std::optional<Calibration> calibration_;
+  std::optional<Run> run_;                      // the last path run
+  std::uint64_t stream_seq_ = 0;                // the stream command in force (0: none)
+  std::shared_ptr<SetpointReceiver> receiver_;  // while a stream runs
+  StreamCounters stream_counters_;              // the last stream's, once it ended
   // The pose the daemon holds and whether it may command motion from it; the homing record in
   // force (nullopt: none valid for these drives and this geometry); the encoder offsets of both.
   PoseTrust trust_;

@@ -47,6 +47,11 @@ struct MotionSettings {
   double tension_margin = 10.0;
   double max_cable_speed = 0.2;         // m/s, slew of a re-referenced cable (hot swap)
   double max_cable_acceleration = 1.0;  // m/s^2
+  // The setpoint stream (docs/motion.md "Setpoint stream"): a setpoint further than these from
+  // the commanded pose is refused; none for this many cycles makes the robot hold smoothly.
+  double stream_max_step = 0.002;       // m
+  double stream_max_step_angle = 0.01;  // rad
+  int stream_deadline_cycles = 3;
 };
 
 struct TensionWatch {

@@ -15,7 +15,9 @@
 //                      fault quick-stops every drive and is latched until fault_reset() (an
 //                      e-stop's only once every input reads closed again)
 //   take_command       a posted command at the cycle boundary (move, trim, re-reference)
-//   sample_trajectory  the pose to command (the active trajectory, or the pose held)
+//   sample_trajectory  the pose to command (the active trajectory or path, the setpoint stream,
+//                      or the pose held; a stop request decelerates along the path,
+//                      rt_controller_motion.cc)
 //   control_tensions   tension control in the null space of the structure matrix
 //                      (tension_control.hpp): the measured tensions trim the cable targets
 //                      towards the band, while holding and moving
@@ -135,6 +137,64 @@ struct RtControllerOptions {
   std::array<double, 3> box_min{}, box_max{};
   // Tension control in the null space (gain 0: off; tension_control.hpp).
   TensionControlOptions tension_control;
+  // A stopped move or path (request_motion_stop) slows down along its path: its time runs at a
+  // rate r going from 1 to 0 on a double-S profile with dr/dt <= a / v, d2r/dt2 <= j / v and
+  // d3r/dt3 <= j^2 / (a v) (the tighter of the linear and the angular class), which adds at most
+  // a to the acceleration and j to the jerk the path has at that point. The setpoint stream's
+  // smooth hold uses the linear and angular acceleration and jerk limits.
+  MotionLimits stop_limits;
+  // The setpoint stream: a setpoint further than these from the commanded pose is refused (the
+  // stream ends, the robot holds); none newer for this many cycles: the robot holds (smoothly)
+  // until one comes within the step limit again.
+  double stream_max_step = 0.002;       // m
+  double stream_max_step_angle = 0.01;  // rad
+  int stream_deadline_cycles = 3;
+};
+
+// The setpoint stream as the RT loop sees it (RtSnapshot::stream).
+enum class StreamState : std::uint8_t {
+  kOff,        // no stream command active
+  kFollowing,  // the last setpoint is applied
+  kHolding,    // late or missing setpoints: decelerated, waiting for one within the step limit
+  kStopping,   // ending (stop request, refused setpoint): decelerating, then the robot holds
+};
+const char* to_string(StreamState s);
+
+enum class StreamEnd : std::uint8_t {
+  kNone,
+  kStopped,      // the operator's stop
+  kStepRefused,  // a setpoint too far from the commanded pose (value: its distance, m or rad)
+  kRefused,      // the receiver refused a setpoint (box, tensions, cable lengths)
+  kFault,        // a fault ended it
+};
+const char* to_string(StreamEnd e);
+
+struct StreamStatus {
+  StreamState state = StreamState::kOff;
+  StreamEnd end = StreamEnd::kNone;  // why the last stream ended
+  std::uint64_t end_seq = 0;         // the setpoint that ended it (refusals)
+  double end_value = 0.0;            // kStepRefused: the step, m (or rad when angular)
+  std::uint64_t applied = 0;         // setpoints applied
+  std::uint64_t last_seq = 0;        // of the last applied setpoint
+  std::uint64_t holds = 0;           // times the deadline passed without a setpoint
+  // Latency of the last applied setpoint: sender timestamp to the cycle that applied it, ns (on
+  // one machine, both CLOCK_MONOTONIC); and receive to apply.
+  std::int64_t latency_ns = 0;
+  std::int64_t queue_ns = 0;
+  // Over every applied setpoint since the stream started: count, sum and sum of squares (ns,
+  // ns^2: mean and standard deviation, the jitter), smallest and largest latency.
+  std::uint64_t latency_count = 0;
+  double latency_sum = 0.0, latency_sum_sq = 0.0;
+  std::int64_t latency_min_ns = 0, latency_max_ns = 0;
+};
+
+// What the RT loop reports about the move in progress (a move or a path run).
+struct MoveProgress {
+  double elapsed_s = 0.0;   // path time reached (it runs slower while stopping)
+  double duration_s = 0.0;  // of the whole move
+  int line = 0;             // path file line at the current point (0: none)
+  bool stopping = false;    // a stop request is being carried out
+  bool stopped = false;     // the last move ended by a stop request, not at its end
 };
 
 // What any thread may read about the loop (trivially copyable, published every cycle).
@@ -181,6 +241,8 @@ struct RtSnapshot {
   double largest_move_step = 0.0;
   double largest_reference_step = 0.0;
   std::uint64_t overruns = 0;  // filled by the loop driver
+  MoveProgress move;
+  StreamStatus stream;
 };
 
 struct RtEvent {
@@ -211,6 +273,17 @@ class RtController {
   MotionCommand* post_first(MotionCommand* command) noexcept {
     return first_.exchange(command, std::memory_order_acq_rel);
   }
+  // Any thread: the move, path or stream with a sequence number up to `seq` stops smoothly
+  // (RtControllerOptions::stop_limits) and the robot holds where it came to rest; such a command
+  // not taken yet is never started.
+  void request_motion_stop(std::uint64_t seq) noexcept {
+    std::uint64_t cur = stop_seq_.load(std::memory_order_acquire);
+    while (cur < seq && !stop_seq_.compare_exchange_weak(cur, seq, std::memory_order_acq_rel)) {
+    }
+  }
+  // The stream's receiving thread (one producer): the next setpoint; false when the ring is full
+  // (the RT loop takes every setpoint waiting at each cycle and applies the newest).
+  bool push_setpoint(const StreamSetpoint& sp) noexcept { return stream_in_.push(sp); }
   // Any thread: requests (taken at the next cycle).
   void request_quick_stop() noexcept { quick_stop_.store(true, std::memory_order_release); }
   // A fault reset is refused (the fault stays latched) while an e-stop input reads open.
@@ -270,6 +343,18 @@ class RtController {
   void reset_stuck_watch() noexcept { stuck_valid_.fill(false); }
   void start_move(const MotionCommand& c, canopen::Timestamp now) noexcept;
   void start_reference(const MotionCommand& c, canopen::Timestamp now) noexcept;
+  // Moves, paths and the stream (rt_controller_motion.cc).
+  bool stop_requested() const noexcept {
+    return active_ != nullptr && active_->seq <= stop_seq_.load(std::memory_order_acquire);
+  }
+  double move_time(canopen::Timestamp now) noexcept;
+  double move_duration() const noexcept;
+  void sample_move(double t) noexcept;
+  void start_stream(const MotionCommand& c, canopen::Timestamp now) noexcept;
+  void sample_stream(canopen::Timestamp now) noexcept;
+  bool take_setpoint(canopen::Timestamp now) noexcept;
+  void decelerate(double dt) noexcept;
+  void end_stream(StreamEnd why, std::uint64_t seq, double value) noexcept;
   void hold_actual(const MotionCommand& c) noexcept;
   void step_trims() noexcept;
   void update_average() noexcept;
@@ -347,6 +432,22 @@ class RtController {
   cdpr::SeqLock<RtSnapshot> published_;
   SpscRing<RtEvent, 256> events_;
   std::uint64_t overruns_ = 0;
+
+  // Moves and paths: the stop request, the path time while stopping (rt_controller_motion.cc).
+  std::atomic<std::uint64_t> stop_seq_{0};
+  DoubleSProfile stop_profile_;  // the rate r = 1 - s(t) of a stopping move
+  bool stopping_ = false;
+  canopen::Timestamp stop_start_{0}, last_now_{0};
+  double move_t_ = 0.0;
+  // The stream: setpoints from the receiving thread; the commanded pose's velocity (linear m/s,
+  // rpy rad/s) and the deceleration reached while holding.
+  SpscRing<StreamSetpoint, 64> stream_in_;
+  bool streaming_ = false;
+  canopen::Timestamp last_setpoint_{0}, stream_start_{0};
+  Eigen::Matrix<double, 6, 1> stream_velocity_ = Eigen::Matrix<double, 6, 1>::Zero();
+  double decel_linear_ = 0.0, decel_angular_ = 0.0;
+  Eigen::Matrix<double, 6, 1> last_applied_ = Eigen::Matrix<double, 6, 1>::Zero();
+  bool st_resumed_ = true;  // no setpoint applied since the start or a hold
 };
 
 }  // namespace cdpr::controller
