@@ -56,6 +56,7 @@ void TensionControl::step(bool run, bool hold, bool sensor_fault, const RobotRea
     reset();
     return;
   }
+  ++cycles_;
   const int m = model.num_cables();
   if (readings_usable(sensor_fault, in, m)) {
     unusable_cycles_ = 0;
@@ -65,7 +66,7 @@ void TensionControl::step(bool run, bool hold, bool sensor_fault, const RobotRea
       return;
     }
     status_.state = TensionControlState::kActive;
-    if (follow(model, data)) map_trims(model, data);
+    if (follow(model, data)) map_trims(model, data, true);
     return;
   }
   status_.in_band = false;
@@ -82,9 +83,9 @@ void TensionControl::step(bool run, bool hold, bool sensor_fault, const RobotRea
       df[k] = -a * force_[k];
       dt[k] = -a * take_up_[k];
     }
-    integrate(model, data, df, dt);
+    if (update_compliances(model, data)) integrate(model, df, dt);
   }
-  map_trims(model, data);  // the frozen (decaying) correction on the pose commanded now
+  map_trims(model, data, false);  // the frozen (decaying) correction on the pose commanded now
 }
 
 // Fresh (within stale_s), finite, from every channel, and no force fault latched.
@@ -139,15 +140,22 @@ void TensionControl::measure(const RobotReading& in, const RobotModel& model,
   status_.largest_error = largest;
 }
 
-double TensionControl::counts_per_newton(const RobotModel& model, const CommandData& data,
-                                         int i) noexcept {
-  const auto k = static_cast<std::size_t>(i);
-  const double compliance =  // m/N at the planned tension
-      cable_elongation_derivatives(model.cables[k], data.cable.loaded_lengths(i),
-                                   data.plan.tensions(i))
-          .d_tension;
-  if (!std::isfinite(compliance) || compliance <= 0.0) return 0.0;
-  return winch_counts_change<double>(model.winches[k], -compliance);  // shorter: more tension
+bool TensionControl::update_compliances(const RobotModel& model, const CommandData& data) noexcept {
+  const int m = model.num_cables();
+  if (data.kinematics.structure_matrix.cols() != m || data.plan.tensions.size() != m) return false;
+  if (compliances_cycle_ == cycles_) return true;  // already this cycle
+  compliances_cycle_ = cycles_;
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    const double compliance =  // m/N at the planned tension
+        cable_elongation_derivatives(model.cables[k], data.cable.loaded_lengths(i),
+                                     data.plan.tensions(i))
+            .d_tension;
+    cpn_[k] = std::isfinite(compliance) && compliance > 0.0
+                  ? winch_counts_change<double>(model.winches[k], -compliance)  // shorter: more
+                  : 0.0;
+  }
+  return true;
 }
 
 bool TensionControl::project(const CommandData& data, int m, const std::array<double, kMaxAxes>& w,
@@ -176,16 +184,14 @@ bool TensionControl::project(const CommandData& data, int m, const std::array<do
 // The errors into this cycle's step of the correction (see the header).
 bool TensionControl::follow(const RobotModel& model, const CommandData& data) noexcept {
   const int m = model.num_cables();
-  if (data.kinematics.structure_matrix.cols() != m || data.plan.tensions.size() != m) {
-    return false;
-  }
+  if (!update_compliances(model, data)) return false;
   std::array<double, kMaxAxes> df{}, dt{};
   const double g = options_.gain * cycle_s_;
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
     df[k] = slack_[k] ? 0.0 : error_[k];
     // A slack cable has no stiffness: shortened on its own until it carries again.
-    if (slack_[k]) dt[k] = g * error_[k] * counts_per_newton(model, data, i);
+    if (slack_[k]) dt[k] = g * error_[k] * cpn_[k];
   }
   if (!project(data, m, weight_, df)) df.fill(0.0);  // no kernel: only the take-up
   // Dead zone: the part of the kernel step beyond half the deadband (largest cable), the
@@ -196,22 +202,18 @@ bool TensionControl::follow(const RobotModel& model, const CommandData& data) no
   const double zone = 0.5 * options_.deadband;
   const double keep = largest > zone ? g * (1.0 - zone / largest) : 0.0;
   for (int i = 0; i < m; ++i) df[static_cast<std::size_t>(i)] *= keep;
-  integrate(model, data, df, dt);
-  std::array<double, kMaxAxes> unit{};
-  unit.fill(1.0);
-  (void)project(data, m, unit, force_);  // re-based on this pose's kernel
+  integrate(model, df, dt);
   return true;
 }
 
-void TensionControl::integrate(const RobotModel& model, const CommandData& data,
-                               const std::array<double, kMaxAxes>& df,
+void TensionControl::integrate(const RobotModel& model, const std::array<double, kMaxAxes>& df,
                                const std::array<double, kMaxAxes>& dt) noexcept {
   const int m = model.num_cables();
   // One scale for the whole step keeps its direction (in the kernel) under the rate limit.
   double scale = 1.0;
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    const double step = std::abs(counts_per_newton(model, data, i) * df[k] + dt[k]);
+    const double step = std::abs(cpn_[k] * df[k] + dt[k]);
     const double dmax = options_.max_rate * cycle_s_ / winch_metres_per_count(model.winches[k]);
     if (step > dmax) scale = std::min(scale, dmax / step);
   }
@@ -222,19 +224,21 @@ void TensionControl::integrate(const RobotModel& model, const CommandData& data,
   }
 }
 
-void TensionControl::map_trims(const RobotModel& model, const CommandData& data) noexcept {
+void TensionControl::map_trims(const RobotModel& model, const CommandData& data,
+                               bool rebase) noexcept {
   const int m = model.num_cables();
-  if (data.kinematics.structure_matrix.cols() != m || data.plan.tensions.size() != m) return;
-  // phi on this pose's kernel (a copy: at a still pose the frozen trims stay bit for bit).
+  if (!update_compliances(model, data)) return;
+  // phi on this pose's kernel (kept as the state when re-based; a frozen one stays as it is, so
+  // at a still pose its trims stay bit for bit).
   std::array<double, kMaxAxes> phi = force_, unit{};
   unit.fill(1.0);
   if (!project(data, m, unit, phi)) phi.fill(0.0);
   // Anti-windup: phi and the take-up scaled together so that no trim passes its bound.
-  std::array<double, kMaxAxes> cpn{};
+  if (rebase) force_ = phi;
+  const std::array<double, kMaxAxes>& cpn = cpn_;
   double largest = 0.0;  // of |trim| / bound
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    cpn[k] = counts_per_newton(model, data, i);
     const double bound = options_.max_trim / winch_metres_per_count(model.winches[k]);
     largest = std::max(largest, std::abs(cpn[k] * phi[k] + take_up_[k]) / bound);
   }

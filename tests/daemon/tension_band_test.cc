@@ -141,5 +141,46 @@ TEST_F(DaemonNativeTension, TensionControlKeepsEveryCableTautAndBelowItsBandThro
   EXPECT_EQ(x.held_trim_moved, 0);
 }
 
+// The calibration still passes with the tension control on (config/sim/cdprd.yaml turns it on):
+// the trims are held while each pose is sampled, so the identification sees one consistent
+// length/tension pair per pose. 25 poses designed 30 N inside the limits, as that file.
+TEST_F(DaemonNativeTension, TheCalibrationPassesItsGatesWithTensionControlOn) {
+  testing::VirtualCell::Settings s;
+  s.measuring =
+      "{poses: 25, laser_samples: 5, laser_interval_s: 0.002, average_cycles: 25, "
+      "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 3, "
+      "design_tension_margin: 30}";
+  s.identification = "{bootstrap: 5}";
+  s.extra = "tension_control: {gain: 20, max_rate: 0.02}\n";
+  const Status started = cell_->start_daemon(s);
+  ASSERT_TRUE(started.ok()) << started.to_string();
+  const Reply r = request("calibrate");
+  ASSERT_TRUE(r.ok) << r.message;
+  ASSERT_TRUE(run_until([&] { return daemon().state() != DaemonState::kHolding; }, 5.0));
+  const bool done = run_until(
+      [&] {
+        const DaemonState st = daemon().state();
+        return st == DaemonState::kAwaitingAcceptance || st == DaemonState::kHolding;
+      },
+      1200.0);
+  ASSERT_TRUE(done);
+  const nlohmann::json st = daemon().status();
+  ASSERT_EQ(st["calibration"]["outcome"], "awaiting_acceptance") << st.dump(2);
+  const Reply report = request("report");
+  ASSERT_TRUE(report.ok) << report.message;
+  const nlohmann::json& rep = report.result["report"];
+  std::printf("[tension-band] calibration with tension control: verdict %s, gates passed %d\n",
+              rep["verdict"].get<std::string>().c_str(), rep["gates_passed"].get<bool>());
+  EXPECT_TRUE(rep["gates_passed"].get<bool>()) << rep["gates"].dump(2);
+  auto after = config::load_robot_config(
+      daemon().store().calibration_dir(r.result["calibration"].get<int>()) + "/model_after.yaml");
+  ASSERT_TRUE(after.ok()) << after.status().to_string();
+  const double before = testing::VirtualCell::anchor_rms(cell_->nominal, cell_->physics->truth());
+  const double now = testing::VirtualCell::anchor_rms(*after, cell_->physics->truth());
+  std::printf("[tension-band] anchors RMS vs truth: %.3f mm before, %.3f mm after\n", before * 1e3,
+              now * 1e3);
+  EXPECT_LT(now, 1e-3);
+}
+
 }  // namespace
 }  // namespace cdpr::controller

@@ -104,12 +104,13 @@ class TensionControl {
   // This cycle's integration step (phi in N, take-up in counts); false: no kinematics.
   bool follow(const RobotModel& model, const CommandData& data) noexcept;
   // trim = -c .* phi + take_up at this pose, phi first projected onto its kernel; bounded.
-  void map_trims(const RobotModel& model, const CommandData& data) noexcept;
-  // The cable compliance (m/N) at the plan of `data` in counts per newton; 0 if unusable.
-  static double counts_per_newton(const RobotModel& model, const CommandData& data, int i) noexcept;
+  // `rebase`: phi keeps its projection (active); otherwise only the trims use it (frozen).
+  void map_trims(const RobotModel& model, const CommandData& data, bool rebase) noexcept;
+  // cpn_: each cable's compliance (m/N) at the plan of `data` in counts per newton (0 if
+  // unusable), once per cycle; false: `data` holds no kinematics of this robot.
+  bool update_compliances(const RobotModel& model, const CommandData& data) noexcept;
   // Adds a step of phi (N) and of the take-up (counts), scaled to the rate limit.
-  void integrate(const RobotModel& model, const CommandData& data,
-                 const std::array<double, kMaxAxes>& df,
+  void integrate(const RobotModel& model, const std::array<double, kMaxAxes>& df,
                  const std::array<double, kMaxAxes>& dt) noexcept;
   // The weighted projection onto the kernel of A^T: v -= W^-1 A (A^T W^-1 A)^-1 A^T v. False
   // (v unchanged) without a kernel (m <= 6, rank < 6).
@@ -131,6 +132,9 @@ class TensionControl {
   std::array<bool, kMaxAxes> edge_{};       // outside the band, not yet back inside [tlo, thi]
   std::array<double, kMaxAxes> force_{};    // N, phi: the internal-force correction
   std::array<double, kMaxAxes> take_up_{};  // counts, slack cables shortened on their own
+  std::array<double, kMaxAxes> cpn_{};      // counts per N of each cable this cycle
+  std::uint64_t cycles_ = 0;                // steps taken
+  std::uint64_t compliances_cycle_ = 0;     // the step cpn_ belongs to (0: none)
 };
 
 }  // namespace cdpr::controller
