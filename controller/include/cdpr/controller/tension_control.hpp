@@ -4,12 +4,15 @@
 // Each cycle, with the readings low-passed (f), the plan p and the structure matrix A^T (6 x m)
 // and the cable compliances c (m/N, at the plan) of the pose commanded last:
 //
-//   target  t = clamp(p, lo + d, hi - d)       (d: deadband; the plan where it is in the band)
+//   target  t = clamp(p, lo + d, hi - d)       (d: deadband; the plan where it is in the band);
+//           an edge cable (outside [lo, hi], until back inside [lo + d, hi - d]):
+//           t = clamp(f, lo + d, hi - d), the nearest point of the shrunk band
 //   error   e = t - f                          for every taut cable; a slack one (f below
 //                                              slack_below) is taken up on its own instead
 //   kernel  df = e - W^-1 A (A^T W^-1 A)^-1 A^T e  the internal-force change (A^T df = 0)
-//           nearest to e, weights W: kEdgeWeight for a cable outside [lo, hi], 1 inside,
-//           kSlackWeight (left alone) for a slack cable
+//           nearest to e, weights W: kEdgeWeight for an edge cable, 1 for the others,
+//           kSlackWeight (left alone) for a slack cable; only the part of df beyond d/2 (its
+//           largest cable, direction kept) is used: at the optimum the noise moves nothing
 //   state   phi += gain * dt * df              the internal-force correction, N; projected
 //           onto the kernel of the current pose every cycle (the correction a pose needs is
 //           carried into the next as a force, never as lengths of another pose)
