@@ -2,6 +2,11 @@
 // (tests/daemon/virtual_cell.hpp: in-process CAN bus, manual clock, laser over loopback TCP).
 //
 //   daemon_bench [--cycles N] [--calibration-only] [--measuring "{poses: 25, ...}"]
+//   daemon_bench --compare-tension-control "{gain: 20}" [--cycles N] [--rounds R]
+//
+// The second form prints only the cycle's compute time, holding and moving, without and with the
+// tension control in the null space (the daemon's tension_control group as given), two daemons
+// measured in alternating rounds of the same run (default 3) so both see the same machine load.
 //
 // Prints (figures, not assertions):
 // - the compute time of Daemon::cycle (tension QP + compensated IK with pulleys for 8 cables,
@@ -72,19 +77,95 @@ void print(const char* what, const Percentiles& p, double baseline_p50) {
               what, p.p50, p.p99, p.max, p.p50 / baseline_p50);
 }
 
+// Daemon::cycle's compute time along moves there and back along x; false: a move was refused.
+bool time_moves(testing::VirtualCell& cell, std::vector<double>& moving) {
+  Daemon& d = *cell.daemon;
+  for (double x : {0.08, -0.08, 0.0}) {
+    const Reply r = cell.request("move", {{"pose", {x, 0.02, 0.0, 0.0, 0.0, 0.0}}});
+    if (!r.ok) {
+      std::fprintf(stderr, "daemon_bench: move: %s\n", r.message.c_str());
+      return false;
+    }
+    for (int c = 0; c < 5; ++c) cell.cycle();  // taken at the next cycle boundary
+    while (d.rt().snapshot().mode == RtMode::kMoving) {
+      moving.push_back(time_cycles(cell, 1, [&] { d.cycle(cell.clock.now()); })[0]);
+      d.service();
+    }
+  }
+  return true;
+}
+
+struct ComputeTimes {
+  std::vector<double> holding, moving;
+};
+
+// The compute time of Daemon::cycle holding (n cycles) and along the moves there and back along x
+// of a cell started with `settings`; false: the cell or a move failed (printed).
+bool compute_times(const testing::VirtualCell::Settings& settings, int n, ComputeTimes& out) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
+                                    ("cdpr-daemon-bench-tc-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  auto cell_r = testing::VirtualCell::create(CDPR_SOURCE_DIR, dir);
+  if (!cell_r.ok() || !(*cell_r)->start_daemon(settings).ok()) {
+    std::fprintf(stderr, "daemon_bench: the cell did not start\n");
+    return false;
+  }
+  testing::VirtualCell& cell = **cell_r;
+  Daemon& d = *cell.daemon;
+  cell.run_until([&] { return d.state() == DaemonState::kHolding; }, 5.0);
+  auto hold = time_cycles(cell, n, [&] { d.cycle(cell.clock.now()); });
+  out.holding.insert(out.holding.end(), hold.begin(), hold.end());
+  if (!time_moves(cell, out.moving)) return false;
+  cell.daemon->shutdown();
+  cell_r->reset();
+  std::filesystem::remove_all(dir);
+  return true;
+}
+
+int compare_tension_control(const std::string& group, int cycles, int rounds) {
+  testing::VirtualCell::Settings off, on;
+  off.extra = "tension_control: {gain: 0}\n";
+  on.extra = "tension_control: " + group + "\n";
+  ComputeTimes a, b;
+  for (int r = 0; r < rounds; ++r) {
+    if (!compute_times(off, cycles, a) || !compute_times(on, cycles, b)) return 1;
+  }
+  std::printf("Daemon::cycle compute time, %d rounds, without and with tension_control %s:\n",
+              rounds, group.c_str());
+  const auto line = [](const char* what, const std::vector<double>& v) {
+    const Percentiles p = percentiles(v);
+    std::printf("  %-34s %6zu cycles  p50 %6.2f us  p99 %6.2f us  max %7.2f us\n", what, v.size(),
+                p.p50, p.p99, p.max);
+  };
+  line("holding, tension control off", a.holding);
+  line("holding, tension control on", b.holding);
+  line("moving, tension control off", a.moving);
+  line("moving, tension control on", b.moving);
+  std::printf("  target <= 10 us p99 with tension control: holding %s, moving %s\n",
+              percentiles(b.holding).p99 <= 10.0 ? "met" : "NOT met",
+              percentiles(b.moving).p99 <= 10.0 ? "met" : "NOT met");
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   int cycles = 20000;
   testing::VirtualCell::Settings settings;
   bool calibrate_only = false;
+  std::string compare;
+  int rounds = 3;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     if (a == "--cycles" && i + 1 < argc) cycles = std::max(100, std::atoi(argv[++i]));
     // The daemon's measuring group (a YAML flow mapping), e.g. "{poses: 25, tension_band: 0}".
     if (a == "--measuring" && i + 1 < argc) settings.measuring = argv[++i];
     if (a == "--calibration-only") calibrate_only = true;
+    if (a == "--compare-tension-control" && i + 1 < argc) compare = argv[++i];
+    if (a == "--rounds" && i + 1 < argc) rounds = std::max(1, std::atoi(argv[++i]));
   }
+  if (!compare.empty()) return compare_tension_control(compare, cycles, rounds);
   const std::filesystem::path dir =
       std::filesystem::temp_directory_path() / ("cdpr-daemon-bench-" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
@@ -117,19 +198,7 @@ int main(int argc, char** argv) {
   print("Daemon::cycle, holding", hold, master.p50);
   // A long move: there and back along x, timed while the trajectory runs.
   std::vector<double> moving;
-  for (double x : {0.08, -0.08, 0.0}) {
-    const Reply r = cell.request("move", {{"pose", {x, 0.02, 0.0, 0.0, 0.0, 0.0}}});
-    if (!r.ok) {
-      std::fprintf(stderr, "daemon_bench: move: %s\n", r.message.c_str());
-      return 1;
-    }
-    for (int c = 0; c < 5; ++c) cell.cycle();  // taken at the next cycle boundary
-    while (d.rt().snapshot().mode == RtMode::kMoving) {
-      auto v = time_cycles(cell, 1, [&] { d.cycle(cell.clock.now()); });
-      moving.push_back(v[0]);
-      d.service();
-    }
-  }
+  if (!time_moves(cell, moving)) return 1;
   print("Daemon::cycle, moving", percentiles(moving), master.p50);
   std::printf(
       "  target <= 10 us per cycle: p50 %s, p99 %s (this machine's other load shows in p99)\n",

@@ -150,8 +150,14 @@ void RtController::hold_fault(const RtFault& f) noexcept {
 }
 
 bool RtController::solve(const Pose& pose) noexcept {
-  const Status s = command_counts(geometry_->model, pose, ref_tension_, command_data_);
-  if (!s.ok()) return false;
+  // With tension control the plan (its target) keeps its band's margin where the pose allows it
+  // (the path check asks as much); elsewhere, and without tension control, the planner's band.
+  const double margin = tension_.enabled() ? tension_.options().margin : 0.0;
+  if (!command_counts(geometry_->model, pose, ref_tension_, command_data_, margin).ok() &&
+      (margin == 0.0 ||
+       !command_counts(geometry_->model, pose, ref_tension_, command_data_).ok())) {
+    return false;
+  }
   for (int i = 0; i < m_; ++i) {
     const auto k = static_cast<std::size_t>(i);
     desired_[k] = command_data_.cable.counts(i) + offsets_[k];

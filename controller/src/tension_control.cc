@@ -45,6 +45,9 @@ void TensionControl::reset() noexcept {
   seen_any_ = false;
   filtered_valid_ = false;
   stale_cycles_ = unusable_cycles_ = 0;
+  force_.fill(0.0);
+  take_up_.fill(0.0);
+  edge_.fill(false);
 }
 
 void TensionControl::step(bool run, bool hold, bool sensor_fault, const RobotReading& in,
@@ -53,18 +56,17 @@ void TensionControl::step(bool run, bool hold, bool sensor_fault, const RobotRea
     reset();
     return;
   }
+  ++cycles_;
   const int m = model.num_cables();
   if (readings_usable(sensor_fault, in, m)) {
     unusable_cycles_ = 0;
+    measure(in, model, data);
     if (hold) {  // the trims stay; the readings still filtered and the band still watched
       status_.state = TensionControlState::kHeld;
-      std::array<double, kMaxAxes> step{};
-      follow(in, model, data, step);
       return;
     }
     status_.state = TensionControlState::kActive;
-    std::array<double, kMaxAxes> step{};
-    if (follow(in, model, data, step)) apply(step, model);
+    if (follow(model, data)) map_trims(model, data, true);
     return;
   }
   status_.in_band = false;
@@ -74,8 +76,16 @@ void TensionControl::step(bool run, bool hold, bool sensor_fault, const RobotRea
     status_.state = TensionControlState::kFrozen;
   } else {
     status_.state = TensionControlState::kDecaying;
-    decay(model);
+    const double a = std::min(1.0, cycle_s_ / options_.decay_s);
+    std::array<double, kMaxAxes> df{}, dt{};
+    for (int i = 0; i < m; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      df[k] = -a * force_[k];
+      dt[k] = -a * take_up_[k];
+    }
+    if (update_compliances(model, data)) integrate(model, df, dt);
   }
+  map_trims(model, data, false);  // the frozen (decaying) correction on the pose commanded now
 }
 
 // Fresh (within stale_s), finite, from every channel, and no force fault latched.
@@ -95,12 +105,11 @@ bool TensionControl::readings_usable(bool sensor_fault, const RobotReading& in, 
   return true;
 }
 
-// The tension errors outside the band into a trim step (see the header).
-bool TensionControl::follow(const RobotReading& in, const RobotModel& model,
-                            const CommandData& data, std::array<double, kMaxAxes>& step) noexcept {
+void TensionControl::measure(const RobotReading& in, const RobotModel& model,
+                             const CommandData& data) noexcept {
   const int m = model.num_cables();
-  std::array<double, kMaxAxes> e{}, w{}, direct{};
-  bool any = false, in_band = true;
+  const bool planned = data.plan.tensions.size() == m;
+  bool in_band = true;
   double largest = 0.0;
   const double a = options_.filter_s > 0.0 ? std::min(1.0, cycle_s_ / options_.filter_s) : 1.0;
   for (int i = 0; i < m; ++i) {
@@ -110,89 +119,138 @@ bool TensionControl::follow(const RobotReading& in, const RobotModel& model,
     const double hi = std::max(lo, c.f_max - options_.margin);
     double& f = filtered_[k];
     f = filtered_valid_ ? f + a * (in.tensions[k] - f) : in.tensions[k];
-    // The target: the band shrunk by the deadband; inside it, nothing to do.
     const double tlo = std::min(lo + options_.deadband, 0.5 * (lo + hi));
     const double thi = std::max(hi - options_.deadband, tlo);
-    // Hysteresis: a cable acts once outside [lo, hi] and until it is back inside [tlo, thi].
-    bool& act = acting_[k];
-    act = f < lo || f > hi || (act && (f < tlo || f > thi));
-    const double err = act ? std::clamp(f, tlo, thi) - f : 0.0;
+    // Hysteresis: a cable is at the edge once outside [lo, hi], until back inside [tlo, thi].
+    bool& edge = edge_[k];
+    edge = f < lo || f > hi || (edge && (f < tlo || f > thi));
+    // The target: at the edge, the nearest point of [tlo, thi]; otherwise the plan clamped into it.
+    const double target =
+        edge ? std::clamp(f, tlo, thi)
+             : std::clamp(planned ? data.plan.tensions(i) : 0.5 * (lo + hi), tlo, thi);
+    const double err = target - f;
     largest = std::max(largest, std::abs(err));
     in_band = in_band && f >= lo && f <= hi;
-    w[k] = f < lo || f > hi ? kEdgeWeight : 1.0;
-    if (act) {
-      // Outside the band: taken up (or paid out) on its own; the platform yields to the part of
-      // the change outside the true kernel. The kernel step leaves it alone (largest weight).
-      direct[k] = err;
-      w[k] = kSlackWeight;
-    } else {
-      e[k] = err;
-    }
-    any = any || err != 0.0;
+    slack_[k] = f < options_.slack_below;
+    error_[k] = err;
+    weight_[k] = slack_[k] ? kSlackWeight : (edge ? kEdgeWeight : 1.0);
   }
   filtered_valid_ = true;
   status_.in_band = in_band;
   status_.largest_error = largest;
-  const auto& s = data.kinematics.structure_matrix;  // A^T, 6 x m
-  if (!any || s.cols() != m) return false;
-  // df = e - W^-1 A (A^T W^-1 A)^-1 A^T e: the tension change in the kernel nearest to e with
-  // the weights W (fixed-size 6 x 6 normal matrix: no allocation). No kernel (m <= 6): none.
-  Eigen::Matrix<double, 6, 1> z = Eigen::Matrix<double, 6, 1>::Zero();
-  bool project = m > 6;
-  if (project) {
-    Eigen::Matrix<double, 6, 6> normal = Eigen::Matrix<double, 6, 6>::Zero();
-    Eigen::Matrix<double, 6, 1> rhs = Eigen::Matrix<double, 6, 1>::Zero();
-    for (int i = 0; i < m; ++i) {
-      const auto k = static_cast<std::size_t>(i);
-      const Eigen::Matrix<double, 6, 1> col = s.col(i);
-      normal += col * col.transpose() / w[k];
-      rhs += col * e[k];
-    }
-    const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(normal);
-    project = llt.info() == Eigen::Success;  // rank < 6: no kernel to speak of
-    if (project) z = llt.solve(rhs);
-  }
-  const double g = options_.gain * cycle_s_;
+}
+
+bool TensionControl::update_compliances(const RobotModel& model, const CommandData& data) noexcept {
+  const int m = model.num_cables();
+  if (data.kinematics.structure_matrix.cols() != m || data.plan.tensions.size() != m) return false;
+  if (compliances_cycle_ == cycles_) return true;  // already this cycle
+  compliances_cycle_ = cycles_;
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    const double df = (project ? e[k] - s.col(i).dot(z) / w[k] : 0.0) + direct[k];
     const double compliance =  // m/N at the planned tension
         cable_elongation_derivatives(model.cables[k], data.cable.loaded_lengths(i),
                                      data.plan.tensions(i))
             .d_tension;
-    if (!std::isfinite(compliance) || compliance <= 0.0) continue;
-    step[k] = g * winch_counts_change<double>(model.winches[k], -compliance * df);
+    cpn_[k] = std::isfinite(compliance) && compliance > 0.0
+                  ? winch_counts_change<double>(model.winches[k], -compliance)  // shorter: more
+                  : 0.0;
   }
   return true;
 }
 
-void TensionControl::decay(const RobotModel& model) noexcept {
-  std::array<double, kMaxAxes> step{};
-  const double a = std::min(1.0, cycle_s_ / options_.decay_s);
-  for (int i = 0; i < model.num_cables(); ++i) {
+bool TensionControl::project(const CommandData& data, int m, const std::array<double, kMaxAxes>& w,
+                             std::array<double, kMaxAxes>& v) const noexcept {
+  const auto& s = data.kinematics.structure_matrix;  // A^T, 6 x m
+  if (m <= 6 || s.cols() != m) return false;
+  // Fixed-size 6 x 6 normal matrix: no allocation.
+  Eigen::Matrix<double, 6, 6> normal = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> rhs = Eigen::Matrix<double, 6, 1>::Zero();
+  for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    step[k] = -a * status_.trim_counts[k];
+    const Eigen::Matrix<double, 6, 1> col = s.col(i);
+    normal += col * col.transpose() / w[k];
+    rhs += col * v[k];
   }
-  apply(step, model);
+  const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(normal);
+  if (llt.info() != Eigen::Success) return false;  // rank < 6: no kernel to speak of
+  const Eigen::Matrix<double, 6, 1> z = llt.solve(rhs);
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    v[k] -= s.col(i).dot(z) / w[k];
+  }
+  return true;
 }
 
-void TensionControl::apply(std::array<double, kMaxAxes>& step, const RobotModel& model) noexcept {
+// The errors into this cycle's step of the correction (see the header).
+bool TensionControl::follow(const RobotModel& model, const CommandData& data) noexcept {
   const int m = model.num_cables();
-  // One scale for every cable keeps the step's direction (in the kernel) under the rate limit.
+  if (!update_compliances(model, data)) return false;
+  std::array<double, kMaxAxes> df{}, dt{};
+  const double g = options_.gain * cycle_s_;
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    df[k] = slack_[k] ? 0.0 : error_[k];
+    // A slack cable has no stiffness: shortened on its own until it carries again.
+    if (slack_[k]) dt[k] = g * error_[k] * cpn_[k];
+  }
+  if (!project(data, m, weight_, df)) df.fill(0.0);  // no kernel: only the take-up
+  // Dead zone: the part of the kernel step beyond half the deadband (largest cable), the
+  // direction kept; at the optimum the readings' noise moves no trim.
+  double largest = 0.0;
+  for (int i = 0; i < m; ++i)
+    largest = std::max(largest, std::abs(df[static_cast<std::size_t>(i)]));
+  const double zone = 0.5 * options_.deadband;
+  const double keep = largest > zone ? g * (1.0 - zone / largest) : 0.0;
+  for (int i = 0; i < m; ++i) df[static_cast<std::size_t>(i)] *= keep;
+  integrate(model, df, dt);
+  return true;
+}
+
+void TensionControl::integrate(const RobotModel& model, const std::array<double, kMaxAxes>& df,
+                               const std::array<double, kMaxAxes>& dt) noexcept {
+  const int m = model.num_cables();
+  // One scale for the whole step keeps its direction (in the kernel) under the rate limit.
   double scale = 1.0;
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    const double per_metre = 1.0 / winch_metres_per_count(model.winches[k]);
-    const double dmax = options_.max_rate * cycle_s_ * per_metre;
-    if (std::abs(step[k]) > dmax) scale = std::min(scale, dmax / std::abs(step[k]));
+    const double step = std::abs(cpn_[k] * df[k] + dt[k]);
+    const double dmax = options_.max_rate * cycle_s_ / winch_metres_per_count(model.winches[k]);
+    if (step > dmax) scale = std::min(scale, dmax / step);
   }
-  status_.saturated = false;
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    force_[k] += scale * df[k];
+    take_up_[k] += scale * dt[k];
+  }
+}
+
+void TensionControl::map_trims(const RobotModel& model, const CommandData& data,
+                               bool rebase) noexcept {
+  const int m = model.num_cables();
+  if (!update_compliances(model, data)) return;
+  // phi on this pose's kernel (kept as the state when re-based; a frozen one stays as it is, so
+  // at a still pose its trims stay bit for bit).
+  std::array<double, kMaxAxes> phi = force_, unit{};
+  unit.fill(1.0);
+  if (!project(data, m, unit, phi)) phi.fill(0.0);
+  // Anti-windup: phi and the take-up scaled together so that no trim passes its bound.
+  if (rebase) force_ = phi;
+  const std::array<double, kMaxAxes>& cpn = cpn_;
+  double largest = 0.0;  // of |trim| / bound
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
     const double bound = options_.max_trim / winch_metres_per_count(model.winches[k]);
-    double& t = status_.trim_counts[k];
-    t = std::clamp(t + scale * step[k], -bound, bound);
-    status_.saturated = status_.saturated || std::abs(t) >= bound;
+    largest = std::max(largest, std::abs(cpn[k] * phi[k] + take_up_[k]) / bound);
+  }
+  status_.saturated = largest >= 1.0 - 1e-9;
+  const double over = std::max(1.0, largest);
+  for (int i = 0; i < m; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    if (over > 1.0) {
+      force_[k] = phi[k] / over;
+      take_up_[k] /= over;
+    }
+    status_.trim_counts[k] = cpn[k] * phi[k] / over + take_up_[k];
   }
 }
 

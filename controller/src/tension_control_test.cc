@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <deque>
@@ -174,6 +175,43 @@ TEST_F(TensionRig, ASlackCableIsTakenUpIntoTheBandAndStaysThere) {
   EXPECT_LT(s.tension_control.trim_counts[0], 0.0);
 }
 
+// The trims change the internal forces only: the stiffness-mapped length change K dl is in the
+// kernel of A^T (no wrench on the platform, so no pose change to first order), and the plant's
+// tension change equals K dl (the platform's yield takes nothing away).
+TEST_F(TensionRig, TrimsChangeOnlyTheInternalForcesNotThePose) {
+  hold_home();
+  // Every cable taut but off its plan along the kernel: no slack take-up, only the kernel step.
+  disturb(0, 0.5 * (planned_[0] - lo(0)));
+  internal_ += kernel_.col(1) * (20.0 / kernel_.col(1).cwiseAbs().maxCoeff());
+  sense();
+  for (int i = 0; i < m_; ++i) ASSERT_GT(io_.tension[static_cast<size_t>(i)], 1.0);
+  cycle(500);
+  Eigen::VectorXd dl(m_);
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<size_t>(i);
+    dl(i) = winch_length_change<double>(geometry_.model.winches[k],
+                                        rt_->snapshot().tension_control.trim_counts[k]);
+  }
+  const Eigen::VectorXd kdl = k_ * dl;
+  ASSERT_GT(kdl.norm(), 5.0) << "the disturbance was corrected by trims";
+  EXPECT_LT((a_.transpose() * kdl).norm(), 1e-6 * kdl.norm() * a_.norm());
+  EXPECT_LT((response_ * dl + kdl).norm(), 1e-6 * kdl.norm());
+  // And the correction undid the disturbance as far as internal forces can: every cable in the
+  // band, and what is left of the error to the targets (the plan clamped into the band shrunk by
+  // the deadband) along the kernel is inside the dead zone (half the deadband, plus the readings'
+  // half-unit dither).
+  EXPECT_TRUE(all_in_band());
+  const double deadband = options_.tension_control.deadband;
+  Eigen::VectorXd rest(m_);
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<size_t>(i);
+    rest(i) = std::clamp(planned_[k], lo(i) + deadband, hi(i) - deadband) - io_.tension[k];
+  }
+  const Eigen::VectorXd along =
+      rest - a_ * (a_.transpose() * a_).ldlt().solve(a_.transpose() * rest);
+  EXPECT_LE(along.cwiseAbs().maxCoeff(), 0.5 * deadband + 0.1) << "left: " << rest.transpose();
+}
+
 TEST_F(TensionRig, TrimsMoveNoFasterThanTheRateLimit) {
   hold_home();
   disturb(0, planned_[0]);
@@ -262,8 +300,10 @@ TEST_F(TensionRig, CycleWithTensionControlAllocatesNothing) {
   disturb(0, planned_[0]);
   move_from_home();
   std::uint64_t allocations = 0;
-  for (int n = 0; n < 400; ++n) {
-    if (n == 300) io_.tensions_arrive = false;  // frozen, then decaying
+  std::array<int, 5> seen{};  // cycles in each state (off, active, held, frozen, decaying)
+  for (int n = 0; n < 600; ++n) {
+    rt_->hold_tension_trims(n >= 150 && n < 200);  // a pose being sampled: the trims held
+    if (n == 300) io_.tensions_arrive = false;     // frozen, then decaying
     {
       test::AllocationCounter count;
       rt_->cycle(now_);
@@ -271,8 +311,14 @@ TEST_F(TensionRig, CycleWithTensionControlAllocatesNothing) {
     }
     now_ += kPeriod;
     sense();  // the plant allocates: outside the count
+    ++seen[static_cast<std::size_t>(rt_->snapshot().tension_control.state)];
   }
   EXPECT_EQ(allocations, 0u);
+  for (const TensionControlState st :
+       {TensionControlState::kActive, TensionControlState::kHeld, TensionControlState::kFrozen,
+        TensionControlState::kDecaying}) {
+    EXPECT_GT(seen[static_cast<std::size_t>(st)], 0) << "never " << to_string(st);
+  }
   EXPECT_GT(rt_->snapshot().largest_move_step, 0.0) << "the platform moved";
   EXPECT_NE(rt_->snapshot().tension_control.state, TensionControlState::kOff);
 }

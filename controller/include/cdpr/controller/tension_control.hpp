@@ -1,23 +1,34 @@
 // Tension control: a stage of the RT cycle (rt_controller.hpp, control_tensions) that trims the
 // cable length targets from the measured tensions so that every cable stays in the band
-// [lo, hi] = [f_min + margin, f_max - margin]. Each cycle, with the readings low-passed (f):
+// [lo, hi] = [f_min + margin, f_max - margin], moving only the internal forces, not the pose.
+// Each cycle, with the readings low-passed (f), the plan p and the structure matrix A^T (6 x m)
+// and the cable compliances c (m/N, at the plan) of the pose commanded last:
 //
-//   a cable acts once f is outside [lo, hi], until f is back in [lo + d, hi - d] (d: deadband);
-//   its error e = clamp(f, lo + d, hi - d) - f (0 for a cable not acting)
-//   an acting cable: dl = -c .* e on its own (c: compliance at the plan, m/N); the platform
-//   yields to the part of the change outside the true kernel of A^T
-//   the others: the weighted projection of their errors onto the nominal kernel of A^T,
-//   df = e - W^-1 A (A^T W^-1 A)^-1 A^T e, dl = -c .* df (none while their errors are 0)
-//   trim += clamp_rate(gain * dt * dl)    counts; the whole step scaled to the rate limit
-//   trim  = clamp(trim, -max_trim, max_trim)   (anti-windup: the trim is the integrator)
+//   target  t = clamp(p, lo + d, hi - d)       (d: deadband; the plan where it is in the band);
+//           an edge cable (outside [lo, hi], until back inside [lo + d, hi - d]):
+//           t = clamp(f, lo + d, hi - d), the nearest point of the shrunk band
+//   error   e = t - f                          for every taut cable; a slack one (f below
+//                                              slack_below) is taken up on its own instead
+//   kernel  df = e - W^-1 A (A^T W^-1 A)^-1 A^T e  the internal-force change (A^T df = 0)
+//           nearest to e, weights W: kEdgeWeight for an edge cable, 1 for the others,
+//           kSlackWeight (left alone) for a slack cable; only the part of df beyond d/2 (its
+//           largest cable, direction kept) is used: at the optimum the noise moves nothing
+//   state   phi += gain * dt * df              the internal-force correction, N; projected
+//           onto the kernel of the current pose every cycle (the correction a pose needs is
+//           carried into the next as a force, never as lengths of another pose)
+//   trims   trim = -c .* phi + take_up         counts; A^T K trim = -A^T phi = 0: the pose
+//                                              does not move to first order
 //
-// Inside the band nothing moves (no trim on the readings' noise while a pose settles). `hold`
-// keeps the trims where they are (a pose being measured).
+// The step of the trims is scaled to max_rate (one scale: the direction stays in the kernel);
+// the trims are bounded by max_trim by scaling phi and the take-up together (anti-windup: the
+// state is the integrator and never winds up past the bound). `hold` keeps the trims where they
+// are (a pose being measured: the identification sees one consistent length/tension pair).
 //
 // Readings: a stale reading (none fresh for stale_s), a non-finite one, no tension channel, or a
-// latched force fault freezes the trims for hold_s, then they decay towards 0 (time constant
-// decay_s, within the rate limit): back to pure position control with the feed-forward plan.
-// state() reports which. step() allocates, locks, logs and throws nothing.
+// latched force fault freezes the correction (phi and the take-up; a move still maps phi onto its
+// poses) for hold_s, then it decays towards 0 (time constant decay_s, within the rate limit):
+// back to pure position control with the feed-forward plan. state() reports which. step()
+// allocates, locks, logs and throws nothing.
 #pragma once
 
 #include <array>
@@ -32,9 +43,9 @@
 namespace cdpr::controller {
 
 struct TensionControlOptions {
-  double gain = 0.0;         // 1/s, integral gain on the projected tension error; 0: off
+  double gain = 0.0;         // 1/s, integral gain on the tension error in the kernel; 0: off
   double margin = 10.0;      // N, target band [f_min + margin, f_max - margin]
-  double deadband = 3.0;     // N, hysteresis: a cable acts from outside the band to this inside it
+  double deadband = 3.0;     // N, the target is the plan clamped this far inside the band
   double max_rate = 0.005;   // m/s of cable, largest trim rate of any cable
   double max_trim = 0.03;    // m of cable, largest trim of any cable
   double stale_s = 0.05;     // s without a fresh reading before the trims freeze
@@ -58,14 +69,14 @@ struct TensionControlStatus {
   TensionControlState state = TensionControlState::kOff;
   bool in_band = false;        // every measured tension in [f_min + margin, f_max - margin]
   bool saturated = false;      // some trim is at max_trim
-  double largest_error = 0.0;  // N, largest |clamp(p, lo + d, hi - d) - f| of this cycle
+  double largest_error = 0.0;  // N, largest |t - f| of this cycle (t: the target, see above)
   std::array<double, kMaxAxes> trim_counts{};
 };
 
 class TensionControl {
  public:
   // Weight of a cable outside its band [lo, hi] against one inside it (1).
-  static constexpr double kEdgeWeight = 10.0;
+  static constexpr double kEdgeWeight = 1000.0;
   // Weight of a slack cable: the kernel step leaves it (all but) alone.
   static constexpr double kSlackWeight = 1e6;
   // Checks the options (finite, non-negative, positive times); cycle_s > 0.
@@ -91,12 +102,23 @@ class TensionControl {
 
  private:
   bool readings_usable(bool sensor_fault, const RobotReading& in, int m) noexcept;
-  // This cycle's trim step (counts) from the filtered readings; false: no step.
-  bool follow(const RobotReading& in, const RobotModel& model, const CommandData& data,
-              std::array<double, kMaxAxes>& step) noexcept;
-  void decay(const RobotModel& model) noexcept;
-  // Adds `step` (counts) scaled to the rate limit, then bounds each trim.
-  void apply(std::array<double, kMaxAxes>& step, const RobotModel& model) noexcept;
+  // Low-passes the readings; targets, errors and weights of this cycle; the band status.
+  void measure(const RobotReading& in, const RobotModel& model, const CommandData& data) noexcept;
+  // This cycle's integration step (phi in N, take-up in counts); false: no kinematics.
+  bool follow(const RobotModel& model, const CommandData& data) noexcept;
+  // trim = -c .* phi + take_up at this pose, phi first projected onto its kernel; bounded.
+  // `rebase`: phi keeps its projection (active); otherwise only the trims use it (frozen).
+  void map_trims(const RobotModel& model, const CommandData& data, bool rebase) noexcept;
+  // cpn_: each cable's compliance (m/N) at the plan of `data` in counts per newton (0 if
+  // unusable), once per cycle; false: `data` holds no kinematics of this robot.
+  bool update_compliances(const RobotModel& model, const CommandData& data) noexcept;
+  // Adds a step of phi (N) and of the take-up (counts), scaled to the rate limit.
+  void integrate(const RobotModel& model, const std::array<double, kMaxAxes>& df,
+                 const std::array<double, kMaxAxes>& dt) noexcept;
+  // The weighted projection onto the kernel of A^T: v -= W^-1 A (A^T W^-1 A)^-1 A^T v. False
+  // (v unchanged) without a kernel (m <= 6, rank < 6).
+  bool project(const CommandData& data, int m, const std::array<double, kMaxAxes>& w,
+               std::array<double, kMaxAxes>& v) const noexcept;
 
   TensionControlOptions options_;
   double cycle_s_ = 0.004;
@@ -107,7 +129,15 @@ class TensionControl {
   int unusable_cycles_ = 0;                  // cycles the readings could not be used
   std::array<double, kMaxAxes> filtered_{};  // N, the low-passed readings
   bool filtered_valid_ = false;
-  std::array<bool, kMaxAxes> acting_{};  // outside the band, not yet back inside the deadband
+  std::array<double, kMaxAxes> error_{};    // N, t - f of this cycle (0 for a slack cable)
+  std::array<double, kMaxAxes> weight_{};   // the projection's weights of this cycle
+  std::array<bool, kMaxAxes> slack_{};      // below slack_below this cycle
+  std::array<bool, kMaxAxes> edge_{};       // outside the band, not yet back inside [tlo, thi]
+  std::array<double, kMaxAxes> force_{};    // N, phi: the internal-force correction
+  std::array<double, kMaxAxes> take_up_{};  // counts, slack cables shortened on their own
+  std::array<double, kMaxAxes> cpn_{};      // counts per N of each cable this cycle
+  std::uint64_t cycles_ = 0;                // steps taken
+  std::uint64_t compliances_cycle_ = 0;     // the step cpn_ belongs to (0: none)
 };
 
 }  // namespace cdpr::controller
