@@ -3,9 +3,12 @@
 // The residual is L^-1 v with v = w + correction and L L^T = cov, where w, the correction and cov
 // are sums of one term per cable (and the weight's wrench in w). Each cable's terms depend on the
 // pose, its anchor and attachment point and its five scalars (g, c, o, s, e): 17 coordinates. They
-// are differentiated with 17-wide jets, added in the functor's order (so every value is the
-// functor's, bit for bit), and chained through the whitening, itself differentiated with respect
-// to v and the 21 entries of cov's lower triangle (the only ones the factorisation reads).
+// are differentiated with 17-wide jets and their derivatives added into the sums' derivatives over
+// all coordinates, in the functor's order; the whitening then runs on jets over all coordinates
+// (in passes of 32). A jet's derivative components are computed independently of each other by
+// the same operations whatever the jet's width, so values and derivatives are those of the
+// automatic differentiation of the functor over all blocks, bit for bit (up to the sign of zeros).
+#include <algorithm>
 #include <memory>
 #include <vector>
 
@@ -16,16 +19,17 @@ namespace {
 
 constexpr int kLocal = 17;        // pose 6, a 3, b 3, g, c, o, s, e
 constexpr int kWeightLocal = 10;  // pose 6, mass 1, centre of mass 3
-constexpr int kOutputs = 27;      // v 6, cov's lower triangle 21
+constexpr int kPass = 32;         // derivative components per pass of the whitening
+constexpr int kLower = 21;        // cov's lower triangle (all the factorisation reads)
 using JetCable = ceres::Jet<double, kLocal>;
 using JetWeight = ceres::Jet<double, kWeightLocal>;
-using JetOut = ceres::Jet<double, kOutputs>;
+using JetPass = ceres::Jet<double, kPass>;
 using Vec6 = Eigen::Matrix<double, 6, 1>;
 using Mat6 = Eigen::Matrix<double, 6, 6>;
 
-// Index of cov(r, c), r >= c, among the outputs.
+// Index of cov(r, c), r >= c, in the lower triangle.
 int lower_index(int r, int c) {
-  return 6 + c * 6 - c * (c - 1) / 2 + (r - c);
+  return c * 6 - c * (c - 1) / 2 + (r - c);
 }
 
 // Jets of `n` values of `x`, seeded at `first`, `first` + 1, ...
@@ -34,129 +38,177 @@ void seed(const double* x, int n, int first, J* out) {
   for (int q = 0; q < n; ++q) out[q] = J(x[q], first + q);
 }
 
+// Values and derivatives over all coordinates of w, the correction and cov's lower triangle.
+struct Sums {
+  explicit Sums(int coords)
+      : n(coords),
+        dw(static_cast<std::size_t>(6 * coords), 0.0),
+        dcorr(static_cast<std::size_t>(6 * coords), 0.0),
+        dcov(static_cast<std::size_t>(kLower * coords), 0.0) {}
+  int n;
+  Vec6 w = Vec6::Zero(), corr = Vec6::Zero();
+  Mat6 cov = Mat6::Zero();
+  std::vector<double> dw, dcorr, dcov;  // row-major: output x coordinate
+  template <typename J>
+  static void add(std::vector<double>& d, int stride, int row, const J& x, const int* coord) {
+    for (int k = 0; k < J::DIMENSION; ++k)
+      d[static_cast<std::size_t>(row * stride + coord[k])] += x.v[k];
+  }
+};
+
 class EquilibriumCostFunction final : public ceres::CostFunction {
  public:
   EquilibriumCostFunction(EquilibriumCost* f, const std::vector<int>& block_sizes) : f_(f) {
     set_num_residuals(6);
     *mutable_parameter_block_sizes() = block_sizes;
+    int offset = 0;
+    for (int size : block_sizes) {
+      offsets_.push_back(offset);
+      offset += size;
+    }
+    num_coords_ = offset;
   }
 
   bool Evaluate(double const* const* p, double* residuals, double** jacobians) const override {
     if (jacobians == nullptr) return (*f_)(p, residuals);
-    const int m = static_cast<int>(f_->k.size());
-    // The weight's wrench starts w (derivatives over pose, mass and centre of mass).
-    JetWeight xw[kWeightLocal];
-    seed(p[0], 6, 0, xw);
-    seed(p[f_->mass_block], 1, 6, xw + 6);
-    seed(p[f_->mass_block + 1], 3, 7, xw + 7);
-    Vec3<JetWeight> rw;
-    Mat3<JetWeight> Rw;
-    pose_from_block(xw, rw, Rw);
-    Eigen::Matrix<JetWeight, 6, 1> ww;
-    f_->weight_wrench<JetWeight>(Rw, xw + 6, xw + 7, ww);
-    Vec6 w, correction = Vec6::Zero();
-    Mat6 cov = Mat6::Zero();
-    Eigen::Matrix<double, 6, kWeightLocal> dweight;
+    Sums s(num_coords_);
+    add_weight(p, s);
+    if (!add_cables(p, s)) return false;
+    return whiten(s, residuals, jacobians);
+  }
+
+ private:
+  // The weight's wrench and the external wrench start w.
+  void add_weight(double const* const* p, Sums& s) const {
+    const int mb = f_->mass_block;
+    JetWeight x[kWeightLocal];
+    seed(p[0], 6, 0, x);
+    seed(p[mb], 1, 6, x + 6);
+    seed(p[mb + 1], 3, 7, x + 7);
+    Vec3<JetWeight> r;
+    Mat3<JetWeight> R;
+    pose_from_block(x, r, R);
+    Eigen::Matrix<JetWeight, 6, 1> w;
+    f_->weight_wrench<JetWeight>(R, x + 6, x + 7, w);
+    int coord[kWeightLocal];
+    for (int k = 0; k < 6; ++k) coord[k] = offsets_[0] + k;
+    coord[6] = offsets_[static_cast<std::size_t>(mb)];
+    for (int k = 0; k < 3; ++k) coord[7 + k] = offsets_[static_cast<std::size_t>(mb + 1)] + k;
     for (int q = 0; q < 6; ++q) {
-      w(q) = ww(q).a;
-      dweight.row(q) = ww(q).v.transpose();
+      s.w(q) = w(q).a;
+      Sums::add(s.dw, s.n, q, w(q), coord);
     }
-    // Each cable's terms, added to the running sums as the functor adds them: the same products
-    // in the same order (cov's entry (r, c) is (s a_r) a_c), so the values are the functor's.
-    std::vector<Eigen::Matrix<double, kOutputs, kLocal>> dterms(static_cast<std::size_t>(m));
+  }
+
+  // Each cable's terms added as EquilibriumCost::wrench adds them (the same jet operations).
+  bool add_cables(double const* const* p, Sums& s) const {
+    const int m = static_cast<int>(f_->k.size());
     JetCable x[kLocal];
     seed(p[0], 6, 0, x);
     Vec3<JetCable> r;
     Mat3<JetCable> R;
     pose_from_block(x, r, R);
     const JetCable sf2(f_->sigma_force * f_->sigma_force);
+    int coord[kLocal];
+    for (int k = 0; k < 6; ++k) coord[k] = offsets_[0] + k;
     for (int i = 0; i < m; ++i) {
       const EquilibriumCost::CableBlocks<double> blocks = f_->cable_blocks(p, i);
       seed(blocks.a, 3, 6, x + 6);
       seed(blocks.b, 3, 9, x + 9);
       const double* scalars[5] = {blocks.g, blocks.c, blocks.o, blocks.s, blocks.e};
       for (int q = 0; q < 5; ++q) x[12 + q] = JetCable(*scalars[q], 12 + q);
+      const int block_of[kLocal - 6] = {1 + i,
+                                        1 + i,
+                                        1 + i,
+                                        1 + m + i,
+                                        1 + m + i,
+                                        1 + m + i,
+                                        1 + 2 * m + i,
+                                        1 + 3 * m + i,
+                                        1 + 4 * m + i,
+                                        1 + 5 * m + i,
+                                        1 + 6 * m + (f_->shared_stiffness ? 0 : i)};
+      const int within[kLocal - 6] = {0, 1, 2, 0, 1, 2, 0, 0, 0, 0, 0};
+      for (int k = 0; k < kLocal - 6; ++k) {
+        coord[6 + k] = offsets_[static_cast<std::size_t>(block_of[k])] + within[k];
+      }
       const EquilibriumCost::CableBlocks<JetCable> jb{x + 6,  x + 9,  x + 12, x + 13,
                                                       x + 14, x + 15, x + 16};
       EquilibriumCost::CableTerms<JetCable> t;
       if (!f_->cable_terms<JetCable>(i, r, R, jb, t)) return false;
-      Eigen::Matrix<double, kOutputs, kLocal>& d = dterms[static_cast<std::size_t>(i)];
       for (int q = 0; q < 6; ++q) {
         const JetCable wq = t.col(q) * t.force;
-        w(q) += wq.a;
-        d.row(q) = wq.v.transpose();
+        s.w(q) += wq.a;
+        Sums::add(s.dw, s.n, q, wq, coord);
         if (t.has_length) {
           const JetCable cq = t.col(q) * t.correction;
-          correction(q) += cq.a;
-          d.row(q) += cq.v.transpose();
+          s.corr(q) += cq.a;
+          Sums::add(s.dcorr, s.n, q, cq, coord);
         }
       }
-      const JetCable s = sf2 * t.weight;
+      const JetCable scale = sf2 * t.weight;
       for (int r2 = 0; r2 < 6; ++r2) {
-        const JetCable sr = s * t.col(r2);
+        const JetCable sr = scale * t.col(r2);
         for (int c = 0; c <= r2; ++c) {
           const JetCable e = sr * t.col(c);
-          cov(r2, c) += e.a;
-          d.row(lower_index(r2, c)) = e.v.transpose();
+          s.cov(r2, c) += e.a;
+          Sums::add(s.dcov, s.n, lower_index(r2, c), e, coord);
         }
       }
     }
-    // The whitening, differentiated with respect to v and cov's lower triangle.
-    Eigen::Matrix<JetOut, 6, 1> v;
-    Eigen::Matrix<JetOut, 6, 6> jcov;
-    for (int q = 0; q < 6; ++q) v(q) = JetOut(w(q) + correction(q), q);
-    for (int c = 0; c < 6; ++c) {
-      for (int r2 = c; r2 < 6; ++r2) {
-        jcov(r2, c) = JetOut(cov(r2, c), lower_index(r2, c));
-        jcov(c, r2) = jcov(r2, c);
-      }
-    }
-    Eigen::Matrix<JetOut, 6, 1> out;
-    if (!EquilibriumCost::whiten<JetOut>(jcov, v, out)) return false;
-    Eigen::Matrix<double, 6, kOutputs> D;
-    for (int q = 0; q < 6; ++q) {
-      residuals[q] = out(q).a;
-      D.row(q) = out(q).v.transpose();
-    }
-    write_jacobians(m, D, dweight, dterms, jacobians);
     return true;
   }
 
- private:
-  // The chain rule into the blocks' Jacobians (row-major, 6 rows; null: a constant block).
-  void write_jacobians(int m, const Eigen::Matrix<double, 6, kOutputs>& D,
-                       const Eigen::Matrix<double, 6, kWeightLocal>& dweight,
-                       const std::vector<Eigen::Matrix<double, kOutputs, kLocal>>& dterms,
-                       double** jac) const {
-    using RowMajor = Eigen::Matrix<double, 6, Eigen::Dynamic, Eigen::RowMajor>;
-    const auto block = [&](int index, int size) {
-      return Eigen::Map<RowMajor>(jac[index], 6, size);
-    };
-    const int e_blocks = f_->shared_stiffness ? 1 : m;
-    const int mb = f_->mass_block;
-    const Eigen::Matrix<double, 6, kWeightLocal> gw = D.leftCols<6>().lazyProduct(dweight);
-    Eigen::Matrix<double, kOutputs, 6> dpose = Eigen::Matrix<double, kOutputs, 6>::Zero();
-    if (jac[mb] != nullptr) block(mb, 1) = gw.col(6);
-    if (jac[mb + 1] != nullptr) block(mb + 1, 3) = gw.rightCols<3>();
-    for (int i = 0; i < e_blocks; ++i) {
-      if (jac[1 + 6 * m + i] != nullptr) block(1 + 6 * m + i, 1).setZero();
-    }
-    for (int i = 0; i < m; ++i) {
-      const Eigen::Matrix<double, kOutputs, kLocal>& d = dterms[static_cast<std::size_t>(i)];
-      dpose += d.leftCols<6>();
-      const Eigen::Matrix<double, 6, kLocal - 6> g = D.lazyProduct(d.rightCols<kLocal - 6>());
-      if (jac[1 + i] != nullptr) block(1 + i, 3) = g.leftCols<3>();
-      if (jac[1 + m + i] != nullptr) block(1 + m + i, 3) = g.middleCols<3>(3);
-      for (int q = 0; q < 4; ++q) {  // g, c, o, s
-        if (jac[1 + (2 + q) * m + i] != nullptr) block(1 + (2 + q) * m + i, 1) = g.col(6 + q);
+  // L^-1 (w + correction) on jets over all coordinates, kPass at a time.
+  bool whiten(const Sums& s, double* residuals, double** jac) const {
+    const std::size_t n = static_cast<std::size_t>(s.n);
+    for (int k0 = 0; k0 < s.n; k0 += kPass) {
+      const int width = std::min(kPass, s.n - k0);
+      Eigen::Matrix<JetPass, 6, 1> v;
+      Eigen::Matrix<JetPass, 6, 6> cov;
+      for (int q = 0; q < 6; ++q) {
+        JetPass wq(s.w(q)), cq(s.corr(q));
+        for (int l = 0; l < width; ++l) {
+          wq.v[l] = s.dw[q * n + static_cast<std::size_t>(k0 + l)];
+          cq.v[l] = s.dcorr[q * n + static_cast<std::size_t>(k0 + l)];
+        }
+        v(q) = wq + cq;
       }
-      const int e = 1 + 6 * m + (f_->shared_stiffness ? 0 : i);
-      if (jac[e] != nullptr) block(e, 1) += g.col(10);
+      for (int c = 0; c < 6; ++c) {
+        for (int r2 = c; r2 < 6; ++r2) {
+          JetPass e(s.cov(r2, c));
+          const auto row = static_cast<std::size_t>(lower_index(r2, c));
+          for (int l = 0; l < width; ++l)
+            e.v[l] = s.dcov[row * n + static_cast<std::size_t>(k0 + l)];
+          cov(r2, c) = e;
+          cov(c, r2) = e;
+        }
+      }
+      Eigen::Matrix<JetPass, 6, 1> out;
+      if (!EquilibriumCost::whiten<JetPass>(cov, v, out)) return false;
+      for (int q = 0; q < 6; ++q) residuals[q] = out(q).a;
+      write_pass(k0, width, out, jac);
     }
-    if (jac[0] != nullptr) block(0, 6) = gw.leftCols<6>() + D.lazyProduct(dpose);
+    return true;
+  }
+
+  // The derivative components k0 .. k0 + width - 1 into the blocks' Jacobians (row-major).
+  void write_pass(int k0, int width, const Eigen::Matrix<JetPass, 6, 1>& out, double** jac) const {
+    const std::vector<int>& sizes = parameter_block_sizes();
+    for (std::size_t b = 0; b < sizes.size(); ++b) {
+      if (jac[b] == nullptr) continue;
+      const int size = sizes[b];
+      for (int j = 0; j < size; ++j) {
+        const int l = offsets_[b] + j - k0;
+        if (l < 0 || l >= width) continue;
+        for (int q = 0; q < 6; ++q) jac[b][q * size + j] = out(q).v[l];
+      }
+    }
   }
 
   std::unique_ptr<EquilibriumCost> f_;
+  std::vector<int> offsets_;  // first coordinate of each block
+  int num_coords_ = 0;
 };
 
 }  // namespace
