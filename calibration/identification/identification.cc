@@ -20,6 +20,7 @@
 #include "cdpr/calibration/kinematics.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/calibration/suspended_statics.hpp"
+#include "identification_costs.hpp"
 #include "identification_internal.hpp"
 
 namespace cdpr {
@@ -43,61 +44,18 @@ namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
+using ident_detail::CableConstants;
+using ident_detail::elongation_at;
+using ident_detail::EquilibriumCost;
+using ident_detail::pose_from_block;
+using ident_detail::true_tension;
+
 // Two unit vectors orthogonal to unit d (a tangent basis of the sphere at d).
 void tangent_basis(const Eigen::Vector3d& d, Eigen::Vector3d& e1, Eigen::Vector3d& e2) {
   const Eigen::Vector3d helper =
       std::abs(d.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
   e1 = d.cross(helper).normalized();
   e2 = d.cross(e1).normalized();
-}
-
-template <typename T>
-void pose_from_block(const T* pose, Vec3<T>& r, Mat3<T>& R) {
-  r = Vec3<T>(pose[0], pose[1], pose[2]);
-  R = rotation_from_rpy<T>(pose[3], pose[4], pose[5]);
-}
-
-// Everything a cable's residuals need that is not estimated.
-struct CableConstants {
-  Eigen::Matrix3d pulley_frame = Eigen::Matrix3d::Identity();
-  double pulley_radius = 0.0;
-  CableModel cable;
-  double sensor_gain = 1.0;    // nominal force sensor gain (raw = gain F + offset)
-  double sensor_offset = 0.0;  // nominal offset
-  bool estimated_stiffness = false;
-};
-
-// True tension from a reading made with the nominal sensor calibration, with the sensor
-// corrections g (relative gain) and c (offset, raw units) being estimated.
-template <typename T>
-T true_tension(const CableConstants& k, double reading, const T& g, const T& c) {
-  const double raw = k.sensor_gain * reading + k.sensor_offset;
-  return (T(raw) - T(k.sensor_offset) - c) / (T(k.sensor_gain) * (T(1) + g));
-}
-
-// Elongation dL of a cable with kinematic length `length` under the tension from `tension_reading`
-// (estimated sensor corrections g, c and stiffness scale e), and in *compliance d(dL)/dF.
-template <typename T>
-T elongation_at(const CableConstants& k, const T& length, double tension_reading, const T& e,
-                const T& g, const T& c, T* force, T* compliance) {
-  const T F = true_tension(k, tension_reading, g, c);
-  if (force) *force = F;
-  const T loaded = ident_detail::loaded_length<T>(k.cable, length);
-  if (k.estimated_stiffness) {
-    const T ea = T(k.cable.ea) * (T(1) + e);
-    if (compliance) *compliance = loaded * ea / ((ea + F) * (ea + F));
-    return F * loaded / (ea + F);
-  }
-  if (compliance) {
-    *compliance = T(0);
-    if (k.cable.elongation != ElongationKind::kRigid) {
-      const double h = 1e-3 * std::max(1.0, std::abs(tension_reading));
-      *compliance = (cable_elongation<T>(k.cable, loaded, F + T(h)) -
-                     cable_elongation<T>(k.cable, loaded, F - T(h))) /
-                    T(2.0 * h);
-    }
-  }
-  return cable_elongation<T>(k.cable, loaded, F);
 }
 
 // Unstretched length U = L_k - dL at pose; false when the geometry is degenerate. With
@@ -176,159 +134,6 @@ struct LaserCost {
     if (!(abs(den) > T(1e-9))) return false;
     const T t = (c[0] - n.dot(p)) / den;
     residual[0] = (t - T(reading)) / T(sigma);
-    return true;
-  }
-};
-
-// Static equilibrium (6 residuals). Blocks: pose, a_1..a_m, b_1..b_m, g_1..g_m, c_1..c_m,
-// o_1..o_m, s_1..s_m, then e (one block when the stiffness is shared, else e_1..e_m), then the
-// platform mass (1) and centre of mass (3, platform frame): the weight's force and moment.
-//
-// The residual w = A^T F + w_gravity carries the force noise linearly: cov(w) = sigma_F^2 A^T A.
-// The same tension readings also enter the cable length residuals of the pose, through the
-// elongation: r_l,i = U_i(F_i) - reading model, with noise -c_i eps_i + encoder noise
-// (c_i = d(dL)/dF). So w is whitened CONDITIONALLY on the length residuals of its pose (the lengths
-// are whitened by themselves, LengthCost; together this is the Cholesky factor of the joint
-// covariance with the lengths first):
-//   w|l   = w + sum_i c_i sigma_F^2 a_i r_l,i / S_i,       S_i = sigma_L^2 + c_i^2 sigma_F^2
-//   cov   = sigma_F^2 sum_i a_i a_i^T (sigma_L^2 / S_i)     (a_i = [u_i; R b_i x u_i])
-// (cables without a length row: no correction, weight 1). Everything is evaluated at the CURRENT
-// pose and geometry (not frozen at the start): the objective is then one fixed function of the
-// parameters, the profile likelihood of the errors-in-variables problem with the true tensions as
-// nuisance parameters. Frozen at the start, the estimate depended on the starting model and the
-// anchors were biased (about 1.7 standard errors of the mean at 1 N on MINI); without the
-// conditioning chi^2/dof was about 1.12 at 1 N on MINI.
-struct EquilibriumCost {
-  std::span<const CableConstants> k;  // Built::constants (shared, not a copy per pose)
-  Eigen::VectorXd tensions;
-  double sigma_force = 1.0;
-  double sigma_length = 1.0;
-  std::vector<double> readings;          // cable length readings; NaN: the cable has no length row
-  std::vector<double> extra_compliance;  // PoseMeasurement::extra_compliance (empty: none)
-  bool shared_stiffness = false;
-  int mass_block = 0;  // index of the mass block in the parameter blocks (the centre of mass next)
-  double gravity = 9.81;
-  Eigen::Matrix<double, 6, 1> external = Eigen::Matrix<double, 6, 1>::Zero();  // world, N, N m
-  // Suspended robots with m < 6 cables (issue 18): cov is singular (rank m), so w|l is split into
-  // the m tension errors eps = (A^T A)^-1 A^T (w|l) (A = the cable wrench columns a_i), each
-  // whitened by its own sigma_F sqrt(sigma_L^2 / S_i), and the 6 - m components of w that no
-  // tension can balance, N^T (w - A eps), which carry no sensor noise: the equilibrium condition
-  // on the pose, divided by sigma_null (a small model sigma). N is the orthonormal basis of the
-  // complement of the current cable wrenches nearest (Cholesky) to 6 - m fixed unit wrench axes
-  // E (`null_basis`, chosen once at the initial pose: the axes the cables balance least), so that
-  // the rows are one smooth function of the parameters. Empty: the Cholesky whitening below
-  // (m >= 6).
-  Eigen::MatrixXd null_basis;
-  double sigma_null = 1e-3;  // N
-
-  // Net wrench, the whitening covariance of w|l and the correction term at the parameters.
-  // `columns` and `weights` (optional) receive the a_i and sigma_L^2 / S_i.
-  template <typename T>
-  bool wrench(T const* const* p, Eigen::Matrix<T, 6, 1>& w, Eigen::Matrix<T, 6, 6>& cov,
-              Eigen::Matrix<T, 6, 1>* correction = nullptr,
-              Eigen::Matrix<T, 6, Eigen::Dynamic>* columns = nullptr,
-              Eigen::Matrix<T, Eigen::Dynamic, 1>* weights = nullptr) const {
-    const int m = static_cast<int>(k.size());
-    const T* pose = p[0];
-    Vec3<T> r;
-    Mat3<T> R;
-    pose_from_block(pose, r, R);
-    const T* mass = p[mass_block];
-    const T* com = p[mass_block + 1];
-    const Vec3<T> weight(T(0), T(0), -mass[0] * T(gravity));
-    w.template head<3>() = weight;
-    w.template tail<3>() = (R * Vec3<T>(com[0], com[1], com[2])).cross(weight);
-    w += external.cast<T>();
-    cov.setZero();
-    if (correction) correction->setZero();
-    if (columns) columns->resize(6, m);
-    if (weights) weights->resize(m);
-    const double sf2 = sigma_force * sigma_force;
-    const double sl2 = sigma_length * sigma_length;
-    for (int i = 0; i < m; ++i) {
-      const auto ui = static_cast<std::size_t>(i);
-      const T* a = p[1 + i];
-      const T* b = p[1 + m + i];
-      const T* g = p[1 + 2 * m + i];
-      const T* c = p[1 + 3 * m + i];
-      const Vec3<T> rb = R * Vec3<T>(b[0], b[1], b[2]);
-      const CableGeometry<T> geom = cable_geometry<T>(Vec3<T>(a[0], a[1], a[2]), k[ui].pulley_frame,
-                                                      T(k[ui].pulley_radius), r + rb);
-      if (!geom.valid) return false;
-      const T F = true_tension(k[ui], tensions(i), g[0], c[0]);
-      Eigen::Matrix<T, 6, 1> col;
-      col.template head<3>() = geom.unit;
-      col.template tail<3>() = rb.cross(geom.unit);
-      w += col * F;
-      T weight_i = T(1);
-      if (!readings.empty() && !std::isnan(readings[ui])) {
-        const T* o = p[1 + 4 * m + i];
-        const T* s = p[1 + 5 * m + i];
-        const T* e = p[1 + 6 * m + (shared_stiffness ? 0 : i)];
-        T compliance;
-        const T U = geom.length - elongation_at<T>(k[ui], geom.length, tensions(i), e[0], g[0],
-                                                   c[0], nullptr, &compliance);
-        const T rl = U - ((T(1) + s[0]) * T(readings[ui]) + o[0]);
-        if (!extra_compliance.empty()) compliance += T(extra_compliance[ui]);
-        const T S = T(sl2) + compliance * compliance * T(sf2);
-        weight_i = T(sl2) / S;
-        if (correction) *correction += col * (compliance * T(sf2) * rl / S);
-      }
-      cov += (T(sf2) * weight_i) * (col * col.transpose());
-      if (columns) columns->col(i) = col;
-      if (weights) (*weights)(i) = weight_i;
-    }
-    return true;
-  }
-
-  // The suspended (m < 6) whitening of the file comment above.
-  template <typename T>
-  bool suspended_residual(T const* const* p, T* residual) const {
-    using std::sqrt;
-    const int m = static_cast<int>(k.size());
-    Eigen::Matrix<T, 6, 1> w;
-    Eigen::Matrix<T, 6, 6> cov;
-    Eigen::Matrix<T, 6, 1> correction;
-    Eigen::Matrix<T, 6, Eigen::Dynamic> A;
-    Eigen::Matrix<T, Eigen::Dynamic, 1> weight;
-    if (!wrench(p, w, cov, &correction, &A, &weight)) return false;
-    const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> AtA = A.transpose() * A;
-    const Eigen::LLT<Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>> llt(AtA);
-    if (llt.info() != Eigen::Success) return false;
-    const Eigen::Matrix<T, 6, 1> wl = w + correction;
-    const Eigen::Matrix<T, Eigen::Dynamic, 1> eps =
-        llt.solve(Eigen::Matrix<T, Eigen::Dynamic, 1>(A.transpose() * wl));
-    for (int i = 0; i < m; ++i) residual[i] = eps(i) / (T(sigma_force) * sqrt(weight(i)));
-    const Eigen::Matrix<T, 6, 1> rest = wl - A * eps;
-    // Coordinates of `rest` in the orthonormal basis N = P E (E^T P E)^-1/2 (Cholesky) of the
-    // current complement, P = I - A (A^T A)^-1 A^T: N^T rest = L^-1 E^T rest, L L^T = E^T P E.
-    const int nn = 6 - m;
-    const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> E = null_basis.cast<T>();
-    const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> AtE = A.transpose() * E;
-    const Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic> S =
-        E.transpose() * E - AtE.transpose() * llt.solve(AtE);
-    const Eigen::LLT<Eigen::Matrix<T, Eigen::Dynamic, Eigen::Dynamic>> lls(S);
-    if (lls.info() != Eigen::Success) return false;
-    const Eigen::Matrix<T, Eigen::Dynamic, 1> c =
-        lls.matrixL().solve(Eigen::Matrix<T, Eigen::Dynamic, 1>(E.transpose() * rest));
-    for (int q = 0; q < nn; ++q) residual[m + q] = c(q) / T(sigma_null);
-    return true;
-  }
-
-  template <typename T>
-  bool operator()(T const* const* p, T* residual) const {
-    if (null_basis.cols() > 0) return suspended_residual(p, residual);
-    Eigen::Matrix<T, 6, 1> w;
-    Eigen::Matrix<T, 6, 6> cov;
-    Eigen::Matrix<T, 6, 1> correction;
-    if (!wrench(p, w, cov, &correction)) return false;
-    // A tiny ridge keeps the factorisation defined at a (refused elsewhere) singular geometry.
-    const T ridge = T(1e-12) * cov.trace();
-    for (int q = 0; q < 6; ++q) cov(q, q) += ridge;
-    const Eigen::LLT<Eigen::Matrix<T, 6, 6>> llt(cov);
-    if (llt.info() != Eigen::Success) return false;
-    const Eigen::Matrix<T, 6, 1> out = llt.matrixL().solve(Eigen::Matrix<T, 6, 1>(w + correction));
-    for (int q = 0; q < 6; ++q) residual[q] = out(q);
     return true;
   }
 };
@@ -895,44 +700,38 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
         }
       }
       B->equilibrium[uj] = f;
-      auto* cost = new ceres::DynamicAutoDiffCostFunction<EquilibriumCost, 40>(f);
       std::vector<double*> blocks;
-      cost->AddParameterBlock(6);
-      blocks.push_back(pose);
+      std::vector<int> sizes;
+      const auto add_block = [&](double* ptr, int size) {
+        blocks.push_back(ptr);
+        sizes.push_back(size);
+      };
+      add_block(pose, 6);
       for (int i = 0; i < m; ++i) {
-        cost->AddParameterBlock(3);
-        blocks.push_back(B->a[static_cast<std::size_t>(i)].data());
+        add_block(B->a[static_cast<std::size_t>(i)].data(), 3);
       }
       for (int i = 0; i < m; ++i) {
-        cost->AddParameterBlock(3);
-        blocks.push_back(B->b[static_cast<std::size_t>(i)].data());
+        add_block(B->b[static_cast<std::size_t>(i)].data(), 3);
       }
       for (int i = 0; i < m; ++i) {
-        cost->AddParameterBlock(1);
-        blocks.push_back(&B->g[static_cast<std::size_t>(i)]);
+        add_block(&B->g[static_cast<std::size_t>(i)], 1);
       }
       for (int i = 0; i < m; ++i) {
-        cost->AddParameterBlock(1);
-        blocks.push_back(&B->c[static_cast<std::size_t>(i)]);
+        add_block(&B->c[static_cast<std::size_t>(i)], 1);
       }
       for (int i = 0; i < m; ++i) {
-        cost->AddParameterBlock(1);
-        blocks.push_back(&B->o[static_cast<std::size_t>(i)]);
+        add_block(&B->o[static_cast<std::size_t>(i)], 1);
       }
       for (int i = 0; i < m; ++i) {
-        cost->AddParameterBlock(1);
-        blocks.push_back(&B->s[static_cast<std::size_t>(i)]);
+        add_block(&B->s[static_cast<std::size_t>(i)], 1);
       }
       for (int i = 0; i < (f->shared_stiffness ? 1 : m); ++i) {
-        cost->AddParameterBlock(1);
-        blocks.push_back(&B->e[static_cast<std::size_t>(i)]);
+        add_block(&B->e[static_cast<std::size_t>(i)], 1);
       }
       f->mass_block = static_cast<int>(blocks.size());
-      cost->AddParameterBlock(1);
-      blocks.push_back(&B->mass);
-      cost->AddParameterBlock(3);
-      blocks.push_back(B->com.data());
-      cost->SetNumResiduals(6);
+      add_block(&B->mass, 1);
+      add_block(B->com.data(), 3);
+      auto* cost = ident_detail::equilibrium_cost_function(f, sizes);
       B->equilibrium_blocks[uj] = blocks;
       auto id = B->problem.AddResidualBlock(cost, make_loss(), blocks);
       B->blocks_per_pose[uj].push_back(id);
