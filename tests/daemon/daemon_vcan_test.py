@@ -17,7 +17,6 @@ loopback; cdprd starts from config/mini.yaml. Checked, in this order, all throug
   6. rollback to version 1 makes it active again (bumpless) and is in the history.
 """
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -29,16 +28,6 @@ from vcan_harness import Cell  # noqa: E402
 cell = Cell(port_base=16020)
 ctl, ctl_json, check, wait_for = cell.ctl, cell.ctl_json, cell.check, cell.wait_for
 holding, WORK = cell.holding, cell.work
-
-
-def true_pose():
-    """The sim's true platform pose: the line it prints on SIGUSR1 (waited for, not timed)."""
-    def poses():
-        return [l for l in open(cell.sim_log.name) if "true platform pose" in l]
-    before = len(poses())
-    cell.sim.send_signal(signal.SIGUSR1)
-    wait_for(lambda: len(poses()) > before, 60, "the sim's true platform pose")
-    return [float(x) for x in poses()[-1].split("pose")[1].split()]
 
 
 def scenario():
@@ -88,7 +77,7 @@ def scenario():
     check(rc == 0, f"move accepted ({err.strip()})")
     wait_for(lambda: holding(v2) and abs(ctl_json("status")["rt"]["commanded_pose"][0] - target[0]) < 1e-9,
              60, "holding at the move's target")
-    p = true_pose()
+    p = cell.true_pose()
     err_mm = 1e3 * sum((a - b) ** 2 for a, b in zip(p[:3], target)) ** 0.5
     check(err_mm <= 0.5, f"test move: the true platform is {err_mm:.3f} mm from the target (<= 0.5 mm)")
 

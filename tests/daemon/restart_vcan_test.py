@@ -36,16 +36,6 @@ ctl, ctl_json, check, wait_for = cell.ctl, cell.ctl_json, cell.check, cell.wait_
 TILTED = ["-0.2126", "0.1512", "0.1766", "0.2618", "0", "0"]
 
 
-def true_pose():
-    """The sim's true platform pose: the line it prints on SIGUSR1 (waited for, not timed)."""
-    def poses():
-        return [l for l in open(cell.sim_log.name) if "true platform pose" in l]
-    before = len(poses())
-    cell.sim.send_signal(signal.SIGUSR1)
-    wait_for(lambda: len(poses()) > before, 60, "the sim's true platform pose")
-    return [float(x) for x in poses()[-1].split("pose")[1].split()]
-
-
 def unchanged(before, after, what):
     dp = math.dist(before[:3], after[:3]) * 1e3
     da = max(abs(a - b) for a, b in zip(before[3:], after[3:])) * 180 / math.pi
@@ -73,12 +63,12 @@ def holds_or_refuses(what):
 
 
 def restart_keeps_the_platform(what):
-    before = true_pose()
+    before = cell.true_pose()
     cell.start_daemon()
     wait_for(lambda: ctl_json("status")["state"] == "holding", 60, f"{what}: holding again")
     wait_for(lambda: cell.holding() or not ctl_json("status")["pose"]["trusted"], 60,
              f"{what}: settled")
-    unchanged(before, true_pose(), f"{what}: restart")
+    unchanged(before, cell.true_pose(), f"{what}: restart")
     return holds_or_refuses(what)
 
 

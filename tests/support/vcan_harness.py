@@ -78,6 +78,15 @@ class Cell:
         """poll, a failed check when `pred` does not hold within `timeout` s."""
         return self.poll(pred, timeout) or self.check(False, f"{what} within {timeout} s")
 
+    def true_pose(self):
+        """The sim's true platform pose: the line it prints on SIGUSR1 (waited for, not timed)."""
+        def poses():
+            return [l for l in open(self.sim_log.name) if "true platform pose" in l]
+        before = len(poses())
+        self.sim.send_signal(signal.SIGUSR1)
+        self.wait_for(lambda: len(poses()) > before, 60, "the sim's true platform pose")
+        return [float(x) for x in poses()[-1].split("pose")[1].split()]
+
     def holding(self, version=None):
         """cdprd holds, settled (with geometry `version` when given)."""
         s = self.ctl_json("status")
