@@ -38,7 +38,9 @@ void RtController::take_enable_requests() noexcept {
 // commanded pose's target) within the tolerance of them. A violation names the winch; its target is
 // not sent.
 void RtController::check_limits(canopen::Timestamp now) noexcept {
-  if (!out_.send_targets) return;
+  // Holding counts, the pose is not known (the drives hold where they are and no motion is
+  // taken): there are no lengths or position to check, only counts held still.
+  if (!out_.send_targets || mode_ == RtMode::kHoldingCounts) return;
   const Eigen::Vector3d& p = pose_.position;
   for (int j = 0; options_.workspace_box && j < 3; ++j) {
     const auto a = static_cast<std::size_t>(j);

@@ -515,6 +515,31 @@ TEST_F(RtRig, AnActualCableLengthBeyondItsLimitLatchesNamingTheWinch) {
   EXPECT_NEAR(s.fault.value, o.min_cable_length[6] - 0.0015, 2e-4);
 }
 
+TEST_F(RtRig, HoldingCountsWithoutATrustedPoseChecksNoLengthOrBox) {
+  // A start whose pose cannot be trusted holds the drives' counts: no pose was solved, so there
+  // is no length or position to judge (once they were judged from an unsolved pose: a cable at
+  // -1.1 mm latched cable_limit at every restart of the fault matrix's e-stop row).
+  RtControllerOptions o;
+  o.cable_length_tolerance = 0.001;
+  for (int i = 0; i < m_; ++i) o.min_cable_length[static_cast<std::size_t>(i)] = 0.05;
+  o.workspace_box = true;
+  o.box_min = {-0.4, -0.4, -0.3};
+  o.box_max = {0.4, 0.4, 0.5};
+  make(o);
+  MotionCommand& hold = make_command(MotionCommand::Type::kReference);
+  hold.hold_actual = hold.from_actual = hold.counts_only = true;
+  hold.pose.position = Eigen::Vector3d(5.0, 5.0, 5.0);  // not known: far outside everything
+  post(hold);
+  cycle(50);
+  const RtSnapshot s = rt_->snapshot();
+  EXPECT_EQ(s.mode, RtMode::kHoldingCounts);
+  EXPECT_EQ(s.fault.kind, FaultKind::kNone);
+  for (int i = 0; i < m_; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    EXPECT_NEAR(io_.last().target_counts[k], io_.position[k], 1.0) << i;
+  }
+}
+
 TEST_F(RtRig, ACommandedPositionOutsideTheWorkspaceBoxLatches) {
   RtControllerOptions o;
   o.workspace_box = true;
