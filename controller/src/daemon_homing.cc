@@ -154,7 +154,7 @@ Status Daemon::restore_homing() {
   CDPR_RETURN_IF_ERROR(master_->wait_for(
       [&] {
         for (const canopen::Drive& d : master_->drives()) {
-          if (master_->last_tpdo(d.node()) <= asked) return false;
+          if (master_->last_state_tpdo(d.node()) <= asked) return false;
         }
         return true;
       },

@@ -141,7 +141,16 @@ void Master::dispatch(const can::Frame& f, Timestamp now) {
     if (n.tpdos[static_cast<std::size_t>(ref.pdo)].decode(f, n.image)) {
       ++stats_.tpdos_received;
       last_tpdo_[n.config.id] = now;
-      if (n.drive >= 0) drives_[static_cast<std::size_t>(n.drive)].on_pdo();
+      if (n.drive >= 0) {
+        Drive& d = drives_[static_cast<std::size_t>(n.drive)];
+        for (const PdoLayout::Field& fld : n.tpdos[static_cast<std::size_t>(ref.pdo)].fields()) {
+          if (d.carries_state(fld.slot)) {
+            d.on_pdo();
+            last_state_tpdo_[n.config.id] = now;
+            break;
+          }
+        }
+      }
       if (n.force >= 0) forces_[static_cast<std::size_t>(n.force)].on_pdo();
     } else {
       ++stats_.short_pdos;

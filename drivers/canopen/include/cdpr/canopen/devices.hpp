@@ -55,6 +55,9 @@ class Drive {
   void commit(Timestamp now);
   void on_pdo() { received_ = true; }
   bool received() const { return received_; }
+  // Whether a TPDO writing `slot` carries the drive's state (statusword or position actual): only
+  // such a TPDO makes the drive known (one carrying only its digital inputs does not).
+  bool carries_state(std::uint16_t slot) const { return slot == sw_slot_ || slot == actual_slot_; }
 
   Mode mode() const { return mode_; }
   // After the master switched the drive (0x6060/0x6061); kNone holds the position (the target

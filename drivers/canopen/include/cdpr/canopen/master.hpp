@@ -133,6 +133,10 @@ class Master {
   ProcessImage* image(NodeId id);
   // When a TPDO of the node was last decoded (0: none since the master was created).
   Timestamp last_tpdo(NodeId id) const { return id <= kMaxNodeId ? last_tpdo_[id] : Timestamp{0}; }
+  // The last TPDO of a drive that carried its statusword or position actual.
+  Timestamp last_state_tpdo(NodeId id) const {
+    return id <= kMaxNodeId ? last_state_tpdo_[id] : Timestamp{0};
+  }
   Pump& pump() { return pump_; }
   Events& events() { return events_; }
   const NodeMonitor& nodes() const { return monitor_; }
@@ -195,6 +199,7 @@ class Master {
   };
   std::array<TpdoRef, 0x800> tpdo_table_{};
   std::array<Timestamp, kMaxNodeId + 1> last_tpdo_{};
+  std::array<Timestamp, kMaxNodeId + 1> last_state_tpdo_{};
   std::vector<Drive> drives_;
   std::vector<ForceSensor> forces_;
   NodeMonitor monitor_;
