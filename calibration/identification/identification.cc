@@ -610,6 +610,7 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
     const PoseMeasurement& pm = set.poses[uj];
     double* pose = B->poses[uj].data();
     const bool have_tensions = pm.tensions.size() == m;
+    const SensorNoise pose_noise = noise_at(noise, pm);
     inverse_kinematics(robot,
                        Pose::from_vector(Eigen::Map<const Eigen::Matrix<double, 6, 1>>(pose)), kin);
     if (opt.use_lengths) {
@@ -632,8 +633,8 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
           missing_tension_warned = true;
         }
         // Force noise propagated through the elongation (at the current geometry, LengthCost).
-        f->sigma_length = noise.sigma_length;
-        f->sigma_force = std::isnan(f->tension) ? 0.0 : noise.sigma_force;
+        f->sigma_length = pose_noise.sigma_length;
+        f->sigma_force = std::isnan(f->tension) ? 0.0 : pose_noise.sigma_force;
         f->extra_compliance = pm.extra_compliance.size() == m ? pm.extra_compliance(i) : 0.0;
         double* e_ptr = opt.estimate_stiffness == StiffnessEstimate::kShared ? &B->e[0] : &B->e[ui];
         auto id = B->problem.AddResidualBlock(
@@ -664,14 +665,15 @@ Result<std::unique_ptr<Built>> build(const CalibratedModel& model, const Measure
         B->rows_per_pose[uj].push_back({Channel::kLaser, l});
       }
     }
-    if (opt.use_equilibrium && have_tensions && pm.tensions.allFinite()) {
+    // A supported platform (it rested on something): the cables did not carry its whole weight.
+    if (opt.use_equilibrium && have_tensions && pm.tensions.allFinite() && !pm.supported) {
       auto* f = new EquilibriumCost;
       f->k = B->constants;
       f->tensions = pm.tensions;
       f->gravity = robot.gravity;
       f->external = pm.external_wrench;
-      f->sigma_force = noise.sigma_force;
-      f->sigma_length = noise.sigma_length;
+      f->sigma_force = pose_noise.sigma_force;
+      f->sigma_length = pose_noise.sigma_length;
       f->shared_stiffness = opt.estimate_stiffness == StiffnessEstimate::kShared;
       if (robot.suspended && m < 6) {
         const Eigen::JacobiSVD<Eigen::MatrixXd> svd(Eigen::MatrixXd(kin.structure_matrix),
@@ -1023,8 +1025,7 @@ CalibratedModel extract(const Built& B, const CalibratedModel& initial) {
 std::vector<Pose> initial_poses(const MeasurementSet& set) {
   std::vector<Pose> p;
   p.reserve(set.poses.size());
-  for (const PoseMeasurement& pm : set.poses)
-    p.push_back(pm.reference ? *pm.reference : pm.commanded);
+  for (const PoseMeasurement& pm : set.poses) p.push_back(start_of(pm));
   return p;
 }
 
@@ -1327,9 +1328,10 @@ Result<IdentificationReport> identify(const CalibratedModel& initial, const Meas
                               &compliance);
         if (pm.extra_compliance.size() == m) compliance += pm.extra_compliance(i);
       }
+      const SensorNoise pose_noise = noise_at(noise, pm);
       rep.log_det_covariance +=
-          std::log(noise.sigma_length * noise.sigma_length +
-                   compliance * compliance * noise.sigma_force * noise.sigma_force);
+          std::log(pose_noise.sigma_length * pose_noise.sigma_length +
+                   compliance * compliance * pose_noise.sigma_force * pose_noise.sigma_force);
       pr.length_m(i) = U - ((1.0 + B.s[ui]) * pm.cable_lengths(i) + B.o[ui]);
       sl += pr.length_m(i) * pr.length_m(i);
       ++nlen;
