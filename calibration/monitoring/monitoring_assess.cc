@@ -145,9 +145,10 @@ void propose(const Monitor& mon, const EffectEntry& e, const EffectEstimate& bes
                   o.full_sequence_poses, p.parameters[0].c_str(), target * scale, unit);
   } else {
     std::snprintf(buf, sizeof buf,
-                  "stop after %d poses of %d samples each: the predicted %s of the re-identified "
-                  "change is then %.3g %s (target %.3g %s)",
-                  static_cast<int>(p.poses.size()), o.samples_per_pose,
+                  "stop after %d pose%s of %d samples each: the predicted %s of the "
+                  "re-identified change is then %.3g %s (target %.3g %s)",
+                  static_cast<int>(p.poses.size()), p.poses.size() == 1 ? "" : "s",
+                  o.samples_per_pose,
                   e.moves_platform ? "position error over the box" : "standard deviation",
                   reached * scale, unit, target * scale, unit);
   }

@@ -103,6 +103,24 @@ Monitor make(const Robot& robot) {
   return std::move(*m);
 }
 
+// Three passes over the poses with `change` in the true robot: the assessment, after at least
+// one alarm.
+MonitorAssessment assess_change(const Change& change) {
+  Robot robot(change);
+  Monitor monitor = make(robot);
+  const MonitorAssessment a = run(robot, monitor, 3);
+  EXPECT_GT(monitor.alarms(), 0);
+  return a;
+}
+
+// Whether the assessment names `effect` on `cable` first (the description when not).
+::testing::AssertionResult named(const MonitorAssessment& a, MonitorEffect effect, int cable) {
+  if (a.changed && a.effects.front().effect == effect && a.effects.front().cable == cable) {
+    return ::testing::AssertionSuccess();
+  }
+  return ::testing::AssertionFailure() << describe(a);
+}
+
 TEST(Monitor, CleanReadingsRaiseNoAlarmAndNameNoChange) {
   Robot robot(Change{});
   Monitor monitor = make(robot);
@@ -124,14 +142,9 @@ TEST(Monitor, AMovedPulleyIsNamedWithItsDisplacement) {
   Change c;
   c.anchor = 2;
   c.anchor_move = 0.002 * across + 0.0005 * u;
-  Robot robot(c);
-  Monitor monitor = make(robot);
-  const MonitorAssessment a = run(robot, monitor, 3);
-  EXPECT_GT(monitor.alarms(), 0);
-  ASSERT_TRUE(a.changed) << describe(a);
+  const MonitorAssessment a = assess_change(c);
+  ASSERT_TRUE(named(a, MonitorEffect::kFrameAnchor, 2));
   const EffectEstimate& e = a.effects.front();
-  EXPECT_EQ(e.effect, MonitorEffect::kFrameAnchor) << describe(a);
-  EXPECT_EQ(e.cable, 2);
   EXPECT_LT((e.value - c.anchor_move).norm(), 0.2 * c.anchor_move.norm()) << e.value.transpose();
   EXPECT_GT(a.position_rms_now_m, a.position_rms_acceptance_m + 1e-4);
   EXPECT_TRUE(a.proposal.needed);
@@ -145,14 +158,9 @@ TEST(Monitor, AForceSensorDriftIsNamedAndMovesNoPosition) {
   Change c;
   c.force = 4;
   c.force_offset = 3.0;
-  Robot robot(c);
-  Monitor monitor = make(robot);
-  const MonitorAssessment a = run(robot, monitor, 3);
-  ASSERT_TRUE(a.changed) << describe(a);
-  const EffectEstimate& e = a.effects.front();
-  EXPECT_EQ(e.effect, MonitorEffect::kForceOffset) << describe(a);
-  EXPECT_EQ(e.cable, 4);
-  EXPECT_NEAR(e.value(0), 3.0, 0.3);
+  const MonitorAssessment a = assess_change(c);
+  ASSERT_TRUE(named(a, MonitorEffect::kForceOffset, 4));
+  EXPECT_NEAR(a.effects.front().value(0), 3.0, 0.3);
   EXPECT_EQ(a.position_rms_now_m, a.position_rms_acceptance_m);
 }
 
@@ -160,14 +168,9 @@ TEST(Monitor, AnEncoderSlipIsNamedWithItsLength) {
   Change c;
   c.slip = 6;
   c.slip_m = 5e-4;
-  Robot robot(c);
-  Monitor monitor = make(robot);
-  const MonitorAssessment a = run(robot, monitor, 3);
-  ASSERT_TRUE(a.changed) << describe(a);
-  const EffectEstimate& e = a.effects.front();
-  EXPECT_EQ(e.effect, MonitorEffect::kEncoderSlip) << describe(a);
-  EXPECT_EQ(e.cable, 6);
-  EXPECT_NEAR(e.value(0), 5e-4, 1e-4);
+  const MonitorAssessment a = assess_change(c);
+  ASSERT_TRUE(named(a, MonitorEffect::kEncoderSlip, 6));
+  EXPECT_NEAR(a.effects.front().value(0), 5e-4, 1e-4);
 }
 
 TEST(Monitor, AddAllocatesNothing) {
