@@ -21,7 +21,9 @@ struct Change {
   int force = -1;
   double force_offset = 0.0;  // N
   int slip = -1;
-  double slip_m = 0.0;  // m: the drum paid out this much more than the encoder says
+  double slip_m = 0.0;   // m: the drum paid out this much more than the encoder says
+  double thermal = 0.0;  // relative growth of every unstretched cable (with its routing)
+  double creep = 0.0;    // 1/N: extra compliance of every cable
 };
 
 class Robot {
@@ -29,6 +31,7 @@ class Robot {
   explicit Robot(const Change& change, std::uint64_t seed = 1)
       : model_(testing::mini_robot()), truth_(model_), change_(change), rng_(seed) {
     if (change.anchor >= 0) truth_.frame_anchors.col(change.anchor) += change.anchor_move;
+    for (CableModel& c : truth_.cables) c.ea = 1.0 / (1.0 / c.ea + change.creep);
   }
   const RobotModel& model() const { return model_; }
 
@@ -41,6 +44,10 @@ class Robot {
     EXPECT_TRUE(l.ok());
     Eigen::VectorXd true_l = *l;
     if (change_.slip >= 0) true_l(change_.slip) += change_.slip_m;
+    for (int i = 0; i < true_l.size(); ++i) {
+      true_l(i) +=
+          change_.thermal * (model_.cables[static_cast<std::size_t>(i)].routing_length + (*l)(i));
+    }
     Eigen::VectorXd tensions;
     Result<Pose> at = settle_platform(truth_, true_l, pose, &tensions);
     EXPECT_TRUE(at.ok());
@@ -171,6 +178,21 @@ TEST(Monitor, AnEncoderSlipIsNamedWithItsLength) {
   const MonitorAssessment a = assess_change(c);
   ASSERT_TRUE(named(a, MonitorEffect::kEncoderSlip, 6));
   EXPECT_NEAR(a.effects.front().value(0), 5e-4, 1e-4);
+}
+
+TEST(Monitor, CableGrowthIsNamedThermalWhenItFollowsTheLengthAndCreepWhenTheTension) {
+  Change thermal;
+  thermal.thermal = -1.2e-4;  // 10 K on a polymer cable
+  const MonitorAssessment a = assess_change(thermal);
+  ASSERT_TRUE(named(a, MonitorEffect::kThermalGrowth, -1));
+  EXPECT_NEAR(a.effects.front().value(0), thermal.thermal, 0.1 * std::abs(thermal.thermal));
+  EXPECT_GT(a.position_rms_now_m, a.position_rms_acceptance_m);
+  Change creep;
+  creep.creep = 5e-6;
+  const MonitorAssessment b = assess_change(creep);
+  ASSERT_TRUE(named(b, MonitorEffect::kCreepGrowth, -1));
+  // Hooke's F L / (EA + F) makes the extra compliance about (1 + F / EA)^-1 of it.
+  EXPECT_NEAR(b.effects.front().value(0), creep.creep, 0.1 * creep.creep);
 }
 
 TEST(Monitor, AddAllocatesNothing) {
