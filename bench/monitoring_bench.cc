@@ -7,7 +7,7 @@
 // In-process, no CAN, no daemon: cdpr-sim's quasi-static physics (sim/physics.hpp) is the true
 // robot, config/mini.yaml both the truth at t = 0 and the calibrated model (an exact calibration:
 // the monitor's model uncertainty is zero), with the scenario noise of mini-calibration.yaml
-// (encoder 2 counts, force 0.4 raw = 0.2 N, laser 0.2 mm). The robot repeats a cycle through the
+// (encoder 2 counts, force 0.2 raw = 0.1 N, laser 0.1 mm). The robot repeats a cycle through the
 // nine poses of a 160 mm cube (its corners and centre): a 10 s move, then a 20 s hold. Every second
 // the commanded pose (sampled on the straight line during moves) goes through the nominal planner
 // and compensated IK to integer counts (sim::nominal_counts), the physics steps there, and the
@@ -42,7 +42,7 @@ constexpr int kMoveSteps = 10;    // s per move
 constexpr int kHoldSteps = 20;    // s per hold
 constexpr double kHalf = 0.08;    // m, half the cube
 constexpr double kStart = 600.0;  // s, when each change starts (10 clean minutes first)
-constexpr double kNoise[] = {2.0, 0.4, 2e-4};  // encoder counts, force raw, laser m
+constexpr double kNoise[] = {2.0, 0.2, 1e-4};  // encoder counts, force raw, laser m
 
 template <typename T>
 T must(cdpr::Result<T> r, const char* what) {

@@ -44,7 +44,13 @@ Monitor::Monitor(const CalibratedModel& model, const MonitorOptions& options, do
   projected_precision_.resize(n_, n_);
   weighted_signature_.resize(n_, p_);
   gram_.resize(p_, p_);
+  contribution_.resize(p_, p_);
   moment_.resize(p_);
+  blocks_.resize(static_cast<std::size_t>(options.history_blocks));
+  for (Block& b : blocks_) {
+    b.gram.resize(p_, p_);
+    b.moment.resize(p_);
+  }
   mean_sigma_.resize(n_);
   const char* axes[] = {"fx", "fy", "fz", "mx", "my", "mz"};
   for (int i = 0; i < m_; ++i) names_.push_back("length " + std::to_string(i + 1));
@@ -68,10 +74,11 @@ Result<Monitor> Monitor::create(const CalibratedModel& model, const MonitorOptio
   if (!(nz.sigma_length > 0.0) || !(nz.sigma_force > 0.0) || !(nz.sigma_laser > 0.0) ||
       !(nz.model_length >= 0.0) || !(nz.model_force >= 0.0) || !(options.window_s > 0.0) ||
       options.samples_per_pose < 1 || options.full_sequence_poses < 1 ||
+      options.block_samples < 1 || options.history_blocks < 1 ||
       !(options.gate_alpha > 0.0 && options.gate_alpha < 1.0)) {
     return Status(ErrorCode::kInvalidArgument,
-                  "monitor: noise sigmas, window, samples per pose, full sequence poses must be "
-                  "positive and the gate in (0, 1)");
+                  "monitor: noise sigmas, window, samples per pose, full sequence poses, block "
+                  "samples and history blocks must be positive and the gate in (0, 1)");
   }
   CDPR_ASSIGN_OR_RETURN(const double h,
                         cusum_threshold(options.false_alarms_per_hour, options.samples_per_hour,
@@ -82,6 +89,12 @@ Result<Monitor> Monitor::create(const CalibratedModel& model, const MonitorOptio
 void Monitor::reset() {
   gram_.setZero();
   moment_.setZero();
+  for (Block& b : blocks_) {
+    b.gram.setZero();
+    b.moment.setZero();
+    b.samples = 0;
+  }
+  block_ = 0;
   mean_sigma_.setZero();
   chi2_ = 0.0;
   weight_ = 0.0;
@@ -225,10 +238,24 @@ bool Monitor::add(const MonitorSample& s) {
                            : 1.0;
   last_time_s_ = s.time_s;
   weighted_signature_.noalias() = projected_precision_ * lin_.signature;
+  contribution_.noalias() = lin_.signature.transpose() * weighted_signature_;
+  const ColumnVector moment = lin_.signature.transpose() * wr;
   gram_ *= decay;
-  gram_.noalias() += lin_.signature.transpose() * weighted_signature_;
+  gram_ += contribution_;
   moment_ *= decay;
-  moment_.noalias() += lin_.signature.transpose() * wr;
+  moment_ += moment;
+  Block* block = &blocks_[static_cast<std::size_t>(block_)];
+  if (block->samples >= options_.block_samples) {
+    block_ = (block_ + 1) % options_.history_blocks;
+    block = &blocks_[static_cast<std::size_t>(block_)];
+    block->gram.setZero();
+    block->moment.setZero();
+    block->samples = 0;
+  }
+  if (block->samples == 0) block->start_s = s.time_s;
+  block->gram += contribution_;
+  block->moment += moment;
+  ++block->samples;
   chi2_ = decay * chi2_ + lin_.residual.dot(wr);
   weight_ = decay * weight_ + 1.0;
   mean_sigma_ *= decay;

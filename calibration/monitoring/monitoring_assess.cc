@@ -155,6 +155,19 @@ void propose(const Monitor& mon, const EffectEntry& e, const EffectEstimate& bes
   p.stopping_rule = buf;
 }
 
+// Least squares of one candidate on its normal equations: value, std and the chi^2 it removes.
+bool fit(const Eigen::MatrixXd& g, const Eigen::VectorXd& b, EffectEstimate& est) {
+  if (!(g.diagonal().minCoeff() > 0.0)) return false;
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(g);
+  if (ldlt.info() != Eigen::Success || ldlt.vectorD().minCoeff() <= 1e-12 * g.trace()) {
+    return false;
+  }
+  est.value = ldlt.solve(b);
+  est.std = ldlt.solve(Eigen::MatrixXd::Identity(g.rows(), g.cols())).diagonal().cwiseSqrt();
+  est.chi2_drop = b.dot(est.value);
+  return true;
+}
+
 }  // namespace
 
 Result<MonitorAssessment> Monitor::assess() const {
@@ -168,25 +181,45 @@ Result<MonitorAssessment> Monitor::assess() const {
   }
   int candidates = 0;
   for (const EffectEntry& e : monitoring::effect_table()) candidates += e.per_cable ? m_ : 1;
+  // The blocks, newest first, for the change-point fits.
+  std::vector<const Block*> recent;
+  for (int j = 0; j < options_.history_blocks; ++j) {
+    const int idx = (block_ - j + options_.history_blocks) % options_.history_blocks;
+    const Block& b = blocks_[static_cast<std::size_t>(idx)];
+    if (b.samples == 0) break;
+    recent.push_back(&b);
+  }
+  const double tried = 1.0 + static_cast<double>(recent.size());
   std::vector<const EffectEntry*> entry_of;
   for (const EffectEntry& e : monitoring::effect_table()) {
     for (int i = e.per_cable ? 0 : -1; i < (e.per_cable ? m_ : 0); ++i) {
       const int col = monitoring::first_column(e, i, m_);
-      const Eigen::MatrixXd g = gram_.block(col, col, e.columns, e.columns);
-      if (!(g.diagonal().minCoeff() > 0.0)) continue;
-      const Eigen::LDLT<Eigen::MatrixXd> ldlt(g);
-      if (ldlt.info() != Eigen::Success || ldlt.vectorD().minCoeff() <= 1e-12 * g.trace()) continue;
       EffectEstimate est;
+      if (!fit(gram_.block(col, col, e.columns, e.columns), moment_.segment(col, e.columns), est)) {
+        continue;
+      }
+      est.bic_drop = est.chi2_drop - e.columns * std::log(std::max(w, 2.0)) - std::log(tried);
+      Eigen::MatrixXd g = Eigen::MatrixXd::Zero(e.columns, e.columns);
+      Eigen::VectorXd b = Eigen::VectorXd::Zero(e.columns);
+      int n = 0;
+      for (const Block* block : recent) {
+        g += block->gram.block(col, col, e.columns, e.columns);
+        b += block->moment.segment(col, e.columns);
+        n += block->samples;
+        EffectEstimate since;
+        if (!fit(g, b, since)) continue;
+        since.bic_drop = since.chi2_drop - e.columns * std::log(std::max(n, 2)) - std::log(tried);
+        if (since.bic_drop > est.bic_drop) {
+          since.since_s = block->start_s;
+          est = since;
+        }
+      }
       est.effect = e.effect;
       est.cable = i;
       est.id = e.id;
       est.words = e.per_cable ? format(e.words, i) : e.words;
-      const Eigen::VectorXd b = moment_.segment(col, e.columns);
-      est.value = ldlt.solve(b);
-      est.std = ldlt.solve(Eigen::MatrixXd::Identity(e.columns, e.columns)).diagonal().cwiseSqrt();
-      est.chi2_drop = b.dot(est.value);
-      est.bic_drop = est.chi2_drop - e.columns * std::log(std::max(w, 2.0));
-      est.significant = est.chi2_drop > chi2_quantile(options_.gate_alpha / candidates, e.columns);
+      est.significant =
+          est.chi2_drop > chi2_quantile(options_.gate_alpha / (candidates * tried), e.columns);
       a.effects.push_back(est);
       entry_of.push_back(&e);
     }

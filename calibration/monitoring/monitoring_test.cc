@@ -104,10 +104,14 @@ MonitorAssessment run(Robot& robot, Monitor& monitor, int rounds) {
   return a.ok() ? *a : MonitorAssessment{};
 }
 
-Monitor make(const Robot& robot) {
-  Result<Monitor> m = Monitor::create(CalibratedModel::from_robot(robot.model()), options());
+Monitor must_create(const Robot& robot, const MonitorOptions& o) {
+  Result<Monitor> m = Monitor::create(CalibratedModel::from_robot(robot.model()), o);
   EXPECT_TRUE(m.ok()) << m.status().to_string();
   return std::move(*m);
+}
+
+Monitor make(const Robot& robot) {
+  return must_create(robot, options());
 }
 
 // Three passes over the poses with `change` in the true robot: the assessment, after at least
@@ -193,6 +197,29 @@ TEST(Monitor, CableGrowthIsNamedThermalWhenItFollowsTheLengthAndCreepWhenTheTens
   ASSERT_TRUE(named(b, MonitorEffect::kCreepGrowth, -1));
   // Hooke's F L / (EA + F) makes the extra compliance about (1 + F / EA)^-1 of it.
   EXPECT_NEAR(b.effects.front().value(0), creep.creep, 0.1 * creep.creep);
+}
+
+TEST(Monitor, AStepAfterACleanPeriodIsFittedFromItsBlockWithItsFullSize) {
+  // 10 clean passes, then 2 with a slip: the window's average would hold a sixth of it.
+  Robot clean(Change{});
+  Change c;
+  c.slip = 1;
+  c.slip_m = 3e-4;
+  Robot slipped(c, 2);
+  MonitorOptions o = options();
+  o.block_samples = static_cast<int>(poses().size());
+  Monitor monitor = must_create(clean, o);
+  run(clean, monitor, 10);
+  const double t0 = 10.0 * static_cast<double>(poses().size());
+  double t = t0;
+  for (int r = 0; r < 2; ++r) {
+    for (const Pose& p : poses()) monitor.add(slipped.read(p, t += 1.0));
+  }
+  Result<MonitorAssessment> a = monitor.assess();
+  ASSERT_TRUE(a.ok());
+  ASSERT_TRUE(named(*a, MonitorEffect::kEncoderSlip, 1));
+  EXPECT_NEAR(a->effects.front().value(0), 3e-4, 3e-5);
+  EXPECT_EQ(a->effects.front().since_s, t0 + 1.0);
 }
 
 TEST(Monitor, AddAllocatesNothing) {

@@ -14,12 +14,14 @@
 // what no pose can explain. Each projected residual, divided by its standard deviation, feeds a
 // two-sided CUSUM (change_detector.hpp) whose threshold follows from the stated false-alarm rate.
 // The same projected information accumulates the normal equations of every candidate change
-// (MonitorEffect, one table in monitoring_effects.cc) over the window since the calibration.
+// (MonitorEffect, one table in monitoring_effects.cc) over the window since the calibration, and
+// per block of samples for the change-point fits.
 // Monitor::add allocates nothing, locks nothing, throws nothing (monitoring_test.cc counts).
 //
 // Monitor::assess (the supervisor, allocates): which candidate explains the accumulated residuals
-// best (least squares on its signature columns, BIC; a gate at a family-wise 1e-3), its size, the
-// predicted position error over the ISO 9283 box now vs at acceptance (the change propagated
+// best (least squares on its signature columns over the window or from a block boundary on, BIC;
+// a gate at a family-wise 1e-3), its size, the predicted position error over the ISO 9283 box now
+// vs at acceptance (the change propagated
 // through the same sensitivity as predicted_accuracy.hpp: dx = -pinv(dL/dx) dL), and a proposal:
 // the parameters to re-identify, the poses that tell them apart and a stopping rule, or the full
 // sequence when that is cheaper.
@@ -55,7 +57,13 @@ struct MonitorSample {
   // N: the force sensors through the calibrated sensor model
   std::array<double, kMonitorMaxCables> tensions{};
   // m; kMissing: no reading this sample
-  std::array<double, kMonitorMaxLasers> lasers{kMissing, kMissing};
+  std::array<double, kMonitorMaxLasers> lasers = missing_lasers();
+
+  static constexpr std::array<double, kMonitorMaxLasers> missing_lasers() {
+    std::array<double, kMonitorMaxLasers> a{};
+    for (double& x : a) x = kMissing;
+    return a;
+  }
 };
 
 // The noise and model uncertainty the last calibration reported, one standard deviation.
@@ -78,6 +86,11 @@ struct MonitorOptions {
   // Attribution: the window's weight of a sample decays as exp(-age / window_s); infinity: every
   // sample since the calibration weighs alike.
   double window_s = std::numeric_limits<double>::infinity();
+  // Change points: the window's normal equations are also kept per block of block_samples
+  // samples, for the last history_blocks blocks; a candidate is also fitted as "zero before a
+  // block boundary, constant after" (a change that started in the window), each boundary tried.
+  int block_samples = 60;
+  int history_blocks = 60;
   // Acceptance: the predicted RMS position error over `box` the calibration was accepted with.
   double acceptance_position_rms_m = 0.0;
   AccuracyBox box;
@@ -104,13 +117,15 @@ enum class MonitorEffect {
 
 struct EffectEstimate {
   MonitorEffect effect = MonitorEffect::kFrameAnchor;
-  int cable = -1;            // 0-based; -1: every cable
-  std::string id;            // locator id, e.g. "frame_anchor", "force_offset_per_cable"
-  std::string words;         // for people, e.g. "pulley moved (frame anchor 3)"
-  Eigen::VectorXd value;     // SI (see MonitorEffect)
-  Eigen::VectorXd std;       // SI, of the window's least squares
-  double chi2_drop = 0.0;    // of the window's residuals
-  double bic_drop = 0.0;     // chi2_drop - columns * ln(samples)
+  int cable = -1;          // 0-based; -1: every cable
+  std::string id;          // locator id, e.g. "frame_anchor", "force_offset_per_cable"
+  std::string words;       // for people, e.g. "pulley moved (frame anchor 3)"
+  Eigen::VectorXd value;   // SI (see MonitorEffect)
+  Eigen::VectorXd std;     // SI, of the window's least squares
+  double chi2_drop = 0.0;  // of the window's residuals
+  double bic_drop = 0.0;   // chi2_drop - columns * ln(samples) (- ln(boundaries tried))
+  // Time the change is fitted from (a block boundary), s; NaN: constant over the whole window.
+  double since_s = std::numeric_limits<double>::quiet_NaN();
   bool significant = false;  // chi2_drop beyond the gate
 };
 
@@ -188,6 +203,14 @@ class Monitor {
   bool linearise(const MonitorSample& sample, Linearisation& out);
   void resize_linearisation(Linearisation& out) const;
 
+  // One block of samples' normal equations (unweighted), for the change-point fits.
+  struct Block {
+    Eigen::MatrixXd gram;
+    Eigen::VectorXd moment;
+    int samples = 0;
+    double start_s = 0.0;
+  };
+
   const CalibratedModel& model() const { return model_; }
   const MonitorOptions& options() const { return options_; }
   int columns() const { return p_; }
@@ -206,6 +229,9 @@ class Monitor {
   Linearisation lin_;
   RowMatrix projected_precision_;  // W = S^-1 - S^-1 B (B' S^-1 B)^-1 B' S^-1
   Signature weighted_signature_;   // W S
+  std::vector<Block> blocks_;      // ring, sized at creation
+  int block_ = 0;                  // the block being filled
+  Gram contribution_;              // this sample's S' W S
   Gram gram_;                      // sum of weights x S' W S
   ColumnVector moment_;            // sum of weights x S' W r
   double chi2_ = 0.0;              // sum of weights x r' W r
