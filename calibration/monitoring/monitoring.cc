@@ -127,6 +127,7 @@ bool Monitor::linearise(const MonitorSample& s, Linearisation& out) {
   const KinematicsData& k = kinematics_;
   const MonitorNoise& nz = options_.noise;
   std::array<double, kMonitorMaxCables> compliance{};
+  resize_linearisation(out);  // fixed capacity: no allocation
   out.residual.setZero();
   out.covariance.setZero();
   out.nuisance.setZero();

@@ -198,8 +198,7 @@ class Monitor {
     Nuisance nuisance;
     Signature signature;
   };
-  // False at a degenerate pose or a missing reading. Allocates nothing once `out` is sized
-  // (resize_linearisation).
+  // False at a degenerate pose or a missing reading. Allocates nothing (fixed capacities).
   bool linearise(const MonitorSample& sample, Linearisation& out);
   void resize_linearisation(Linearisation& out) const;
 
