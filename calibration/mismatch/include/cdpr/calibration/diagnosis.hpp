@@ -3,7 +3,8 @@
 // Pure statistics on top of identification.hpp and mismatch.hpp (no I/O, no logging). The
 // candidate effects are the entries of effect_library.hpp; how diagnose() decides (selection,
 // refit, acceptance, naming, extra-pose design, the model with the effects, the verdict) is
-// described in docs/mismatch-locator.md, and diagnosis.cc follows the same named stages.
+// described in docs/mismatch-locator.md; diagnosis.cc runs the same named stages, each in a
+// source of its own (diagnosis_*.cc, gross_readings.cc).
 #pragma once
 
 #include <Eigen/Core>
@@ -43,8 +44,8 @@ struct DiagnosisOptions {
   bool bic_informing_rows = false;
   // Once a further effect is accepted beside Gauss-Newton effects (creep, drifts, force gains:
   // moved into the readings), their coefficients are refitted beside it, and the sag's catenary is
-  // recomputed at the new estimate (polish_gauss_newton, refresh_catenary in diagnosis.cc); false
-  // keeps the coefficients and the catenary each was accepted with (before sessions 16 and 18).
+  // recomputed at the new estimate (polish_gauss_newton, refresh_catenary); false keeps the
+  // coefficients and the catenary each was accepted with.
   bool polish_gauss_newton = true;
   // A Gauss-Newton effect that follows the tension readings (nonlinear elasticity, compliance,
   // creep) moved into the lengths makes them depend on the readings: true adds its derivative by
