@@ -166,10 +166,15 @@ struct ControlSettings {
 // `cdprctl health` shows what changed and proposes a re-identification. It never moves the robot.
 struct MonitoringSettings {
   bool enabled = false;
-  double period_s = 1.0;                // s between samples (settled holds only)
-  double false_alarms_per_hour = 0.1;   // stated rate of the detectors together
-  double alert_position_m = 1e-4;       // m of predicted RMS position error above acceptance
-  double assess_period_s = 60.0;        // s between assessments after an alarm
+  double period_s = 1.0;               // s between samples (settled holds only)
+  double false_alarms_per_hour = 0.1;  // stated rate of the detectors together
+  double alert_position_m = 1e-4;      // m of predicted RMS position error above acceptance
+  double assess_period_s = 60.0;       // s between assessments after an alarm
+  // The accepted model's own uncertainty (one standard deviation): of a cable length (e.g. its
+  // anchors' standard deviation) and of the force balance (e.g. the weight's); the sensors' noise
+  // is identification.noise_*.
+  double model_length_m = 1e-4;
+  double model_force_n = 2.0;
 };
 
 struct DaemonConfig {
