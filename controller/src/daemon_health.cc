@@ -11,6 +11,7 @@
 
 namespace cdpr::controller {
 using json = nlohmann::json;
+using control::ControlErrorCode;
 
 namespace {
 
@@ -77,6 +78,7 @@ Status Daemon::restart_monitor(const Geometry& g) {
   monitor_.reset();
   monitor_version_ = g.version;
   health_alerted_ = false;
+  health_alarmed_ = false;
   monitor_assess_ns_ = 0;
   Result<Monitor> m = Monitor::create(CalibratedModel::from_robot(g.model), o);
   if (!m.ok()) return m.status();
@@ -120,7 +122,8 @@ void Daemon::watch_health(const RtSnapshot& s) {
     sample.tensions[k] = s.tensions[k];
   }
   const bool alarm = monitor_->add(sample);
-  if (alarm && monitor_->alarms() == 1) {
+  if (alarm && !health_alarmed_) {
+    health_alarmed_ = true;
     const std::string row = monitor_->row_name(monitor_->first_alarm_row());
     spdlog::warn("health: the readings left the model of geometry {} ({})", g->version, row);
     publish("health",

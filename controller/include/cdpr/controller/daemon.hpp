@@ -353,6 +353,7 @@ class Daemon {
   std::int64_t monitor_start_ns_ = 0;   // robot time it started
   std::int64_t monitor_sample_ns_ = 0;  // of its last sample
   std::int64_t monitor_assess_ns_ = 0;  // of its last assessment
+  bool health_alarmed_ = false;         // the alarm event was raised for this geometry
   bool health_alerted_ = false;         // the change event was raised for this geometry
 
   // Under sink_mu_: where events go.
