@@ -104,6 +104,11 @@ CalibratedModel extract(const Built& B, const CalibratedModel& initial) {
       const Result<SuspendedState> hang = suspended_equilibrium_pose(out.robot, target);
       out.robot.home = hang.ok() ? hang->pose : target;
     }
+  } else if (out.robot.suspended && m < 6) {
+    // No pose held the home (--gauge none): it keeps its position and heading and hangs as the
+    // calibrated model makes it, as a suspended robot's home must (the config loader checks it).
+    const Result<SuspendedState> hang = suspended_equilibrium_pose(out.robot, out.robot.home);
+    if (hang.ok()) out.robot.home = hang->pose;
   }
   for (std::size_t l = 0; l < B.lasers.size(); ++l) {
     const LaserBlocks& L = B.lasers[l];
