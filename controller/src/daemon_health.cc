@@ -115,11 +115,11 @@ void Daemon::watch_health(const RtSnapshot& s) {
   MonitorSample sample;
   sample.time_s = 1e-9 * static_cast<double>(s.now_ns - monitor_start_ns_);
   sample.pose = s.pose();
-  for (int i = 0; i < g->model.num_cables() && i < kMonitorMaxCables; ++i) {
-    const auto k = static_cast<std::size_t>(i);
-    sample.lengths[k] =
-        winch_counts_to_length<double>(g->model.winches[k], s.actual_counts[k] - offsets[k]);
-    sample.tensions[k] = s.tensions[k];
+  Eigen::VectorXd lengths, tensions;
+  encoder_lengths(s, g->model, offsets, lengths, tensions);
+  for (Eigen::Index i = 0; i < lengths.size() && i < kMonitorMaxCables; ++i) {
+    sample.lengths[static_cast<std::size_t>(i)] = lengths(i);
+    sample.tensions[static_cast<std::size_t>(i)] = tensions(i);
   }
   const bool alarm = monitor_->add(sample);
   if (alarm && !health_alarmed_) {

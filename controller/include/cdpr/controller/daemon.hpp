@@ -230,8 +230,11 @@ class Daemon {
   Status move_to(const Pose& pose, double reference_tension, bool abortable);
   Status hold_still(bool abortable);
   Result<Pose> pose_from_encoders(const RobotModel& model);
-  void encoder_lengths(const RobotModel& model, const std::array<double, kMaxAxes>& offsets,
-                       Eigen::VectorXd& lengths, Eigen::VectorXd& tensions);
+  // The cable lengths the encoders read in `snap` (the master's before the loop runs) with
+  // `offsets`, and the measured tensions (0 without force readings).
+  void encoder_lengths(const RtSnapshot& snap, const RobotModel& model,
+                       const std::array<double, kMaxAxes>& offsets, Eigen::VectorXd& lengths,
+                       Eigen::VectorXd& tensions);
 
   // The calibration run (worker thread; daemon_calibration.cc).
   void run_calibration(std::vector<Pose> poses, PeerInfo peer);
