@@ -239,44 +239,39 @@ struct ChannelSums {
 void record_row(const RowInfo& ri, double r, const SensorNoise& noise, PoseResiduals& pr,
                 IdentificationReport& rep, ChannelSums& sums) {
   rep.chi2 += r * r;
+  // A row of a fixed sigma: its normalised and SI values, the sigma's share of the log det.
+  const auto fixed = [&](double& normalized, double& si, double sigma, double& sum, int& n) {
+    normalized = r;
+    si = r * sigma;
+    rep.log_det_covariance += 2.0 * std::log(sigma);
+    sum += si * si;
+    ++n;
+  };
+  const Eigen::Index i = ri.index;
   switch (ri.channel) {
-    case Channel::kLength: {
-      pr.length_normalized(ri.index) = r;  // SI value computed by length_residuals
+    case Channel::kLength:
+      pr.length_normalized(i) = r;  // SI value computed by length_residuals
       break;
-    }
     case Channel::kLaser:
-      pr.laser_normalized(ri.index) = r;
-      pr.laser_m(ri.index) = r * noise.sigma_laser;
-      rep.log_det_covariance += 2.0 * std::log(noise.sigma_laser);
-      sums.laser += pr.laser_m(ri.index) * pr.laser_m(ri.index);
-      ++sums.n_laser;
+      fixed(pr.laser_normalized(i), pr.laser_m(i), noise.sigma_laser, sums.laser, sums.n_laser);
       break;
     case Channel::kWrench:
-      pr.wrench_normalized(ri.index) = r;
+      pr.wrench_normalized(i) = r;
       break;
     case Channel::kReference:
-      pr.reference_normalized(ri.index) = r;
+      pr.reference_normalized(i) = r;
       break;
     case Channel::kSwivel:
-      pr.swivel_normalized(ri.index) = r;
-      pr.swivel_rad(ri.index) = r * noise.sigma_swivel;
-      rep.log_det_covariance += 2.0 * std::log(noise.sigma_swivel);
-      sums.swivel += pr.swivel_rad(ri.index) * pr.swivel_rad(ri.index);
-      ++sums.n_swivel;
+      fixed(pr.swivel_normalized(i), pr.swivel_rad(i), noise.sigma_swivel, sums.swivel,
+            sums.n_swivel);
       break;
     case Channel::kInclination:
-      pr.inclination_normalized(ri.index) = r;
-      pr.inclination_rad(ri.index) = r * noise.sigma_inclination;
-      rep.log_det_covariance += 2.0 * std::log(noise.sigma_inclination);
-      sums.inclination += pr.inclination_rad(ri.index) * pr.inclination_rad(ri.index);
-      ++sums.n_inclination;
+      fixed(pr.inclination_normalized(i), pr.inclination_rad(i), noise.sigma_inclination,
+            sums.inclination, sums.n_inclination);
       break;
     case Channel::kImuYaw:
-      pr.imu_yaw_normalized = r;
-      pr.imu_yaw_rad = r * noise.sigma_imu_yaw;
-      rep.log_det_covariance += 2.0 * std::log(noise.sigma_imu_yaw);
-      sums.imu_yaw += pr.imu_yaw_rad * pr.imu_yaw_rad;
-      ++sums.n_imu_yaw;
+      fixed(pr.imu_yaw_normalized, pr.imu_yaw_rad, noise.sigma_imu_yaw, sums.imu_yaw,
+            sums.n_imu_yaw);
       break;
   }
 }
