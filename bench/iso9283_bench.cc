@@ -34,6 +34,7 @@
 #include "cdpr/sim/lockstep_io.hpp"
 #include "cdpr/sim/physics.hpp"
 #include "cdpr/sim/scenario.hpp"
+#include "virtual_calibration.hpp"
 
 namespace {
 
@@ -250,23 +251,12 @@ struct Args {
 
 RobotModel calibrate(const RobotModel& nominal, const RobotModel& truth,
                      const cdpr::sim::Scenario& scenario, const Args& args) {
-  const std::uint64_t seed = args.seed;
-  const cdpr::CalibratedModel initial = cdpr::CalibratedModel::from_robot(nominal);
-  cdpr::PoseDesignOptions design;
-  design.num_poses = 25;
-  const cdpr::PoseDesign poses = must(cdpr::design_poses(initial, design), "pose design");
-  auto physics = must(cdpr::sim::Physics::create(truth, scenario, seed + 1), "physics");
-  cdpr::sim::LockstepOptions lo;
-  lo.laser_samples = 5;
-  const auto samples = must(cdpr::sim::run_lockstep(physics, nominal, poses.poses, lo), "lockstep");
-  const auto rec = must(cdpr::sim::make_recording(samples, nominal, scenario, {}), "recording");
-  const auto set = must(cdpr::recording::to_measurement_set(rec), "measurement set");
   cdpr::IdentificationOptions io;
   io.estimate_stiffness = args.stiffness == "shared"      ? cdpr::StiffnessEstimate::kShared
                           : args.stiffness == "per-cable" ? cdpr::StiffnessEstimate::kPerCable
                                                           : cdpr::StiffnessEstimate::kFixed;
-  const auto report = must(cdpr::identify(initial, set, io), "identify");
-  return report.estimate.robot;
+  return cdpr::bench::calibrate_virtual_robot(nominal, truth, scenario, args.seed + 1, io)
+      .estimate.robot;
 }
 
 Args parse(int argc, char** argv) {

@@ -5,5 +5,6 @@ if(TARGET cdpr_sim)
   add_executable(monitoring_bench ${CMAKE_CURRENT_LIST_DIR}/monitoring_bench.cc)
   target_compile_definitions(monitoring_bench PRIVATE CDPR_SOURCE_DIR="${CMAKE_SOURCE_DIR}")
   target_link_libraries(monitoring_bench PRIVATE cdpr_calibration_monitoring cdpr_sim cdpr_config
+                                                 cdpr_recording cdpr_calibration
                                                  cdpr_options)
 endif()

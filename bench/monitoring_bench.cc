@@ -2,7 +2,8 @@
 // and the platform's travel from the change's start to the first alarm, the effect named and its
 // estimated size against the truth; and the false alarms of a clean run against the stated rates.
 //
-//   build/ci/bench/monitoring_bench [--clean-hours H] [--change-hours H] [--seed S]
+//   build/ci/bench/monitoring_bench [--clean-hours H] [--change-hours H] [--calibrated-hours H]
+//                                   [--only-calibrated] [--seed S]
 //
 // In-process, no CAN, no daemon: cdpr-sim's quasi-static physics (sim/physics.hpp) is the true
 // robot, config/mini.yaml both the truth at t = 0 and the calibrated model (an exact calibration:
@@ -13,6 +14,9 @@
 // and compensated IK to integer counts (sim::nominal_counts), the physics steps there, and the
 // monitor gets one sample: the encoder counts through the nominal winch model, the raw forces
 // through the nominal sensor model, the laser.
+// Then the same clean cycle after a real calibration (calibrated_clean_run): the main job's robot
+// calibrated on 25 designed poses (virtual_calibration.hpp), watched without and with a reference
+// phase (MonitorOptions::reference_s). --only-calibrated runs that part alone.
 #include <Eigen/Core>
 #include <chrono>
 #include <cmath>
@@ -29,6 +33,7 @@
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/sim/physics.hpp"
 #include "cdpr/sim/scenario.hpp"
+#include "virtual_calibration.hpp"
 
 namespace {
 
@@ -131,16 +136,26 @@ struct Run {
   Pose last;
 };
 
-Run make_run(const RobotModel& nominal, const std::string& extra, std::uint64_t seed) {
+cdpr::sim::Scenario bench_scenario(const std::string& extra) {
   char noise[160];
   std::snprintf(noise, sizeof noise, "noise: {encoder_counts: %g, force_raw: %g, laser: %g}\n",
                 kNoise[0], kNoise[1], kNoise[2]);
   const std::string text = std::string("name: monitoring\n") + noise + extra;
-  const cdpr::sim::Scenario s = must(cdpr::sim::parse_scenario(text, "bench.yaml"), "scenario");
+  return must(cdpr::sim::parse_scenario(text, "bench.yaml"), "scenario");
+}
+
+// `model` commands the robot and reads its sensors (the calibrated model); the scenario's truth
+// (resolved against `nominal`) is the robot.
+Run make_run(const RobotModel& model, const RobotModel& nominal, const cdpr::sim::Scenario& s,
+             std::uint64_t seed) {
   RobotModel truth = must(cdpr::sim::resolve_truth(s, nominal), "truth");
-  return Run{nominal,       must(cdpr::sim::Physics::create(truth, s, seed), "physics"),
+  return Run{model,         must(cdpr::sim::Physics::create(truth, s, seed), "physics"),
              cycle_poses(), 0,
              0.0,           Pose{}};
+}
+
+Run make_run(const RobotModel& nominal, const std::string& extra, std::uint64_t seed) {
+  return make_run(nominal, nominal, bench_scenario(extra), seed);
 }
 
 // One step of the run: the commanded pose, the physics, the sample.
@@ -201,15 +216,17 @@ double acceptance_rms(const RobotModel& nominal, const cdpr::MonitorOptions& o) 
   return pa.position_rms_m;
 }
 
-void clean_run(const RobotModel& nominal, double hours, std::uint64_t seed) {
+// Hours of clean running (no change) with monitors at stated rates of 10, 1 and 0.1 false alarms
+// per hour: how many alarms each raised. `run` holds the robot and the model the monitors watch.
+void clean_run(Run run, const cdpr::MonitorOptions& base, double hours) {
   const double rates[] = {10.0, 1.0, 0.1};
   std::vector<Monitor> monitors;
   for (double r : rates) {
-    monitors.push_back(must(
-        Monitor::create(cdpr::CalibratedModel::from_robot(nominal), monitor_options(nominal, r)),
-        "monitor"));
+    cdpr::MonitorOptions o = base;
+    o.false_alarms_per_hour = r;
+    monitors.push_back(
+        must(Monitor::create(cdpr::CalibratedModel::from_robot(run.nominal), o), "monitor"));
   }
-  Run run = make_run(nominal, "", seed);
   const int steps = static_cast<int>(hours * 3600.0 / kStep);
   const auto t0 = std::chrono::steady_clock::now();
   double add_seconds = 0.0;
@@ -221,7 +238,7 @@ void clean_run(const RobotModel& nominal, double hours, std::uint64_t seed) {
   }
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf(
-      "clean run: %.1f h simulated (%d samples at %.0f per hour, %.0f m travelled), %.1f s "
+      "  %.1f h simulated (%d samples at %.0f per hour, %.0f m travelled), %.1f s "
       "wall, Monitor::add %.1f us per sample\n",
       hours, steps, 3600.0 / kStep, run.travel, wall,
       1e6 * add_seconds / (steps * monitors.size()));
@@ -231,6 +248,50 @@ void clean_run(const RobotModel& nominal, double hours, std::uint64_t seed) {
     const double measured = monitors[j].alarms() / hours;
     std::printf("  %-22.2f %-10.2f %-12d %-12.3f %.2f\n", rates[j], monitors[j].threshold(),
                 monitors[j].alarms(), measured, measured / rates[j]);
+  }
+  const cdpr::MonitorAssessment a = must(monitors.back().assess(), "assess");
+  std::printf("  assessment at the end (stated 0.1/h): %s%s\n",
+              a.changed ? a.effects.front().words.c_str() : "no change named",
+              a.reference_consistent ? "" : " (reference beyond the stated uncertainty)");
+}
+
+// The same clean running after a real calibration: the true robot is the main job's
+// (config/scenarios/mini-calibration.yaml: measured anchors, softer cables, encoder zeros, its
+// noise), calibrated from the nominal config on 25 designed poses (cdpr-fit calibrate's library
+// calls) with EA fixed or estimated. The monitors watch the calibrated model, its predicted
+// accuracy the model uncertainty: as noise per sample (no reference phase), or as the prior of a
+// reference phase of `reference_s` (MonitorOptions::reference_s).
+void calibrated_clean_run(const RobotModel& nominal, cdpr::StiffnessEstimate stiffness,
+                          const char* label, double hours, std::uint64_t seed) {
+  const cdpr::sim::Scenario scenario =
+      must(cdpr::sim::load_scenario(std::string(CDPR_SOURCE_DIR) +
+                                    "/config/scenarios/mini-calibration.yaml"),
+           "mini-calibration.yaml");
+  const RobotModel truth = must(cdpr::sim::resolve_truth(scenario, nominal), "truth");
+  cdpr::IdentificationOptions io;
+  io.estimate_stiffness = stiffness;
+  const cdpr::IdentificationReport rep =
+      cdpr::bench::calibrate_virtual_robot(nominal, truth, scenario, seed, io);
+  const RobotModel& model = rep.estimate.robot;
+  cdpr::MonitorOptions o = monitor_options(model, 0.1);
+  cdpr::SensorNoise n;
+  n.sigma_length = o.noise.sigma_length;
+  n.sigma_force = o.noise.sigma_force;
+  n.sigma_laser = o.noise.sigma_laser;
+  cdpr::PredictedAccuracyOptions po;
+  po.box = o.box;
+  const cdpr::PredictedAccuracy pa =
+      must(cdpr::predict_accuracy(rep.estimate, o.box.grid(), n, po), "accuracy");
+  o.noise = cdpr::monitor_noise(n, &pa);
+  o.acceptance_position_rms_m = pa.position_rms_m;
+  for (double reference : {0.0, 600.0, 3600.0}) {
+    o.reference_s = reference;
+    std::printf(
+        "after a real calibration (%s; chi2/dof %.2f, model length uncertainty %.4f mm), %s:\n",
+        label, rep.chi2 / std::max(1, rep.dof), 1e3 * o.noise.model_length,
+        reference > 0.0 ? (reference > 600.0 ? "reference phase 1 h" : "reference phase 600 s")
+                        : "no reference phase");
+    clean_run(make_run(model, nominal, scenario, seed + 2000), o, hours);
   }
 }
 
@@ -306,18 +367,25 @@ void change_run(const RobotModel& nominal, const Change& c, double hours, std::u
 }  // namespace
 
 int main(int argc, char** argv) {
-  double clean_hours = 100.0, change_hours = 2.0;
+  double clean_hours = 100.0, change_hours = 2.0, calibrated_hours = 10.0;
   std::uint64_t seed = 1;
+  bool only_calibrated = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--clean-hours") && i + 1 < argc) {
       clean_hours = std::atof(argv[++i]);
     } else if (!std::strcmp(argv[i], "--change-hours") && i + 1 < argc) {
       change_hours = std::atof(argv[++i]);
+    } else if (!std::strcmp(argv[i], "--calibrated-hours") && i + 1 < argc) {
+      calibrated_hours = std::atof(argv[++i]);
+    } else if (!std::strcmp(argv[i], "--only-calibrated")) {
+      only_calibrated = true;
     } else if (!std::strcmp(argv[i], "--seed") && i + 1 < argc) {
       seed = std::strtoull(argv[++i], nullptr, 10);
     } else {
-      std::fprintf(stderr,
-                   "usage: monitoring_bench [--clean-hours H] [--change-hours H] [--seed S]\n");
+      std::fprintf(
+          stderr,
+          "usage: monitoring_bench [--clean-hours H] [--change-hours H] [--calibrated-hours H] "
+          "[--only-calibrated] [--seed S]\n");
       return 2;
     }
   }
@@ -333,7 +401,14 @@ int main(int argc, char** argv) {
       "virtual MINI (cdpr-sim physics, truth = config/mini.yaml), seed %llu, one sample per "
       "%.0f s, stated rate 0.1 false alarms per hour for the changes\n",
       static_cast<unsigned long long>(seed), kStep);
-  for (const Change& c : kChanges) change_run(nominal, c, change_hours, seed, acceptance);
-  clean_run(nominal, clean_hours, seed + 1000);
+  if (!only_calibrated) {
+    for (const Change& c : kChanges) change_run(nominal, c, change_hours, seed, acceptance);
+    std::printf("clean run (exact calibration):\n");
+    clean_run(make_run(nominal, "", seed + 1000), monitor_options(nominal, 0.1), clean_hours);
+  }
+  calibrated_clean_run(nominal, cdpr::StiffnessEstimate::kPerCable, "EA per cable estimated",
+                       calibrated_hours, seed);
+  calibrated_clean_run(nominal, cdpr::StiffnessEstimate::kFixed, "EA fixed at the nominal",
+                       calibrated_hours, seed);
   return 0;
 }

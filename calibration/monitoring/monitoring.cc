@@ -46,6 +46,9 @@ Monitor::Monitor(const CalibratedModel& model, const MonitorOptions& options, do
   gram_.resize(p_, p_);
   contribution_.resize(p_, p_);
   moment_.resize(p_);
+  reference_gram_.resize(p_, p_);
+  reference_moment_.resize(p_);
+  reference_offset_.resize(p_);
   blocks_.resize(static_cast<std::size_t>(options.history_blocks));
   for (Block& b : blocks_) {
     b.gram.resize(p_, p_);
@@ -73,12 +76,13 @@ Result<Monitor> Monitor::create(const CalibratedModel& model, const MonitorOptio
   const MonitorNoise& nz = options.noise;
   if (!(nz.sigma_length > 0.0) || !(nz.sigma_force > 0.0) || !(nz.sigma_laser > 0.0) ||
       !(nz.model_length >= 0.0) || !(nz.model_force >= 0.0) || !(options.window_s > 0.0) ||
-      options.samples_per_pose < 1 || options.full_sequence_poses < 1 ||
-      options.block_samples < 1 || options.history_blocks < 1 ||
+      !(options.reference_s >= 0.0) || options.samples_per_pose < 1 ||
+      options.full_sequence_poses < 1 || options.block_samples < 1 || options.history_blocks < 1 ||
       !(options.gate_alpha > 0.0 && options.gate_alpha < 1.0)) {
     return Status(ErrorCode::kInvalidArgument,
                   "monitor: noise sigmas, window, samples per pose, full sequence poses, block "
-                  "samples and history blocks must be positive and the gate in (0, 1)");
+                  "samples and history blocks must be positive, the reference phase not negative "
+                  "and the gate in (0, 1)");
   }
   CDPR_ASSIGN_OR_RETURN(const double h,
                         cusum_threshold(options.false_alarms_per_hour, options.samples_per_hour,
@@ -105,6 +109,69 @@ void Monitor::reset() {
   first_alarm_row_ = -1;
   for (Cusum& c : detectors_) c.reset();
   row_alarms_.fill(0);
+  reference_gram_.setZero();
+  reference_moment_.setZero();
+  reference_offset_.setZero();
+  referenced_ = !(options_.reference_s > 0.0);
+  reference_consistent_ = true;
+  reference_mahalanobis_ = 0.0;
+}
+
+// The reference phase's fit: the calibrated parameters' error that explains its residuals best,
+// with the calibration's stated uncertainty as a prior (Gauss-Markov with a Gaussian prior); the
+// other columns stay at zero. Runs once, in add(): fixed-capacity matrices, no allocation.
+void Monitor::fit_reference() {
+  Gram a = reference_gram_;
+  ColumnVector b = reference_moment_;
+  for (const monitoring::EffectEntry& e : monitoring::effect_table()) {
+    const int cables = e.per_cable ? m_ : 1;
+    const double sd = e.calibration_std != nullptr ? e.calibration_std(options_.noise) : 0.0;
+    for (int i = 0; i < cables; ++i) {
+      const int col = monitoring::first_column(e, e.per_cable ? i : -1, m_);
+      for (int c = col; c < col + e.columns; ++c) {
+        if (e.calibration_std == nullptr) {
+          a.row(c).setZero();
+          a.col(c).setZero();
+          a(c, c) = 1.0;
+          b(c) = 0.0;
+          continue;
+        }
+        // The prior, and a ridge relative to the column's own information (its units differ).
+        a(c, c) += (sd > 0.0 ? 1.0 / (sd * sd) : 0.0) + 1e-9 * a(c, c) + 1e-300;
+      }
+    }
+  }
+  const Eigen::LDLT<Gram> ldlt(a);
+  reference_offset_ = ldlt.info() == Eigen::Success ? ColumnVector(ldlt.solve(b))
+                                                    : ColumnVector(ColumnVector::Zero(p_));
+  // Is the offset within the calibration's stated uncertainty? Under the prior each fitted
+  // column varies by (prior - posterior variance); a column beyond the Bonferroni gate means the
+  // calibrated model itself does not hold: the offset is dropped, so the detectors judge the model
+  // as it is (and alarm), and the assessment says so.
+  const Gram posterior = ldlt.solve(Gram::Identity(p_, p_));
+  reference_mahalanobis_ = 0.0;  // the largest squared z
+  int stated = 0;
+  for (const monitoring::EffectEntry& e : monitoring::effect_table()) {
+    const double sd = e.calibration_std != nullptr ? e.calibration_std(options_.noise) : 0.0;
+    if (!(sd > 0.0)) continue;
+    const int cables = e.per_cable ? m_ : 1;
+    for (int i = 0; i < cables; ++i) {
+      const int col = monitoring::first_column(e, e.per_cable ? i : -1, m_);
+      for (int c = col; c < col + e.columns; ++c) {
+        const double var = sd * sd - posterior(c, c);
+        if (var > 1e-12 * sd * sd) {
+          reference_mahalanobis_ =
+              std::max(reference_mahalanobis_, reference_offset_(c) * reference_offset_(c) / var);
+        }
+        ++stated;
+      }
+    }
+  }
+  const double gate =
+      stated > 0 ? monitoring::normal_quantile(0.5 * options_.gate_alpha / stated) : 0.0;
+  reference_consistent_ = stated == 0 || reference_mahalanobis_ <= gate * gate;
+  if (!reference_consistent_) reference_offset_.setZero();
+  referenced_ = true;
 }
 
 void Monitor::resize_linearisation(Linearisation& out) const {
@@ -126,6 +193,10 @@ bool Monitor::linearise(const MonitorSample& s, Linearisation& out) {
   if (!inverse_kinematics(robot, s.pose, kinematics_)) return false;
   const KinematicsData& k = kinematics_;
   const MonitorNoise& nz = options_.noise;
+  // With a reference phase the model's uncertainty is a prior of its fit, not noise per sample.
+  const bool reference = options_.reference_s > 0.0;
+  const double model_length = reference ? 0.0 : nz.model_length;
+  const double model_force = reference ? 0.0 : nz.model_force;
   std::array<double, kMonitorMaxCables> compliance{};
   resize_linearisation(out);  // fixed capacity: no allocation
   out.residual.setZero();
@@ -140,7 +211,7 @@ bool Monitor::linearise(const MonitorSample& s, Linearisation& out) {
         cable_elongation_derivatives(c, loaded_length(c, k.lengths(i)), f);
     compliance[u] = d.d_tension;
     out.residual(i) = s.lengths[u] - cable_length_command<double>(c, k.lengths(i), f);
-    out.covariance(i, i) = nz.sigma_length * nz.sigma_length + nz.model_length * nz.model_length;
+    out.covariance(i, i) = nz.sigma_length * nz.sigma_length + model_length * model_length;
     // A slack cable's length says nothing of the geometry: its row carries nothing.
     if (f < 0.5 * c.f_min) out.covariance(i, i) = kNoReading;
     out.nuisance.row(i) = -k.structure_matrix.col(i).transpose();
@@ -175,7 +246,7 @@ bool Monitor::linearise(const MonitorSample& s, Linearisation& out) {
   const double rho = robot.platform_radius();
   for (int a = 0; a < 6; ++a) {
     const double scale = a < 3 ? 1.0 : rho;
-    out.covariance(m_ + a, m_ + a) += nz.model_force * nz.model_force * scale * scale;
+    out.covariance(m_ + a, m_ + a) += model_force * model_force * scale * scale;
   }
   // Lasers: distance along the beam to the target plane; its pose derivative is the nuisance.
   for (int l = 0; l < lasers_; ++l) {
@@ -228,6 +299,17 @@ bool projected_precision(const Monitor::Linearisation& lin, Monitor::RowMatrix& 
 bool Monitor::add(const MonitorSample& s) {
   if (!std::isfinite(s.time_s) || !linearise(s, lin_)) return false;
   if (!monitoring::projected_precision(lin_, projected_precision_)) return false;
+  if (!referenced_) {
+    if (s.time_s < options_.reference_s) {
+      weighted_signature_.noalias() = projected_precision_ * lin_.signature;
+      reference_gram_.noalias() += lin_.signature.transpose() * weighted_signature_;
+      reference_moment_.noalias() +=
+          lin_.signature.transpose() * (projected_precision_ * lin_.residual);
+      return false;
+    }
+    fit_reference();
+  }
+  lin_.residual.noalias() -= lin_.signature * reference_offset_;
   // The projected residual e = S W r.
   const RowVector wr = projected_precision_ * lin_.residual;
   // Cov(e) = S W S, e = S W r: each channel normalised by its own standard deviation.

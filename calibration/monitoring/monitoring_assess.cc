@@ -16,18 +16,6 @@ namespace {
 
 using monitoring::EffectEntry;
 
-// Upper quantile of chi^2 with k dof at tail probability p (Wilson-Hilferty).
-double chi2_quantile(double p, int k) {
-  double lo = 0.0, hi = 40.0;  // z with 0.5 erfc(z / sqrt 2) = p
-  for (int it = 0; it < 200; ++it) {
-    const double mid = 0.5 * (lo + hi);
-    (0.5 * std::erfc(mid / std::sqrt(2.0)) > p ? lo : hi) = mid;
-  }
-  const double a = 2.0 / (9.0 * k);
-  const double c = 1.0 - a + lo * std::sqrt(a);
-  return k * c * c * c;
-}
-
 std::string format(const char* fmt, int cable) {
   char buf[160];
   std::snprintf(buf, sizeof buf, fmt, cable + 1);
@@ -173,6 +161,8 @@ bool fit(const Eigen::MatrixXd& g, const Eigen::VectorXd& b, EffectEstimate& est
 Result<MonitorAssessment> Monitor::assess() const {
   MonitorAssessment a;
   a.samples = samples_;
+  a.referenced = referenced_;
+  a.reference_consistent = reference_consistent_;
   const double w = weight_ > 0.0 ? weight_ : 1.0;
   for (int r = 0; r < n_; ++r) {
     const auto u = static_cast<std::size_t>(r);
@@ -218,8 +208,8 @@ Result<MonitorAssessment> Monitor::assess() const {
       est.cable = i;
       est.id = e.id;
       est.words = e.per_cable ? format(e.words, i) : e.words;
-      est.significant =
-          est.chi2_drop > chi2_quantile(options_.gate_alpha / (candidates * tried), e.columns);
+      est.significant = est.chi2_drop > monitoring::chi2_quantile(
+                                            options_.gate_alpha / (candidates * tried), e.columns);
       a.effects.push_back(est);
       entry_of.push_back(&e);
     }
@@ -265,6 +255,12 @@ std::string describe(const MonitorAssessment& a) {
       "%d samples; predicted position error over the box: %.3f mm now, %.3f mm at acceptance\n",
       a.samples, a.position_rms_now_m * 1e3, a.position_rms_acceptance_m * 1e3);
   out += buf;
+  if (!a.referenced) out += "reference phase: still fitting the calibration's own error\n";
+  if (!a.reference_consistent) {
+    out +=
+        "reference phase: the calibration's own error is beyond its stated uncertainty: the "
+        "calibrated model is judged as it is\n";
+  }
   for (const MonitorRow& r : a.rows) {
     std::snprintf(buf, sizeof buf, "  %-16s mean %+.2f sigma, detector %.1f of %.1f, %d alarms\n",
                   r.name.c_str(), r.mean_sigma, r.statistic, r.threshold, r.alarms);

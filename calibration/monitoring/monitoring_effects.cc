@@ -1,5 +1,7 @@
 #include "monitoring_effects.hpp"
 
+#include <cmath>
+
 #include "cdpr/calibration/elongation.hpp"
 
 namespace cdpr::monitoring {
@@ -48,18 +50,37 @@ void fill_creep(const SampleGeometry& g, int, Monitor::Signature& s, int col) {
   }
 }
 
+// Elasticity of cable i: it stretches c F (routing + L_k) more than the model says (1/EA up by c).
+void fill_elasticity(const SampleGeometry& g, int i, Monitor::Signature& s, int col) {
+  s(i, col) = -g.tensions[i] *
+              loaded_length(g.robot->cables[static_cast<std::size_t>(i)], g.kinematics->lengths(i));
+}
+
+double length_std(const MonitorNoise& n) {
+  return n.model_length;
+}
+double force_std(const MonitorNoise& n) {
+  return n.model_force;
+}
+double compliance_std(const MonitorNoise& n) {
+  return n.model_compliance;
+}
+
 const EffectEntry kEffects[] = {
     {MonitorEffect::kFrameAnchor, "frame_anchor", "pulley moved (frame anchor %d)", true, 3, true,
-     "frame anchor %d (x, y, z)", "mm", 1e3, fill_frame_anchor},
+     "frame anchor %d (x, y, z)", "mm", 1e3, fill_frame_anchor, length_std},
     {MonitorEffect::kForceOffset, "force_offset_per_cable", "force sensor drift on cable %d", true,
-     1, false, "force sensor %d offset", "N", 1.0, fill_force_offset},
+     1, false, "force sensor %d offset", "N", 1.0, fill_force_offset, force_std},
     {MonitorEffect::kEncoderSlip, "encoder_offset_per_cable", "encoder slip on cable %d", true, 1,
-     true, "encoder zero of cable %d", "mm", 1e3, fill_encoder_slip},
+     true, "encoder zero of cable %d", "mm", 1e3, fill_encoder_slip, length_std},
     {MonitorEffect::kThermalGrowth, "thermal_growth", "cable length growth (thermal, ~ length)",
      false, 1, true, "every cable's length offset (or the thermal coefficient)", "mm/m", 1e3,
-     fill_thermal},
+     fill_thermal, nullptr},
     {MonitorEffect::kCreepGrowth, "creep_shared", "cable length growth (creep, ~ tension x length)",
-     false, 1, true, "the cables' elasticity (EA) and length offsets", "1/N", 1.0, fill_creep},
+     false, 1, true, "the cables' elasticity (EA) and length offsets", "1/N", 1.0, fill_creep,
+     nullptr},
+    {MonitorEffect::kElasticity, "hooke_per_cable", "cable %d elasticity changed (EA)", true, 1,
+     true, "the elasticity (EA) of cable %d", "1/MN", 1e6, fill_elasticity, compliance_std},
 };
 
 }  // namespace
@@ -75,6 +96,22 @@ int first_column(const EffectEntry& e, int cable, int m) {
     col += x.per_cable ? x.columns * m : x.columns;
   }
   return -1;
+}
+
+double normal_quantile(double p) {
+  double lo = 0.0, hi = 40.0;  // z with 0.5 erfc(z / sqrt 2) = p
+  for (int it = 0; it < 200; ++it) {
+    const double mid = 0.5 * (lo + hi);
+    (0.5 * std::erfc(mid / std::sqrt(2.0)) > p ? lo : hi) = mid;
+  }
+  return lo;
+}
+
+double chi2_quantile(double p, int k) {
+  const double z = normal_quantile(p);
+  const double a = 2.0 / (9.0 * k);
+  const double c = 1.0 - a + z * std::sqrt(a);
+  return k * c * c * c;
 }
 
 int total_columns(int m) {

@@ -33,6 +33,10 @@ struct EffectEntry {
   // Writes the columns of cable `cable` (or the shared columns, cable -1) into `s` from column
   // `col` on, rows: m lengths, then 6 equilibrium, then the lasers (zero).
   void (*fill)(const SampleGeometry& g, int cable, Monitor::Signature& s, int col);
+  // A parameter the calibration estimated, whose own error is a static offset the reference
+  // phase fits (MonitorOptions::reference_s): its prior standard deviation from the calibration's
+  // stated uncertainty (0: no prior). Null: not a calibrated parameter (a change over time only).
+  double (*calibration_std)(const MonitorNoise& noise);
 };
 
 std::span<const EffectEntry> effect_table();
@@ -41,6 +45,11 @@ std::span<const EffectEntry> effect_table();
 int first_column(const EffectEntry& e, int cable, int m);
 // Total columns for m cables.
 int total_columns(int m);
+
+// Upper quantile of chi^2 with k dof at tail probability p (Wilson-Hilferty).
+double chi2_quantile(double p, int k);
+// z with P(N(0, 1) > z) = p.
+double normal_quantile(double p);
 
 // The projected precision W = S^-1 - S^-1 B (B' S^-1 B)^-1 B' S^-1 of a linearisation (S its
 // covariance, B its nuisance columns): the information left once the pose error is profiled out.

@@ -222,6 +222,70 @@ TEST(Monitor, AStepAfterACleanPeriodIsFittedFromItsBlockWithItsFullSize) {
   EXPECT_EQ(a->effects.front().since_s, t0 + 1.0);
 }
 
+// A real calibration's own error: frame anchor 2 of the model 1.5 mm off the robot's (a pulley
+// the calibration placed imperfectly), from the start.
+Change calibration_error() {
+  Change c;
+  c.anchor = 1;
+  c.anchor_move = Eigen::Vector3d(1.5e-3, -1.0e-3, 0.5e-3);
+  return c;
+}
+
+TEST(Monitor, AReferencePhaseTakesTheCalibrationsOwnErrorAsItsBaseline) {
+  Robot robot(calibration_error());
+  Monitor plain = make(robot);
+  run(robot, plain, 6);
+  EXPECT_GT(plain.alarms(), 0);  // without it the calibration's error looks like a change
+  MonitorOptions o = options();
+  o.reference_s = 3.0 * static_cast<double>(poses().size()) + 0.5;  // three passes
+  o.noise.model_length = 2e-3;
+  Monitor monitor = must_create(robot, o);
+  EXPECT_FALSE(monitor.referenced());
+  const MonitorAssessment a = run(robot, monitor, 12);
+  EXPECT_TRUE(monitor.referenced());
+  EXPECT_TRUE(monitor.reference_consistent());
+  EXPECT_EQ(monitor.alarms(), 0);
+  EXPECT_FALSE(a.changed) << describe(a);
+  EXPECT_EQ(a.samples, 9 * static_cast<int>(poses().size()));  // the reference is not a sample
+}
+
+TEST(Monitor, AReferenceBeyondTheStatedUncertaintyJudgesTheModelAsItIs) {
+  Robot robot(calibration_error());  // 1.9 mm off, stated 0.1 mm
+  MonitorOptions o = options();
+  o.reference_s = 3.0 * static_cast<double>(poses().size()) + 0.5;
+  o.noise.model_length = 1e-4;
+  Monitor monitor = must_create(robot, o);
+  const MonitorAssessment a = run(robot, monitor, 6);
+  EXPECT_TRUE(a.referenced);
+  EXPECT_FALSE(a.reference_consistent);
+  EXPECT_GT(monitor.reference_mahalanobis(), 16.0);  // a column more than 4 sigmas off
+  EXPECT_GT(monitor.alarms(), 0);
+  ASSERT_TRUE(named(a, MonitorEffect::kFrameAnchor, 1));
+  EXPECT_NE(describe(a).find("beyond its stated uncertainty"), std::string::npos) << describe(a);
+}
+
+TEST(Monitor, AChangeAfterTheReferencePhaseIsNamedBesideTheCalibrationsError) {
+  Robot calibrated(calibration_error());
+  Change later = calibration_error();
+  later.slip = 5;
+  later.slip_m = 3e-4;
+  Robot slipped(later, 2);
+  MonitorOptions o = options();
+  o.reference_s = 3.0 * static_cast<double>(poses().size()) + 0.5;
+  o.noise.model_length = 2e-3;
+  Monitor monitor = must_create(calibrated, o);
+  run(calibrated, monitor, 3);
+  double t = 3.0 * static_cast<double>(poses().size());
+  for (int r = 0; r < 3; ++r) {
+    for (const Pose& p : poses()) monitor.add(slipped.read(p, t += 1.0));
+  }
+  EXPECT_GT(monitor.alarms(), 0);
+  Result<MonitorAssessment> a = monitor.assess();
+  ASSERT_TRUE(a.ok());
+  ASSERT_TRUE(named(*a, MonitorEffect::kEncoderSlip, 5));
+  EXPECT_NEAR(a->effects.front().value(0), 3e-4, 3e-5);
+}
+
 TEST(Monitor, AddAllocatesNothing) {
   Robot robot(Change{});
   Monitor monitor = make(robot);
@@ -232,6 +296,15 @@ TEST(Monitor, AddAllocatesNothing) {
   for (const MonitorSample& s : samples) monitor.add(s);
   EXPECT_EQ(count.allocations(), 0u);
   EXPECT_EQ(monitor.samples(), static_cast<int>(samples.size()) + 1);
+  // The reference phase and its fit, too.
+  MonitorOptions o = options();
+  o.reference_s = 0.5 * static_cast<double>(samples.size());
+  Monitor referenced = must_create(robot, o);
+  referenced.add(samples.front());
+  test::AllocationCounter count_reference;
+  for (const MonitorSample& s : samples) referenced.add(s);
+  EXPECT_EQ(count_reference.allocations(), 0u);
+  EXPECT_TRUE(referenced.referenced());
 }
 
 TEST(Monitor, SkipsIncompleteSamplesAndRefusesTooManyCables) {

@@ -46,6 +46,8 @@ json health_json(const Monitor& monitor, const MonitorAssessment& a, int version
   return {{"enabled", true},
           {"geometry_version", version},
           {"samples", a.samples},
+          {"referenced", a.referenced},
+          {"reference_consistent", a.reference_consistent},
           {"alarms", monitor.alarms()},
           {"first_alarm_s", std::isnan(first) ? json(nullptr) : json(first)},
           {"rows", rows},
@@ -73,6 +75,7 @@ Status Daemon::restart_monitor(const Geometry& g) {
   o.noise.sigma_laser = config_.measuring.noise_laser_m;
   o.noise.model_length = mc.model_length_m;
   o.noise.model_force = mc.model_force_n;
+  o.reference_s = mc.reference_s;
   o.false_alarms_per_hour = mc.false_alarms_per_hour;
   o.samples_per_hour = 3600.0 / mc.period_s;
   monitor_.reset();

@@ -21,7 +21,7 @@ class DaemonHealth : public testing::CellTest {
   void start(bool enabled) {
     testing::VirtualCell::Settings s;
     if (enabled) {
-      s.extra = "monitoring: {enabled: true, period_s: 0.2, assess_period_s: 2}\n";
+      s.extra = "monitoring: {enabled: true, period_s: 0.2, assess_period_s: 2, reference_s: 4}\n";
     }
     start_daemon(s);
     ASSERT_TRUE(holds_settled(10.0));
@@ -69,7 +69,11 @@ TEST_F(DaemonHealth, SamplesWhileHoldingAndSeesAWrongGeometryWithoutMovingTheRob
   EXPECT_EQ(h["enabled"], true);
   EXPECT_GT(h["samples"].get<int>(), 50) << h.dump(2);
   EXPECT_FALSE(h["rows"].empty());
-  // The nominal anchors are about 14.5 mm off: the detectors fire and an event says so.
+  // The nominal anchors are about 14.5 mm off, the stated model uncertainty 0.1 mm: the reference
+  // phase finds the model's own error beyond it and judges the model as it is.
+  EXPECT_TRUE(h["referenced"].get<bool>());
+  EXPECT_FALSE(h["reference_consistent"].get<bool>());
+  // The detectors fire and an event says so.
   EXPECT_GT(h["alarms"].get<int>(), 0) << h["text"].get<std::string>();
   EXPECT_EQ(cell_->count_events("health", "alarm", ""), 1);  // once per geometry
   // The assessment names a moved pulley (the nominal anchors are all off; one candidate at a

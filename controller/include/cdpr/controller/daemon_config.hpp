@@ -175,6 +175,10 @@ struct MonitoringSettings {
   // is identification.noise_*.
   double model_length_m = 1e-4;
   double model_force_n = 2.0;
+  // s of samples after a geometry is activated that fit its own error (the prior: the model
+  // uncertainty above) before the detectors judge changes against it (MonitorOptions::
+  // reference_s; it should see the application's poses); 0: the model is taken as exact.
+  double reference_s = 3600.0;
 };
 
 struct DaemonConfig {

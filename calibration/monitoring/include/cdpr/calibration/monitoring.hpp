@@ -44,7 +44,7 @@ namespace cdpr {
 inline constexpr int kMonitorMaxCables = 12;
 inline constexpr int kMonitorMaxLasers = 2;
 inline constexpr int kMonitorMaxRows = kMonitorMaxCables + 6 + kMonitorMaxLasers;
-inline constexpr int kMonitorMaxColumns = 5 * kMonitorMaxCables + 2;
+inline constexpr int kMonitorMaxColumns = 6 * kMonitorMaxCables + 2;
 
 // What the RT cycle samples at a hold or during a (slow, quasi-static) move. Plain data.
 struct MonitorSample {
@@ -68,11 +68,12 @@ struct MonitorSample {
 
 // The noise and model uncertainty the last calibration reported, one standard deviation.
 struct MonitorNoise {
-  double sigma_length = 1.0e-5;  // m, an encoder length reading
-  double sigma_force = 1.0;      // N, a tension reading
-  double sigma_laser = 1.0e-3;   // m
-  double model_length = 0.0;     // m, uncertainty of a model length (e.g. the anchors' CRB)
-  double model_force = 0.0;      // N, uncertainty of the equilibrium (e.g. of the weight)
+  double sigma_length = 1.0e-5;   // m, an encoder length reading
+  double sigma_force = 1.0;       // N, a tension reading
+  double sigma_laser = 1.0e-3;    // m
+  double model_length = 0.0;      // m, uncertainty of a model length (e.g. the anchors' CRB)
+  double model_force = 0.0;       // N, uncertainty of the equilibrium (e.g. of the weight)
+  double model_compliance = 0.0;  // 1/N, uncertainty of a cable's 1/EA (0: not stated)
 };
 // From the calibration's sensor noise and its predicted accuracy (anchor_rms_std_m as the length
 // uncertainty; `accuracy` may be null).
@@ -91,6 +92,19 @@ struct MonitorOptions {
   // block boundary, constant after" (a change that started in the window), each boundary tried.
   int block_samples = 60;
   int history_blocks = 60;
+  // Reference phase: a real calibration is not exact, and its error is a static offset of the
+  // residuals the detectors would accumulate as a change. The samples of the first reference_s
+  // seconds raise no alarm; they fit the calibrated parameters' own error (frame anchors, encoder
+  // zeros, force offsets: the effect table's calibrated entries, with the noise's model_length and
+  // model_force as their prior standard deviations), and every later residual is judged against
+  // the model with that offset: the monitor then tells changes since the reference, not the
+  // calibration's error. A change during the reference phase is not seen. 0: no reference phase
+  // (the model is taken as exact). Where a fitted column is beyond the stated uncertainty (its
+  // z, from the prior less the posterior variance, past a Bonferroni gate at gate_alpha over the
+  // stated columns), the model does not hold: no offset is applied,
+  // and the detectors judge the calibrated model as it is. Columns whose stated uncertainty is 0
+  // are fitted without a prior (and without that check).
+  double reference_s = 0.0;
   // Acceptance: the predicted RMS position error over `box` the calibration was accepted with.
   double acceptance_position_rms_m = 0.0;
   AccuracyBox box;
@@ -113,6 +127,7 @@ enum class MonitorEffect {
   kEncoderSlip,    // encoder slip on cable i (length, m)
   kThermalGrowth,  // cable length growth ~ (routing + l) (thermal; relative)
   kCreepGrowth,    // cable length growth ~ F (routing + L) (creep; 1/N)
+  kElasticity,     // cable i stretches c F (routing + L) more than the model (1/EA change; 1/N)
 };
 
 struct EffectEstimate {
@@ -148,6 +163,10 @@ struct MonitorRow {
 
 struct MonitorAssessment {
   int samples = 0;
+  // The reference phase (MonitorOptions::reference_s): over, and whether the calibration's own
+  // error it fitted was within the stated uncertainty (else the model is judged as it is).
+  bool referenced = true;
+  bool reference_consistent = true;
   std::vector<MonitorRow> rows;
   std::vector<EffectEstimate> effects;  // every candidate, best (largest BIC drop) first
   bool changed = false;                 // the best candidate is significant
@@ -165,8 +184,14 @@ class Monitor {
   // tension, or at a degenerate pose, is skipped (false). Allocates nothing.
   bool add(const MonitorSample& sample);
 
-  // Forgets the window and the detectors (after a new calibration is accepted).
+  // Forgets the window, the detectors and the reference (after a new calibration is accepted).
   void reset();
+  // The reference phase is over and its offset applies (always true when reference_s is 0).
+  bool referenced() const { return referenced_; }
+  // The reference's fitted error was within the calibration's stated uncertainty (true before
+  // the reference ends); the largest squared z of its fitted columns.
+  bool reference_consistent() const { return reference_consistent_; }
+  double reference_mahalanobis() const { return reference_mahalanobis_; }
 
   int samples() const { return samples_; }
   int rows() const { return n_; }
@@ -216,6 +241,7 @@ class Monitor {
 
  private:
   Monitor(const CalibratedModel& model, const MonitorOptions& options, double threshold);
+  void fit_reference();
 
   CalibratedModel model_;
   MonitorOptions options_;
@@ -233,9 +259,15 @@ class Monitor {
   Gram contribution_;              // this sample's S' W S
   Gram gram_;                      // sum of weights x S' W S
   ColumnVector moment_;            // sum of weights x S' W r
-  double chi2_ = 0.0;              // sum of weights x r' W r
-  double weight_ = 0.0;            // sum of weights
-  RowVector mean_sigma_;           // window sum of weights x normalised projected residual
+  Gram reference_gram_;            // the reference phase's S' W S (unweighted)
+  ColumnVector reference_moment_;  // and S' W r
+  ColumnVector reference_offset_;  // the calibrated parameters' error the reference fitted
+  bool referenced_ = true;
+  bool reference_consistent_ = true;
+  double reference_mahalanobis_ = 0.0;
+  double chi2_ = 0.0;     // sum of weights x r' W r
+  double weight_ = 0.0;   // sum of weights
+  RowVector mean_sigma_;  // window sum of weights x normalised projected residual
   std::array<Cusum, kMonitorMaxRows> detectors_{};
   std::array<int, kMonitorMaxRows> row_alarms_{};
   std::vector<std::string> names_;
