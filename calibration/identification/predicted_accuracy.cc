@@ -30,6 +30,8 @@ namespace {
 
 Eigen::MatrixXd normalized_pinv(const Eigen::MatrixXd& S, double tol, int* rank) {
   const int P = static_cast<int>(S.rows());
+  if (rank) *rank = 0;
+  if (P == 0) return Eigen::MatrixXd(0, 0);  // nothing estimated: no parameter to be uncertain
   Eigen::VectorXd d(P);
   for (int q = 0; q < P; ++q) d(q) = S(q, q) > 0 ? std::sqrt(S(q, q)) : 1.0;
   const Eigen::MatrixXd N = d.cwiseInverse().asDiagonal() * S * d.cwiseInverse().asDiagonal();

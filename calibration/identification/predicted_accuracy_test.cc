@@ -43,6 +43,25 @@ TEST(PredictedAccuracy, ScalesWithTheNoiseAndIsPositive) {
   EXPECT_NEAR(b->position_rms_m / a->position_rms_m, 2.0, 0.02);
 }
 
+// With nothing estimated (cdpr-fit's --estimate none) there is no parameter to be uncertain: the
+// bound is zero, not a crash (an empty information matrix aborted in its eigen-decomposition:
+// fit_cli_fuzz, `diagnose --estimate none --html`).
+TEST(PredictedAccuracy, NothingEstimatedPredictsNoParameterUncertainty) {
+  scenario::Scenario s = scenario::mini_scenario();
+  const std::vector<Pose> poses = scenario::random_feasible_poses(s.nominal.robot, s.box, 15, 11);
+  PredictedAccuracyOptions o;
+  o.box.points_per_axis = 3;
+  o.identification.estimate_frame_anchors = false;
+  o.identification.estimate_length_offsets = false;
+  o.identification.estimate_laser_plane = false;
+  auto a = predict_accuracy(s.nominal, poses, SensorNoise{}, o);
+  ASSERT_TRUE(a.ok()) << a.status().to_string();
+  EXPECT_TRUE(a->names.empty());
+  EXPECT_EQ(a->rank, 0);
+  EXPECT_EQ(a->anchor_rms_std_m, 0.0);
+  EXPECT_EQ(a->position_rms_m, 0.0);
+}
+
 // Issue 18: the prediction is the Cramer-Rao bound of the channels the robot records, the same
 // bound the identifiability analysis works from for those channels and poses.
 TEST(PredictedAccuracy, EqualsTheBoundOfTheChannelsRecorded) {

@@ -343,14 +343,14 @@ TEST_F(CdprctlTest, PermissionDeniedOnTheSocketExitsFourAndNamesTheGroup) {
 }
 
 TEST_F(CdprctlTest, NoAnswerBeforeTheTimeoutExitsSeven) {
-  status_delay_ = 1500ms;  // the scripted daemon is stuck
+  status_delay_ = 3000ms;  // the scripted daemon is stuck (far longer than --timeout)
   start_daemon();
   const auto t0 = std::chrono::steady_clock::now();
   const Outcome o = ctl({"--timeout", "0.2", "status"});
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_EQ(o.code, kExitTimeout);
   EXPECT_NE(o.err.find("no answer from cdprd before the timeout"), std::string::npos) << o.err;
-  EXPECT_LT(s, 1.2);
+  EXPECT_LT(s, 2.5);  // cut at the timeout, not at the answer (a loaded host may add a second)
 }
 
 TEST_F(CdprctlTest, UsageErrorsExitTwoAndHelpExitsZero) {

@@ -107,11 +107,13 @@ def scenario():
     check(h["activations"][-1]["version"] == 1, "the history ends with the rollback")
 
 
+# 15 designed poses, not cdprd's 25: the checks need an accepted calibration within 1 mm, and 15
+# give 0.27 mm RMS (25 gave 0.11) with the same effect named, in 70 s of measuring instead of 121.
 cell.write_configs(
     "motion: {max_linear_velocity: 0.2, max_linear_acceleration: 0.6, "
     "max_linear_jerk: 6, max_angular_velocity: 0.6, max_angular_acceleration: 2, "
     "max_angular_jerk: 20}\n"
-    "measuring: {poses: 25, laser_samples: 10, average_cycles: 10, "
+    "measuring: {poses: 15, laser_samples: 10, average_cycles: 10, "
     "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4}\n"
     "identification: {bootstrap: 30}\n")
 # Eight poses from the designed set for the quick calibration that gets rejected.

@@ -16,9 +16,12 @@ Every run must end by itself (no signal, within --per-run seconds) with a docume
 be one JSON document; a config that calibrate or diagnose wrote must load again (a fixed-model
 calibrate on it names no error in it). The run stops after --runs runs or --seconds, whichever
 comes first, and fails when fewer than --min-runs ran. The random generator is seeded (--seed):
-the same seed gives the same runs.
+the same seed gives the same runs. With --pick N each mutated run is the one of N drawn that adds
+the most option values not run yet, so that a short run passes every value of every option
+(--cover fails the run when one was left out); --pick 1, the default, is the plain random sequence.
 
-  fuzz_cli.py --fit build/ci/tools/cdpr-fit --source . [--seconds 150] [--runs 4000]
+  fuzz_cli.py --fit build/ci/tools/cdpr-fit --source . --runs 300 --pick 8 --cover   (the test)
+  fuzz_cli.py --fit build/ci/tools/cdpr-fit --source . --seconds 3000 --runs 4000    (campaign)
 """
 import argparse
 import json
@@ -159,33 +162,109 @@ def issue_inputs(seeds):
     return fixed
 
 
+# The options each command is run with: (option, commands, probability, values); a value-less
+# option is passed with its only value. --estimate and the --noise-* overrides are drawn apart.
+OPTIONS = [("--gauge", ("calibrate", "diagnose"), 0.4, ["home", "start", "laser-plane", "both",
+                                                          "none"]),
+           ("--home-pose", ("calibrate", "diagnose"), 0.15, ["0", "1", "3", "-1", "999"]),
+           ("--estimate", ("calibrate", "diagnose"), 0.4, ESTIMATE_WORDS + ["none"]),
+           ("--validate", ("calibrate", "diagnose"), 0.2, ["held.csv"]),
+           ("--loss", ("calibrate",), 0.15, ["huber", "cauchy", "none"]),
+           ("--method", ("calibrate",), 0.1, ["paper"]),
+           ("--max-iterations", ("calibrate",), 0.15, ["1", "3"]),
+           ("--fit-alpha", ("calibrate",), 0.1, ["0", "1", "0.5"])]
+NOISE_COMMANDS = ("calibrate", "diagnose", "validate")
+NOISE_VALUES = ["1e-9", "1e-3", "0.5", "1e300"]
+# The file a run mutates (None: none) and the commands run on it.
+TARGETS = ["rec", "rec", "config", "poses", "held", None]
+COMMANDS_ON = {"rec": ["calibrate", "calibrate", "diagnose"], "poses": ["simulate"],
+               "held": ["validate", "calibrate"],
+               "config": ["calibrate", "diagnose", "simulate", "validate"],
+               None: ["calibrate", "calibrate", "diagnose", "validate"]}
+
+
 def options(command, rng):
     """A random combination of the command's options (none, some or many)."""
     o = []
-    if command in ("calibrate", "diagnose"):
-        if rng.random() < 0.4:
-            o += ["--gauge", rng.choice(["home", "start", "laser-plane", "both", "none"])]
-        if rng.random() < 0.15:
-            o += ["--home-pose", rng.choice(["0", "1", "3", "-1", "999"])]
-        if rng.random() < 0.4:
+    for name, commands, p, values in OPTIONS:
+        if command not in commands or rng.random() >= p:
+            continue
+        if name == "--estimate":
             words = ["none"] if rng.random() < 0.15 else rng.sample(ESTIMATE_WORDS,
                                                                     rng.randint(1, 4))
-            o += ["--estimate", ",".join(words)]
-        if rng.random() < 0.2:
-            o += ["--validate", "held.csv"]
-    if command == "calibrate":
-        if rng.random() < 0.15:
-            o += ["--loss", rng.choice(["huber", "cauchy", "none"])]
-        if rng.random() < 0.1:
-            o += ["--method", "paper"]
-        if rng.random() < 0.15:
-            o += ["--max-iterations", rng.choice(["1", "3"])]
-        if rng.random() < 0.1:
-            o += ["--fit-alpha", rng.choice(["0", "1", "0.5"])]
-    if command in ("calibrate", "diagnose", "validate") and rng.random() < 0.3:
+            o += [name, ",".join(words)]
+        else:
+            o += [name, rng.choice(values) if len(values) > 1 else values[0]]
+    if command in NOISE_COMMANDS and rng.random() < 0.3:
         for noise in rng.sample(NOISES, rng.randint(1, 3)):
-            o += ["--noise-" + noise, rng.choice(["1e-9", "1e-3", "0.5", "1e300"])]
+            o += ["--noise-" + noise, rng.choice(NOISE_VALUES)]
     return o
+
+
+def mutated_run(seeds, rng):
+    """One seeded mutation: (robot, target, data, command, json_flag, report, opts)."""
+    robot = rng.choice(list(ROBOTS))
+    target = rng.choice(TARGETS)
+    data = mutate(seeds[robot][target], rng) if target else None
+    # A command is drawn for every target, the one of the target taken (the same draws, so the
+    # same runs for a seed, as the sequence this script has always made).
+    command = {t: rng.choice(c) if len(c) > 1 else c[0] for t, c in COMMANDS_ON.items()}[target]
+    opts = options(command, rng)
+    if target == "held" and command == "calibrate" and "held.csv" not in opts:
+        opts += ["--validate", "held.csv"]
+    return robot, target, data, command, rng.random() < 0.5, rng.random() < 0.5, opts
+
+
+def features(run_):
+    """What one run exercises: the command on its robot, the file it mutates, --json and the
+    reports, and each option value it passes (each --estimate word on its own)."""
+    robot, target, _, command, json_flag, report, opts = run_
+    f = {(command, robot), (command, "mutates", target), (command, "json", json_flag),
+         (command, "reports", report)}
+    for i in range(0, len(opts), 2):
+        for v in opts[i + 1].split(",") if opts[i] == "--estimate" else [opts[i + 1]]:
+            f.add((command, opts[i], v))
+    return f
+
+
+def possible_features():
+    """Every feature a mutated run can have (from the tables options() and mutated_run() draw
+    from)."""
+    f = set()
+    for target, commands in COMMANDS_ON.items():
+        for command in commands:
+            f |= {(command, r) for r in ROBOTS} | {(command, "mutates", target)}
+            f |= {(command, k, b) for k in ("json", "reports") for b in (False, True)}
+    for name, commands, _, values in OPTIONS:
+        f |= {(command, name, v) for command in commands for v in values}
+    f |= {(command, "--noise-" + n, v) for command in NOISE_COMMANDS for n in NOISES
+          for v in NOISE_VALUES}
+    return f
+
+
+def planned_runs(seeds, fixed, rng, pick=1):
+    """The runs in order, each (robot, target, data, command, json_flag, report, opts): the issues'
+    inputs (each through calibrate, diagnose and simulate), then seeded mutations. With pick > 1
+    each mutated run is the one of `pick` drawn that adds the most features not yet run (ties: the
+    first drawn), so that a short run still exercises every option value; pick 1 is a plain random
+    sequence. They depend on the seed and the seed files only, not on what the runs did."""
+    for robot, target, data in fixed:
+        for command in ("calibrate", "diagnose", "simulate"):
+            yield robot, target, data, command, rng.random() < 0.5, rng.random() < 0.5, []
+    missing = possible_features()
+    while True:
+        drawn = [mutated_run(seeds, rng) for _ in range(pick)]
+        best = max(drawn, key=lambda r: len(features(r) & missing))
+        missing -= features(best)
+        yield best
+
+
+def missing_features(plan, runs):
+    """The features that no run of the plan's first `runs` has."""
+    missing = possible_features()
+    for _ in range(runs):
+        missing -= features(next(plan))
+    return missing
 
 
 def main():
@@ -198,6 +277,10 @@ def main():
     ap.add_argument("--per-run", type=float, default=120.0)
     ap.add_argument("--seed", type=int, default=16)
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--pick", type=int, default=1,
+                    help="each mutated run is the best of this many drawn for new option values")
+    ap.add_argument("--cover", action="store_true",
+                    help="fail unless the runs made exercised every option value of every command")
     ap.add_argument("--keep", help="directory to copy failing inputs to")
     a = ap.parse_args()
     a.fit = os.path.abspath(a.fit)
@@ -214,7 +297,6 @@ def main():
                             ("config", "config.yaml"), ("held", "held.csv"))}
             fixed += [(name, t, data) for t, data in issue_inputs(seeds[name])]
 
-        rng = random.Random(a.seed)
         deadline = time.monotonic() + a.seconds
 
         def one(n, robot, target, data, command, json_flag, report, opts):
@@ -277,29 +359,14 @@ def main():
 
         n = 0
         outcomes = []
+        plan = planned_runs(seeds, fixed, random.Random(a.seed), a.pick)
+        ran_features = {}
         with ThreadPoolExecutor(max_workers=a.jobs) as pool:
             pending = []
             while n < a.runs and time.monotonic() < deadline:
-                opts = []
-                if n < len(fixed) * 3:
-                    robot, target, data = fixed[n // 3]
-                    command = ["calibrate", "diagnose", "simulate"][n % 3]
-                else:
-                    robot = rng.choice(list(ROBOTS))
-                    target = rng.choice(["rec", "rec", "config", "poses", "held", None])
-                    data = mutate(seeds[robot][target], rng) if target else None
-                    command = {"rec": rng.choice(["calibrate", "calibrate", "diagnose"]),
-                               "poses": "simulate",
-                               "held": rng.choice(["validate", "calibrate"]),
-                               "config": rng.choice(["calibrate", "diagnose", "simulate",
-                                                     "validate"]),
-                               None: rng.choice(["calibrate", "calibrate", "diagnose",
-                                                 "validate"])}[target]
-                    opts = options(command, rng)
-                    if target == "held" and command == "calibrate" and "held.csv" not in opts:
-                        opts += ["--validate", "held.csv"]
-                pending.append(pool.submit(one, n, robot, target, data, command,
-                                           rng.random() < 0.5, rng.random() < 0.5, opts))
+                planned = next(plan)
+                ran_features[n] = features(planned)
+                pending.append(pool.submit(one, n, *planned))
                 n += 1
                 # Keep the workers busy: wait for any run (a slow one does not hold the others).
                 while len(pending) >= 2 * a.jobs:
@@ -322,6 +389,14 @@ def main():
                   counts.items(), key=lambda x: (x[0][0], str(x[0][1]))))))
         if failures:
             print("fuzz_cli: FAILED: %d runs ended badly" % len(failures))
+            return 1
+        missing = possible_features()
+        for num, _, code, _, _, _, _ in outcomes:
+            if code != "cut":
+                missing -= ran_features[num]
+        if a.cover and missing:
+            print("fuzz_cli: FAILED: the runs made did not exercise %s (more --runs or --pick)" %
+                  ", ".join(" ".join(str(x) for x in m) for m in sorted(missing, key=str)))
             return 1
         if n < a.min_runs:
             print("fuzz_cli: FAILED: only %d runs (at least %d wanted): the machine is too slow "
