@@ -154,6 +154,16 @@ bool RtController::solve(const Pose& pose) noexcept {
   // With tension control the plan (its target) keeps the band's margin and the guard inside it
   // where the pose allows it, else the margin (the path check asks as much); elsewhere, and
   // without tension control, the planner's band.
+  if (solved_.valid && solved_.geometry == geometry_ && solved_.reference == ref_tension_ &&
+      solved_.pose.position == pose.position && solved_.pose.rpy == pose.rpy &&
+      plan_reference_ == command_data_.plan.reference) {
+    for (int i = 0; i < m_; ++i) {
+      desired_[static_cast<std::size_t>(i)] =
+          command_data_.cable.counts(i) + offsets_[static_cast<std::size_t>(i)];
+    }
+    return true;
+  }
+  solved_.valid = false;
   const TensionControlOptions& tc = tension_.options();
   const std::array<double, 3> margins{tc.margin + tc.guard, tc.margin, 0.0};
   const std::size_t first = tension_.enabled() ? 0 : 2;
@@ -170,6 +180,7 @@ bool RtController::solve(const Pose& pose) noexcept {
     desired_[k] = command_data_.cable.counts(i) + offsets_[k];
     snap_.planned[k] = command_data_.plan.tensions(i);
   }
+  solved_ = Solved{true, pose, ref_tension_, geometry_};
   return true;
 }
 

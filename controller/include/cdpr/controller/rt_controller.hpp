@@ -404,6 +404,14 @@ class RtController {
   // ref_tension_) at a bounded rate, so the plan and its elongation compensation never step;
   // NaN: none yet (taken as it is at the next solve).
   double plan_reference_ = std::numeric_limits<double>::quiet_NaN();
+  // What the last solve was made from: the same pose, pretension and geometry with the plan's
+  // reference settled give the same plan and counts (a hold solves once, not every cycle).
+  struct Solved {
+    bool valid = false;
+    Pose pose;
+    double reference = 0.0;
+    const Geometry* geometry = nullptr;
+  } solved_;
   Pose hold_pose_;
   Pose pose_;
   canopen::Timestamp move_start_{0};
