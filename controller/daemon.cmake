@@ -25,7 +25,8 @@ add_library(cdpr_daemon STATIC
   ${_d}/src/daemon_commands.cc
   ${_d}/src/log_coalescer.cc
   ${_d}/src/setpoint_stream.cc
-  ${_d}/src/daemon_motion.cc)
+  ${_d}/src/daemon_motion.cc
+  ${_d}/src/daemon_health.cc)
 target_include_directories(cdpr_daemon PUBLIC ${_d}/include)
 target_link_libraries(cdpr_daemon
   PUBLIC cdpr_io cdpr_control cdpr_calibration_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording

@@ -7,7 +7,7 @@ cd "$(dirname "$0")/.."
 filter=${1:-}
 bash scripts/install-deps.sh
 cmake --preset release >/dev/null
-programs=(model_bench statics_bench bench_canopen_cycle bench_sim identification_bench mismatch_bench daemon_bench)
+programs=(model_bench statics_bench bench_canopen_cycle bench_sim identification_bench mismatch_bench monitoring_bench daemon_bench)
 targets=()
 for p in "${programs[@]}"; do [[ -z "$filter" || "$p" == *"$filter"* ]] && targets+=("$p"); done
 [ ${#targets[@]} -gt 0 ] || { echo "bench: no benchmark matches '$filter'" >&2; exit 2; }

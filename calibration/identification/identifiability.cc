@@ -293,8 +293,7 @@ Result<IdentifiabilityReport> analyze_identifiability(const CalibratedModel& mod
                                                       const IdentificationOptions& identification,
                                                       const IdentifiabilityOptions& options) {
   std::vector<Pose> poses;
-  for (const PoseMeasurement& pm : set.poses)
-    poses.push_back(pm.reference ? *pm.reference : pm.commanded);
+  for (const PoseMeasurement& pm : set.poses) poses.push_back(start_of(pm));
   // Only the total information is analysed: no per-pose matrices (a gigabyte on 100,000 poses).
   auto gi = ident_detail::total_geometry_information(model, set, poses, identification);
   if (!gi) return gi.status();

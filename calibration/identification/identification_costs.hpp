@@ -1,12 +1,14 @@
-// The cable constants, the tension and elongation helpers and the equilibrium residual of the
-// identification problem (not installed). identification.cc builds the problem with them;
-// equilibrium_cost.cc differentiates the equilibrium residual.
+// The residuals of the identification problem (not installed): the cable constants, the tension
+// and elongation helpers, the equilibrium residual and the autodiff cost functors of the other
+// channels (length, laser, reference, swivel, inclinometer, IMU yaw). problem_build.cc builds the
+// problem with them; equilibrium_cost.cc differentiates the equilibrium residual.
 #pragma once
 
 #include <ceres/ceres.h>
 
 #include <Eigen/Dense>
 #include <cmath>
+#include <limits>
 #include <span>
 #include <vector>
 
@@ -271,5 +273,170 @@ struct EquilibriumCost {
 // Suspended robots with m < 6 cables are differentiated over all blocks.
 ceres::CostFunction* equilibrium_cost_function(EquilibriumCost* f,
                                                const std::vector<int>& block_sizes);
+
+// Unstretched length U = L_k - dL at pose; false when the geometry is degenerate. With
+// `compliance` non-null also d(dL)/dF there (m/N; 0 without a tension reading).
+template <typename T>
+bool unstretched_length(const CableConstants& k, const T* a, const T* b, const T* pose,
+                        double tension_reading, const T& e, const T& g, const T& c, T& U,
+                        Vec3<T>* unit = nullptr, Vec3<T>* arm = nullptr, T* force = nullptr,
+                        T* compliance = nullptr) {
+  Vec3<T> r;
+  Mat3<T> R;
+  pose_from_block(pose, r, R);
+  const Vec3<T> rb = R * Vec3<T>(b[0], b[1], b[2]);
+  const Vec3<T> P = r + rb;
+  const CableGeometry<T> geom =
+      cable_geometry<T>(Vec3<T>(a[0], a[1], a[2]), k.pulley_frame, T(k.pulley_radius), P);
+  if (!geom.valid) return false;
+  U = geom.length;
+  if (compliance) *compliance = T(0);
+  if (!std::isnan(tension_reading)) {
+    U -= elongation_at<T>(k, geom.length, tension_reading, e, g, c, force, compliance);
+  } else if (force) {
+    *force = T(0);
+  }
+  if (unit) *unit = geom.unit;
+  if (arm) *arm = rb;
+  return true;
+}
+
+// Cable length residual. Blocks: a(3), b(3), pose(6), o(1), s(1), e(1), g(1), c(1).
+// Its sigma combines the encoder noise and the force noise through the cable compliance at the
+// CURRENT geometry and tension, sqrt(sigma_length^2 + (d(dL)/dF sigma_force)^2), so that, like the
+// equilibrium residual, the objective does not depend on where the solver started.
+struct LengthCost {
+  const CableConstants* k = nullptr;  // Built::constants (shared: 100,000 poses, 8 cables each)
+  double reading = 0.0;
+  double tension = std::numeric_limits<double>::quiet_NaN();
+  double sigma_length = 1.0;
+  double sigma_force = 0.0;       // 0: the force noise is not propagated
+  double extra_compliance = 0.0;  // PoseMeasurement::extra_compliance, m/N
+  template <typename T>
+  bool operator()(const T* a, const T* b, const T* pose, const T* o, const T* s, const T* e,
+                  const T* g, const T* c, T* residual) const {
+    T U;
+    T compliance;
+    if (!unstretched_length<T>(*k, a, b, pose, tension, e[0], g[0], c[0], U, nullptr, nullptr,
+                               nullptr, &compliance)) {
+      return false;
+    }
+    const T force_part = (compliance + T(extra_compliance)) * T(sigma_force);
+    const T sigma = sqrt(T(sigma_length * sigma_length) + force_part * force_part);
+    residual[0] = (U - ((T(1) + s[0]) * T(reading) + o[0])) / sigma;
+    return true;
+  }
+};
+
+// Laser residual. Blocks: pose(6), origin(3), direction angles(2), normal angles(2), c(1).
+struct LaserCost {
+  Eigen::Vector3d d0, de1, de2;  // platform frame
+  Eigen::Vector3d n0, ne1, ne2;  // world
+  double reading = 0.0;
+  double sigma = 1.0;
+  template <typename T>
+  bool operator()(const T* pose, const T* origin, const T* dir, const T* normal, const T* c,
+                  T* residual) const {
+    Vec3<T> r;
+    Mat3<T> R;
+    pose_from_block(pose, r, R);
+    Vec3<T> d = d0.cast<T>() + de1.cast<T>() * dir[0] + de2.cast<T>() * dir[1];
+    d = d / sqrt(d.squaredNorm());
+    Vec3<T> n = n0.cast<T>() + ne1.cast<T>() * normal[0] + ne2.cast<T>() * normal[1];
+    n = n / sqrt(n.squaredNorm());
+    const Vec3<T> p = r + R * Vec3<T>(origin[0], origin[1], origin[2]);
+    const Vec3<T> dw = R * d;
+    const T den = n.dot(dw);
+    if (!(abs(den) > T(1e-9))) return false;
+    const T t = (c[0] - n.dot(p)) / den;
+    residual[0] = (t - T(reading)) / T(sigma);
+    return true;
+  }
+};
+
+struct ReferenceCost {
+  Eigen::Matrix<double, 6, 1> reference;
+  Eigen::Matrix<double, 6, 1> inv_sigma;
+  template <typename T>
+  bool operator()(const T* pose, T* residual) const {
+    for (int q = 0; q < 6; ++q) residual[q] = (pose[q] - T(reference(q))) * T(inv_sigma(q));
+    return true;
+  }
+};
+
+// Angle difference wrapped to (-pi, pi]; the derivative is exactly 1 (atan2(sin, cos)).
+template <typename T>
+T wrap_angle(const T& x) {
+  using std::atan2;
+  using std::cos;
+  using std::sin;
+  return atan2(sin(x), cos(x));
+}
+
+// Swivel-angle residual (issue 18). Blocks: a(3), b(3), pose(6), zero(1).
+//   r = wrap(direction (gamma - zero) - reading) / sigma,  gamma = atan2(v_y, v_x),
+//   v = Rp^T (r + R b - a)   (the swivel angle of kinematics.hpp, pulley frame Rp of the model)
+struct SwivelCost {
+  Eigen::Matrix3d pulley_frame = Eigen::Matrix3d::Identity();
+  int direction = 1;
+  double reading = 0.0;
+  double sigma = 1.0;
+  template <typename T>
+  bool operator()(const T* a, const T* b, const T* pose, const T* zero, T* residual) const {
+    Vec3<T> r;
+    Mat3<T> R;
+    pose_from_block(pose, r, R);
+    const Vec3<T> P = r + R * Vec3<T>(b[0], b[1], b[2]);
+    const Vec3<T> v = pulley_frame.transpose().cast<T>() * (P - Vec3<T>(a[0], a[1], a[2]));
+    // On the swivel axis the angle is undefined.
+    if (!(v(0) * v(0) + v(1) * v(1) > T(1e-18))) return false;
+    const T gamma = atan2(v(1), v(0));
+    residual[0] =
+        wrap_angle<T>(T(static_cast<double>(direction)) * (gamma - zero[0]) - T(reading)) /
+        T(sigma);
+    return true;
+  }
+};
+
+// Orientation of the inclinometer / IMU frame: R(pose) R_m0 rotation_from_rpy(d0, d1, 0).
+template <typename T>
+Mat3<T> sensor_rotation(const T* pose, const Eigen::Matrix3d& mount0, const T* d) {
+  return rotation_from_rpy<T>(pose[3], pose[4], pose[5]) * mount0.cast<T>() *
+         rotation_from_rpy<T>(d[0], d[1], T(0));
+}
+
+// Inclinometer residuals (issue 18), 2 per pose. Blocks: pose(6), mounting correction(2).
+struct InclinometerCost {
+  Eigen::Matrix3d mount0 = Eigen::Matrix3d::Identity();
+  Eigen::Vector2d reading = Eigen::Vector2d::Zero();
+  double sigma = 1.0;
+  template <typename T>
+  bool operator()(const T* pose, const T* mount, T* residual) const {
+    using std::sqrt;
+    const Mat3<T> Rs = sensor_rotation<T>(pose, mount0, mount);
+    const T c = sqrt(Rs(2, 1) * Rs(2, 1) + Rs(2, 2) * Rs(2, 2));
+    if (!(c > T(1e-9))) return false;  // sensor x axis vertical: roll undefined
+    const T roll = atan2(Rs(2, 1), Rs(2, 2));
+    const T pitch = atan2(-Rs(2, 0), c);
+    residual[0] = wrap_angle<T>(roll - T(reading(0))) / T(sigma);
+    residual[1] = wrap_angle<T>(pitch - T(reading(1))) / T(sigma);
+    return true;
+  }
+};
+
+// IMU heading residual (issue 18). Blocks: pose(6), mounting correction(2), yaw zero(1).
+struct ImuYawCost {
+  Eigen::Matrix3d mount0 = Eigen::Matrix3d::Identity();
+  double reading = 0.0;
+  double sigma = 1.0;
+  template <typename T>
+  bool operator()(const T* pose, const T* mount, const T* yaw_zero, T* residual) const {
+    const Mat3<T> Rs = sensor_rotation<T>(pose, mount0, mount);
+    if (!(Rs(0, 0) * Rs(0, 0) + Rs(1, 0) * Rs(1, 0) > T(1e-18))) return false;
+    const T yaw = atan2(Rs(1, 0), Rs(0, 0));
+    residual[0] = wrap_angle<T>(yaw - yaw_zero[0] - T(reading)) / T(sigma);
+    return true;
+  }
+};
 
 }  // namespace cdpr::ident_detail

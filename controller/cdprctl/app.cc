@@ -603,6 +603,9 @@ int run(int argc, const char* const* argv, std::ostream& out, std::ostream& err,
   CliValues values;
   add_simple(app, inv, "status", "status",
              "state, fault, geometry version, calibration progress, RT loop figures");
+  add_simple(app, inv, "health", "health",
+             "in-service monitoring: what changed since the calibration, which effect it looks "
+             "like, the predicted position error and the re-identification it proposes");
   add_calibration_commands(app, inv, values);
   add_geometry_commands(app, inv, values);
   add_report_and_motion_commands(app, inv, values);

@@ -195,6 +195,7 @@ TEST_F(CdprctlTest, EverySubcommandSendsItsRequest) {
       {{"run", program_file}, "run", {{"program", program}, {"source", program_file}}},
       {{"stream", "start"}, "stream", {{"action", "start"}}},
       {{"stream", "stop"}, "stream", {{"action", "stop"}}},
+      {{"health"}, "health", json::object()},
       {{"status", "--json"}, "status", json::object()},  // global options after the command
   };
   for (const Case& c : cases) {

@@ -57,6 +57,7 @@ constexpr std::array<CommandSpec, kCommandCount> kCommands{{
     {"home", true, kHomeArgs, Command::kHome},
     {"run", true, kRunArgs, Command::kRun},
     {"stream", true, kStreamArgs, Command::kStream},
+    {"health", false, {}, Command::kHealth},
 }};
 
 constexpr bool commands_in_enum_order() {

@@ -122,8 +122,8 @@ TEST(ControlProtocol, EveryPrivilegedCommandIsMarkedAndOnlyThose) {
       "calibrate", "abort",       "accept", "reject", "geometry_rollback",
       "stop",      "fault_reset", "move",   "enable", "disable",
       "home",      "run",         "stream"};
-  const std::set<std::string> open = {"status",           "watch", "geometry_show", "geometry_diff",
-                                      "geometry_history", "report"};
+  const std::set<std::string> open = {
+      "status", "watch", "geometry_show", "geometry_diff", "geometry_history", "report", "health"};
   std::set<std::string> seen;
   for (const CommandSpec& c : commands()) {
     const std::string name(c.name);

@@ -335,11 +335,9 @@ Status Daemon::start() {
   return Status::success();
 }
 
-// The cable lengths the encoders read now (the RT loop's last reading, or the master's before
-// the loop runs) with `offsets`, and the measured tensions (0 without force readings).
-void Daemon::encoder_lengths(const RobotModel& model, const std::array<double, kMaxAxes>& offsets,
-                             Eigen::VectorXd& lengths, Eigen::VectorXd& tensions) {
-  const RtSnapshot snap = rt_->snapshot();
+void Daemon::encoder_lengths(const RtSnapshot& snap, const RobotModel& model,
+                             const std::array<double, kMaxAxes>& offsets, Eigen::VectorXd& lengths,
+                             Eigen::VectorXd& tensions) {
   const int m = model.num_cables();
   lengths.resize(m);
   tensions.resize(m);
@@ -365,7 +363,7 @@ Result<Pose> Daemon::pose_from_encoders(const RobotModel& model) {
     offsets = offsets_;
   }
   Eigen::VectorXd lengths, tensions;
-  encoder_lengths(model, offsets, lengths, tensions);
+  encoder_lengths(snap, model, offsets, lengths, tensions);
   ForwardKinematicsOptions options;
   options.initial_pose = snap.cycle > 0 ? snap.pose() : model.home;
   // Another geometry (hot swap, rollback) may not reach the encoders' lengths exactly: the

@@ -54,6 +54,7 @@ Daemon::Handler Daemon::handler(Command command) {
       {Command::kHome, &Daemon::cmd_home},
       {Command::kRun, &Daemon::cmd_run},
       {Command::kStream, &Daemon::cmd_stream},
+      {Command::kHealth, &Daemon::cmd_health},
   }};
   static_assert(
       [] {

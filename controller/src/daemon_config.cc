@@ -105,6 +105,21 @@ Status read_tension_control(const YamlField& n, TensionControlSettings& t) {
   return in_range(n, "decay_s", 1e-3, 600.0, "s", t.decay_s);
 }
 
+Status read_monitoring(const YamlField& n, MonitoringSettings& m) {
+  if (!n.present()) return Status::success();
+  CDPR_RETURN_IF_ERROR(
+      n.check_keys({"enabled", "period_s", "false_alarms_per_hour", "alert_position_m",
+                    "assess_period_s", "model_length_m", "model_force_n"}));
+  CDPR_RETURN_IF_ERROR(in_range(n, "model_length_m", 0.0, 1.0, "m", m.model_length_m));
+  CDPR_RETURN_IF_ERROR(in_range(n, "model_force_n", 0.0, 1e4, "N", m.model_force_n));
+  CDPR_RETURN_IF_ERROR(n.optional("enabled", m.enabled));
+  CDPR_RETURN_IF_ERROR(in_range(n, "period_s", 0.01, 3600.0, "s", m.period_s));
+  CDPR_RETURN_IF_ERROR(
+      in_range(n, "false_alarms_per_hour", 1e-6, 100.0, "1/h", m.false_alarms_per_hour));
+  CDPR_RETURN_IF_ERROR(in_range(n, "alert_position_m", 1e-7, 1.0, "m", m.alert_position_m));
+  return in_range(n, "assess_period_s", 1.0, 86400.0, "s", m.assess_period_s);
+}
+
 Status read_measuring(const YamlField& n, const std::string& dir, MeasuringSettings& m) {
   if (!n.present()) return Status::success();
   CDPR_RETURN_IF_ERROR(n.check_keys(
@@ -219,10 +234,10 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   c.file = doc.file();
   const YamlField root = doc.root();
   CDPR_RETURN_IF_ERROR(root.expect_map("a mapping of daemon settings"));
-  CDPR_RETURN_IF_ERROR(
-      root.check_keys({"robot", "canopen", "laser", "can_interface", "state_directory", "realtime",
-                       "identity", "motion", "tension_watch", "tension_control", "measuring",
-                       "identification", "acceptance", "start", "control", "safety"}));
+  CDPR_RETURN_IF_ERROR(root.check_keys(
+      {"robot", "canopen", "laser", "can_interface", "state_directory", "realtime", "identity",
+       "motion", "tension_watch", "tension_control", "measuring", "identification", "acceptance",
+       "start", "control", "safety", "monitoring"}));
   const std::string dir = std::filesystem::path(c.file).parent_path().string();
   CDPR_ASSIGN_OR_RETURN(YamlField robot, root.required("robot", "the robot description"));
   CDPR_ASSIGN_OR_RETURN(c.robot, robot.text());
@@ -246,6 +261,7 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   CDPR_RETURN_IF_ERROR(read_start(root["start"], c.start));
   CDPR_RETURN_IF_ERROR(read_control(root["control"], dir, c.control));
   CDPR_RETURN_IF_ERROR(read_safety_settings(root["safety"], c.safety));
+  CDPR_RETURN_IF_ERROR(read_monitoring(root["monitoring"], c.monitoring));
   return c;
 }
 

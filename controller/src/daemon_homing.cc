@@ -62,7 +62,7 @@ Daemon::PoseTrust Daemon::verify_pose(const RobotModel& model,
   const double r_max = std::sqrt(m) * count_tol * mpc + config_.start.model_uncertainty_m;
   const double pos_tol = 2.0 * r_max, ang_tol = 2.0 * r_max / platform_radius(model);
   Eigen::VectorXd lengths, tensions;
-  encoder_lengths(model, offsets, lengths, tensions);
+  encoder_lengths(rt_->snapshot(), model, offsets, lengths, tensions);
   std::vector<Pose> starts{model.home};
   if (persisted != nullptr) starts.insert(starts.begin(), *persisted);
   std::optional<ForwardKinematicsSummary> best, from_persisted;

@@ -16,6 +16,7 @@ void Daemon::service() {
   const RtSnapshot s = rt_->snapshot();
   watch_slack(s);
   watch_tension_control(s);
+  watch_health(s);
   follow_motion(s);
   const DaemonState st = state();
   if (s.fault.kind != FaultKind::kNone && st != DaemonState::kFault &&

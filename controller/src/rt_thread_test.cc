@@ -223,10 +223,21 @@ class ScriptedCycle final : public CycleHandler {
     if (w.cycle + 1 == compute_.size()) {
       allocations_ = counter_->allocations();
       loop_->request_stop();
+      done_.store(true);
     }
   }
   const Wake& wake(std::size_t i) const { return wakes_[i]; }
   std::uint64_t allocations() const { return allocations_; }
+  // Waits until the script's last cycle ran (a generous bound: a hang, not a slow machine, fails):
+  // the loop must not be stopped before, or it ends early on a loaded machine.
+  bool wait_done() const {
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!done_.load()) {
+      if (std::chrono::steady_clock::now() > until) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    return true;
+  }
 
  private:
   ManualLoopClock& clock_;
@@ -235,6 +246,7 @@ class ScriptedCycle final : public CycleHandler {
   RtLoop* loop_ = nullptr;
   std::optional<test::AllocationCounter> counter_;
   std::uint64_t allocations_ = ~0ull;
+  std::atomic<bool> done_{false};
 };
 
 TEST(RtLoop, RunsCyclesOnTheGridAndPublishesExactStatistics) {
@@ -248,6 +260,7 @@ TEST(RtLoop, RunsCyclesOnTheGridAndPublishesExactStatistics) {
   RtLoop loop(o, handler, clock);
   handler.set_loop(&loop);
   ASSERT_TRUE(loop.start().ok());
+  ASSERT_TRUE(handler.wait_done());
   loop.stop();
   EXPECT_FALSE(loop.running());
   EXPECT_EQ(loop.cycles(), 50u);

@@ -12,6 +12,7 @@
 
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/canopen/eds_check.hpp"
+#include "cdpr/io/atomic_file.hpp"
 
 namespace cdpr::canopen::eds {
 namespace {
@@ -136,7 +137,7 @@ TEST(Eds, WritesADcfThatReadsBack) {
   const std::string path = (std::filesystem::temp_directory_path() /
                             ("cdpr-eds-test-" + std::to_string(::getpid()) + ".dcf"))
                                .string();
-  ASSERT_TRUE(write_text_file(path, text).ok());
+  ASSERT_TRUE(io::write_file_atomically(path, text).ok());
   auto d = Eds::load(path);
   std::remove(path.c_str());
   ASSERT_TRUE(d.ok()) << d.status().to_string();
@@ -305,7 +306,7 @@ std::string drive_eds_without(std::initializer_list<std::uint16_t> drop, const s
   }
   out.set_device_info(e->device_info());
   const std::string path = ::testing::TempDir() + "/" + name + ".eds";
-  EXPECT_TRUE(write_text_file(path, to_dcf(out, Commissioning{}, {})).ok());
+  EXPECT_TRUE(io::write_file_atomically(path, to_dcf(out, Commissioning{}, {})).ok());
   return path;
 }
 

@@ -74,6 +74,8 @@ Physics::Physics(RobotModel truth, const Scenario& scenario, std::uint64_t seed,
     s.offset += e.force_offset_error.at(i);
     sensors_.push_back(s);
   }
+  base_sensors_ = sensors_;
+  base_frame_anchors_ = truth_.frame_anchors;
   // Creep on a polynomial surface adds c g(t) F L, a degree-2 term: pad the surface to order 2.
   for (int i = 0; i < m; ++i) {
     CableModel& c = work_.cables[static_cast<std::size_t>(i)];
@@ -126,12 +128,33 @@ double Physics::unstretched_length(int i, double counts, double time_s) const {
   const auto k = static_cast<std::size_t>(i);
   const WinchModel& w = truth_.winches[k];
   const HiddenEffects& e = scenario_.effects;
+  double slip = 0.0;  // drifts: the drum turned further than the encoder reports
+  for (const Drift& d : scenario_.drifts) {
+    if (d.kind == DriftKind::kEncoderSlip && d.cable == i) slip += d.counts * d.fraction_at(time_s);
+  }
   double l = w.length_offset + e.encoder_zero_offset.at(i) +
-             (1.0 + e.transmission_scale.at(i)) * winch_length_change<double>(w, counts);
+             (1.0 + e.transmission_scale.at(i)) * winch_length_change<double>(w, counts + slip);
   if (e.thermal) {
     l += e.thermal->alpha * (truth_.cables[k].routing_length + l) * e.thermal->delta_at(time_s);
   }
   return l;
+}
+
+void Physics::apply_drifts(double time_s) {
+  if (scenario_.drifts.empty()) return;
+  truth_.frame_anchors = base_frame_anchors_;
+  sensors_ = base_sensors_;
+  for (const Drift& d : scenario_.drifts) {
+    const double f = d.fraction_at(time_s);
+    const auto k = static_cast<std::size_t>(d.cable);
+    if (d.kind == DriftKind::kPulleyMove) {
+      truth_.frame_anchors.col(d.cable) += f * d.by;
+    } else if (d.kind == DriftKind::kForceSensor) {
+      sensors_[k].gain *= 1.0 + f * d.gain;
+      sensors_[k].offset += f * d.offset;
+    }
+  }
+  work_.frame_anchors = truth_.frame_anchors;
 }
 
 void Physics::update_cable_laws(double time_s) {
@@ -372,6 +395,7 @@ Status Physics::step(const Eigen::Ref<const Eigen::VectorXd>& counts, double tim
                          state_.time_s);
   }
   update_cable_laws(time_s);
+  apply_drifts(time_s);
   // Direction of the last move (hysteresis, pulley friction): kept while the counts stand still.
   Eigen::VectorXd last_move = state_.last_move;
   if (state_.steps > 0) {

@@ -272,7 +272,8 @@ Result<Scenario> parse_document(const YamlDocument& doc, std::string_view base_d
   if (!root.present()) {
     return Status::error(ErrorCode::kInvalidArgument, "%s: empty scenario", s.file.c_str());
   }
-  CDPR_RETURN_IF_ERROR(root.check_keys({"name", "truth", "noise", "effects", "faults", "laser"}));
+  CDPR_RETURN_IF_ERROR(
+      root.check_keys({"name", "truth", "noise", "effects", "drifts", "faults", "laser"}));
   CDPR_RETURN_IF_ERROR(root.optional("name", s.name));
   if (const YamlField f = root["truth"]; f.present()) {
     CDPR_RETURN_IF_ERROR(parse_truth(f, base_dir, s.truth));
@@ -280,6 +281,14 @@ Result<Scenario> parse_document(const YamlDocument& doc, std::string_view base_d
   if (const YamlField f = root["noise"]; f.present()) CDPR_RETURN_IF_ERROR(parse_noise(f, s.noise));
   if (const YamlField f = root["effects"]; f.present()) {
     CDPR_RETURN_IF_ERROR(parse_effects(f, s.effects));
+  }
+  if (const YamlField f = root["drifts"]; f.present()) {
+    CDPR_RETURN_IF_ERROR(f.expect_list("a list of drifts"));
+    for (std::size_t k = 0; k < f.size(); ++k) {
+      Drift drift;
+      CDPR_RETURN_IF_ERROR(parse_drift(f[k], drift));
+      s.drifts.push_back(drift);
+    }
   }
   if (const YamlField f = root["faults"]; f.present()) {
     CDPR_RETURN_IF_ERROR(f.expect_list("a list of faults"));
@@ -347,6 +356,14 @@ Status check_against(const Scenario& s, int m) {
                            "%s:%d: %s: %d values for a robot with %d cables (give 1 or %d)",
                            s.file.c_str(), l.p->line, l.field, static_cast<int>(l.p->values.size()),
                            m, m);
+    }
+  }
+  for (std::size_t k = 0; k < s.drifts.size(); ++k) {
+    const Drift& d = s.drifts[k];
+    if (d.cable >= m) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "%s:%d: drifts[%d].cable: cable %d does not exist (the robot has %d)",
+                           s.file.c_str(), d.line, static_cast<int>(k), d.cable + 1, m);
     }
   }
   for (std::size_t k = 0; k < s.faults.size(); ++k) {

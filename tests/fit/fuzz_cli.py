@@ -1,16 +1,22 @@
 #!/usr/bin/env python3
-"""Mutation run of cdpr-fit's calibrate, diagnose and simulate as a user would meet them (issue 16).
+"""Mutation run of cdpr-fit's calibrate, diagnose, validate and simulate as a user would meet them.
 
-Starts from a valid MINI session (designed poses, an elastic recording) plus the inputs of the
-issue (a 0xFF cell, cmd_x = 1e300, a -1e308 cell, noise 1e300, a BOM, millimetres, an output
-naming an input), mutates the recording, the robot config and the pose list (byte flips and
-insertions of any byte, 0xFF and NUL included; extreme numbers in cells; duplicated, dropped,
-swapped and truncated lines) and runs the three commands, with and without --json and --report.
+Two robots: MINI (over-constrained, laser) and config/crane4.yaml (a suspended 4-cable crane with
+swivel encoders, an inclinometer and an IMU heading). For each, a valid session (designed poses,
+an elastic recording, a second recording held out) plus the inputs of issue 16 (a 0xFF cell,
+cmd_x = 1e300, a -1e308 cell, noise 1e300, a BOM). Each run mutates the recording, the robot
+config or the pose list (byte flips and insertions of any byte, 0xFF and NUL included; extreme
+numbers in cells; duplicated, dropped, swapped and truncated lines) or none of them, and runs a
+command with a random combination of its options (--gauge, --home-pose, --estimate words or
+none, --loss, --method, --max-iterations, --fit-alpha, the --noise-* overrides, --validate),
+with and without --json and the reports.
 
 Every run must end by itself (no signal, within --per-run seconds) with a documented exit status
-(0, 1, 2; calibrate and diagnose also 3, 4); with --json, stdout must be one JSON document. The run stops after
---runs mutations or --seconds, whichever comes first, and fails when fewer than --min-runs ran.
-The random generator is seeded (--seed): the same seed gives the same mutations.
+(0, 1, 2; calibrate and diagnose also 3, 4; calibrate 5 with --validate); with --json, stdout must
+be one JSON document; a config that calibrate or diagnose wrote must load again (a fixed-model
+calibrate on it names no error in it). The run stops after --runs runs or --seconds, whichever
+comes first, and fails when fewer than --min-runs ran. The random generator is seeded (--seed):
+the same seed gives the same runs.
 
   fuzz_cli.py --fit build/ci/tools/cdpr-fit --source . [--seconds 150] [--runs 4000]
 """
@@ -28,7 +34,29 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 EXTREMES = ["1e300", "-1e308", "1e-320", "nan", "inf", "-inf", "", "0", "-0", "1e", "0x10",
             "99999999999999999999", "+-1", "1,2", "\xff", "\x00", "1e308", "-1e300"]
 # calibrate: 3 fit test failed, 4 not trustworthy (docs/cdpr-fit.md); diagnose: 3 mismatch, 4 inconclusive.
-ALLOWED = {"calibrate": {0, 1, 2, 3, 4}, "simulate": {0, 1, 2}, "diagnose": {0, 1, 2, 3, 4}}
+# calibrate --validate: 5 the calibrated model predicts the held-out recording worse than nominal.
+ALLOWED = {"calibrate": {0, 1, 2, 3, 4, 5}, "simulate": {0, 1, 2}, "diagnose": {0, 1, 2, 3, 4},
+           "validate": {0, 1, 2}}
+ESTIMATE_WORDS = ["anchors", "paper-anchors", "platform-anchors", "offsets", "scales", "stiffness",
+                  "stiffness-per-cable", "force-gains", "force-offsets", "laser-origin",
+                  "laser-direction", "laser-plane", "swivel-zeros", "inclinometer-mounting",
+                  "imu-yaw-zero", "mass", "com"]
+NOISES = ["length", "laser", "force", "swivel", "inclination", "imu-yaw", "ref-position",
+          "ref-angle"]
+# The robots: config, true robot (a file, or the config with text replaced), channels.
+ROBOTS = {
+    "mini": {"config": "config/mini.yaml", "truth": "config/mini-measured.yaml", "replace": [],
+             "channels": "laser", "poses": 12},
+    "crane": {"config": "config/crane4.yaml", "truth": None,
+              # Anchors 2 cm further out and up (symmetric: it still hangs level at home), a
+              # heavier platform.
+              "replace": [("[1.0, -1.15, 1.8]", "[1.02, -1.17, 1.82]"),
+                          ("[-1.0, -1.15, 1.8]", "[-1.02, -1.17, 1.82]"),
+                          ("[-1.0, 1.15, 1.8]", "[-1.02, 1.17, 1.82]"),
+                          ("[1.0, 1.15, 1.8]", "[1.02, 1.17, 1.82]"),
+                          ("mass: 13.0", "mass: 14.0")],
+              "channels": "swivel,inclinometer,imu-yaw", "poses": 10},
+}
 
 
 def mutate(data: bytes, rng: random.Random) -> bytes:
@@ -86,6 +114,80 @@ def run(fit, args, per_run, cwd):
     return p.returncode, p.stdout, p.stderr, time.monotonic() - start
 
 
+def set_up(fit, source, work, name, robot):
+    """The valid session of one robot in work/name: config.yaml, poses.csv, rec.csv, held.csv."""
+    d = os.path.join(work, name)
+    os.makedirs(d)
+    shutil.copy(os.path.join(source, robot["config"]), os.path.join(d, "config.yaml"))
+    if robot["truth"]:
+        shutil.copy(os.path.join(source, robot["truth"]), os.path.join(d, "truth.yaml"))
+    else:
+        text = open(os.path.join(source, robot["config"])).read()
+        for old, new in robot["replace"]:
+            if old not in text:
+                return "%s: %r is not in %s" % (name, old, robot["config"])
+            text = text.replace(old, new)
+        open(os.path.join(d, "truth.yaml"), "w").write(text)
+    design = ["design-poses", "--config", "config.yaml", "--count", str(robot["poses"]),
+              "--out", "poses.csv"]
+    for cmd in [design] + [["simulate", "--config", "truth.yaml", "--nominal", "config.yaml",
+                            "--physics", "elastic", "--poses", "poses.csv", "--channels",
+                            robot["channels"], "--seed", seed, "--out", out]
+                           for seed, out in (("3", "rec.csv"), ("4", "held.csv"))]:
+        code, _, err, _ = run(fit, cmd, 120, d)
+        if code != 0:
+            return "%s: %s: %s" % (name, " ".join(cmd), err.decode(errors="replace"))
+    return None
+
+
+def issue_inputs(seeds):
+    """The inputs of issue 16 for one robot's seeds: (target, bytes)."""
+    fixed = [("poses", b"# units: SI\npose,x,y,z,roll,pitch,yaw\n0,\xff,0,0,0,0,0\n"),
+             ("rec", b"\xef\xbb\xbf" + seeds["rec"]),
+             ("config", seeds["config"].replace(b"name: ", b"name: \xff", 1))]
+    lines = seeds["rec"].split(b"\n")
+    header = next(i for i, l in enumerate(lines) if l.startswith(b"pose,"))
+    names = lines[header].split(b",")
+    for column, value in ((b"cmd_x", b"1e300"), (b"length_2", b"-1e308"), (b"laser_1", b"512.3")):
+        if column in names:
+            row = lines[header + 3].split(b",")
+            row[names.index(column)] = value
+            fixed.append(("rec", b"\n".join(lines[:header + 3] + [b",".join(row)] +
+                                           lines[header + 4:])))
+    fixed.append(("rec", b"\n".join(l if not l.startswith(b"# noise_length_m")
+                                    else b"# noise_length_m: 1e300" for l in lines)))
+    return fixed
+
+
+def options(command, rng):
+    """A random combination of the command's options (none, some or many)."""
+    o = []
+    if command in ("calibrate", "diagnose"):
+        if rng.random() < 0.4:
+            o += ["--gauge", rng.choice(["home", "start", "laser-plane", "both", "none"])]
+        if rng.random() < 0.15:
+            o += ["--home-pose", rng.choice(["0", "1", "3", "-1", "999"])]
+        if rng.random() < 0.4:
+            words = ["none"] if rng.random() < 0.15 else rng.sample(ESTIMATE_WORDS,
+                                                                    rng.randint(1, 4))
+            o += ["--estimate", ",".join(words)]
+        if rng.random() < 0.2:
+            o += ["--validate", "held.csv"]
+    if command == "calibrate":
+        if rng.random() < 0.15:
+            o += ["--loss", rng.choice(["huber", "cauchy", "none"])]
+        if rng.random() < 0.1:
+            o += ["--method", "paper"]
+        if rng.random() < 0.15:
+            o += ["--max-iterations", rng.choice(["1", "3"])]
+        if rng.random() < 0.1:
+            o += ["--fit-alpha", rng.choice(["0", "1", "0.5"])]
+    if command in ("calibrate", "diagnose", "validate") and rng.random() < 0.3:
+        for noise in rng.sample(NOISES, rng.randint(1, 3)):
+            o += ["--noise-" + noise, rng.choice(["1e-9", "1e-3", "0.5", "1e300"])]
+    return o
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--fit", required=True)
@@ -98,50 +200,31 @@ def main():
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--keep", help="directory to copy failing inputs to")
     a = ap.parse_args()
-    nominal = os.path.join(a.source, "config", "mini.yaml")
-    truth = os.path.join(a.source, "config", "mini-measured.yaml")
+    a.fit = os.path.abspath(a.fit)
     work = tempfile.mkdtemp(prefix="cdpr_fit_fuzz_")
     try:
-        for cmd in (["design-poses", "--config", nominal, "--count", "12", "--out", "poses.csv"],
-                    ["simulate", "--config", truth, "--nominal", nominal, "--physics", "elastic",
-                     "--poses", "poses.csv", "--seed", "3", "--out", "rec.csv"]):
-            code, _, err, _ = run(a.fit, cmd, 120, work)
-            if code != 0:
-                print("fuzz_cli: setting up failed:", err.decode(errors="replace"))
+        seeds, fixed = {}, []
+        for name, robot in ROBOTS.items():
+            problem = set_up(a.fit, a.source, work, name, robot)
+            if problem:
+                print("fuzz_cli: setting up failed:", problem)
                 return 1
-        seeds = {
-            "rec": open(os.path.join(work, "rec.csv"), "rb").read(),
-            "poses": open(os.path.join(work, "poses.csv"), "rb").read(),
-            "config": open(nominal, "rb").read(),
-        }
-        # The inputs of the issue, run first.
-        fixed = [("poses", b"# units: SI\npose,x,y,z,roll,pitch,yaw\n0,\xff,0,0,0,0,0\n"),
-                 ("rec", b"\xef\xbb\xbf" + seeds["rec"]),
-                 ("config", seeds["config"].replace(b"name: MINI", b"name: MINI\xff"))]
-        lines = seeds["rec"].split(b"\n")
-        header = next(i for i, l in enumerate(lines) if l.startswith(b"pose,"))
-        names = lines[header].split(b",")
-        for column, value in ((b"cmd_x", b"1e300"), (b"length_2", b"-1e308"),
-                              (b"laser_1", b"512.3")):
-            row = lines[header + 3].split(b",")
-            row[names.index(column)] = value
-            fixed.append(("rec", b"\n".join(lines[:header + 3] + [b",".join(row)] +
-                                           lines[header + 4:])))
-        fixed.append(("rec", b"\n".join(l if not l.startswith(b"# noise_length_m")
-                                        else b"# noise_length_m: 1e300" for l in lines)))
+            seeds[name] = {key: open(os.path.join(work, name, f), "rb").read() for key, f in
+                           (("rec", "rec.csv"), ("poses", "poses.csv"),
+                            ("config", "config.yaml"), ("held", "held.csv"))}
+            fixed += [(name, t, data) for t, data in issue_inputs(seeds[name])]
 
         rng = random.Random(a.seed)
         deadline = time.monotonic() + a.seconds
-        failures = []
-        counts = {}
 
-        def one(n, target, data, command, json_flag, report):
+        def one(n, robot, target, data, command, json_flag, report, opts):
             d = os.path.join(work, "run%d" % n)
             os.makedirs(d)
-            files = {"rec": "rec.csv", "poses": "poses.csv", "config": "config.yaml"}
+            files = {"rec": "rec.csv", "poses": "poses.csv", "config": "config.yaml",
+                     "held": "held.csv"}
             for key, name in files.items():
                 with open(os.path.join(d, name), "wb") as f:
-                    f.write(data if key == target else seeds[key])
+                    f.write(data if key == target else seeds[robot][key])
             args = (["--json"] if json_flag else [])
             if command == "calibrate":
                 args += ["calibrate", "--config", "config.yaml", "--recording", "rec.csv",
@@ -150,10 +233,14 @@ def main():
                 args += ["diagnose", "--config", "config.yaml", "--recording", "rec.csv",
                          "--bootstrap", "2", "--folds", "2", "--out", "out.yaml"] + \
                     (["--json", "report.json", "--html", "report.html"] if report else [])
+            elif command == "validate":
+                args += ["validate", "--config", "config.yaml", "--recording", "held.csv",
+                         "--model", "config.yaml"] + (["--model", "held.csv"] if report else [])
             else:
                 args += ["simulate", "--config", "config.yaml", "--poses", "poses.csv",
                          "--out", "out.csv"] + (["--nominal", "config.yaml", "--physics",
                                                  "elastic"] if report else [])
+            args += opts
             # A run still going when the whole budget ends is cut, not counted; only a run that
             # overran its own limit (--per-run) is a failure.
             limit = min(a.per_run, max(1.0, deadline + 5.0 - time.monotonic()))
@@ -173,6 +260,17 @@ def main():
                     json.loads(out.decode("utf-8"))
                 except (ValueError, UnicodeDecodeError) as e:
                     problem = "stdout is not one JSON document (%s)" % e
+            if problem is None and command != "simulate" and \
+                    os.path.exists(os.path.join(d, "out.yaml")):
+                # What calibrate or diagnose wrote must load again: a fixed-model calibrate on it
+                # may fail its fit test but must name no error in out.yaml.
+                reload = ["calibrate", "--config", "out.yaml", "--recording", "rec.csv",
+                          "--estimate", "none"]
+                limit = min(a.per_run, max(1.0, deadline + 5.0 - time.monotonic()))
+                rcode, _, rerr, _ = run(a.fit, reload, limit, d)
+                if rcode is not None and (rcode < 0 or b"error: out.yaml" in rerr):
+                    problem = "the config it wrote does not reload (exit %d): %s" % (
+                        rcode, rerr.decode(errors="replace")[-300:])
             if problem is None:
                 shutil.rmtree(d, ignore_errors=True)
             return n, command, code, problem, err, d, args
@@ -182,17 +280,26 @@ def main():
         with ThreadPoolExecutor(max_workers=a.jobs) as pool:
             pending = []
             while n < a.runs and time.monotonic() < deadline:
+                opts = []
                 if n < len(fixed) * 3:
-                    target, data = fixed[n // 3]
+                    robot, target, data = fixed[n // 3]
                     command = ["calibrate", "diagnose", "simulate"][n % 3]
                 else:
-                    target = rng.choice(["rec", "rec", "config", "poses"])
-                    data = mutate(seeds[target], rng)
+                    robot = rng.choice(list(ROBOTS))
+                    target = rng.choice(["rec", "rec", "config", "poses", "held", None])
+                    data = mutate(seeds[robot][target], rng) if target else None
                     command = {"rec": rng.choice(["calibrate", "calibrate", "diagnose"]),
                                "poses": "simulate",
-                               "config": rng.choice(["calibrate", "diagnose", "simulate"])}[target]
-                pending.append(pool.submit(one, n, target, data, command, rng.random() < 0.5,
-                                           rng.random() < 0.5))
+                               "held": rng.choice(["validate", "calibrate"]),
+                               "config": rng.choice(["calibrate", "diagnose", "simulate",
+                                                     "validate"]),
+                               None: rng.choice(["calibrate", "calibrate", "diagnose",
+                                                 "validate"])}[target]
+                    opts = options(command, rng)
+                    if target == "held" and command == "calibrate" and "held.csv" not in opts:
+                        opts += ["--validate", "held.csv"]
+                pending.append(pool.submit(one, n, robot, target, data, command,
+                                           rng.random() < 0.5, rng.random() < 0.5, opts))
                 n += 1
                 # Keep the workers busy: wait for any run (a slow one does not hold the others).
                 while len(pending) >= 2 * a.jobs:
@@ -201,6 +308,7 @@ def main():
                     pending = list(rest)
             outcomes += [p.result() for p in pending]
         elapsed = a.seconds - max(0.0, deadline - time.monotonic())
+        counts = {}
         for _, command, code, _, _, _, _ in outcomes:
             counts[(command, code)] = counts.get((command, code), 0) + 1
         failures = [o for o in outcomes if o[3] is not None]

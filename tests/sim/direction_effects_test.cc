@@ -650,9 +650,9 @@ TEST(LaserMounting, ATiltedMountIsTestedOnTheBeamDirectionsAlone) {
 // nominal and force sensor gain errors, noise-free: the method's first check, the model with the
 // named effects represents the simulated ones exactly. The catenary depends on the true tension
 // (its arc ~1/T^2) and on the EA, so a catenary moved into the readings before the gains or the EA
-// were in is wrong once they are (refresh_catenary in diagnosis.cc recomputes it at every later
-// acceptance); and nonlinear elasticity, taken greedily first for the elasticity, comes back to
-// Hooke by a swap within the elasticity group though both are confounded with the gains. Before
+// were in is wrong once they are (refresh_catenary in diagnosis_refit.cc recomputes it at every
+// later acceptance); and nonlinear elasticity, taken greedily first for the elasticity, comes back
+// to Hooke by a swap within the elasticity group though both are confounded with the gains. Before
 // (session 17): nonlinear elasticity + sag + gains left chi^2 94 over 188 degrees of freedom.
 TEST(CompoundEffects, NoiseFreeSagBesideElasticityAndForceGainsIsRepresentedExactly) {
   const Mini& robot = large();

@@ -761,26 +761,4 @@ std::string to_dcf(const Eds& eds, const Commissioning& c,
   return out.str();
 }
 
-Status write_text_file(const std::string& path, std::string_view text) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    if (!out) {
-      return Status::error(ErrorCode::kIoError, "%s: cannot write: %s", tmp.c_str(),
-                           std::strerror(errno));
-    }
-    out.write(text.data(), static_cast<std::streamsize>(text.size()));
-    out.flush();
-    if (!out) {
-      return Status::error(ErrorCode::kIoError, "%s: write failed: %s", tmp.c_str(),
-                           std::strerror(errno));
-    }
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    return Status::error(ErrorCode::kIoError, "%s: rename from %s failed: %s", path.c_str(),
-                         tmp.c_str(), std::strerror(errno));
-  }
-  return Status::success();
-}
-
 }  // namespace cdpr::canopen::eds

@@ -8,6 +8,7 @@
 
 #include "cdpr/canopen/eds.hpp"
 #include "cdpr/canopen/master.hpp"
+#include "cdpr/io/atomic_file.hpp"
 
 namespace cdpr::canopen {
 
@@ -153,7 +154,7 @@ Status Master::write_dcf(NodeId id, const std::string& path) const {
   c.node_name = n.config.name;
   c.bitrate = config_.bitrate;
   c.network_name = config_.interface;
-  return eds::write_text_file(path, eds::to_dcf(description, c, n.applied));
+  return io::write_file_atomically(path, eds::to_dcf(description, c, n.applied));
 }
 
 Status Master::write_dcfs(const std::string& dir) const {

@@ -1,5 +1,6 @@
 // Recording <-> MeasurementSet.
 #include <cmath>
+#include <limits>
 
 #include "cdpr/recording/recording.hpp"
 
@@ -16,6 +17,43 @@ Status sigma_from(const Metadata& md, const char* k, double* sigma) {
   }
   *sigma = v;
   return Status::success();
+}
+
+// The optional campaign columns into a measurement (a start pose is all six cells or none).
+Status campaign_to_measurement(const Recording& rec, const RecordedPose& p, PoseMeasurement* m) {
+  if (rec.has_planned_tensions) m->planned_tensions = p.planned_tensions;
+  m->scatter_length = p.scatter_length_m;
+  m->scatter_force = p.scatter_force_n;
+  m->supported = p.supported;
+  if (!rec.has_start) return Status::success();
+  const auto start = p.start.vector();
+  const int filled = static_cast<int>(start.array().isFinite().count());
+  if (filled == 6) {
+    m->start = p.start;
+  } else if (filled != 0) {
+    return Status::error(ErrorCode::kInvalidArgument,
+                         "pose %lld: start pose has %d of its 6 start_ cells filled (all or none)",
+                         static_cast<long long>(p.index), filled);
+  }
+  return Status::success();
+}
+
+void campaign_from_measurement(const Recording& rec, const PoseMeasurement& p, RecordedPose* r) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  if (rec.has_planned_tensions) {
+    r->planned_tensions = p.planned_tensions.size() == 0
+                              ? Eigen::VectorXd::Constant(rec.num_cables, nan)
+                              : Eigen::VectorXd(p.planned_tensions);
+  }
+  r->scatter_length_m = p.scatter_length;
+  r->scatter_force_n = p.scatter_force;
+  r->supported = p.supported;
+  if (p.start) {
+    r->start = *p.start;
+  } else {
+    r->start.position.setConstant(nan);
+    r->start.rpy.setConstant(nan);
+  }
 }
 
 }  // namespace
@@ -56,6 +94,7 @@ Result<MeasurementSet> to_measurement_set(const Recording& rec, const SensorNois
     if (rec.has_imu_yaw) m.imu_yaw = p.imu_yaw;
     m.time = p.time_s;
     m.temperature = p.temperature_c;
+    CDPR_RETURN_IF_ERROR(campaign_to_measurement(rec, p, &m));
     if (rec.has_reference) {
       const auto ref = p.reference.vector();
       const int filled = static_cast<int>(ref.array().isFinite().count());
@@ -87,6 +126,11 @@ Result<Recording> from_measurement_set(const MeasurementSet& set, Metadata metad
     if (p.swivel_angles.size() != 0) rec.has_swivel = true;
     if (!p.inclination.array().isNaN().all()) rec.has_inclinometer = true;
     if (!std::isnan(p.imu_yaw)) rec.has_imu_yaw = true;
+    if (p.planned_tensions.size() != 0) rec.has_planned_tensions = true;
+    if (!std::isnan(p.scatter_length)) rec.has_scatter_length = true;
+    if (!std::isnan(p.scatter_force)) rec.has_scatter_force = true;
+    if (p.supported) rec.has_supported = true;
+    if (p.start) rec.has_start = true;
   }
   metadata.set_number(key::kNoiseLength, set.noise.sigma_length);
   metadata.set_number(key::kNoiseForce, set.noise.sigma_force);
@@ -132,6 +176,7 @@ Result<Recording> from_measurement_set(const MeasurementSet& set, Metadata metad
       r.reference.rpy.setConstant(nan);
     }
     r.temperature_c = p.temperature;
+    campaign_from_measurement(rec, p, &r);
     rec.poses.push_back(std::move(r));
   }
   return rec;

@@ -13,6 +13,8 @@ namespace {
 
 constexpr const char* kCmd[6] = {"cmd_x", "cmd_y", "cmd_z", "cmd_roll", "cmd_pitch", "cmd_yaw"};
 constexpr const char* kRef[6] = {"ref_x", "ref_y", "ref_z", "ref_roll", "ref_pitch", "ref_yaw"};
+constexpr const char* kStart[6] = {"start_x",    "start_y",     "start_z",
+                                   "start_roll", "start_pitch", "start_yaw"};
 constexpr const char* kAxis[6] = {"x", "y", "z", "roll", "pitch", "yaw"};
 
 // A unit name for a factor between the readings and what the config expects.
@@ -124,11 +126,12 @@ Status check_plausible(const Recording& rec, const RobotModel& model, std::strin
     const auto it = std::find(rec.header.begin(), rec.header.end(), name);
     return it == rec.header.end() ? canonical : static_cast<int>(it - rec.header.begin()) + 1;
   };
-  std::vector<int> cmd_cols, ref_cols;
+  std::vector<int> cmd_cols, ref_cols, start_cols;
   const int first_length = 9, first_tension = first_length + m, first_laser = first_tension + m;
   for (int a = 0; a < 6; ++a) {
     cmd_cols.push_back(column(kCmd[a], 3 + a));
     ref_cols.push_back(column(kRef[a], first_laser + k + a));
+    start_cols.push_back(column(kStart[a], 0));  // 0: not known (a recording not read from a file)
   }
   const int temperature_col =
       column("temperature_c", first_laser + k + (rec.has_reference ? 6 : 0));
@@ -206,6 +209,14 @@ Status check_plausible(const Recording& rec, const RobotModel& model, std::strin
                                      /*positive=*/true));
     if (rec.has_reference) {
       CDPR_RETURN_IF_ERROR(check_pose(p.reference, frame, limits, file, p.line, kRef, ref_cols));
+    }
+    if (rec.has_start) {
+      CDPR_RETURN_IF_ERROR(check_pose(p.start, frame, limits, file, p.line, kStart, start_cols));
+    }
+    if (rec.has_planned_tensions) {
+      CDPR_RETURN_IF_ERROR(check_cells(p.planned_tensions, "planned_tension_", 0,
+                                       limits.max_abs_tension_n, "N", "a cable tension",
+                                       /*positive=*/false));
     }
     if (rec.has_temperature && !std::isnan(p.temperature_c) &&
         !(p.temperature_c >= limits.min_temperature_c &&

@@ -18,6 +18,8 @@ constexpr std::array<const char*, 6> kCmd = {"cmd_x",    "cmd_y",     "cmd_z",
                                              "cmd_roll", "cmd_pitch", "cmd_yaw"};
 constexpr std::array<const char*, 6> kRef = {"ref_x",    "ref_y",     "ref_z",
                                              "ref_roll", "ref_pitch", "ref_yaw"};
+constexpr std::array<const char*, 6> kStart = {"start_x",    "start_y",     "start_z",
+                                               "start_roll", "start_pitch", "start_yaw"};
 constexpr const char* kRecordingFormat = "cdpr-recording 1";
 constexpr const char* kCableFormat = "cdpr-cable-experiment 1";
 constexpr const char* kForceFormat = "cdpr-force-experiment 1";
@@ -63,13 +65,27 @@ struct Layout {
   int pose = -1, time = -1;
   std::array<int, 6> cmd{-1, -1, -1, -1, -1, -1};
   std::array<int, 6> ref{-1, -1, -1, -1, -1, -1};
-  std::vector<int> lengths, tensions, lasers, swivels;
+  std::array<int, 6> start{-1, -1, -1, -1, -1, -1};
+  std::vector<int> lengths, tensions, lasers, swivels, planned;
   int temperature = -1;
   int incl_roll = -1, incl_pitch = -1, imu_yaw = -1;
+  int scatter_length = -1, scatter_force = -1, supported = -1;
 };
 
+// Six columns that come together (ref_*, start_*): all six or none.
+Status all_or_none(const CsvTable& t, const std::array<int, 6>& cols,
+                   const std::array<const char*, 6>& names, const char* what) {
+  int given = 0;
+  for (const int c : cols) given += c >= 0 ? 1 : 0;
+  if (given == 0 || given == 6) return Status::success();
+  for (std::size_t a = 0; a < 6; ++a) {
+    if (cols[a] < 0) return header_error(t, what, names[a]);
+  }
+  return Status::success();
+}
+
 Status resolve_layout(const CsvTable& t, Layout* layout) {
-  std::map<int, int> lengths, tensions, lasers, swivels;  // index -> column
+  std::map<int, int> lengths, tensions, lasers, swivels, planned;  // index -> column
   for (std::size_t c = 0; c < t.header.size(); ++c) {
     const std::string& h = t.header[c];
     const int col = static_cast<int>(c);
@@ -94,11 +110,20 @@ Status resolve_layout(const CsvTable& t, Layout* layout) {
       layout->incl_pitch = col;
     } else if (h == "imu_yaw") {
       layout->imu_yaw = col;
+    } else if (int q = indexed(h, "planned_tension_"); q > 0) {
+      planned[q] = col;
+    } else if (h == "scatter_length_m") {
+      layout->scatter_length = col;
+    } else if (h == "scatter_force_n") {
+      layout->scatter_force = col;
+    } else if (h == "supported") {
+      layout->supported = col;
     } else {
       known = false;
       for (std::size_t a = 0; a < 6; ++a) {
         if (h == kCmd[a]) layout->cmd[a] = col, known = true;
         if (h == kRef[a]) layout->ref[a] = col, known = true;
+        if (h == kStart[a]) layout->start[a] = col, known = true;
       }
     }
     if (!known) {
@@ -145,16 +170,18 @@ Status resolve_layout(const CsvTable& t, Layout* layout) {
     return header_error(t, "missing column '%s' (incl_roll and incl_pitch come together)",
                         layout->incl_roll < 0 ? "incl_roll" : "incl_pitch");
   }
-  int refs = 0;
-  for (const int c : layout->ref) refs += c >= 0 ? 1 : 0;
-  if (refs != 0 && refs != 6) {
-    for (std::size_t a = 0; a < 6; ++a) {
-      if (layout->ref[a] < 0) {
-        return header_error(t, "missing column '%s' (ref_ columns are all six or none)", kRef[a]);
-      }
-    }
+  CDPR_RETURN_IF_ERROR(contiguous(planned, "planned_tension_", &layout->planned));
+  if (!layout->planned.empty() && layout->planned.size() != layout->lengths.size()) {
+    return Status::error(ErrorCode::kParseError,
+                         "%s:%d: %zu planned_tension_ columns but %zu cables (one per cable or "
+                         "none)",
+                         t.name.c_str(), t.header_line, layout->planned.size(),
+                         layout->lengths.size());
   }
-  return Status::success();
+  CDPR_RETURN_IF_ERROR(
+      all_or_none(t, layout->ref, kRef, "missing column '%s' (ref_ columns are all six or none)"));
+  return all_or_none(t, layout->start, kStart,
+                     "missing column '%s' (start_ columns are all six or none)");
 }
 
 Status check_size(const char* what, Eigen::Index got, int want, std::int64_t pose) {
@@ -182,6 +209,53 @@ Status with_path(const Status& s, const std::string& path) {
   return out;
 }
 
+// A six-column pose cell group (ref_*, start_*): NaN when the file has none of them.
+Status parse_pose_cells(const CsvTable& t, const CsvRow& row, const std::array<int, 6>& cols,
+                        Pose* out) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  out->position.setConstant(nan);
+  out->rpy.setConstant(nan);
+  if (cols[0] < 0) return Status::success();
+  for (int a = 0; a < 6; ++a) {
+    double v = 0.0;
+    CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, cols[static_cast<std::size_t>(a)], true, &v));
+    (a < 3 ? out->position : out->rpy)(a % 3) = v;
+  }
+  return Status::success();
+}
+
+// The optional columns of what a campaign knows besides the readings: planned tensions, the
+// pose's scatter, the supported flag, the start pose.
+Status parse_campaign_cells(const CsvTable& t, const CsvRow& row, const Layout& layout,
+                            RecordedPose* p) {
+  if (!layout.planned.empty()) {
+    p->planned_tensions.resize(static_cast<Eigen::Index>(layout.planned.size()));
+    for (std::size_t i = 0; i < layout.planned.size(); ++i) {
+      CDPR_RETURN_IF_ERROR(detail::parse_double(
+          t, row, layout.planned[i], true, &p->planned_tensions(static_cast<Eigen::Index>(i))));
+    }
+  }
+  for (const auto& [col, out] : {std::pair{layout.scatter_length, &p->scatter_length_m},
+                                 std::pair{layout.scatter_force, &p->scatter_force_n}}) {
+    if (col < 0) continue;
+    CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, col, true, out));
+    if (*out < 0.0) {
+      return detail::cell_error(t, row, col, "a scatter is a standard deviation, >= 0 (got %g)",
+                                *out);
+    }
+  }
+  if (layout.supported >= 0) {
+    double v = 0.0;
+    CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, layout.supported, true, &v));
+    if (!std::isnan(v) && v != 0.0 && v != 1.0) {
+      return detail::cell_error(t, row, layout.supported,
+                                "expected 1 (the platform rested on something) or 0, got %g", v);
+    }
+    p->supported = v == 1.0;
+  }
+  return parse_pose_cells(t, row, layout.start, &p->start);
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------------
@@ -203,9 +277,13 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
   rec.has_imu_yaw = layout.imu_yaw >= 0;
   rec.has_reference = layout.ref[0] >= 0;
   rec.has_temperature = layout.temperature >= 0;
+  rec.has_planned_tensions = !layout.planned.empty();
+  rec.has_scatter_length = layout.scatter_length >= 0;
+  rec.has_scatter_force = layout.scatter_force >= 0;
+  rec.has_supported = layout.supported >= 0;
+  rec.has_start = layout.start[0] >= 0;
   rec.header = t.header;
   rec.poses.reserve(t.rows.size());
-  const double nan = std::numeric_limits<double>::quiet_NaN();
   int previous_line = 0;
   for (const CsvRow& row : t.rows) {
     RecordedPose p;
@@ -252,19 +330,12 @@ Result<Recording> parse_recording(std::string_view text, std::string_view name) 
     if (rec.has_imu_yaw) {
       CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, layout.imu_yaw, true, &p.imu_yaw));
     }
-    p.reference.position.setConstant(nan);
-    p.reference.rpy.setConstant(nan);
-    if (rec.has_reference) {
-      for (int a = 0; a < 6; ++a) {
-        double v = 0.0;
-        CDPR_RETURN_IF_ERROR(detail::parse_double(t, row, layout.ref[a], true, &v));
-        (a < 3 ? p.reference.position : p.reference.rpy)(a % 3) = v;
-      }
-    }
+    CDPR_RETURN_IF_ERROR(parse_pose_cells(t, row, layout.ref, &p.reference));
     if (rec.has_temperature) {
       CDPR_RETURN_IF_ERROR(
           detail::parse_double(t, row, layout.temperature, true, &p.temperature_c));
     }
+    CDPR_RETURN_IF_ERROR(parse_campaign_cells(t, row, layout, &p));
     rec.poses.push_back(std::move(p));
   }
   return rec;
@@ -306,9 +377,46 @@ Result<std::string> format_recording_header(const Recording& rec) {
     for (const char* c : kRef) out += std::string(",") + c;
   }
   if (rec.has_temperature) out += ",temperature_c";
+  if (rec.has_planned_tensions) {
+    for (int i = 1; i <= rec.num_cables; ++i) out += ",planned_tension_" + std::to_string(i);
+  }
+  if (rec.has_scatter_length) out += ",scatter_length_m";
+  if (rec.has_scatter_force) out += ",scatter_force_n";
+  if (rec.has_supported) out += ",supported";
+  if (rec.has_start) {
+    for (const char* c : kStart) out += std::string(",") + c;
+  }
   out += '\n';
   return out;
 }
+
+namespace {
+
+Status append_campaign_cells(const Recording& rec, const RecordedPose& p, std::string* out) {
+  if (rec.has_planned_tensions) {
+    CDPR_RETURN_IF_ERROR(
+        check_size("planned tension", p.planned_tensions.size(), rec.num_cables, p.index));
+    for (Eigen::Index i = 0; i < p.planned_tensions.size(); ++i) {
+      CDPR_RETURN_IF_ERROR(append(out, p.planned_tensions(i), "a planned tension", p.index));
+    }
+  }
+  if (rec.has_scatter_length) {
+    CDPR_RETURN_IF_ERROR(append(out, p.scatter_length_m, "the length scatter", p.index));
+  }
+  if (rec.has_scatter_force) {
+    CDPR_RETURN_IF_ERROR(append(out, p.scatter_force_n, "the force scatter", p.index));
+  }
+  if (rec.has_supported) *out += p.supported ? ",1" : ",0";
+  if (rec.has_start) {
+    const auto start = p.start.vector();
+    for (int a = 0; a < 6; ++a) {
+      CDPR_RETURN_IF_ERROR(append(out, start(a), "the start pose", p.index));
+    }
+  }
+  return Status::success();
+}
+
+}  // namespace
 
 Result<std::string> format_recording_row(const Recording& rec, const RecordedPose& p) {
   CDPR_RETURN_IF_ERROR(check_columns(rec));
@@ -357,6 +465,7 @@ Result<std::string> format_recording_row(const Recording& rec, const RecordedPos
   if (rec.has_temperature) {
     CDPR_RETURN_IF_ERROR(append(&out, p.temperature_c, "the temperature", p.index));
   }
+  CDPR_RETURN_IF_ERROR(append_campaign_cells(rec, p, &out));
   out += '\n';
   return out;
 }

@@ -111,8 +111,9 @@ enum class Command {
   kHome,
   kRun,
   kStream,
+  kHealth,
 };
-inline constexpr std::size_t kCommandCount = 19;
+inline constexpr std::size_t kCommandCount = 20;
 
 struct CommandSpec {
   std::string_view name;

@@ -32,6 +32,7 @@
 
 #include "cdpr/calibration/diagnosis.hpp"
 #include "cdpr/calibration/identification.hpp"
+#include "cdpr/calibration/monitoring.hpp"
 #include "cdpr/can/can_bus.hpp"
 #include "cdpr/can/virtual_bus.hpp"
 #include "cdpr/canopen/master.hpp"
@@ -213,6 +214,9 @@ class Daemon {
   void log_rt_events();
   void watch_slack(const RtSnapshot& s);
   void watch_tension_control(const RtSnapshot& s);
+  // In-service monitoring (daemon_health.cc): a sample per period while settled, events.
+  void watch_health(const RtSnapshot& s);
+  Status restart_monitor(const Geometry& g);
   void latch_fault(const RtSnapshot& s);
   void after_fault_reset();
 
@@ -226,8 +230,11 @@ class Daemon {
   Status move_to(const Pose& pose, double reference_tension, bool abortable);
   Status hold_still(bool abortable);
   Result<Pose> pose_from_encoders(const RobotModel& model);
-  void encoder_lengths(const RobotModel& model, const std::array<double, kMaxAxes>& offsets,
-                       Eigen::VectorXd& lengths, Eigen::VectorXd& tensions);
+  // The cable lengths the encoders read in `snap` (the master's before the loop runs) with
+  // `offsets`, and the measured tensions (0 without force readings).
+  void encoder_lengths(const RtSnapshot& snap, const RobotModel& model,
+                       const std::array<double, kMaxAxes>& offsets, Eigen::VectorXd& lengths,
+                       Eigen::VectorXd& tensions);
 
   // The calibration run (worker thread; daemon_calibration.cc).
   void run_calibration(std::vector<Pose> poses, PeerInfo peer);
@@ -280,6 +287,7 @@ class Daemon {
   };
   Reply cmd_run(const nlohmann::json& args, const PeerInfo& peer);
   Reply cmd_stream(const nlohmann::json& args, const PeerInfo& peer);
+  Reply cmd_health(const nlohmann::json& args, const PeerInfo& peer);
   Reply abort_motion(const PeerInfo& peer);
   std::optional<Reply> refuse_motion(const char* what);
   Reply start_stream(const PeerInfo& peer);
@@ -339,6 +347,17 @@ class Daemon {
   std::mutex motion_mu_;
   std::deque<std::unique_ptr<MotionCommand>> commands_;
   std::uint64_t next_seq_ = 1;
+
+  // Under health_mu_: the in-service monitor of the active geometry (service() feeds it, the
+  // health request reads it).
+  mutable std::mutex health_mu_;
+  std::unique_ptr<Monitor> monitor_;
+  int monitor_version_ = -1;            // geometry version it monitors
+  std::int64_t monitor_start_ns_ = 0;   // robot time it started
+  std::int64_t monitor_sample_ns_ = 0;  // of its last sample
+  std::int64_t monitor_assess_ns_ = 0;  // of its last assessment
+  bool health_alarmed_ = false;         // the alarm event was raised for this geometry
+  bool health_alerted_ = false;         // the change event was raised for this geometry
 
   // Under sink_mu_: where events go.
   std::mutex sink_mu_;

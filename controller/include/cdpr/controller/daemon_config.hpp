@@ -160,6 +160,23 @@ struct ControlSettings {
   std::string group;  // owner group of the socket; "" = the daemon's group
 };
 
+// In-service monitoring (docs/monitoring.md): while the robot holds, the supervisor feeds one
+// sample per period to a consistency monitor of the active geometry; an alarm or a predicted
+// position error past alert_position_m above the one at acceptance raises an event, and
+// `cdprctl health` shows what changed and proposes a re-identification. It never moves the robot.
+struct MonitoringSettings {
+  bool enabled = false;
+  double period_s = 1.0;               // s between samples (settled holds only)
+  double false_alarms_per_hour = 0.1;  // stated rate of the detectors together
+  double alert_position_m = 1e-4;      // m of predicted RMS position error above acceptance
+  double assess_period_s = 60.0;       // s between assessments after an alarm
+  // The accepted model's own uncertainty (one standard deviation): of a cable length (e.g. its
+  // anchors' standard deviation) and of the force balance (e.g. the weight's); the sensors' noise
+  // is identification.noise_*.
+  double model_length_m = 1e-4;
+  double model_force_n = 2.0;
+};
+
 struct DaemonConfig {
   std::string file;           // where it was read from
   std::string robot;          // robot description (nominal geometry at first start)
@@ -178,6 +195,7 @@ struct DaemonConfig {
   StartSettings start;
   ControlSettings control;
   SafetySettings safety;  // e-stop inputs, brakes, winch limits, workspace box (safety_config.hpp)
+  MonitoringSettings monitoring;
 };
 
 Result<DaemonConfig> parse_daemon_config(std::string_view yaml, std::string_view file);

@@ -6,6 +6,7 @@
 // One step, for time t and counts c_i:
 //   1. winch (TRUE model, with the hidden transmission scale s_i and encoder-zero offset o_i):
 //        l_i = length_offset_i + o_i + (1 + s_i) * direction_i * c_i * metres_per_count_i
+//      (an encoder_slip drift adds its counts to c_i: the drum turned further than reported)
 //      thermal drift: l_i += alpha * (routing_length_i + l_i) * dT(t)
 //      hysteresis: l_i += h_i * d_i, d_i the direction of cable i's last move (+1: its length
 //      command grew, i.e. paid out; -1: reeled in; 0 before its first move), updated at every
@@ -13,7 +14,8 @@
 //   2. cable law (TRUE: config, stiff, Hooke EA or polynomial surface) with creep as a
 //      time-dependent extra compliance c * log(1 + t / tau) (Hooke: 1/EA_eff = 1/EA + c g(t);
 //      polynomial: dL += c g(t) F L)
-//   3. equilibrium (TRUE geometry with its pulleys): elastostatics.hpp, warm-started from the
+//   3. equilibrium (TRUE geometry with its pulleys, frame anchors moved by pulley_move drifts):
+//   elastostatics.hpp, warm-started from the
 //      previous pose (a Newton on elastostatic_wrench, falling back to solve_elastostatics); with
 //      sag on, each free span is an elastic catenary (catenary.hpp) and the equilibrium is found
 //      by Newton with a finite-difference Jacobian.
@@ -114,18 +116,22 @@ class Physics {
   Physics(RobotModel truth, const Scenario& scenario, std::uint64_t seed,
           const PhysicsOptions& options);
   void update_cable_laws(double time_s);
+  void apply_drifts(double time_s);  // scenario drifts at time_s: frame anchors, force sensors
   bool solve_newton(const Eigen::VectorXd& l, Eigen::Vector3d& r, Eigen::Matrix3d& R, int& iters);
   bool solve_sag(const Eigen::VectorXd& l, Eigen::Vector3d& r, Eigen::Matrix3d& R, int& iters);
   Status solve_weightless(Eigen::Vector3d& r, Eigen::Matrix3d& R, int& iters);
   bool sag_wrench(const Eigen::VectorXd& l, const Eigen::Vector3d& r, const Eigen::Matrix3d& R,
                   Wrench& w, Eigen::VectorXd& tensions);
 
-  RobotModel truth_;  // the true robot as resolved (cable laws without creep)
+  RobotModel truth_;  // the true robot as resolved (cable laws without creep), frame anchors moved
+                      // by the drifts at the last step
   RobotModel work_;   // the cable laws in force at the current time (creep applied)
   Scenario scenario_;
   PhysicsOptions options_;
   std::vector<LaserModel> lasers_;
-  std::vector<ForceSensorModel> sensors_;               // true force sensors
+  std::vector<ForceSensorModel> sensors_;               // true force sensors (drifts applied)
+  std::vector<ForceSensorModel> base_sensors_;          // true force sensors without drifts
+  Eigen::Matrix3Xd base_frame_anchors_;                 // true frame anchors without drifts
   std::vector<std::vector<double>> base_coefficients_;  // polynomial, padded to order >= 2
   std::mt19937_64 rng_;
   std::normal_distribution<double> normal_{0.0, 1.0};

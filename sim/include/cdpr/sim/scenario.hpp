@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "cdpr/calibration/robot_model.hpp"
+#include "cdpr/sim/drift.hpp"
 #include "cdpr/status.hpp"
 
 namespace cdpr::sim {
@@ -157,6 +158,7 @@ struct Scenario {
   TruthSource truth;
   SensorNoiseLevels noise;
   HiddenEffects effects;
+  std::vector<Drift> drifts;  // slow hidden changes during the run, in file order
   std::vector<Fault> faults;  // in file order
   LaserServing laser;
 

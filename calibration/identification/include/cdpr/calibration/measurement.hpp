@@ -115,6 +115,20 @@ struct PoseMeasurement {
   std::optional<Pose> reference;                                  // known pose, if any
   double time = std::numeric_limits<double>::quiet_NaN();         // s
   double temperature = std::numeric_limits<double>::quiet_NaN();  // degC
+  // What a real campaign knows besides the readings (optional recording columns):
+  // the tensions the controller planned at this pose (N, size m or empty; not an observation);
+  Eigen::VectorXd planned_tensions;
+  // the scatter of this pose's averaged readings (standard deviations, m and N; NaN: none): the
+  // identification weighs the pose's length and tension residuals with
+  // sqrt(sigma^2 + scatter^2) instead of the recording's sigma;
+  double scatter_length = std::numeric_limits<double>::quiet_NaN();
+  double scatter_force = std::numeric_limits<double>::quiet_NaN();
+  // the platform rested on something (a support at homing): the cables did not carry its whole
+  // weight, so the pose's static equilibrium is not used (its lengths and other readings are);
+  bool supported = false;
+  // a better start than the commanded pose (the robot's own estimate, a camera): the pose's
+  // solve starts here; the commanded pose stays what was commanded.
+  std::optional<Pose> start;
   // A known wrench on the platform besides gravity and the cables (force N, moment N m about the
   // platform's reference point, world axes), added to the static equilibrium: a payload, or a
   // modelled effect such as the cable weight the platform carries (diagnosis.hpp). Zero in
@@ -127,6 +141,21 @@ struct PoseMeasurement {
   // sqrt(sigma_length^2 + ((compliance + extra) sigma_force)^2). Empty in recordings.
   Eigen::VectorXd extra_compliance;
 };
+
+// The sensor noise at pose `pm`: the set's, with the length and tension sigmas widened by the
+// pose's scatter (sqrt(sigma^2 + scatter^2)) where the recording gives one.
+inline SensorNoise noise_at(const SensorNoise& set_noise, const PoseMeasurement& pm) {
+  SensorNoise n = set_noise;
+  if (pm.scatter_length > 0.0) n.sigma_length = std::hypot(n.sigma_length, pm.scatter_length);
+  if (pm.scatter_force > 0.0) n.sigma_force = std::hypot(n.sigma_force, pm.scatter_force);
+  return n;
+}
+
+// Where the solve of pose `pm` starts: the reference pose, else the start pose, else the
+// commanded one.
+inline Pose start_of(const PoseMeasurement& pm) {
+  return pm.reference ? *pm.reference : pm.start ? *pm.start : pm.commanded;
+}
 
 struct MeasurementSet {
   std::vector<PoseMeasurement> poses;
@@ -182,6 +211,20 @@ inline Status validate(const MeasurementSet& set, const RobotModel& model) {
     if (p.reference && !p.reference->vector().allFinite()) {
       return Status::error(ErrorCode::kInvalidArgument,
                            "measurement set: pose %d: reference pose is not finite", j);
+    }
+    if (p.start && !p.start->vector().allFinite()) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %d: start pose is not finite", j);
+    }
+    if (p.planned_tensions.size() != 0 && p.planned_tensions.size() != m) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %d: %d planned tensions, the model has %d cables",
+                           j, static_cast<int>(p.planned_tensions.size()), m);
+    }
+    if (p.scatter_length < 0.0 || p.scatter_force < 0.0 || std::isinf(p.scatter_length) ||
+        std::isinf(p.scatter_force)) {
+      return Status::error(ErrorCode::kInvalidArgument,
+                           "measurement set: pose %d: a scatter must be finite and >= 0", j);
     }
   }
   return Status::success();

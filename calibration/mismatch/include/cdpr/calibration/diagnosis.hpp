@@ -3,7 +3,8 @@
 // Pure statistics on top of identification.hpp and mismatch.hpp (no I/O, no logging). The
 // candidate effects are the entries of effect_library.hpp; how diagnose() decides (selection,
 // refit, acceptance, naming, extra-pose design, the model with the effects, the verdict) is
-// described in docs/mismatch-locator.md, and diagnosis.cc follows the same named stages.
+// described in docs/mismatch-locator.md; diagnosis.cc runs the same named stages, each in a
+// source of its own (diagnosis_*.cc, gross_readings.cc).
 #pragma once
 
 #include <Eigen/Core>
@@ -43,8 +44,8 @@ struct DiagnosisOptions {
   bool bic_informing_rows = false;
   // Once a further effect is accepted beside Gauss-Newton effects (creep, drifts, force gains:
   // moved into the readings), their coefficients are refitted beside it, and the sag's catenary is
-  // recomputed at the new estimate (polish_gauss_newton, refresh_catenary in diagnosis.cc); false
-  // keeps the coefficients and the catenary each was accepted with (before sessions 16 and 18).
+  // recomputed at the new estimate (polish_gauss_newton, refresh_catenary); false keeps the
+  // coefficients and the catenary each was accepted with.
   bool polish_gauss_newton = true;
   // A Gauss-Newton effect that follows the tension readings (nonlinear elasticity, compliance,
   // creep) moved into the lengths makes them depend on the readings: true adds its derivative by
@@ -102,11 +103,11 @@ struct DiagnosisOptions {
   // (2 ln of the Bayes factor, deviance units) at least this far below the accepted set's. The
   // first round's effects also pass Holm over the trials and the bootstrap; the second round's
   // only the screen and the step's tests, so at the design that sees the laser's beam direction a
-  // noise realisation that looks like a tilt was named beside every effect of one seed (LARGE seed
-  // 0: LRT p 0.0016 on 2 parameters, BIC -1.1; the true tilts beside sag or creep -10 to -11).
-  // 6 ("strong" on Kass and Raftery's scale) mends that seed but loses true MINI tilts beside
-  // creep and drum (BIC -0.6 to -5.3), so the default is 0: the step's BIC < 0 alone
-  // (docs/mismatch-benchmark.md, "Choices the figures support").
+  // noise realisation that looks like a tilt can pass them beside every effect. A threshold that
+  // stops such a noise tilt also stops true small tilts beside other effects, so the default is
+  // 0: the step's BIC < 0 alone, and weak steps are held back as suspects instead
+  // (weak_step_bic). docs/mismatch-benchmark.md measures the trade ("Choices the figures
+  // support").
   double second_round_min_evidence = 0.0;
   // Robot time instead of a threshold: a step that adds an effect beside accepted ones (the first
   // round's forward steps after the first effect, the second screening round) whose BIC is less
@@ -115,9 +116,9 @@ struct DiagnosisOptions {
   // parameters, and the confirmatory re-run on the longer recording (follow_up_groups,
   // confirm_suspect) decides it. Applies only when follow_up_poses > 0 and the run is not itself
   // confirmatory (screen.only_groups empty). 6 is "strong" evidence on Kass and Raftery's scale
-  // (docs/mismatch-benchmark.md, "Choices the figures support": LARGE seed 0's absent laser beam
-  // direction, BIC -1.1, held back and not confirmed; true MINI beam tilts beside creep and drum
-  // scale, -0.6 to -5.3, confirmed with their follow-up poses). 0: off (taken on BIC < 0 alone).
+  // (the trade against the threshold of second_round_min_evidence is measured in
+  // docs/mismatch-benchmark.md, "Choices the figures support"). 0: off (taken on BIC < 0
+  // alone).
   double weak_step_bic = 6.0;
   // The re-run after a held-back suspect's follow-up poses: its candidate id (FollowUp::suspect of
   // a FollowUp with held_back). An effect of its selection group is then named only with strong
@@ -136,15 +137,15 @@ struct DiagnosisOptions {
   // mistyped cell, a unit slip, a sensor glitch, a laser beam on the wrong target), not missing
   // physics: when at most max(1, 2 % of the readings) are, the verdict is inconclusive and names
   // them; more are structure, left to the effects. A least-squares fit spreads one such reading
-  // over the whole geometry, and the effects would fit the smear (a 336 mm error in one length
-  // reading of MINI: three effects named, 100 s). They are named only when taking them out lowers
+  // over the whole geometry, and the effects would fit the smear (several effects named for one
+  // wrong length reading). They are named only when taking them out lowers
   // the standard identification's chi^2 by at least gross_sigmas^2 / 4 each, and either the rest
   // without them fits within the noise (chi^2 upper-tail p-value at least gross_rest_p) or that
   // drop is at least gross_share of the whole misfit beyond the noise (chi^2 - dof). A robust fit
-  // can also leave readings far out on a recording with physics in it (LARGE's compound benchmark:
-  // 10 of 90 runs with the robust fit alone, one traced: a pose settled metres off; MINI's pulley
-  // friction at 3x noise: one length reading 60 sigmas out), but then taking them out leaves most
-  // of the misfit where it was (friction: 0.30-0.34 of it). A wild reading beside a real effect
+  // can also leave readings far out on a recording with physics in it (a pose settled far off,
+  // pulley friction put into one length reading), but then taking them out leaves most of the
+  // misfit where it was: they are not called gross, the effects are left to explain them. A wild
+  // reading beside a real effect
   // carries nearly all of it and is named (docs/mismatch-locator.md). 0: no check.
   double gross_sigmas = 20.0;
   double gross_spread = 10.0;

@@ -26,7 +26,7 @@
 //    span of J is "already modelled" (k = 0). Two candidates of different selection groups whose
 //    projected column spaces have a canonical correlation above a threshold are confounded: the
 //    pose set cannot tell them apart.
-//    The library (mismatch.cc): Hooke elasticity ~F L (shared, per cable); winch/sensor
+//    The library (mismatch_design.cc): Hooke elasticity ~F L (shared, per cable); winch/sensor
 //    compliance ~F (shared, per winch); nonlinear elasticity (a F + k2 F^2) L; creep
 //    ~F L ln(1 + t / 10 s); encoder offsets and drifts ~t; transmission drift ~t L; sag (arc
 //    length ~Lh^2 L / F^2 and the cable weight the platform carries, on the equilibrium rows);

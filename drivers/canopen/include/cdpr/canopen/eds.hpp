@@ -162,6 +162,5 @@ struct Commissioning {
 // [DeviceComissioning] from `c`; [FileInfo] names the tool.
 std::string to_dcf(const Eds& eds, const Commissioning& c,
                    const std::map<std::uint32_t, std::int64_t>& values);
-Status write_text_file(const std::string& path, std::string_view text);
 
 }  // namespace cdpr::canopen::eds

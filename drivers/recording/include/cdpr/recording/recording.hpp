@@ -85,18 +85,29 @@ struct RecordedPose {
   double imu_yaw = std::numeric_limits<double>::quiet_NaN();  // rad
   Pose reference;  // ref_*; NaN when not measured (or when the file has no ref_ columns)
   double temperature_c = std::numeric_limits<double>::quiet_NaN();  // degrees Celsius
-  int line = 0;  // the row's line in the file it was read from (1-based); 0 when not read
+  // What a real campaign knows besides the readings (optional columns, docs/recording-format.md).
+  Eigen::VectorXd planned_tensions;  // m entries when the file has planned_tension_ columns, N
+  double scatter_length_m = std::numeric_limits<double>::quiet_NaN();  // this pose's, m
+  double scatter_force_n = std::numeric_limits<double>::quiet_NaN();   // this pose's, N
+  bool supported = false;  // the platform rested on something: the cables did not carry it all
+  Pose start;              // start_*; NaN when not given (or when the file has no start_ columns)
+  int line = 0;            // the row's line in the file it was read from (1-based); 0 when not read
 };
 
 struct Recording {
   Metadata metadata;
-  int num_cables = 0;             // m >= 1
-  int num_lasers = 0;             // k >= 0 (0: no laser columns)
-  bool has_swivel = false;        // the file has swivel_1..swivel_m
-  bool has_inclinometer = false;  // the file has incl_roll and incl_pitch
-  bool has_imu_yaw = false;       // the file has imu_yaw
-  bool has_reference = false;     // the file has the six ref_* columns
-  bool has_temperature = false;   // the file has the temperature_c column
+  int num_cables = 0;                 // m >= 1
+  int num_lasers = 0;                 // k >= 0 (0: no laser columns)
+  bool has_swivel = false;            // the file has swivel_1..swivel_m
+  bool has_inclinometer = false;      // the file has incl_roll and incl_pitch
+  bool has_imu_yaw = false;           // the file has imu_yaw
+  bool has_reference = false;         // the file has the six ref_* columns
+  bool has_temperature = false;       // the file has the temperature_c column
+  bool has_planned_tensions = false;  // the file has planned_tension_1..planned_tension_m
+  bool has_scatter_length = false;    // the file has scatter_length_m
+  bool has_scatter_force = false;     // the file has scatter_force_n
+  bool has_supported = false;         // the file has supported
+  bool has_start = false;             // the file has the six start_* columns
   std::vector<RecordedPose> poses;
   std::vector<std::string> header;  // the column names in the file's order; empty when not read
 };

@@ -1,0 +1,171 @@
+// In-service monitoring in the daemon (docs/monitoring.md): while the robot holds a trusted pose,
+// the supervisor's tick feeds one sample per monitoring.period_s to the consistency monitor of the
+// active geometry (calibration/monitoring); a detector's first alarm and, after it, a change the
+// assessment names (or a predicted position error past the alert) raise `health` events; the
+// `health` request shows the assessment. Nothing here moves the robot.
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+
+#include "cdpr/controller/daemon.hpp"
+
+namespace cdpr::controller {
+using json = nlohmann::json;
+using control::ControlErrorCode;
+
+namespace {
+
+json vector_json(const Eigen::VectorXd& v) {
+  json a = json::array();
+  for (Eigen::Index i = 0; i < v.size(); ++i) a.push_back(v(i));
+  return a;
+}
+
+json health_json(const Monitor& monitor, const MonitorAssessment& a, int version) {
+  json rows = json::array();
+  for (const MonitorRow& r : a.rows) {
+    rows.push_back({{"name", r.name},
+                    {"statistic", r.statistic},
+                    {"threshold", r.threshold},
+                    {"mean_sigma", r.mean_sigma},
+                    {"alarms", r.alarms}});
+  }
+  json effects = json::array();
+  for (std::size_t k = 0; k < a.effects.size() && k < 3; ++k) {
+    const EffectEstimate& e = a.effects[k];
+    effects.push_back({{"id", e.id},
+                       {"words", e.words},
+                       {"cable", e.cable >= 0 ? json(e.cable + 1) : json(nullptr)},
+                       {"value", vector_json(e.value)},
+                       {"std", vector_json(e.std)},
+                       {"significant", e.significant},
+                       {"since_s", std::isnan(e.since_s) ? json(nullptr) : json(e.since_s)}});
+  }
+  const ReidentificationProposal& p = a.proposal;
+  const double first = monitor.first_alarm_time_s();
+  return {{"enabled", true},
+          {"geometry_version", version},
+          {"samples", a.samples},
+          {"alarms", monitor.alarms()},
+          {"first_alarm_s", std::isnan(first) ? json(nullptr) : json(first)},
+          {"rows", rows},
+          {"changed", a.changed},
+          {"effects", effects},
+          {"position_rms_acceptance_m", a.position_rms_acceptance_m},
+          {"position_rms_now_m", a.position_rms_now_m},
+          {"proposal",
+           {{"needed", p.needed},
+            {"full_sequence", p.full_sequence},
+            {"parameters", p.parameters},
+            {"poses", p.poses.size()},
+            {"predicted_position_m", p.predicted_position_m},
+            {"stopping_rule", p.stopping_rule}}},
+          {"text", describe(a)}};
+}
+
+}  // namespace
+
+Status Daemon::restart_monitor(const Geometry& g) {
+  const MonitoringSettings& mc = config_.monitoring;
+  MonitorOptions o;
+  o.noise.sigma_length = config_.measuring.noise_length_m;
+  o.noise.sigma_force = config_.measuring.noise_force_n;
+  o.noise.sigma_laser = config_.measuring.noise_laser_m;
+  o.noise.model_length = mc.model_length_m;
+  o.noise.model_force = mc.model_force_n;
+  o.false_alarms_per_hour = mc.false_alarms_per_hour;
+  o.samples_per_hour = 3600.0 / mc.period_s;
+  monitor_.reset();
+  monitor_version_ = g.version;
+  health_alerted_ = false;
+  health_alarmed_ = false;
+  monitor_assess_ns_ = 0;
+  Result<Monitor> m = Monitor::create(CalibratedModel::from_robot(g.model), o);
+  if (!m.ok()) return m.status();
+  monitor_ = std::make_unique<Monitor>(std::move(*m));
+  return Status::success();
+}
+
+void Daemon::watch_health(const RtSnapshot& s) {
+  const MonitoringSettings& mc = config_.monitoring;
+  if (!mc.enabled || worker_running_.load() || state() != DaemonState::kHolding ||
+      s.mode != RtMode::kHolding || !s.settled || !s.have_tensions) {
+    return;
+  }
+  const Geometry* g = nullptr;
+  std::array<double, kMaxAxes> offsets{};
+  {
+    std::lock_guard lock(mu_);
+    if (!trust_.trusted) return;
+    g = active_;
+    offsets = offsets_;
+  }
+  if (g == nullptr) return;
+  std::lock_guard lock(health_mu_);
+  if (g->version != monitor_version_) {
+    if (Status st = restart_monitor(*g); !st.ok()) {
+      spdlog::warn("health: no monitoring of geometry {}: {}", g->version, st.message());
+      return;
+    }
+    monitor_start_ns_ = s.now_ns;
+    monitor_sample_ns_ = s.now_ns - static_cast<std::int64_t>(mc.period_s * 1e9);
+  }
+  if (!monitor_ || static_cast<double>(s.now_ns - monitor_sample_ns_) < mc.period_s * 1e9) return;
+  monitor_sample_ns_ = s.now_ns;
+  MonitorSample sample;
+  sample.time_s = 1e-9 * static_cast<double>(s.now_ns - monitor_start_ns_);
+  sample.pose = s.pose();
+  Eigen::VectorXd lengths, tensions;
+  encoder_lengths(s, g->model, offsets, lengths, tensions);
+  for (Eigen::Index i = 0; i < lengths.size() && i < kMonitorMaxCables; ++i) {
+    sample.lengths[static_cast<std::size_t>(i)] = lengths(i);
+    sample.tensions[static_cast<std::size_t>(i)] = tensions(i);
+  }
+  const bool alarm = monitor_->add(sample);
+  if (alarm && !health_alarmed_) {
+    health_alarmed_ = true;
+    const std::string row = monitor_->row_name(monitor_->first_alarm_row());
+    spdlog::warn("health: the readings left the model of geometry {} ({})", g->version, row);
+    publish("health",
+            {{"alarm", row}, {"geometry_version", g->version}, {"time_s", sample.time_s}});
+  }
+  const double since_assessed = 1e-9 * static_cast<double>(s.now_ns - monitor_assess_ns_);
+  if (monitor_->alarms() == 0 || health_alerted_ || since_assessed < mc.assess_period_s) return;
+  monitor_assess_ns_ = s.now_ns;
+  const Result<MonitorAssessment> a = monitor_->assess();
+  if (!a.ok()) return;
+  if (a->changed || a->position_rms_now_m - a->position_rms_acceptance_m > mc.alert_position_m) {
+    health_alerted_ = true;
+    const std::string words =
+        a->effects.empty() ? std::string("no named change") : a->effects.front().words;
+    spdlog::warn(
+        "health: {}; predicted position error {:.3f} mm (at acceptance {:.3f} mm): "
+        "cdprctl health",
+        words, 1e3 * a->position_rms_now_m, 1e3 * a->position_rms_acceptance_m);
+    publish("health", health_json(*monitor_, *a, g->version));
+  }
+}
+
+Reply Daemon::cmd_health(const json&, const PeerInfo&) {
+  if (!config_.monitoring.enabled) {
+    return Reply::success(
+        {{"enabled", false},
+         {"message", "in-service monitoring is off (monitoring.enabled in the daemon config)"}});
+  }
+  std::lock_guard lock(health_mu_);
+  if (!monitor_ || monitor_->samples() == 0) {
+    return Reply::success({{"enabled", true},
+                           {"samples", 0},
+                           {"message",
+                            "no sample yet: the monitor samples while the robot holds a trusted "
+                            "pose under a geometry"}});
+  }
+  const Result<MonitorAssessment> a = monitor_->assess();
+  if (!a.ok()) {
+    return Reply::failure(ControlErrorCode::kInternal,
+                          "health: the assessment failed: " + std::string(a.status().message()));
+  }
+  return Reply::success(health_json(*monitor_, *a, monitor_version_));
+}
+
+}  // namespace cdpr::controller
