@@ -22,8 +22,6 @@
 #include <thread>
 #include <vector>
 
-#include "cdpr/calibration/force_distribution.hpp"
-#include "cdpr/calibration/path_check.hpp"
 #include "cdpr/can/virtual_bus.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
@@ -333,13 +331,8 @@ class VirtualCell {
   // The pretension of the planner's plan at home the platform is homed with (NaN: its default).
   double home_reference_tension() const {
     if (home_tensions_ == HomeTensions::kPlanner) return std::numeric_limits<double>::quiet_NaN();
-    CommandData data(nominal);
-    const double margin = MotionSettings{}.tension_margin + TensionControlOptions{}.guard;
-    if (!command_counts(nominal, nominal.home, default_reference_tension(nominal), data, margin)
-             .ok()) {
-      return std::numeric_limits<double>::quiet_NaN();
-    }
-    return data.plan.reference;
+    return sim::home_reference_tension(
+        nominal, MotionSettings{}.tension_margin + TensionControlOptions{}.guard);
   }
 
   Status make_robot(std::uint64_t seed) {
