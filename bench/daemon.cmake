@@ -11,3 +11,8 @@ add_executable(daemon_soak ${CMAKE_CURRENT_LIST_DIR}/daemon_soak.cc)
 target_include_directories(daemon_soak PRIVATE ${PROJECT_SOURCE_DIR}/tests/daemon)
 target_link_libraries(daemon_soak PRIVATE cdpr_daemon cdpr_sim cdpr_options spdlog::spdlog)
 target_compile_definitions(daemon_soak PRIVATE CDPR_SOURCE_DIR="${PROJECT_SOURCE_DIR}")
+
+# stream_latency_bench: the setpoint stream's latency and jitter with the real clock (a sender, the
+# receiver thread, the RT loop's ring and a loop at the cycle period; docs/motion.md "Setpoint stream").
+add_executable(stream_latency_bench ${CMAKE_CURRENT_LIST_DIR}/stream_latency_bench.cc)
+target_link_libraries(stream_latency_bench PRIVATE cdpr_daemon cdpr_options)

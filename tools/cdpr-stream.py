@@ -25,8 +25,11 @@ def main():
     p0 = st["rt"]["commanded_pose"]
     x0, y0 = p0[0], p0[1]
     s = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    # The circle's time is the setpoint's slot (seq * cycle): the first setpoint is the
+    # commanded pose itself (a stream starts from rest there, else cdprd ends it:
+    # resume_refused).
     seq, t0 = 0, time.monotonic()
-    while (t := time.monotonic() - t0) < a.seconds:
+    while (t := seq * a.cycle) < a.seconds:
         w = 2 * math.pi * t / a.period
         pose = [x0 + a.circle * (math.cos(w) - 1), y0 + a.circle * math.sin(w)] + list(p0[2:6])
         seq += 1

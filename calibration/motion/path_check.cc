@@ -319,9 +319,11 @@ void pose_text(const Pose& pose, char* buf, std::size_t n) {
 
 }  // namespace
 
-Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
-                     double reference_tension, double margin, TensionPlan& plan) {
-  plan.outcome = ForceDistributionOutcome::kInvalidInput;
+namespace {
+
+// The checks of plan_tensions' input and the band; kOk or the error to return.
+Status plan_input(const RobotModel& model, const KinematicsData& kinematics,
+                  double reference_tension, double margin, CableVector& lo, CableVector& hi) {
   if (!sizes_ok(model, kinematics)) {
     return Status::error(ErrorCode::kInvalidArgument,
                          "tension plan: model with %d cables (1 to %d supported) or scratch data "
@@ -337,36 +339,70 @@ Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
     return Status::error(ErrorCode::kInvalidArgument,
                          "tension plan: margin must be finite and >= 0 (got %g)", margin);
   }
-  CableVector lo, hi;
   if (Status s = band(model, margin, lo, hi); !s.ok()) return s.prepend("tension plan: ");
-  const Wrench6 w = gravity_wrench(model, kinematics.rotation);
+  return Status::success();
+}
+
+// One QP nearest to `reference` into `plan`; the error of an outcome that no reference changes
+// (degenerate, invalid, infeasible), else success (feasible or not found: see plan.outcome).
+Status plan_attempt(const KinematicsData& kinematics, const Wrench6& w, const CableVector& lo,
+                    const CableVector& hi, double reference, TensionPlan& plan) {
   ForceDistributionOptions options;
+  options.reference_tension = reference;
+  const ForceDistributionResult r =
+      distribute_forces(kinematics.structure_matrix, w, lo, hi, options);
+  plan.outcome = r.outcome;
+  plan.tensions = r.tensions;
+  plan.reference = reference;
+  plan.cables_at_limits = r.cables_at_limits;
+  switch (r.outcome) {
+    case ForceDistributionOutcome::kDegenerate:
+      return Status(ErrorCode::kNumericalFailure, r.status.message()).prepend("tension plan: ");
+    case ForceDistributionOutcome::kInvalidInput:
+      return Status(ErrorCode::kInvalidArgument, r.status.message()).prepend("tension plan: ");
+    case ForceDistributionOutcome::kInfeasible:  // the same at any reference
+      return Status(ErrorCode::kOutOfRange,
+                    "tension plan: no tensions within the cable limits balance the platform "
+                    "(outside the wrench-feasible workspace)");
+    case ForceDistributionOutcome::kFeasible:
+    case ForceDistributionOutcome::kNotFound:
+      break;
+  }
+  return Status::success();
+}
+
+Status not_found() {
+  return Status(ErrorCode::kOutOfRange,
+                "tension plan: the QP found no tensions within the cable limits");
+}
+
+}  // namespace
+
+Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
+                     double reference_tension, double margin, TensionPlan& plan) {
+  plan.outcome = ForceDistributionOutcome::kInvalidInput;
+  CableVector lo, hi;
+  CDPR_RETURN_IF_ERROR(plan_input(model, kinematics, reference_tension, margin, lo, hi));
+  const Wrench6 w = gravity_wrench(model, kinematics.rotation);
   for (const double scale : {1.0, 2.0, 4.0}) {
-    options.reference_tension = scale * reference_tension;
-    const ForceDistributionResult r =
-        distribute_forces(kinematics.structure_matrix, w, lo, hi, options);
-    plan.outcome = r.outcome;
-    plan.tensions = r.tensions;
-    plan.reference = scale * reference_tension;
-    plan.cables_at_limits = r.cables_at_limits;
-    if (r.feasible() && r.cables_at_limits == 0) return Status::success();
-    switch (r.outcome) {
-      case ForceDistributionOutcome::kDegenerate:
-        return Status(ErrorCode::kNumericalFailure, r.status.message()).prepend("tension plan: ");
-      case ForceDistributionOutcome::kInvalidInput:
-        return Status(ErrorCode::kInvalidArgument, r.status.message()).prepend("tension plan: ");
-      case ForceDistributionOutcome::kInfeasible:  // the same at any reference
-        return Status(ErrorCode::kOutOfRange,
-                      "tension plan: no tensions within the cable limits balance the platform "
-                      "(outside the wrench-feasible workspace)");
-      case ForceDistributionOutcome::kFeasible:
-      case ForceDistributionOutcome::kNotFound:
-        break;
+    CDPR_RETURN_IF_ERROR(plan_attempt(kinematics, w, lo, hi, scale * reference_tension, plan));
+    if (plan.outcome == ForceDistributionOutcome::kFeasible && plan.cables_at_limits == 0) {
+      return Status::success();
     }
   }
   if (plan.outcome == ForceDistributionOutcome::kFeasible) return Status::success();
-  return Status(ErrorCode::kOutOfRange,
-                "tension plan: the QP found no tensions within the cable limits");
+  return not_found();
+}
+
+Status plan_tensions_at(const RobotModel& model, const KinematicsData& kinematics,
+                        double reference_tension, double margin, TensionPlan& plan) {
+  plan.outcome = ForceDistributionOutcome::kInvalidInput;
+  CableVector lo, hi;
+  CDPR_RETURN_IF_ERROR(plan_input(model, kinematics, reference_tension, margin, lo, hi));
+  CDPR_RETURN_IF_ERROR(plan_attempt(kinematics, gravity_wrench(model, kinematics.rotation), lo, hi,
+                                    reference_tension, plan));
+  if (plan.outcome == ForceDistributionOutcome::kFeasible) return Status::success();
+  return not_found();
 }
 
 Status check_pose(const RobotModel& model, const Pose& pose, const PathCheckOptions& options,

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -82,6 +83,41 @@ TEST(PlanTensions, KeepsTensionsInsideTheMarginBand) {
   const Status s = plan_tensions(mini, kinematics, 20.0, 100.0, plan);
   EXPECT_EQ(s.code(), ErrorCode::kInvalidArgument);
   EXPECT_TRUE(contains(s, "cable 1")) << s.to_string();
+}
+
+// Along a line where the planner's choice switches between 1x and 2x the reference (a cable
+// meets the band's edge), its plan steps; the plan at one reference in between changes little
+// from one point to the next, and a plan at the band's edge is accepted as it is.
+TEST(PlanTensions, AtOneReferenceTheyChangeSmoothlyWhereThePlannersChoiceSteps) {
+  const RobotModel mini = testing::mini_robot();
+  const double reference = default_reference_tension(mini);
+  const double margin = 10.0;
+  KinematicsData kinematics(mini);
+  TensionPlan chosen, at;
+  double chosen_step = 0.0, at_step = 0.0, previous_ref = 0.0;
+  Eigen::VectorXd last_chosen, last_at;
+  int switches = 0, at_edge = 0;
+  for (int k = 0; k <= 400; ++k) {  // 0.5 mm apart
+    const Pose pose = pose_at(-0.1 + 0.0005 * k, 0.08, 0.06, 0, 0, 0);
+    ASSERT_TRUE(inverse_kinematics(mini, pose, kinematics));
+    ASSERT_TRUE(plan_tensions(mini, kinematics, reference, margin, chosen).ok());
+    ASSERT_TRUE(plan_tensions_at(mini, kinematics, reference, margin, at).ok());
+    EXPECT_EQ(at.reference, reference);
+    if (at.cables_at_limits > 0) ++at_edge;
+    const Eigen::VectorXd c = chosen.tensions, a = at.tensions;
+    if (k > 0) {
+      chosen_step = std::max(chosen_step, (c - last_chosen).cwiseAbs().maxCoeff());
+      at_step = std::max(at_step, (a - last_at).cwiseAbs().maxCoeff());
+      if (chosen.reference != previous_ref) ++switches;
+    }
+    last_chosen = c;
+    last_at = a;
+    previous_ref = chosen.reference;
+  }
+  ASSERT_GT(switches, 0) << "the line no longer crosses a switch of the planner's choice";
+  EXPECT_GT(at_edge, 0);
+  EXPECT_GT(chosen_step, 10.0);
+  EXPECT_LT(at_step, 0.2 * chosen_step);
 }
 
 TEST(CheckPose, AcceptsHomeAndRefusesAHeavyPlatformNamingTheOverloadedCable) {

@@ -46,6 +46,8 @@ const char* to_string(StreamEnd e) {
       return "stopped";
     case StreamEnd::kStepRefused:
       return "step_refused";
+    case StreamEnd::kResumeRefused:
+      return "resume_refused";
     case StreamEnd::kRefused:
       return "refused";
     case StreamEnd::kFault:
@@ -141,12 +143,21 @@ bool RtController::take_setpoint(canopen::Timestamp now) noexcept {
     d(j + 3) = wrapped(newest.pose[static_cast<std::size_t>(j + 3)] - pose_.rpy(j));
   }
   const double step = d.head<3>().norm(), angle = d.tail<3>().cwiseAbs().maxCoeff();
-  if (step > options_.stream_max_step) {
-    end_stream(StreamEnd::kStepRefused, newest.seq, step);
+  // From rest (the start, after a hold) a setpoint is a step of the pose: at most what the
+  // acceleration limits cover in one cycle from rest (a dt^2 / 2), else the stream ends. An
+  // application resumes from the held pose (status: rt.commanded_pose).
+  const MotionLimits& l = options_.stop_limits;
+  const double dt2 = 0.5 * options_.cycle_s * options_.cycle_s;
+  const StreamEnd why = st_resumed_ ? StreamEnd::kResumeRefused : StreamEnd::kStepRefused;
+  const double max_step = st_resumed_ ? l.max_linear_acceleration * dt2 : options_.stream_max_step;
+  const double max_angle =
+      st_resumed_ ? l.max_angular_acceleration * dt2 : options_.stream_max_step_angle;
+  if (step > max_step) {
+    end_stream(why, newest.seq, step);
     return false;
   }
-  if (angle > options_.stream_max_step_angle) {
-    end_stream(StreamEnd::kStepRefused, newest.seq, angle);
+  if (angle > max_angle) {
+    end_stream(why, newest.seq, angle);
     return false;
   }
   // The velocity from the last applied setpoint (not from the pose coasted since).

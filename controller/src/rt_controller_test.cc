@@ -712,9 +712,11 @@ TEST_F(RtMotion, TheStreamFollowsSetpointsHoldsSmoothlyWhenLateAndEndsOnAJump) {
   const Pose home = rt_->snapshot().pose();
   const std::uint64_t seq = post_stream();
   cycle();
-  const double v = 0.05;  // m/s along +x, one setpoint per cycle
+  const double v = 0.05;  // m/s along +x, one setpoint per cycle, from rest at home
   Pose p = home;
   std::uint64_t n = 0;
+  send(++n, p);
+  cycle();
   for (int c = 0; c < 100; ++c) {
     p.position.x() += v * dt();
     send(++n, p);
@@ -722,7 +724,7 @@ TEST_F(RtMotion, TheStreamFollowsSetpointsHoldsSmoothlyWhenLateAndEndsOnAJump) {
     ASSERT_NEAR((rt_->snapshot().pose().position - p.position).norm(), 0.0, 1e-12) << c;
   }
   EXPECT_EQ(rt_->snapshot().stream.state, StreamState::kFollowing);
-  EXPECT_EQ(rt_->snapshot().stream.applied, 100u);
+  EXPECT_EQ(rt_->snapshot().stream.applied, 101u);
   // Missing setpoints: the pose coasts, brakes after the deadline, never jumps.
   std::vector<Eigen::Vector3d> held = {rt_->snapshot().pose().position};
   const auto more = motion::positions(
@@ -741,9 +743,10 @@ TEST_F(RtMotion, TheStreamFollowsSetpointsHoldsSmoothlyWhenLateAndEndsOnAJump) {
                        v * v / l.max_linear_acceleration +
                        v * l.max_linear_acceleration / l.max_linear_jerk);
   EXPECT_LT((held.back() - held[held.size() - 2]).norm(), 1e-12) << "at rest";
-  // A setpoint within the step limit of the held pose resumes; a jump ends the stream.
+  // A setpoint within one cycle of acceleration from rest of the held pose resumes; a jump
+  // ends the stream.
   Pose q = h.pose();
-  q.position.x() += 0.5 * options_.stream_max_step;
+  q.position.x() += 0.25 * l.max_linear_acceleration * dt() * dt();
   send(++n, q);
   cycle();
   EXPECT_EQ(rt_->snapshot().stream.state, StreamState::kFollowing);
@@ -758,6 +761,35 @@ TEST_F(RtMotion, TheStreamFollowsSetpointsHoldsSmoothlyWhenLateAndEndsOnAJump) {
   EXPECT_LT((e.pose().position - q.position).norm(), 2.5 * options_.stream_max_step)
       << "the refused setpoint was not applied";
   EXPECT_EQ(e.stream.latency_ns, std::chrono::nanoseconds(1ms).count());
+}
+
+// A stream never starts with a jump: its first setpoint (and the first after a hold) may be at
+// most what the acceleration limit covers in one cycle from rest from the held pose; further,
+// the stream ends and the robot never moves.
+TEST_F(RtMotion, AStreamStartingAwayFromTheHeldPoseEndsWithoutMoving) {
+  hold_home();
+  const Pose home = rt_->snapshot().pose();
+  const std::uint64_t seq = post_stream();
+  cycle();
+  const double limit = 0.5 * options_.stop_limits.max_linear_acceleration * dt() * dt();
+  Pose q = home;
+  q.position.y() += 2.0 * limit;  // far within the step limit of a running stream
+  ASSERT_LT(2.0 * limit, options_.stream_max_step);
+  send(1, q);
+  std::vector<Eigen::Vector3d> at = {rt_->snapshot().pose().position};
+  ASSERT_TRUE(run_until(
+      [&](const RtSnapshot& s) {
+        at.push_back(s.pose().position);
+        return s.command_done == seq;
+      },
+      50));
+  const RtSnapshot e = rt_->snapshot();
+  EXPECT_EQ(e.mode, RtMode::kHolding);
+  EXPECT_EQ(e.stream.end, StreamEnd::kResumeRefused);
+  EXPECT_STREQ(to_string(e.stream.end), "resume_refused");
+  EXPECT_NEAR(e.stream.end_value, 2.0 * limit, 1e-12);
+  EXPECT_EQ(e.stream.applied, 0u);
+  for (const Eigen::Vector3d& x : at) EXPECT_EQ((x - home.position).norm(), 0.0);
 }
 
 TEST_F(RtMotion, AReceiverRefusalOrAStopEndsTheStreamAndTheRobotHolds) {
@@ -798,8 +830,8 @@ TEST_F(RtMotion, PathSamplingTheStopAndTheStreamReaderAllocateNothing) {
     test::AllocationCounter count;
     cycle();
     for (std::uint64_t n = 1; n <= 200; ++n) {
-      p.position.y() += 0.0002;
-      if (n % 50 != 0) send(n, p);  // with gaps: holds too
+      if (n > 1) p.position.y() += 0.0002;  // from rest at the held pose
+      if (n % 50 != 0) send(n, p);          // with gaps: holds too
       cycle();
     }
     rt_->request_motion_stop(stream);

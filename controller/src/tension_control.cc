@@ -31,11 +31,11 @@ Status TensionControl::validate(const TensionControlOptions& o, double cycle_s) 
     return Status::error(ErrorCode::kInvalidArgument, "tension control: cycle of %g s", cycle_s);
   }
   if (bad(o.gain) || bad(o.margin) || bad(o.deadband) || bad(o.max_rate) || bad(o.max_trim) ||
-      bad(o.stale_s) || bad(o.hold_s) || bad(o.filter_s) || !std::isfinite(o.slack_below) ||
-      !std::isfinite(o.decay_s) || o.decay_s <= 0.0) {
+      bad(o.stale_s) || bad(o.hold_s) || bad(o.filter_s) || bad(o.guard) ||
+      !std::isfinite(o.slack_below) || !std::isfinite(o.decay_s) || o.decay_s <= 0.0) {
     return Status(ErrorCode::kInvalidArgument,
-                  "tension control: gain, margin, deadband, max_rate, max_trim, stale_s, hold_s "
-                  "and filter_s must be finite and >= 0, slack_below finite, decay_s > 0");
+                  "tension control: gain, margin, deadband, max_rate, max_trim, stale_s, hold_s, "
+                  "filter_s and guard must be finite and >= 0, slack_below finite, decay_s > 0");
   }
   return Status::success();
 }
@@ -105,6 +105,14 @@ bool TensionControl::readings_usable(bool sensor_fault, const RobotReading& in, 
   return true;
 }
 
+// 1 far inside the band, rising quadratically to kEdgeWeight at its edges over `guard`.
+double TensionControl::guard_weight(double f, double lo, double hi) const noexcept {
+  const double guard = options_.guard;
+  if (!(guard > 0.0)) return 1.0;
+  const double near = std::clamp(1.0 - std::min(f - lo, hi - f) / guard, 0.0, 1.0);
+  return 1.0 + (kEdgeWeight - 1.0) * near * near;
+}
+
 void TensionControl::measure(const RobotReading& in, const RobotModel& model,
                              const CommandData& data) noexcept {
   const int m = model.num_cables();
@@ -133,7 +141,7 @@ void TensionControl::measure(const RobotReading& in, const RobotModel& model,
     in_band = in_band && f >= lo && f <= hi;
     slack_[k] = f < options_.slack_below;
     error_[k] = err;
-    weight_[k] = slack_[k] ? kSlackWeight : (edge ? kEdgeWeight : 1.0);
+    weight_[k] = slack_[k] ? kSlackWeight : (edge ? kEdgeWeight : guard_weight(f, lo, hi));
   }
   filtered_valid_ = true;
   status_.in_band = in_band;

@@ -11,6 +11,7 @@
 #include <cmath>
 #include <deque>
 #include <functional>
+#include <limits>
 #include <memory>
 
 #include "alloc_counter.hpp"
@@ -37,6 +38,9 @@ class TensionRig : public ::testing::Test {
     m_ = geometry_.model.num_cables();
     options_.tension_control.gain = 5.0;
     options_.tension_control.margin = 10.0;
+    // The kernel step alone: the plan on the band's margin, every taut cable weighing 1 (the
+    // guard is measured on the virtual MINI: daemon_tension_band_test).
+    options_.tension_control.guard = 0.0;
     make();
   }
   void make() {
@@ -330,6 +334,9 @@ TEST(TensionControl, RefusesNegativeOrNonFiniteOptions) {
   EXPECT_FALSE(TensionControl::validate(o, 0.004).ok());
   o = TensionControlOptions{};
   o.decay_s = 0.0;
+  EXPECT_FALSE(TensionControl::validate(o, 0.004).ok());
+  o = TensionControlOptions{};
+  o.guard = std::numeric_limits<double>::quiet_NaN();
   EXPECT_FALSE(TensionControl::validate(o, 0.004).ok());
   EXPECT_FALSE(TensionControl::validate(TensionControlOptions{}, 0.0).ok());
 }

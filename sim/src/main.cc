@@ -19,6 +19,7 @@
 #include <csignal>
 #include <cstdio>
 #include <exception>
+#include <limits>
 #include <memory>
 #include <string>
 #include <thread>
@@ -76,6 +77,7 @@ int run(int argc, char** argv) {
   double rate_hz = 100.0, duration_s = 0.0, dwell_s = 2.0;
   int laser_samples = 1, substeps = 10;
   std::string home_mode = "nominal";
+  double home_margin = 0.0;
   std::vector<std::string> evaluate;
   app.add_option("--config", config_path, "nominal robot description (what the daemon uses)")
       ->required();
@@ -96,6 +98,12 @@ int run(int argc, char** argv) {
                  "counts) or 'reference' (the true platform stands at home, as on a reference "
                  "platform)")
       ->check(CLI::IsMember({"nominal", "reference"}));
+  app.add_option("--home-margin", home_margin,
+                 "with --home reference: the platform is homed at the tensions of the nominal "
+                 "planner's plan at home keeping this far inside [f_min, f_max], N (cdprd with "
+                 "tension control holds its margin plus guard there: 30 N with the defaults); "
+                 "default: the planner's own tensions")
+      ->check(CLI::Range(0.0, 1e5));
   app.add_option("--evaluate", evaluate,
                  "judge robot descriptions against the scenario's truth: frame-anchor error and "
                  "the ISO 9283 box position error they realise on the true robot; then exit");
@@ -225,8 +233,16 @@ int run(int argc, char** argv) {
   if (!can_if.empty() && canopen_path.empty()) {
     return fail("--can needs --canopen (the CANopen network: node ids and PDOs)");
   }
+  double home_reference = std::numeric_limits<double>::quiet_NaN();
+  if (home_margin > 0.0) {
+    home_reference = cdpr::sim::home_reference_tension(*nominal, home_margin);
+    if (std::isnan(home_reference)) {
+      return fail("--home-margin: no plan at the home pose keeps " + std::to_string(home_margin) +
+                  " N inside the cable limits");
+    }
+  }
   auto home = home_mode == "reference"
-                  ? cdpr::sim::true_pose_counts(*physics, physics->truth().home)
+                  ? cdpr::sim::true_pose_counts(*physics, physics->truth().home, home_reference)
                   : cdpr::sim::nominal_counts(*nominal, nominal->home);
   if (!home.ok()) return fail("home counts: " + home.status().to_string());
   const Eigen::VectorXd counts = home->array().round().matrix();

@@ -12,6 +12,7 @@
 #include "cdpr/calibration/forward_kinematics.hpp"
 #include "cdpr/calibration/ik_compensation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/path_check.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/calibration/winch.hpp"
 
@@ -531,6 +532,15 @@ Result<Eigen::VectorXd> nominal_counts(const RobotModel& nominal, const Pose& po
                          data.kinematics.invalid_cable + 1);
   }
   return Eigen::VectorXd(data.counts);
+}
+
+double home_reference_tension(const RobotModel& nominal, double margin) {
+  CommandData data(nominal);
+  if (!command_counts(nominal, nominal.home, default_reference_tension(nominal), data, margin)
+           .ok()) {
+    return std::numeric_limits<double>::quiet_NaN();
+  }
+  return data.plan.reference;
 }
 
 Result<Eigen::VectorXd> true_pose_counts(const Physics& physics, const Pose& pose,

@@ -11,6 +11,7 @@
 #include "cdpr/calibration/elastostatics.hpp"
 #include "cdpr/calibration/ik_compensation.hpp"
 #include "cdpr/calibration/kinematics.hpp"
+#include "cdpr/calibration/path_check.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/calibration/suspended_statics.hpp"
 #include "cdpr/calibration/winch.hpp"
@@ -86,6 +87,26 @@ double angle_error(const Pose& a, const Pose& b) {
   const Eigen::Matrix3d d =
       rotation_from_rpy<double>(a.rpy) * rotation_from_rpy<double>(b.rpy).transpose();
   return std::acos(std::clamp((d.trace() - 1.0) / 2.0, -1.0, 1.0));
+}
+
+// The pretension a robot is homed at so that it is held at home at the tensions it was homed
+// with: the planner's own without a margin; with one its 1x leaves out (MINI's lower cables sit
+// 0.6 N above f_min + 10 at home), the reference whose plan keeps it; none past the limits.
+TEST(Physics, HomeReferenceTensionIsThePlannersChoiceKeepingTheMargin) {
+  const RobotModel nominal = load("mini.yaml");
+  EXPECT_EQ(home_reference_tension(nominal, 0.0), default_reference_tension(nominal));
+  const double margin = 30.0;
+  const double ref = home_reference_tension(nominal, margin);
+  ASSERT_TRUE(std::isfinite(ref));
+  EXPECT_GT(ref, default_reference_tension(nominal));
+  CommandData data(nominal);
+  ASSERT_TRUE(command_counts(nominal, nominal.home, ref, data, margin).ok());
+  for (int i = 0; i < nominal.num_cables(); ++i) {
+    EXPECT_GE(data.plan.tensions(i),
+              nominal.cables[static_cast<std::size_t>(i)].f_min + margin - 1e-6)
+        << "cable " << i + 1;
+  }
+  EXPECT_TRUE(std::isnan(home_reference_tension(nominal, 1e4)));
 }
 
 TEST(Physics, StiffCablesPutThePlatformAtTheTrueIkPose) {

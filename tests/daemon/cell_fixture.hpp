@@ -19,8 +19,11 @@ namespace cdpr::controller::testing {
 
 class CellTest : public ::testing::Test {
  protected:
-  // `prefix` starts the scratch folder's name (then the pid and the test's name).
-  explicit CellTest(std::string prefix) : prefix_(std::move(prefix)) {}
+  // `prefix` starts the scratch folder's name (then the pid and the test's name); `home`: the
+  // tensions the virtual robot is homed with (VirtualCell::HomeTensions).
+  explicit CellTest(std::string prefix,
+                    VirtualCell::HomeTensions home = VirtualCell::HomeTensions::kPlanner)
+      : prefix_(std::move(prefix)), home_(home) {}
 
   void SetUp() override {
     dir_ = std::filesystem::temp_directory_path() /
@@ -28,7 +31,7 @@ class CellTest : public ::testing::Test {
             ::testing::UnitTest::GetInstance()->current_test_info()->name());
     std::filesystem::remove_all(dir_);
     std::filesystem::create_directories(dir_);
-    auto c = VirtualCell::create(CDPR_SOURCE_DIR, dir_);
+    auto c = VirtualCell::create(CDPR_SOURCE_DIR, dir_, 7, VirtualCell::LaserLink::kTcp, home_);
     ASSERT_TRUE(c.ok()) << c.status().to_string();
     cell_ = std::move(*c);
   }
@@ -64,6 +67,7 @@ class CellTest : public ::testing::Test {
 
  private:
   std::string prefix_;
+  VirtualCell::HomeTensions home_;
 };
 
 }  // namespace cdpr::controller::testing

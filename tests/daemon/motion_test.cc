@@ -146,6 +146,7 @@ TEST_F(DaemonMotion, StreamsACircleHoldsOnAGapCountsSequenceFaultsAndRefusesAJum
   };
   const double cycle_s = std::chrono::duration<double>(cell_->network.sync_period).count();
   double t = 0.0;
+  step(circle(t), seq + 1);  // from rest: the held pose itself
   for (int c = 0; c < 300; ++c) {
     t += cycle_s;
     const Pose p = circle(t);
@@ -157,8 +158,9 @@ TEST_F(DaemonMotion, StreamsACircleHoldsOnAGapCountsSequenceFaultsAndRefusesAJum
   for (int c = 0; c < 10; ++c) cell_->cycle();
   EXPECT_EQ(st()["stream"]["state"], "holding");
   EXPECT_EQ(st()["stream"]["holds"], 1);
+  // It resumes from rest at the held pose (a step there ends the stream: resume_refused).
   t += 10 * cycle_s;
-  step(circle(t + cycle_s), seq + 11);
+  step(daemon().rt().snapshot().pose(), seq + 11);
   t += cycle_s;
   EXPECT_EQ(st()["stream"]["state"], "following");
   EXPECT_EQ(st()["stream"]["gaps"], 10);

@@ -1,11 +1,11 @@
 // Issue 40's acceptance: the measuring sequence on the uncalibrated virtual MINI (cdprd starts from
 // the nominal config/mini.yaml, the anchors 14.5 mm RMS off the virtual robot's) keeps every cable
-// above f_min and below f_max - margin at every RT cycle only with the tension control in the
-// null space. The poses are designed 30 N inside the tension limits (measuring.
-// design_tension_margin): at the default 10 N, four of the twelve designed poses have no internal
-// force that puts every cable of the true robot in the band. The smallest and largest measured
-// tension of each cable over the sequence are printed (docs/daemon.md "Tension control" quotes
-// them):
+// inside [f_min + margin, f_max - margin] at every RT cycle, moves included, only with the
+// tension control in the null space. The poses are designed 30 N inside the tension limits
+// (measuring. design_tension_margin): at the default 10 N, four of the twelve designed poses have
+// no internal force that puts every cable of the true robot in the band. The smallest and largest
+// measured tension of each cable over the sequence are printed (docs/daemon.md "Tension control"
+// quotes them):
 //
 //   build/ci/tests/daemon/daemon_tension_band_test | grep tension-band
 #include <gtest/gtest.h>
@@ -24,7 +24,7 @@ namespace {
 
 class DaemonNativeTension : public testing::CellTest {
  protected:
-  DaemonNativeTension() : CellTest("cdprd-tension-") {}
+  DaemonNativeTension() : CellTest("cdprd-tension-", testing::VirtualCell::HomeTensions::kHeld) {}
 
   struct Extremes {
     std::array<double, kMaxAxes> lo{}, hi{};
@@ -33,6 +33,13 @@ class DaemonNativeTension : public testing::CellTest {
     int held = 0;              // cycles with the trims held (a pose being sampled)
     int held_out_of_band = 0;  // of them, with a (filtered) tension outside the band
     int held_trim_moved = 0;   // of them, with a trim other than the cycle before's
+    // The cycle with the lowest tension relative to its cable's lower band limit.
+    double worst = std::numeric_limits<double>::infinity();
+    int worst_cable = 0;
+    RtSnapshot worst_snap;
+    // The smallest distance of a tension to either edge of the band, N, moving and holding.
+    double clearance_moving = std::numeric_limits<double>::infinity();
+    double clearance_holding = std::numeric_limits<double>::infinity();
   };
 
   // The measuring sequence of a calibration (12 designed poses and the return to the first),
@@ -52,6 +59,17 @@ class DaemonNativeTension : public testing::CellTest {
     const Status started = cell_->start_daemon(s);
     EXPECT_TRUE(started.ok()) << started.to_string();
     if (!started.ok()) return x;
+    // The sequence starts from the robot holding its home, its tensions settled (the virtual
+    // robot powers on with the planner's tensions at home, some on the band's edge; the tension
+    // control then takes them to its plan).
+    EXPECT_TRUE(run_until(
+        [&] {
+          const RtSnapshot r = daemon().rt().snapshot();
+          const TensionControlStatus& tc = r.tension_control;
+          return r.mode == RtMode::kHolding && r.settled &&
+                 (tc.state != TensionControlState::kActive || tc.in_band);
+        },
+        30.0));
     bool last_held = false;
     std::array<double, kMaxAxes> last_trims{};
     const Reply r = request("calibrate");
@@ -76,6 +94,14 @@ class DaemonNativeTension : public testing::CellTest {
             const auto k = static_cast<std::size_t>(i);
             x.lo[k] = std::min(x.lo[k], snap.tensions[k]);
             x.hi[k] = std::max(x.hi[k], snap.tensions[k]);
+            const double clear = std::min(snap.tensions[k] - lower(i), upper(i) - snap.tensions[k]);
+            double& c = snap.mode == RtMode::kMoving ? x.clearance_moving : x.clearance_holding;
+            c = std::min(c, clear);
+            if (snap.tensions[k] - lower(i) < x.worst) {
+              x.worst = snap.tensions[k] - lower(i);
+              x.worst_cable = i;
+              x.worst_snap = snap;
+            }
           }
           return false;
         },
@@ -96,6 +122,15 @@ class DaemonNativeTension : public testing::CellTest {
                   what, i + 1, x.lo[k], x.hi[k], lower(i), upper(i));
     }
     std::printf("[tension-band] %s: %d cycles of the measuring sequence\n", what, x.cycles);
+    const RtSnapshot& w = x.worst_snap;
+    const auto c = static_cast<std::size_t>(x.worst_cable);
+    std::printf(
+        "[tension-band] %s: closest to f_min + margin: cable %d at %.1f N (planned %.1f N), "
+        "robot %s\n",
+        what, x.worst_cable + 1, w.tensions[c], w.planned[c], to_string(w.mode));
+    std::printf(
+        "[tension-band] %s: smallest clearance to the band: %.1f N moving, %.1f N holding\n", what,
+        x.clearance_moving, x.clearance_holding);
   }
   // The band's limits of cable i (the daemon's motion.tension_margin).
   double lower(int i) const {
@@ -122,64 +157,27 @@ TEST_F(DaemonNativeTension, WithoutTensionControlACableGoesSlackDuringTheSequenc
   EXPECT_TRUE(outside) << "the nominal geometry no longer drives a cable out of its band";
 }
 
-// With the tension control in the null space (gain 20 /s, trims up to 0.02 m/s) no cable goes
-// slack or reaches f_max - margin at any cycle, moves included; every pose is sampled with every
+// With the tension control in the null space (gain 20 /s, trims up to 0.02 m/s) no cable leaves
+// its band at any cycle, moves included; every pose is sampled with every
 // cable in the band and the trims held still (one consistent length/tension pair per pose).
-// During moves a cable can dip below f_min + margin (the integral lags the geometry's error
-// along the path; docs/daemon.md quotes the figures).
+// Every cable stays inside [f_min + margin, f_max - margin] at every cycle, moves included (the
+// plan never steps and keeps a guard inside the band: docs/daemon.md "Tension control").
 TEST_F(DaemonNativeTension, TensionControlKeepsEveryCableTautAndBelowItsBandThroughTheSequence) {
   const Extremes x = measure("{gain: 20, max_rate: 0.02}");
   print("with tension control", x);
   ASSERT_GT(x.cycles, 0);
   for (int i = 0; i < x.cables; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    EXPECT_GT(x.lo[k], cell_->nominal.cables[k].f_min) << "cable " << i + 1;
-    EXPECT_LT(x.hi[k], upper(i)) << "cable " << i + 1;
+    EXPECT_GE(x.lo[k], lower(i)) << "cable " << i + 1;
+    EXPECT_LE(x.hi[k], upper(i)) << "cable " << i + 1;
   }
+  // With room to spare: at least the control's deadband (the error it leaves uncorrected).
+  const double deadband = TensionControlSettings{}.deadband;
+  EXPECT_GE(x.clearance_moving, deadband);
+  EXPECT_GE(x.clearance_holding, deadband);
   EXPECT_GT(x.held, 0) << "no pose was sampled with the trims held";
   EXPECT_EQ(x.held_out_of_band, 0);
   EXPECT_EQ(x.held_trim_moved, 0);
-}
-
-// The calibration still passes with the tension control on (config/sim/cdprd.yaml turns it on):
-// the trims are held while each pose is sampled, so the identification sees one consistent
-// length/tension pair per pose. 25 poses designed 30 N inside the limits, as that file.
-TEST_F(DaemonNativeTension, TheCalibrationPassesItsGatesWithTensionControlOn) {
-  testing::VirtualCell::Settings s;
-  s.measuring =
-      "{poses: 25, laser_samples: 5, laser_interval_s: 0.002, average_cycles: 25, "
-      "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 3, "
-      "design_tension_margin: 30}";
-  s.identification = "{bootstrap: 5}";
-  s.extra = "tension_control: {gain: 20, max_rate: 0.02}\n";
-  const Status started = cell_->start_daemon(s);
-  ASSERT_TRUE(started.ok()) << started.to_string();
-  const Reply r = request("calibrate");
-  ASSERT_TRUE(r.ok) << r.message;
-  ASSERT_TRUE(run_until([&] { return daemon().state() != DaemonState::kHolding; }, 5.0));
-  const bool done = run_until(
-      [&] {
-        const DaemonState st = daemon().state();
-        return st == DaemonState::kAwaitingAcceptance || st == DaemonState::kHolding;
-      },
-      1200.0);
-  ASSERT_TRUE(done);
-  const nlohmann::json st = daemon().status();
-  ASSERT_EQ(st["calibration"]["outcome"], "awaiting_acceptance") << st.dump(2);
-  const Reply report = request("report");
-  ASSERT_TRUE(report.ok) << report.message;
-  const nlohmann::json& rep = report.result["report"];
-  std::printf("[tension-band] calibration with tension control: verdict %s, gates passed %d\n",
-              rep["verdict"].get<std::string>().c_str(), rep["gates_passed"].get<bool>());
-  EXPECT_TRUE(rep["gates_passed"].get<bool>()) << rep["gates"].dump(2);
-  auto after = config::load_robot_config(
-      daemon().store().calibration_dir(r.result["calibration"].get<int>()) + "/model_after.yaml");
-  ASSERT_TRUE(after.ok()) << after.status().to_string();
-  const double before = testing::VirtualCell::anchor_rms(cell_->nominal, cell_->physics->truth());
-  const double now = testing::VirtualCell::anchor_rms(*after, cell_->physics->truth());
-  std::printf("[tension-band] anchors RMS vs truth: %.3f mm before, %.3f mm after\n", before * 1e3,
-              now * 1e3);
-  EXPECT_LT(now, 1e-3);
 }
 
 }  // namespace

@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -26,6 +27,7 @@
 #include "cdpr/config/robot_config.hpp"
 #include "cdpr/controller/daemon.hpp"
 #include "cdpr/controller/state_store.hpp"
+#include "cdpr/controller/tension_control.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
 #include "cdpr/modbus/register_map.hpp"
 #include "cdpr/sim/can_robot.hpp"
@@ -62,12 +64,21 @@ class VirtualCell {
   // Modbus RTU over a pseudo-terminal the virtual robot serves, read by the driver that cdprd's
   // `laser:` file configures (as cdprd's main does).
   enum class LaserLink { kTcp, kRtuThroughConfig };
+  // The tensions the platform is homed with (it powers up standing on its reference platform at
+  // home): the planner's own at home, or the ones cdprd's tension control holds there (its plan
+  // keeps the band's margin and the guard: TensionControlOptions). A platform held at other
+  // tensions than it was homed with moves off home where the geometry is still wrong (its
+  // internal force is the nominal model's, not the truth's: 20 N more turned the uncalibrated
+  // MINI 1.3 mrad), and the identification's home-pose gauge turns every anchor with it.
+  enum class HomeTensions { kPlanner, kHeld };
   static Result<std::unique_ptr<VirtualCell>> create(const std::string& source,
                                                      std::filesystem::path dir,
                                                      std::uint64_t seed = 7,
-                                                     LaserLink link = LaserLink::kTcp) {
+                                                     LaserLink link = LaserLink::kTcp,
+                                                     HomeTensions home = HomeTensions::kPlanner) {
     std::unique_ptr<VirtualCell> c(new VirtualCell(source, std::move(dir)));
     c->link_ = link;
+    c->home_tensions_ = home;
     if (Status s = c->make_robot(seed); !s.ok()) return s;
     return c;
   }
@@ -317,6 +328,13 @@ class VirtualCell {
   VirtualCell(std::string source, std::filesystem::path dir)
       : source_(std::move(source)), dir_(std::move(dir)) {}
 
+  // The pretension of the planner's plan at home the platform is homed with (NaN: its default).
+  double home_reference_tension() const {
+    if (home_tensions_ == HomeTensions::kPlanner) return std::numeric_limits<double>::quiet_NaN();
+    return sim::home_reference_tension(
+        nominal, MotionSettings{}.tension_margin + TensionControlOptions{}.guard);
+  }
+
   Status make_robot(std::uint64_t seed) {
     auto nom = config::load_robot_config(source_ + "/config/mini.yaml");
     if (!nom.ok()) return nom.status();
@@ -329,7 +347,7 @@ class VirtualCell {
     auto p = sim::Physics::create(*truth, scenario, seed);
     if (!p.ok()) return p.status();
     physics = std::make_unique<sim::Physics>(std::move(*p));
-    auto home = sim::true_pose_counts(*physics, physics->truth().home);
+    auto home = sim::true_pose_counts(*physics, physics->truth().home, home_reference_tension());
     if (!home.ok()) return home.status();
     if (Status s = physics->step(home->array().round().matrix(), 0.0); !s.ok()) return s;
     auto net = canopen::load_config(source_ + "/config/canopen-mini.yaml");
@@ -401,6 +419,7 @@ class VirtualCell {
     return laser->start();
   }
 
+  HomeTensions home_tensions_ = HomeTensions::kPlanner;
   LaserLink link_ = LaserLink::kTcp;
   std::string source_;
   std::filesystem::path dir_;

@@ -164,8 +164,11 @@ enum class StreamEnd : std::uint8_t {
   kNone,
   kStopped,      // the operator's stop
   kStepRefused,  // a setpoint too far from the commanded pose (value: its distance, m or rad)
-  kRefused,      // the receiver refused a setpoint (box, tensions, cable lengths)
-  kFault,        // a fault ended it
+  // The first setpoint from rest (the stream's start, after a hold) further from the held pose
+  // than the acceleration limit covers in one cycle from rest (value: its distance, m or rad).
+  kResumeRefused,
+  kRefused,  // the receiver refused a setpoint (box, tensions, cable lengths)
+  kFault,    // a fault ended it
 };
 const char* to_string(StreamEnd e);
 
@@ -173,10 +176,10 @@ struct StreamStatus {
   StreamState state = StreamState::kOff;
   StreamEnd end = StreamEnd::kNone;  // why the last stream ended
   std::uint64_t end_seq = 0;         // the setpoint that ended it (refusals)
-  double end_value = 0.0;            // kStepRefused: the step, m (or rad when angular)
-  std::uint64_t applied = 0;         // setpoints applied
-  std::uint64_t last_seq = 0;        // of the last applied setpoint
-  std::uint64_t holds = 0;           // times the deadline passed without a setpoint
+  double end_value = 0.0;      // kStepRefused, kResumeRefused: the step, m (or rad when angular)
+  std::uint64_t applied = 0;   // setpoints applied
+  std::uint64_t last_seq = 0;  // of the last applied setpoint
+  std::uint64_t holds = 0;     // times the deadline passed without a setpoint
   // Latency of the last applied setpoint: sender timestamp to the cycle that applied it, ns (on
   // one machine, both CLOCK_MONOTONIC); and receive to apply.
   std::int64_t latency_ns = 0;
@@ -361,6 +364,7 @@ class RtController {
   void set_fault(const RtFault& f) noexcept;
   void hold_fault(const RtFault& f) noexcept;
   bool solve(const Pose& pose) noexcept;
+  void follow_plan_reference(const Pose& pose, double margin) noexcept;
   bool active() const noexcept {
     return mode_ == RtMode::kMoving || mode_ == RtMode::kHolding || mode_ == RtMode::kSlewing ||
            mode_ == RtMode::kHoldingCounts;
@@ -396,6 +400,18 @@ class RtController {
   RtMode mode_ = RtMode::kDisabled;
   RtFault fault_;
   double ref_tension_ = 0.0, ref_start_ = 0.0, ref_goal_ = 0.0;  // planner pretension, N
+  // The reference the plan is made at (solve): it follows the planner's choice (1x, 2x or 4x
+  // ref_tension_) at a bounded rate, so the plan and its elongation compensation never step;
+  // NaN: none yet (taken as it is at the next solve).
+  double plan_reference_ = std::numeric_limits<double>::quiet_NaN();
+  // What the last solve was made from: the same pose, pretension and geometry with the plan's
+  // reference settled give the same plan and counts (a hold solves once, not every cycle).
+  struct Solved {
+    bool valid = false;
+    Pose pose;
+    double reference = 0.0;
+    const Geometry* geometry = nullptr;
+  } solved_;
   Pose hold_pose_;
   Pose pose_;
   canopen::Timestamp move_start_{0};

@@ -10,7 +10,9 @@
 //   error   e = t - f                          for every taut cable; a slack one (f below
 //                                              slack_below) is taken up on its own instead
 //   kernel  df = e - W^-1 A (A^T W^-1 A)^-1 A^T e  the internal-force change (A^T df = 0)
-//           nearest to e, weights W: kEdgeWeight for an edge cable, 1 for the others,
+//           nearest to e, weights W: kEdgeWeight for an edge cable, for the others 1 rising
+//           quadratically to kEdgeWeight as the cable comes within `guard` of the band's
+//           edges (the internal force is spent first where a cable is closest to its limit),
 //           kSlackWeight (left alone) for a slack cable; only the part of df beyond d/2 (its
 //           largest cable, direction kept) is used: at the optimum the noise moves nothing
 //   state   phi += gain * dt * df              the internal-force correction, N; projected
@@ -53,6 +55,10 @@ struct TensionControlOptions {
   double decay_s = 2.0;      // s, time constant of the decay towards 0
   double filter_s = 0.02;    // s, time constant of the low-pass on the readings; 0: none
   double slack_below = 1.0;  // N, a (filtered) reading below this is a slack cable
+  // N: a cable this close to the band's edges weighs more (above); RtController plans the
+  // tensions this far inside the band where the pose allows it (headroom for what the geometry's
+  // error adds along a move before the integral catches up).
+  double guard = 20.0;
 };
 
 enum class TensionControlState : std::uint8_t {
@@ -101,6 +107,7 @@ class TensionControl {
   const TensionControlStatus& status() const noexcept { return status_; }
 
  private:
+  double guard_weight(double f, double lo, double hi) const noexcept;
   bool readings_usable(bool sensor_fault, const RobotReading& in, int m) noexcept;
   // Low-passes the readings; targets, errors and weights of this cycle; the band status.
   void measure(const RobotReading& in, const RobotModel& model, const CommandData& data) noexcept;

@@ -154,6 +154,13 @@ class Physics {
 Result<Eigen::VectorXd> nominal_counts(const RobotModel& nominal, const Pose& pose,
                                        double reference_tension = kNaN);
 
+// The pretension (N) at which the NOMINAL planner plans the home pose keeping `margin` inside
+// every cable's [f_min, f_max] (its choice of 1x, 2x or 4x default_reference_tension; NaN when
+// none does). cdprd's tension control holds home at its margin plus guard: a robot homed at
+// other tensions moves off home where the geometry is still wrong, since internal force in the
+// nominal null space is not in the true one (docs/daemon.md "Tension control").
+double home_reference_tension(const RobotModel& nominal, double margin);
+
 // Motor counts (fractional) that put the TRUE platform at `pose` with the tensions the true
 // robot's planner gives there (pretension `reference_tension`, NaN: default_reference_tension of
 // the truth), the hidden winch effects included: the state of a robot whose platform stands on

@@ -48,6 +48,12 @@ struct TensionPlan {
 // kMaxCables cables, a non-positive reference). Allocates nothing.
 Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
                      double reference_tension, double margin, TensionPlan& plan);
+// One attempt at exactly `reference_tension` (no retry at 2x and 4x): a feasible plan with
+// cables on the band's edges is accepted. The QP's solution is continuous in the pose and in the
+// reference, so a reference that changes continuously gives a plan that does too (plan_tensions'
+// choice between 1x, 2x and 4x steps). The same errors; allocates nothing.
+Status plan_tensions_at(const RobotModel& model, const KinematicsData& kinematics,
+                        double reference_tension, double margin, TensionPlan& plan);
 
 struct PathCheckOptions {
   double max_linear_step = 0.005;                          // m between checked points
