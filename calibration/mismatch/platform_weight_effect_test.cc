@@ -10,18 +10,13 @@
 
 #include "cdpr/calibration/diagnosis.hpp"
 #include "cdpr/calibration/simulate.hpp"
-#include "cdpr/calibration/suspended_statics.hpp"
-#include "testing/identification_scenario.hpp"
 #include "testing/mismatch_test_data.hpp"
-#include "testing/residual_derivatives.hpp"
+#include "testing/platform_weight_scenario.hpp"
 
 namespace cdpr {
 namespace {
 
-void conceal_weight(RobotModel& truth) {
-  truth.platform.mass *= 1.12;
-  truth.platform.center_of_mass += Eigen::Vector3d(0.015, -0.010, 0.020);
-}
+using testing::conceal_weight;
 
 // Few poses and resamples (noise-free: the statistics are not what is tested).
 DiagnosisOptions quick() {
@@ -62,26 +57,10 @@ void expect_weight_named(const Diagnosis& d, const RobotModel& truth) {
 }
 
 TEST(PlatformWeightEffect, NoiseFreeCraneNamesTheWeightWithItsTrueValues) {
-  scenario::Scenario s = scenario::crane_scenario();
-  conceal_weight(s.truth.robot);
-  const Result<SuspendedState> home =
-      suspended_equilibrium_pose(s.truth.robot, s.nominal.robot.home);
-  ASSERT_TRUE(home.ok());
-  s.truth.robot.home = home->pose;
-  auto off =
-      homing_offsets(s.truth.robot, s.nominal.robot, default_reference_tension(s.nominal.robot));
-  ASSERT_TRUE(off.ok());
-  s.truth.readings.length_offsets = *off;
-  const std::vector<Pose> commands = scenario::random_hanging_poses(s.nominal.robot, s.box, 14, 21);
-  const SimulatedMeasurements sim =
-      testing::simulated(s.truth, commands, scenario::crane_simulation(s, false), 4);
-  IdentificationOptions o;
-  o.estimate_laser_plane = false;
-  o.estimate_swivel_zeros = true;
-  o.estimate_inclinometer_mounting = true;
-  auto d = diagnose(s.nominal, sim.set, nullptr, o, quick());
+  const testing::HeavyCrane c = testing::heavy_crane();
+  auto d = diagnose(c.s.nominal, c.sim.set, nullptr, c.options, quick());
   ASSERT_TRUE(d.ok()) << d.status().to_string();
-  expect_weight_named(*d, s.truth.robot);
+  expect_weight_named(*d, c.s.truth.robot);
 }
 
 TEST(PlatformWeightEffect, NoiseFreeMiniNamesTheWeightWithItsTrueValues) {
