@@ -11,17 +11,13 @@
 #include "cdpr/calibration/suspended_statics.hpp"
 #include "testing/identification_scenario.hpp"
 #include "testing/mismatch_test_data.hpp"
+#include "testing/platform_weight_scenario.hpp"
 #include "testing/residual_derivatives.hpp"
 
 namespace cdpr {
 namespace {
 
-// The concealed error: a platform 12 % heavier than configured whose centre of mass is off by
-// (15, -10, 20) mm in the platform frame.
-void conceal_weight(RobotModel& truth) {
-  truth.platform.mass *= 1.12;
-  truth.platform.center_of_mass += Eigen::Vector3d(0.015, -0.010, 0.020);
-}
+using testing::conceal_weight;
 
 const ParameterEstimate* find(const IdentificationReport& r, ParameterKind kind, int component) {
   for (const ParameterEstimate& p : r.parameters) {
@@ -60,23 +56,10 @@ TEST(PlatformWeight, MassAndComAreWordsOfTheOneVocabulary) {
 // The suspended crane: the poses hang where the true (heavier, offset) platform's statics put
 // them; identified from the nominal model with the usual crane items plus mass and com.
 TEST(PlatformWeight, NoiseFreeCraneRecoversMassAndComToNumericalPrecision) {
-  scenario::Scenario s = scenario::crane_scenario();
-  conceal_weight(s.truth.robot);
-  const Result<SuspendedState> home =
-      suspended_equilibrium_pose(s.truth.robot, s.nominal.robot.home);
-  ASSERT_TRUE(home.ok());
-  s.truth.robot.home = home->pose;
-  auto off =
-      homing_offsets(s.truth.robot, s.nominal.robot, default_reference_tension(s.nominal.robot));
-  ASSERT_TRUE(off.ok());
-  s.truth.readings.length_offsets = *off;
-  const std::vector<Pose> commands = scenario::random_hanging_poses(s.nominal.robot, s.box, 14, 21);
-  const SimulatedMeasurements sim =
-      testing::simulated(s.truth, commands, scenario::crane_simulation(s, false), 4);
-  IdentificationOptions o;
-  o.estimate_laser_plane = false;
-  o.estimate_swivel_zeros = true;
-  o.estimate_inclinometer_mounting = true;
+  const testing::HeavyCrane c = testing::heavy_crane();
+  const scenario::Scenario& s = c.s;
+  const SimulatedMeasurements& sim = c.sim;
+  IdentificationOptions o = c.options;
   o.estimate_platform_mass = true;
   o.estimate_platform_com = true;
   o.function_tolerance = 1e-16;

@@ -59,6 +59,7 @@ std::vector<double> holm(const std::vector<double>& p) {
 // (DiagnosisOptions::confirm_suspect) also needs its BIC below -strong_bic.
 struct Gate {
   double alpha = 0.05;
+  double rival_p = 0.05;     // DiagnosisOptions::screen_gate_p (EffectFit::rival_p_value)
   std::string strong_group;  // empty: none
   double strong_bic = 0.0;
 };
@@ -66,6 +67,7 @@ struct Gate {
 Gate gate_of(const DiagnosisOptions& options) {
   Gate g;
   g.alpha = options.screen.alpha;
+  g.rival_p = options.screen_gate_p;
   if (const EffectDescriptor* e =
           options.confirm_suspect.empty() ? nullptr : find_effect(options.confirm_suspect)) {
     g.strong_group = selection_group(std::string(e->family));
@@ -86,7 +88,7 @@ bool passes_tests(const EffectFit& f, double p_adj, const Gate& gate) {
                             ? -gate.strong_bic
                             : 0.0;
   return p_adj < gate.alpha && f.bic_delta < std::min(0.0, needed) &&
-         f.cv_normalized_after < f.cv_normalized_before;
+         f.cv_normalized_after < f.cv_normalized_before && !(f.rival_p_value < gate.rival_p);
 }
 
 // Among passing fits, one per family: the simplest, unless a richer member is significantly
@@ -397,6 +399,12 @@ bool swap_once(const RefitContext& ctx, const State& standard, const MismatchSum
                              : std::numeric_limits<double>::infinity();
       acc.joint_bics[ids] = b;
       if (!joint) continue;
+      // An effect whose per-cable rival is significant beside it is not swapped in either.
+      if (std::any_of(joint->fits.begin(), joint->fits.end(), [&](const EffectFit& f) {
+            return f.rival_p_value < options.screen_gate_p;
+          })) {
+        continue;
+      }
       if (b < best_bic) {
         best_bic = b;
         best_state = std::move(joint->state);

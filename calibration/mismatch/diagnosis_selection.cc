@@ -374,6 +374,16 @@ EffectParameter describe_parameter(const ParameterEstimate& p, const CalibratedM
     const int dg = digits_for(p.std_dev);
     e.text = "force sensor offset of cable " + cable + ": " + signed_number(p.value, dg) +
              format(" +- %.*f N", dg, p.std_dev);
+  } else if (p.id.kind == ParameterKind::kPlatformMass) {
+    const int dg = digits_for(p.std_dev);
+    e.text = format("platform mass: %.*f +- %.*f kg (configured %.*f kg)", dg, p.value, dg,
+                    p.std_dev, dg, p.initial);
+  } else if (p.id.kind == ParameterKind::kPlatformCom) {
+    const int dg = digits_for(1e3 * p.std_dev);
+    e.text = format("platform centre of mass %c: ", "xyz"[std::clamp(p.id.component, 0, 2)]) +
+             signed_number(1e3 * p.value, dg) +
+             format(" +- %.*f mm (configured ", dg, 1e3 * p.std_dev) +
+             signed_number(1e3 * p.initial, dg) + " mm, platform frame)";
   } else if (p.unit == "m") {
     const double dv = 1e3 * (p.value - p.initial);
     const int dg = digits_for(1e3 * p.std_dev);

@@ -216,6 +216,15 @@ void estimate_force_gains(IdentificationOptions& o) {
 void estimate_force_offsets(IdentificationOptions& o) {
   o.estimate_force_offsets = true;
 }
+void estimate_platform_weight(IdentificationOptions& o) {
+  o.estimate_platform_mass = true;
+  o.estimate_platform_com = true;
+}
+// Applied after estimate_platform_weight: a wrong mass alone should not pay for three
+// centre-of-mass coordinates (the lower BIC is kept).
+void platform_mass_only(IdentificationOptions& o) {
+  o.estimate_platform_com = false;
+}
 void estimate_laser_mounting(IdentificationOptions& o) {
   o.estimate_laser_origin = true;
   o.estimate_laser_direction = true;
@@ -308,6 +317,18 @@ std::vector<EffectDescriptor> make_library() {
                  R::kIdentification, estimate_force_offsets, nullptr,
                  "ParameterBounds::force_offset_fraction", nullptr, nullptr, kTension});
   lib.back().parameters = {ParameterKind::kForceOffset};
+  // The platform's weight: one force and moment pattern shared by every cable at every pose. The
+  // per-cable force sensor gains explain a misfit of the equilibrium cable by cable (their common
+  // mode is a wrong mass): its rival, in its selection group, never beside it.
+  lib.push_back({"platform_weight",
+                 "platform mass and centre of mass (the weight's force and moment in the "
+                 "equilibrium, the same at every pose)",
+                 "platform weight", "force sensor gain", C::kUnestimatedParameters,
+                 R::kIdentification, estimate_platform_weight, platform_mass_only,
+                 "ParameterBounds::mass_factor_min/max, centre of mass within the platform radius",
+                 nullptr, nullptr, kPoseIndex});
+  lib.back().parameters = {ParameterKind::kPlatformMass, ParameterKind::kPlatformCom};
+  lib.back().per_cable_rival = "force_gain_per_cable";
   lib.push_back({"laser_mounting", "laser mounting (origin and beam direction on the platform)",
                  "laser mounting", "laser mounting", C::kUnestimatedParameters, R::kIdentification,
                  estimate_laser_mounting, laser_direction_only,

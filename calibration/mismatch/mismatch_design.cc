@@ -467,8 +467,9 @@ void add_jacobian_candidates(std::vector<Candidate>& lib, const DesignData& D,
     Jx.middleRows(D.pose_start[uj], D.pose_start[uj + 1] - D.pose_start[uj]) =
         ext.jacobian_geometry[uj];
   }
-  auto group = [&](const char* id) {
-    const std::vector<ParameterKind>& kinds = find_effect(id)->parameters;
+  auto group = [&](const EffectDescriptor& e) {
+    const std::vector<ParameterKind>& kinds = e.parameters;
+    const std::string id(e.id);
     std::vector<int> picked;
     for (int q = 0; q < static_cast<int>(ext.names.size()); ++q) {
       const std::string& nm = ext.names[static_cast<std::size_t>(q)];
@@ -479,16 +480,15 @@ void add_jacobian_candidates(std::vector<Candidate>& lib, const DesignData& D,
       picked.push_back(q);
     }
     if (picked.empty()) return;
-    Candidate c = candidate(id, Eigen::MatrixXd(n, static_cast<Eigen::Index>(picked.size())), {});
+    Candidate c =
+        candidate(id.c_str(), Eigen::MatrixXd(n, static_cast<Eigen::Index>(picked.size())), {});
     for (std::size_t q = 0; q < picked.size(); ++q) {
       c.X.col(static_cast<Eigen::Index>(q)) = Jx.col(picked[q]);
     }
     if (c.X.norm() > 0) lib.push_back(std::move(c));
   };
-  for (const char* id :
-       {"drum_scale_per_cable", "platform_anchors", "force_gain_per_cable",
-        "force_offset_per_cable", "laser_mounting", "laser_direction", "laser_plane"}) {
-    group(id);
+  for (const EffectDescriptor& e : effect_library()) {
+    if (e.columns == EffectColumns::kUnestimatedParameters) group(e);
   }
   for (const Candidate& c : lib) {
     if (c.id == "drum_scale_per_cable") {

@@ -200,6 +200,11 @@ struct EffectFit {
   // round, on the residual the effects accepted before it leave.
   int round = 1;
   bool modelled_in_config = false;  // the calibrated config can carry it (else: report only)
+  // Of an effect with a per-cable rival (EffectDescriptor::per_cable_rival: the platform's weight
+  // and the force sensor gains): the screen's p-value of the rival on what this fit leaves,
+  // Bonferroni over the library. Below DiagnosisOptions::screen_gate_p the misfit differs per
+  // cable, which the shared effect cannot be, and it is not accepted.
+  double rival_p_value = 1.0;
   // Of an accepted effect (Diagnosis::accepted): the values of the model after (refitted beside
   // every effect accepted with it; the deviations of the Gauss-Newton coefficients stay the
   // accepting trial's); of a candidate: its trial's.

@@ -71,6 +71,12 @@ struct EffectDescriptor {
   // kUnestimatedParameters: the identification parameters whose Jacobian columns are the
   // candidate's (those the standard identification left fixed).
   std::vector<ParameterKind> parameters = {};
+  // An effect shared by every cable at every pose (the platform's weight: one force and moment
+  // pattern) whose misfit a per-cable effect of the same readings also explains, cable by cable
+  // (the force sensor gains): that effect's id. The shared effect is named only when its rival is
+  // not significant beside it (EffectFit::rival_p_value); the two share a selection group, so
+  // that they are never in one model. Empty: none.
+  std::string_view per_cable_rival = {};
 };
 
 // The library, in the order mismatch_design builds (and the screen ranks ties of) the candidates.
