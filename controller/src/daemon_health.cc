@@ -6,6 +6,7 @@
 #include <spdlog/spdlog.h>
 
 #include <cmath>
+#include <limits>
 
 #include "cdpr/controller/daemon.hpp"
 
@@ -21,7 +22,8 @@ json vector_json(const Eigen::VectorXd& v) {
   return a;
 }
 
-json health_json(const Monitor& monitor, const MonitorAssessment& a, int version) {
+json health_json(const Monitor& monitor, const MonitorAssessment& a, int version,
+                 int moving_samples) {
   json rows = json::array();
   for (const MonitorRow& r : a.rows) {
     rows.push_back({{"name", r.name},
@@ -46,6 +48,7 @@ json health_json(const Monitor& monitor, const MonitorAssessment& a, int version
   return {{"enabled", true},
           {"geometry_version", version},
           {"samples", a.samples},
+          {"samples_moving", moving_samples},
           {"referenced", a.referenced},
           {"reference_consistent", a.reference_consistent},
           {"alarms", monitor.alarms()},
@@ -80,6 +83,7 @@ Status Daemon::restart_monitor(const Geometry& g) {
   o.samples_per_hour = 3600.0 / mc.period_s;
   monitor_.reset();
   monitor_version_ = g.version;
+  health_moving_samples_ = 0;
   health_alerted_ = false;
   health_alarmed_ = false;
   monitor_assess_ns_ = 0;
@@ -89,12 +93,34 @@ Status Daemon::restart_monitor(const Geometry& g) {
   return Status::success();
 }
 
+// The commanded platform speed since the previous supervisor tick (m/s; infinity on the first).
+double Daemon::health_speed(const RtSnapshot& s) {
+  const Pose p = s.pose();
+  double speed = std::numeric_limits<double>::infinity();
+  if (health_last_ns_ >= 0 && s.now_ns > health_last_ns_) {
+    const Eigen::Vector3d last(health_last_position_[0], health_last_position_[1],
+                               health_last_position_[2]);
+    speed = (p.position - last).norm() / (1e-9 * static_cast<double>(s.now_ns - health_last_ns_));
+  }
+  health_last_position_ = {p.position.x(), p.position.y(), p.position.z()};
+  health_last_ns_ = s.now_ns;
+  return speed;
+}
+
 void Daemon::watch_health(const RtSnapshot& s) {
   const MonitoringSettings& mc = config_.monitoring;
-  if (!mc.enabled || worker_running_.load() || state() != DaemonState::kHolding ||
-      s.mode != RtMode::kHolding || !s.settled || !s.have_tensions) {
-    return;
+  if (!mc.enabled || worker_running_.load() || !s.have_tensions) return;
+  // A settled hold, or a slow (quasi-static) move when move_speed_m_s allows it.
+  const DaemonState st = state();
+  const bool holding = st == DaemonState::kHolding && s.mode == RtMode::kHolding && s.settled;
+  bool moving = false;
+  {
+    std::lock_guard lock(health_mu_);
+    const double speed = health_speed(s);
+    moving = mc.move_speed_m_s > 0.0 && st == DaemonState::kMoving && s.mode == RtMode::kMoving &&
+             speed <= mc.move_speed_m_s;
   }
+  if (!holding && !moving) return;
   const Geometry* g = nullptr;
   std::array<double, kMaxAxes> offsets{};
   {
@@ -124,7 +150,9 @@ void Daemon::watch_health(const RtSnapshot& s) {
     sample.lengths[static_cast<std::size_t>(i)] = lengths(i);
     sample.tensions[static_cast<std::size_t>(i)] = tensions(i);
   }
+  const int before = monitor_->samples();
   const bool alarm = monitor_->add(sample);
+  if (moving && monitor_->samples() > before) ++health_moving_samples_;
   if (alarm && !health_alarmed_) {
     health_alarmed_ = true;
     const std::string row = monitor_->row_name(monitor_->first_alarm_row());
@@ -145,7 +173,7 @@ void Daemon::watch_health(const RtSnapshot& s) {
         "health: {}; predicted position error {:.3f} mm (at acceptance {:.3f} mm): "
         "cdprctl health",
         words, 1e3 * a->position_rms_now_m, 1e3 * a->position_rms_acceptance_m);
-    publish("health", health_json(*monitor_, *a, g->version));
+    publish("health", health_json(*monitor_, *a, g->version, health_moving_samples_));
   }
 }
 
@@ -168,7 +196,7 @@ Reply Daemon::cmd_health(const json&, const PeerInfo&) {
     return Reply::failure(ControlErrorCode::kInternal,
                           "health: the assessment failed: " + std::string(a.status().message()));
   }
-  return Reply::success(health_json(*monitor_, *a, monitor_version_));
+  return Reply::success(health_json(*monitor_, *a, monitor_version_, health_moving_samples_));
 }
 
 }  // namespace cdpr::controller

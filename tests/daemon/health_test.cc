@@ -68,6 +68,9 @@ TEST_F(DaemonHealth, SamplesWhileHoldingAndSeesAWrongGeometryWithoutMovingTheRob
   const json& h = r.result;
   EXPECT_EQ(h["enabled"], true);
   EXPECT_GT(h["samples"].get<int>(), 50) << h.dump(2);
+  // Moves slower than move_speed_m_s are sampled too (the virtual robot is quasi-static).
+  EXPECT_GT(h["samples_moving"].get<int>(), 0) << h.dump(2);
+  EXPECT_LT(h["samples_moving"].get<int>(), h["samples"].get<int>());
   EXPECT_FALSE(h["rows"].empty());
   // The nominal anchors are about 14.5 mm off, the stated model uncertainty 0.1 mm: the reference
   // phase finds the model's own error beyond it and judges the model as it is.

@@ -216,6 +216,7 @@ class Daemon {
   void watch_tension_control(const RtSnapshot& s);
   // In-service monitoring (daemon_health.cc): a sample per period while settled, events.
   void watch_health(const RtSnapshot& s);
+  double health_speed(const RtSnapshot& s);  // under health_mu_
   Status restart_monitor(const Geometry& g);
   void latch_fault(const RtSnapshot& s);
   void after_fault_reset();
@@ -358,6 +359,10 @@ class Daemon {
   std::int64_t monitor_assess_ns_ = 0;  // of its last assessment
   bool health_alarmed_ = false;         // the alarm event was raised for this geometry
   bool health_alerted_ = false;         // the change event was raised for this geometry
+  // The previous supervisor tick's commanded position and time (the platform's speed in moves).
+  std::array<double, 3> health_last_position_{};
+  std::int64_t health_last_ns_ = -1;
+  int health_moving_samples_ = 0;  // samples taken during moves, for this geometry
 
   // Under sink_mu_: where events go.
   std::mutex sink_mu_;

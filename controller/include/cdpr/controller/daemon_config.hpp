@@ -166,7 +166,10 @@ struct ControlSettings {
 // `cdprctl health` shows what changed and proposes a re-identification. It never moves the robot.
 struct MonitoringSettings {
   bool enabled = false;
-  double period_s = 1.0;               // s between samples (settled holds only)
+  double period_s = 1.0;  // s between samples
+  // Samples are taken at settled holds and, when this is > 0, during moves whose commanded speed
+  // stays below it (m/s: quasi-static, the following error and inertia negligible); 0: holds only.
+  double move_speed_m_s = 0.0;
   double false_alarms_per_hour = 0.1;  // stated rate of the detectors together
   double alert_position_m = 1e-4;      // m of predicted RMS position error above acceptance
   double assess_period_s = 60.0;       // s between assessments after an alarm
