@@ -41,6 +41,7 @@ if(CDPR_BUILD_TESTS)
 endif()
 
 cdpr_add_gtest(NAME daemon_rt_controller_test SOURCES ${_d}/src/rt_controller_test.cc
+                                                       ${_d}/src/rt_controller_motion_test.cc
                LIBS cdpr_daemon cdpr_daemon_testing cdpr_calibration_testing cdpr_test_support)
 cdpr_add_gtest(NAME daemon_tension_control_test SOURCES ${_d}/src/tension_control_test.cc
                LIBS cdpr_daemon cdpr_daemon_testing cdpr_calibration_testing cdpr_test_support)

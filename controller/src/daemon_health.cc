@@ -111,13 +111,13 @@ void Daemon::watch_health(const RtSnapshot& s) {
   const MonitoringSettings& mc = config_.monitoring;
   if (!mc.enabled || worker_running_.load() || !s.have_tensions) return;
   // A settled hold, or a slow (quasi-static) move when move_speed_m_s allows it.
-  const DaemonState st = state();
-  const bool holding = st == DaemonState::kHolding && s.mode == RtMode::kHolding && s.settled;
+  const DaemonState ds = state();
+  const bool holding = ds == DaemonState::kHolding && s.mode == RtMode::kHolding && s.settled;
   bool moving = false;
   {
     std::lock_guard lock(health_mu_);
     const double speed = health_speed(s);
-    moving = mc.move_speed_m_s > 0.0 && st == DaemonState::kMoving && s.mode == RtMode::kMoving &&
+    moving = mc.move_speed_m_s > 0.0 && ds == DaemonState::kMoving && s.mode == RtMode::kMoving &&
              speed <= mc.move_speed_m_s;
   }
   if (!holding && !moving) return;

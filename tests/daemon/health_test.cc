@@ -21,7 +21,9 @@ class DaemonHealth : public testing::CellTest {
   void start(bool enabled) {
     testing::VirtualCell::Settings s;
     if (enabled) {
-      s.extra = "monitoring: {enabled: true, period_s: 0.2, assess_period_s: 2, reference_s: 4}\n";
+      s.extra =
+          "monitoring: {enabled: true, period_s: 0.2, assess_period_s: 2, reference_s: 4, "
+          "move_speed_m_s: 1.0}\n";
     }
     start_daemon(s);
     ASSERT_TRUE(holds_settled(10.0));
