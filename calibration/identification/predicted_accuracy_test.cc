@@ -16,6 +16,16 @@
 namespace cdpr {
 namespace {
 
+// Every noise of `n` doubled.
+SensorNoise doubled(SensorNoise n) {
+  n.sigma_length *= 2;
+  n.sigma_laser *= 2;
+  n.sigma_force *= 2;
+  n.sigma_reference_position *= 2;
+  n.sigma_reference_angle *= 2;
+  return n;
+}
+
 TEST(PredictedAccuracy, ScalesWithTheNoiseAndIsPositive) {
   scenario::Scenario s = scenario::mini_scenario();
   const std::vector<Pose> poses = scenario::random_feasible_poses(s.nominal.robot, s.box, 25, 11);
@@ -31,12 +41,7 @@ TEST(PredictedAccuracy, ScalesWithTheNoiseAndIsPositive) {
   EXPECT_GT(a->anchor_rms_std_m, 0.0);
   EXPECT_GT(a->grid_points, 0);
   // Every noise doubled: every bound doubles (the information is quadratic in 1/sigma).
-  SensorNoise twice = noise;
-  twice.sigma_length *= 2;
-  twice.sigma_laser *= 2;
-  twice.sigma_force *= 2;
-  twice.sigma_reference_position *= 2;
-  twice.sigma_reference_angle *= 2;
+  const SensorNoise twice = doubled(noise);
   auto b = predict_accuracy(s.nominal, poses, twice, o);
   ASSERT_TRUE(b.ok());
   EXPECT_NEAR(b->anchor_rms_std_m / a->anchor_rms_std_m, 2.0, 0.02);
@@ -172,12 +177,7 @@ TEST(PredictIso9283Position, NominalErrorIsTheFrameShiftAndTheBoundScalesWithThe
   EXPECT_EQ(p->points, 5);
   EXPECT_NEAR(p->nominal_m, 1e-3, 1e-6);
   EXPECT_GT(p->calibrated_m, 0.0);
-  SensorNoise twice = noise;
-  twice.sigma_length *= 2;
-  twice.sigma_laser *= 2;
-  twice.sigma_force *= 2;
-  twice.sigma_reference_position *= 2;
-  twice.sigma_reference_angle *= 2;
+  const SensorNoise twice = doubled(noise);
   auto crb2 = predict_accuracy(s.nominal, poses, twice, o);
   ASSERT_TRUE(crb2.ok());
   auto p2 = predict_iso9283_position(s.nominal, s.nominal, *crb2, twice, o);

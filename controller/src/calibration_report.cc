@@ -73,6 +73,19 @@ Gate anchor_change_gate(const RobotModel& before, const RobotModel& after,
   return g;
 }
 
+// `m` with its encoder zeros and drum scale (relative to `reference`'s drums) as readings: the
+// robot `reference` commands in counts reaches the lengths `m` gives those counts (winch.hpp).
+CalibratedModel counting(const RobotModel& m, const RobotModel& reference) {
+  CalibratedModel c = CalibratedModel::from_robot(m);
+  for (int i = 0; i < m.num_cables() && i < reference.num_cables(); ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    c.readings.length_offsets(i) = m.winches[k].length_offset;
+    c.readings.length_scales(i) =
+        m.winches[k].drum_diameter / reference.winches[k].drum_diameter - 1.0;
+  }
+  return c;
+}
+
 // Predicted position accuracy over the ISO 9283 box (Cramer-Rao bound of this pose set), and
 // the AP-like figure at ISO 9283's points from the same bound.
 Gate predicted_accuracy_gate(const RobotModel& before, const RobotModel& after,
@@ -99,7 +112,8 @@ Gate predicted_accuracy_gate(const RobotModel& before, const RobotModel& after,
     g.text = "predicted RMS position error " + fmt("%.3f", g.value * 1e3) + " mm over " +
              std::to_string(acc->grid_points) + " box points" + (g.passed ? " <= " : " > ") +
              fmt("%.3f", g.limit * 1e3) + " mm";
-    auto iso = predict_iso9283_position(nominal, calibrated, *acc, set.noise, pa);
+    auto iso = predict_iso9283_position(counting(before, before), counting(after, before), *acc,
+                                        set.noise, pa);
     if (iso.ok()) {
       o.iso9283_predicted = *iso;
     } else {

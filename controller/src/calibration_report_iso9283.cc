@@ -74,7 +74,8 @@ std::string predicted_sentence(const CalibrationOutcome& o) {
          "pose set): position error at ISO 9283's points of the 312 mm cube about home, largest "
          "of " +
          std::to_string(p.points) + ": nominal model " + mm(p.nominal_m) +
-         " mm (where it takes the robot if the calibrated geometry is right) -> calibrated " +
+         " mm (where its encoder counts take the robot if the calibration is right) -> "
+         "calibrated " +
          mm(p.calibrated_m) + " mm (RMS from the parameters' uncertainty), " +
          percent(gain(p.nominal_m, p.calibrated_m)) +
          " position accuracy predicted; the paper measured " +
