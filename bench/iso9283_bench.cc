@@ -6,7 +6,10 @@
 // paper's figures (+58 % position accuracy, path accuracy 1.284 mm, path repeatability 0.18 mm).
 //
 //   build/ci/bench/iso9283_bench [--scenario FILE] [--cycles N] [--path-cycles N] [--seed S]
-//                                [--stiffness fixed|shared|per-cable]
+//                                [--stiffness fixed|shared|per-cable] [--out FILE]
+//
+// --out FILE also writes the figures as the calibration report reads them
+// (cdpr/report/iso9283.hpp; the daemon config's report.iso9283_measured).
 //
 // The virtual robot is cdpr-sim's quasi-static physics (sim/physics.hpp) with the scenario's hidden
 // effects, homed with the nominal model at home (as the daemon's cell powers on). Each 4 ms cycle
@@ -28,9 +31,12 @@
 #include "cdpr/calibration/path.hpp"
 #include "cdpr/calibration/path_check.hpp"
 #include "cdpr/calibration/pose_design.hpp"
+#include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/calibration/simulate.hpp"
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/io/atomic_file.hpp"
 #include "cdpr/recording/recording.hpp"
+#include "cdpr/report/iso9283.hpp"
 #include "cdpr/sim/lockstep_io.hpp"
 #include "cdpr/sim/physics.hpp"
 #include "cdpr/sim/scenario.hpp"
@@ -42,10 +48,10 @@ using cdpr::Pose;
 using cdpr::RobotModel;
 using Clock = std::chrono::steady_clock;
 
-constexpr double kCycle = 0.004;             // s, the network's SYNC period (config/cdprd.yaml)
-constexpr double kPaperPositionGain = 58.0;  // %, position accuracy after vs before calibration
-constexpr double kPaperAT = 1.284e-3;        // m, path accuracy after calibration
-constexpr double kPaperRT = 0.18e-3;         // m, path repeatability after calibration
+constexpr double kCycle = 0.004;  // s, the network's SYNC period (config/cdprd.yaml)
+constexpr double kPaperPositionGain = 100.0 * cdpr::report::kPaperPositionAccuracyGain;  // %
+constexpr double kPaperAT = cdpr::report::kPaperPathAccuracyM;
+constexpr double kPaperRT = cdpr::report::kPaperPathRepeatabilityM;
 
 template <typename T>
 T must(cdpr::Result<T> r, const char* what) {
@@ -247,6 +253,7 @@ struct Args {
   int path_cycles = 10;
   std::uint64_t seed = 7;
   std::string stiffness = "fixed";  // what the identification does with EA (cdpr-fit: fixed)
+  std::string out;                  // the figures as JSON for the calibration report; "" = none
 };
 
 RobotModel calibrate(const RobotModel& nominal, const RobotModel& truth,
@@ -277,10 +284,12 @@ Args parse(int argc, char** argv) {
                (std::strcmp(argv[i + 1], "fixed") == 0 || std::strcmp(argv[i + 1], "shared") == 0 ||
                 std::strcmp(argv[i + 1], "per-cable") == 0)) {
       a.stiffness = argv[++i];
+    } else if (k == "--out" && has) {
+      a.out = argv[++i];
     } else {
       std::fprintf(stderr,
                    "usage: iso9283_bench [--scenario FILE] [--cycles N] [--path-cycles N] "
-                   "[--seed S] [--stiffness fixed|shared|per-cable]\n");
+                   "[--seed S] [--stiffness fixed|shared|per-cable] [--out FILE]\n");
       std::exit(2);
     }
   }
@@ -324,10 +333,9 @@ int main(int argc, char** argv) {
   // The test cube: 312 mm centred at the origin (the paper's MINI box); the diagonal plane through
   // the edges (x, z) = (-a, -a) and (+a, +a); P2..P5 at 10 % of the plane's diagonals from its
   // corners.
-  const double a = 0.156;
-  const Eigen::Vector3d C[4] = {{-a, -a, -a}, {-a, a, -a}, {a, a, a}, {a, -a, a}};
-  std::vector<Eigen::Vector3d> points = {Eigen::Vector3d::Zero()};
-  for (const auto& c : C) points.push_back(c + 0.2 * (Eigen::Vector3d::Zero() - c));
+  const cdpr::AccuracyBox box;  // MINI's 312 mm cube at the origin
+  const double a = box.half_extent.x();
+  const std::vector<Eigen::Vector3d> points = cdpr::iso9283_points(box);
   // Test paths in the same plane: its diagonal P2 -> P4, and a circle about P1 of diameter 80 % of
   // the cube's edge, both at rotation 0 (as in the paper).
   const Eigen::Vector3d u = Eigen::Vector3d(1, 0, 1).normalized(), v = Eigen::Vector3d::UnitY();
@@ -400,5 +408,23 @@ int main(int argc, char** argv) {
       "whole bench %.1f s\n",
       0.5 * (fig[0].sample_us + fig[1].sample_us), 0.5 * (fig[0].physics_us + fig[1].physics_us),
       calib_s, wall);
+  if (!args.out.empty()) {
+    cdpr::report::Iso9283Measured m;
+    char setup[512];
+    std::snprintf(setup, sizeof setup,
+                  "iso9283_bench: virtual MINI, truth %s, seed %llu, %d pose cycles, %d path "
+                  "cycles, identification stiffness %s",
+                  args.scenario.c_str(), static_cast<unsigned long long>(args.seed), args.cycles,
+                  args.path_cycles, args.stiffness.c_str());
+    m.setup = setup;
+    cdpr::report::Iso9283Figures* columns[2] = {&m.nominal, &m.calibrated};
+    for (int k = 0; k < 2; ++k) {
+      *columns[k] = {fig[k].pose.ap,   fig[k].pose.rp, fig[k].line.at,
+                     fig[k].circle.at, fig[k].line.rt, fig[k].circle.rt};
+    }
+    must(cdpr::io::write_file_atomically(args.out, cdpr::report::iso9283_json(m).dump(2) + "\n"),
+         "--out");
+    std::printf("figures written to %s\n", args.out.c_str());
+  }
   return 0;
 }

@@ -14,6 +14,7 @@ add_library(cdpr_daemon STATIC
   ${_d}/src/tension_control.cc
   ${_d}/src/state_store.cc
   ${_d}/src/calibration_report.cc
+  ${_d}/src/calibration_report_iso9283.cc
   ${_d}/src/supervisor.cc
   ${_d}/src/measuring_sequence.cc
   ${_d}/src/daemon_text.cc
@@ -30,8 +31,8 @@ add_library(cdpr_daemon STATIC
 target_include_directories(cdpr_daemon PUBLIC ${_d}/include)
 target_link_libraries(cdpr_daemon
   PUBLIC cdpr_io cdpr_control cdpr_calibration_motion cdpr_canopen cdpr_can cdpr_modbus cdpr_config cdpr_recording
-         cdpr_calibration nlohmann_json::nlohmann_json Threads::Threads cdpr_version
-  PRIVATE spdlog::spdlog cdpr_yaml cdpr_report cdpr_options)
+         cdpr_calibration cdpr_report nlohmann_json::nlohmann_json Threads::Threads cdpr_version
+  PRIVATE spdlog::spdlog cdpr_yaml cdpr_options)
 
 # Test support: a fake robot I/O for unit tests of the RT cycle (controller/testing).
 if(CDPR_BUILD_TESTS)
@@ -50,7 +51,7 @@ cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.c
 cdpr_add_gtest(NAME daemon_log_coalescer_test SOURCES ${_d}/src/log_coalescer_test.cc
                LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_calibration_report_test SOURCES ${_d}/src/calibration_report_test.cc
-               LIBS cdpr_daemon)
+               ${_d}/src/calibration_report_iso9283_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_supervisor_test SOURCES ${_d}/src/supervisor_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_measuring_sequence_test SOURCES ${_d}/src/measuring_sequence_test.cc
                LIBS cdpr_daemon)

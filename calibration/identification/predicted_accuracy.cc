@@ -26,6 +26,17 @@ std::vector<Pose> AccuracyBox::grid() const {
   return out;
 }
 
+std::vector<Eigen::Vector3d> iso9283_points(const AccuracyBox& box) {
+  const Eigen::Vector3d& h = box.half_extent;
+  const Eigen::Vector3d corners[4] = {{-h.x(), -h.y(), -h.z()},
+                                      {-h.x(), h.y(), -h.z()},
+                                      {h.x(), h.y(), h.z()},
+                                      {h.x(), -h.y(), h.z()}};
+  std::vector<Eigen::Vector3d> out = {box.center};
+  for (const Eigen::Vector3d& c : corners) out.push_back(box.center + 0.8 * c);
+  return out;
+}
+
 namespace {
 
 Eigen::MatrixXd normalized_pinv(const Eigen::MatrixXd& S, double tol, int* rank) {
@@ -259,6 +270,40 @@ Result<RealizedAccuracy> measure_position_accuracy(const CalibratedModel& truth,
   }
   out.position_rms_m = std::sqrt(sp / out.grid_points);
   out.orientation_rms_rad = std::sqrt(so / out.grid_points);
+  return out;
+}
+
+Result<PredictedIsoPosition> predict_iso9283_position(const CalibratedModel& nominal,
+                                                      const CalibratedModel& calibrated,
+                                                      const PredictedAccuracy& crb,
+                                                      const SensorNoise& noise,
+                                                      const PredictedAccuracyOptions& options) {
+  const double f_ref = std::isnan(options.reference_tension)
+                           ? default_reference_tension(nominal.robot)
+                           : options.reference_tension;
+  PredictedIsoPosition out;
+  out.nominal_m = 0.0;
+  out.calibrated_m = 0.0;
+  for (const Eigen::Vector3d& p : iso9283_points(options.box)) {
+    AccuracyBox at;
+    at.center = p;
+    at.half_extent.setZero();
+    at.points_per_axis = 1;
+    const auto reached = measure_position_accuracy(calibrated, nominal, at, f_ref);
+    const auto sens =
+        pose_sensitivities(nominal, at, f_ref, noise, options.identification, crb.ids, nullptr);
+    if (!reached.ok() || !sens.ok() || sens->size() != 1) continue;
+    const Eigen::MatrixXd& G = sens->front();
+    const double v = (G * crb.covariance * G.transpose()).topLeftCorner<3, 3>().trace();
+    out.nominal_m = std::max(out.nominal_m, reached->position_max_m);
+    out.calibrated_m = std::max(out.calibrated_m, std::sqrt(std::max(0.0, v)));
+    ++out.points;
+  }
+  if (out.points == 0) {
+    return Status(
+        ErrorCode::kNumericalFailure,
+        "ISO 9283 points: none is feasible for both the nominal and the calibrated model");
+  }
   return out;
 }
 

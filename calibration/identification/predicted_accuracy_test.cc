@@ -16,6 +16,16 @@
 namespace cdpr {
 namespace {
 
+// Every noise of `n` doubled.
+SensorNoise doubled(SensorNoise n) {
+  n.sigma_length *= 2;
+  n.sigma_laser *= 2;
+  n.sigma_force *= 2;
+  n.sigma_reference_position *= 2;
+  n.sigma_reference_angle *= 2;
+  return n;
+}
+
 TEST(PredictedAccuracy, ScalesWithTheNoiseAndIsPositive) {
   scenario::Scenario s = scenario::mini_scenario();
   const std::vector<Pose> poses = scenario::random_feasible_poses(s.nominal.robot, s.box, 25, 11);
@@ -31,12 +41,7 @@ TEST(PredictedAccuracy, ScalesWithTheNoiseAndIsPositive) {
   EXPECT_GT(a->anchor_rms_std_m, 0.0);
   EXPECT_GT(a->grid_points, 0);
   // Every noise doubled: every bound doubles (the information is quadratic in 1/sigma).
-  SensorNoise twice = noise;
-  twice.sigma_length *= 2;
-  twice.sigma_laser *= 2;
-  twice.sigma_force *= 2;
-  twice.sigma_reference_position *= 2;
-  twice.sigma_reference_angle *= 2;
+  const SensorNoise twice = doubled(noise);
   auto b = predict_accuracy(s.nominal, poses, twice, o);
   ASSERT_TRUE(b.ok());
   EXPECT_NEAR(b->anchor_rms_std_m / a->anchor_rms_std_m, 2.0, 0.02);
@@ -139,6 +144,46 @@ TEST(PredictedAccuracy, PerfectControllerReachesTheTargets) {
   auto nominal = measure_position_accuracy(s.truth, s.nominal, box);
   ASSERT_TRUE(nominal.ok());
   EXPECT_GT(nominal->position_rms_m, 1e-3);  // the SolidWorks anchors are off by ~10 mm
+}
+
+TEST(Iso9283Points, CentreThenFourPointsOnTheCubesDiagonalPlaneAtTenPercentFromItsCorners) {
+  AccuracyBox box;
+  box.center = Eigen::Vector3d(0.01, -0.02, 0.03);
+  const std::vector<Eigen::Vector3d> p = iso9283_points(box);
+  ASSERT_EQ(p.size(), 5u);
+  EXPECT_TRUE(p[0].isApprox(box.center));
+  for (std::size_t k = 1; k < p.size(); ++k) {
+    const Eigen::Vector3d d = p[k] - box.center;
+    EXPECT_NEAR(d.x(), d.z(), 1e-12) << k;  // the plane through two opposite edges
+    EXPECT_NEAR(d.cwiseAbs().maxCoeff(), 0.8 * box.half_extent.x(), 1e-12) << k;
+  }
+  // P2 and P4 are the ends of one of the plane's diagonals (the bench's test line).
+  EXPECT_TRUE((p[1] - box.center).isApprox(-(p[3] - box.center)));
+}
+
+TEST(PredictIso9283Position, NominalErrorIsTheFrameShiftAndTheBoundScalesWithTheNoise) {
+  scenario::Scenario s = scenario::mini_scenario();
+  const std::vector<Pose> poses = scenario::random_feasible_poses(s.nominal.robot, s.box, 25, 11);
+  SensorNoise noise;
+  PredictedAccuracyOptions o;
+  o.identification.slack_tension_sigmas = 0.0;
+  auto crb = predict_accuracy(s.nominal, poses, noise, o);
+  ASSERT_TRUE(crb.ok()) << crb.status().to_string();
+  // A calibrated frame shifted by 1 mm: commanding with the nominal model lands 1 mm off.
+  CalibratedModel shifted = s.nominal;
+  shifted.robot.frame_anchors.row(0).array() += 1e-3;
+  auto p = predict_iso9283_position(s.nominal, shifted, *crb, noise, o);
+  ASSERT_TRUE(p.ok()) << p.status().to_string();
+  EXPECT_EQ(p->points, 5);
+  EXPECT_NEAR(p->nominal_m, 1e-3, 1e-6);
+  EXPECT_GT(p->calibrated_m, 0.0);
+  const SensorNoise twice = doubled(noise);
+  auto crb2 = predict_accuracy(s.nominal, poses, twice, o);
+  ASSERT_TRUE(crb2.ok());
+  auto p2 = predict_iso9283_position(s.nominal, s.nominal, *crb2, twice, o);
+  ASSERT_TRUE(p2.ok());
+  EXPECT_LT(p2->nominal_m, 1e-7);  // nothing changed: the nominal model is right
+  EXPECT_NEAR(p2->calibrated_m, 2.0 * p->calibrated_m, 1e-3 * p->calibrated_m);
 }
 
 // Issue 18: a 4-cable crane cannot hold the level poses of the box; each target is evaluated

@@ -73,10 +73,24 @@ Gate anchor_change_gate(const RobotModel& before, const RobotModel& after,
   return g;
 }
 
-// Predicted position accuracy over the ISO 9283 box (Cramer-Rao bound of this pose set).
+// `m` with its encoder zeros and drum scale (relative to `reference`'s drums) as readings: the
+// robot `reference` commands in counts reaches the lengths `m` gives those counts (winch.hpp).
+CalibratedModel counting(const RobotModel& m, const RobotModel& reference) {
+  CalibratedModel c = CalibratedModel::from_robot(m);
+  for (int i = 0; i < m.num_cables() && i < reference.num_cables(); ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    c.readings.length_offsets(i) = m.winches[k].length_offset;
+    c.readings.length_scales(i) =
+        m.winches[k].drum_diameter / reference.winches[k].drum_diameter - 1.0;
+  }
+  return c;
+}
+
+// Predicted position accuracy over the ISO 9283 box (Cramer-Rao bound of this pose set), and
+// the AP-like figure at ISO 9283's points from the same bound.
 Gate predicted_accuracy_gate(const RobotModel& before, const RobotModel& after,
                              const MeasurementSet& set, const IdentificationOptions& options,
-                             const AcceptanceGates& gates, double* predicted_rms_m) {
+                             const AcceptanceGates& gates, CalibrationOutcome& o) {
   Gate g;
   g.name = "predicted_accuracy";
   std::vector<Pose> poses;
@@ -86,20 +100,30 @@ Gate predicted_accuracy_gate(const RobotModel& before, const RobotModel& after,
   pa.box.center = after.home.position;
   // The pose set was planned feasible for the model it was measured with; the bound hardly
   // depends on the geometry's few millimetres of change.
-  auto acc = predict_accuracy(CalibratedModel::from_robot(before), poses, set.noise, pa);
-  if (!acc.ok()) acc = predict_accuracy(CalibratedModel::from_robot(after), poses, set.noise, pa);
+  const CalibratedModel nominal = CalibratedModel::from_robot(before);
+  const CalibratedModel calibrated = CalibratedModel::from_robot(after);
+  auto acc = predict_accuracy(nominal, poses, set.noise, pa);
+  if (!acc.ok()) acc = predict_accuracy(calibrated, poses, set.noise, pa);
   g.limit = gates.max_predicted_position_error_m;
   if (acc.ok()) {
     g.value = acc->position_rms_m;
-    *predicted_rms_m = g.value;
+    o.predicted_position_rms_m = g.value;
     g.passed = g.value <= g.limit;
     g.text = "predicted RMS position error " + fmt("%.3f", g.value * 1e3) + " mm over " +
              std::to_string(acc->grid_points) + " box points" + (g.passed ? " <= " : " > ") +
              fmt("%.3f", g.limit * 1e3) + " mm";
+    auto iso = predict_iso9283_position(counting(before, before), counting(after, before), *acc,
+                                        set.noise, pa);
+    if (iso.ok()) {
+      o.iso9283_predicted = *iso;
+    } else {
+      o.iso9283_predicted_problem = iso.status().to_string();
+    }
   } else {
     g.value = std::numeric_limits<double>::quiet_NaN();
     g.passed = false;
     g.text = "predicted accuracy unavailable: " + acc.status().to_string();
+    o.iso9283_predicted_problem = g.text;
   }
   return g;
 }
@@ -147,8 +171,7 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
   }
   o.gates.push_back(fit_gate(*o.fit, gates));
   o.gates.push_back(anchor_change_gate(before, o.model, gates));
-  o.gates.push_back(
-      predicted_accuracy_gate(before, o.model, set, options, gates, &o.predicted_position_rms_m));
+  o.gates.push_back(predicted_accuracy_gate(before, o.model, set, options, gates, o));
   o.gates.push_back(mismatch_gate(diagnosis, o.verdict_key, gates));
   o.gates_passed = true;
   for (const Gate& g : o.gates) {
@@ -227,6 +250,7 @@ json calibration_json(const CalibrationOutcome& o, const CalibrationReportContex
           {"gates", gates},
           {"gates_passed", o.gates_passed},
           {"predicted_position_rms_m", o.predicted_position_rms_m},
+          {"iso9283", iso9283_json(o, c)},
           {"fit",
            {{"chi2", o.fit->chi2},
             {"dof", o.fit->dof},
@@ -272,7 +296,7 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
       << report::html_escape(r.reading)
       << ". Its first row stays in the recording and is left out of the identification.</p>\n";
   }
-  h << "</section>\n";
+  h << "</section>\n" << iso9283_html(o, c);
   std::string page = report_page;
   const std::size_t body = page.find("<body>");
   if (body == std::string::npos)

@@ -483,6 +483,7 @@ Result<json> Daemon::write_report(int id, const Geometry& g, const MeasuringSequ
   ctx.started = md.get(recording::key::kDate);
   ctx.measuring_s = now_s() - seq.started_s();
   ctx.remeasured = result.remeasured;
+  load_iso9283_measured(config_.report.iso9283_measured, ctx);
   const Diagnosis* diagnosis = result.diagnosis.ok() ? &*result.diagnosis : nullptr;
   const CalibratedModel after_model =
       diagnosis != nullptr ? diagnosis->model_after : result.report->estimate;
@@ -508,7 +509,7 @@ Result<json> Daemon::write_report(int id, const Geometry& g, const MeasuringSequ
   const std::pair<std::string, std::string> files[] = {
       {"report.json", summary.dump(2, ' ', false, json::error_handler_t::replace) + "\n"},
       {"report.html", calibration_html(out, ctx, rendered.html)},
-      {"report.txt", rendered.text},
+      {"report.txt", rendered.text + "\n" + iso9283_text(out, ctx)},
       {"model_before.yaml", config::save_robot_config(g.model)},
       {"model_after.yaml", config::save_robot_config(out.model)},
   };

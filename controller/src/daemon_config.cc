@@ -231,6 +231,14 @@ Status read_control(const YamlField& n, const std::string& dir, ControlSettings&
   return n.optional("group", c.group);
 }
 
+Status read_report(const YamlField& n, const std::string& dir, ReportSettings& r) {
+  if (!n.present()) return Status::success();
+  CDPR_RETURN_IF_ERROR(n.check_keys({"iso9283_measured"}));
+  CDPR_RETURN_IF_ERROR(n.optional("iso9283_measured", r.iso9283_measured));
+  r.iso9283_measured = resolve(dir, r.iso9283_measured);
+  return Status::success();
+}
+
 Result<DaemonConfig> read(const YamlDocument& doc) {
   DaemonConfig c;
   c.file = doc.file();
@@ -239,7 +247,7 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   CDPR_RETURN_IF_ERROR(root.check_keys(
       {"robot", "canopen", "laser", "can_interface", "state_directory", "realtime", "identity",
        "motion", "tension_watch", "tension_control", "measuring", "identification", "acceptance",
-       "start", "control", "safety", "monitoring"}));
+       "start", "control", "safety", "monitoring", "report"}));
   const std::string dir = std::filesystem::path(c.file).parent_path().string();
   CDPR_ASSIGN_OR_RETURN(YamlField robot, root.required("robot", "the robot description"));
   CDPR_ASSIGN_OR_RETURN(c.robot, robot.text());
@@ -264,6 +272,7 @@ Result<DaemonConfig> read(const YamlDocument& doc) {
   CDPR_RETURN_IF_ERROR(read_control(root["control"], dir, c.control));
   CDPR_RETURN_IF_ERROR(read_safety_settings(root["safety"], c.safety));
   CDPR_RETURN_IF_ERROR(read_monitoring(root["monitoring"], c.monitoring));
+  CDPR_RETURN_IF_ERROR(read_report(root["report"], dir, c.report));
   return c;
 }
 

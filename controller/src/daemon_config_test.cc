@@ -24,7 +24,8 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
       "design_emphasis_weight: 1, laser_samples: 10, remeasure_rounds: 2}\n"
       "identification: {estimate: [anchors, scales], diagnose: false}\n"
       "acceptance: {mode: auto, max_anchor_change_m: 0.01}\n"
-      "control: {socket: /run/x.sock, group: cdpr}\n",
+      "control: {socket: /run/x.sock, group: cdpr}\n"
+      "report: {iso9283_measured: bench/iso9283.json}\n",
       "/etc/cdpr/cdprd.yaml");
   ASSERT_TRUE(c.ok()) << c.status().to_string();
   EXPECT_EQ(c->robot, "/etc/cdpr/mini.yaml");
@@ -51,6 +52,7 @@ TEST(DaemonConfig, ReadsEveryGroupAndResolvesPathsAgainstTheFile) {
   EXPECT_EQ(c->acceptance.mode, AcceptanceMode::kAuto);
   EXPECT_DOUBLE_EQ(c->acceptance.max_anchor_change_m, 0.01);
   EXPECT_EQ(c->control.group, "cdpr");
+  EXPECT_EQ(c->report.iso9283_measured, "/etc/cdpr/bench/iso9283.json");
 }
 
 TEST(DaemonConfig, ErrorsNameFileLineAndField) {

@@ -25,6 +25,7 @@
 #include "cdpr/can/virtual_bus.hpp"
 #include "cdpr/canopen/config.hpp"
 #include "cdpr/config/robot_config.hpp"
+#include "cdpr/controller/calibration_report.hpp"
 #include "cdpr/controller/daemon.hpp"
 #include "cdpr/controller/state_store.hpp"
 #include "cdpr/modbus/laser_sensor.hpp"
@@ -150,6 +151,14 @@ TEST_F(DaemonNativeTensionControl, CalibratesMiniAcceptsBumplesslyAndTheNextMove
   EXPECT_LT(figures, first_plot);
   EXPECT_NE(html.find("over the ISO 9283 box"), std::string::npos);
   EXPECT_NE(html.find("recording <code>recording.csv</code> ("), std::string::npos);
+  // The ISO 9283 section: an AP-like figure predicted at the five points, the bench's command.
+  const json& iso = rep["iso9283"];
+  std::printf("[daemon-native] ISO 9283 predicted: %s\n", iso["predicted"].dump().c_str());
+  EXPECT_EQ(iso["predicted"]["points"], 5) << iso.dump(2);
+  const std::size_t iso_section = html.find("<section id=\"iso9283\">");
+  ASSERT_NE(iso_section, std::string::npos);
+  EXPECT_GT(iso_section, decision);
+  EXPECT_NE(html.find(kIso9283Command), std::string::npos);
   auto after =
       config::load_robot_config(daemon().store().calibration_dir(id) + "/model_after.yaml");
   ASSERT_TRUE(after.ok()) << after.status().to_string();

@@ -7,16 +7,26 @@
 // predicted RMS position error over the ISO 9283 box (Cramer-Rao bound of the recorded pose
 // set), and no unresolved mismatch (the mismatch locator's verdict is "no mismatch" or
 // "mismatch named").
+//
+// The section "ISO 9283 (position and path)" (calibration_report_iso9283.cc) gives an AP-like
+// figure PREDICTED at ISO 9283's five points about home, nominal vs calibrated
+// (predict_iso9283_position), the command that MEASURES AP, RP, AT and RT on the virtual robot
+// (iso9283_bench: the daemon cannot see the true pose of a real robot) with the paper's figures
+// beside, and the measured table when the daemon config names the bench's file
+// (report.iso9283_measured).
 #pragma once
 
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "cdpr/calibration/diagnosis.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/controller/daemon_config.hpp"
+#include "cdpr/report/iso9283.hpp"
 
 namespace cdpr::controller {
 
@@ -41,6 +51,10 @@ struct CalibrationOutcome {
   bool gates_passed = false;
   std::string failed_gates;  // "fit, mismatch"
   double predicted_position_rms_m = 0.0;
+  // AP-like figure predicted at ISO 9283's points of the box about home; when it could not be
+  // computed, why (iso9283_predicted.points == 0).
+  PredictedIsoPosition iso9283_predicted;
+  std::string iso9283_predicted_problem;
   int poses = 0;
 };
 
@@ -60,7 +74,25 @@ struct CalibrationReportContext {
   std::string started;
   double measuring_s = 0.0;
   std::vector<RemeasuredPose> remeasured;
+  // ISO 9283 figures measured on the virtual robot (load_iso9283_measured): the file ("": none
+  // configured), its figures, or why they could not be read.
+  std::string iso9283_file;
+  std::optional<report::Iso9283Measured> iso9283_measured;
+  std::string iso9283_problem;
 };
+
+// The command that measures the figures on the virtual robot and writes the file.
+inline constexpr const char* kIso9283Command = "build/ci/bench/iso9283_bench --out iso9283.json";
+
+// Reads `path` into c.iso9283_*; never fails: a missing, unreadable or malformed file becomes
+// c.iso9283_problem (naming the file and the field) and the report says so.
+void load_iso9283_measured(const std::string& path, CalibrationReportContext& c);
+
+// The section "ISO 9283 (position and path)": HTML (in calibration_html), text (appended to
+// report.txt) and JSON ("iso9283" in calibration_json).
+std::string iso9283_html(const CalibrationOutcome& o, const CalibrationReportContext& c);
+std::string iso9283_text(const CalibrationOutcome& o, const CalibrationReportContext& c);
+nlohmann::json iso9283_json(const CalibrationOutcome& o, const CalibrationReportContext& c);
 
 // One round of extra poses that the mismatch locator asks for: the separating poses of each
 // confounded pair, then a suspect's follow-up poses, and how the next diagnosis runs. After a

@@ -184,6 +184,15 @@ struct MonitoringSettings {
   double reference_s = 3600.0;
 };
 
+// What the calibration report shows besides the calibration (docs/daemon.md "Acceptance gates and
+// the report").
+struct ReportSettings {
+  // ISO 9283 figures measured on the virtual robot (`iso9283_bench --out FILE`, resolved against
+  // the config's directory; "" = none): the report's "ISO 9283" section shows them. Read when a
+  // report is written; a missing or bad file is said in the report, never an error.
+  std::string iso9283_measured;
+};
+
 struct DaemonConfig {
   std::string file;           // where it was read from
   std::string robot;          // robot description (nominal geometry at first start)
@@ -203,6 +212,7 @@ struct DaemonConfig {
   ControlSettings control;
   SafetySettings safety;  // e-stop inputs, brakes, winch limits, workspace box (safety_config.hpp)
   MonitoringSettings monitoring;
+  ReportSettings report;
 };
 
 Result<DaemonConfig> parse_daemon_config(std::string_view yaml, std::string_view file);

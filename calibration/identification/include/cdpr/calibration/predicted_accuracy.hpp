@@ -37,6 +37,12 @@ struct AccuracyBox {
   std::vector<Pose> grid() const;
 };
 
+// ISO 9283's five test positions of `box` (its cube for a cube): P1 the centre, P2..P5 on the
+// diagonal plane through the edges (x, z) = (-hx, -hz) and (+hx, +hz), each at 10 % of the plane's
+// diagonals from a corner (0.8 of the way from the centre to the corner). The iso9283_bench's
+// points and the calibration report's.
+std::vector<Eigen::Vector3d> iso9283_points(const AccuracyBox& box);
+
 struct PredictedAccuracyOptions {
   IdentificationOptions identification;
   // The channels the calibration will record (issue 18), with the noise given to
@@ -94,6 +100,26 @@ Result<std::vector<Eigen::MatrixXd>> pose_sensitivities(const CalibratedModel& m
                                                         const IdentificationOptions& identification,
                                                         const std::vector<ParameterId>& ids,
                                                         int* skipped_points = nullptr);
+
+// A position-accuracy (AP-like) figure PREDICTED at the ISO 9283 points of `options.box`
+// (iso9283_points), not measured: the largest over the points of
+//  - nominal_m: the distance from the commanded point to where commanding with `nominal` takes
+//    the robot whose geometry is `calibrated` (measure_position_accuracy at each point: the
+//    nominal model's error if the calibration is right);
+//  - calibrated_m: the RMS position error the calibrated model keeps from its parameters'
+//    uncertainty, `crb` (predict_accuracy's Cramer-Rao covariance with `nominal` and `noise`)
+//    propagated at the point as predict_accuracy does.
+// kNumericalFailure when no point is feasible for either figure.
+struct PredictedIsoPosition {
+  double nominal_m = std::numeric_limits<double>::quiet_NaN();
+  double calibrated_m = std::numeric_limits<double>::quiet_NaN();
+  int points = 0;  // of the five, where both figures were computed
+};
+Result<PredictedIsoPosition> predict_iso9283_position(const CalibratedModel& nominal,
+                                                      const CalibratedModel& calibrated,
+                                                      const PredictedAccuracy& crb,
+                                                      const SensorNoise& noise,
+                                                      const PredictedAccuracyOptions& options);
 
 struct RealizedAccuracy {
   double position_rms_m = 0.0;
