@@ -201,19 +201,25 @@ cdpr::MonitorOptions monitor_options(const RobotModel& nominal, double rate_per_
   return o;
 }
 
-// The acceptance figure: predict_accuracy of a calibration on the cycle's nine poses (+ the box
-// grid) with the bench's noise.
-double acceptance_rms(const RobotModel& nominal, const cdpr::MonitorOptions& o) {
+cdpr::SensorNoise sensor_noise(const cdpr::MonitorOptions& o) {
   cdpr::SensorNoise n;
   n.sigma_length = o.noise.sigma_length;
   n.sigma_force = o.noise.sigma_force;
   n.sigma_laser = o.noise.sigma_laser;
+  return n;
+}
+
+// predict_accuracy of a calibration of `model` on the box grid with the bench's noise.
+cdpr::PredictedAccuracy box_accuracy(const cdpr::CalibratedModel& model,
+                                     const cdpr::MonitorOptions& o) {
   cdpr::PredictedAccuracyOptions po;
   po.box = o.box;
-  std::vector<Pose> poses = o.box.grid();
-  const cdpr::PredictedAccuracy pa = must(
-      cdpr::predict_accuracy(cdpr::CalibratedModel::from_robot(nominal), poses, n, po), "accuracy");
-  return pa.position_rms_m;
+  return must(cdpr::predict_accuracy(model, o.box.grid(), sensor_noise(o), po), "accuracy");
+}
+
+// The acceptance figure of an exact calibration.
+double acceptance_rms(const RobotModel& nominal, const cdpr::MonitorOptions& o) {
+  return box_accuracy(cdpr::CalibratedModel::from_robot(nominal), o).position_rms_m;
 }
 
 // Hours of clean running (no change) with monitors at stated rates of 10, 1 and 0.1 false alarms
@@ -274,15 +280,8 @@ void calibrated_clean_run(const RobotModel& nominal, cdpr::StiffnessEstimate sti
       cdpr::bench::calibrate_virtual_robot(nominal, truth, scenario, seed, io);
   const RobotModel& model = rep.estimate.robot;
   cdpr::MonitorOptions o = monitor_options(model, 0.1);
-  cdpr::SensorNoise n;
-  n.sigma_length = o.noise.sigma_length;
-  n.sigma_force = o.noise.sigma_force;
-  n.sigma_laser = o.noise.sigma_laser;
-  cdpr::PredictedAccuracyOptions po;
-  po.box = o.box;
-  const cdpr::PredictedAccuracy pa =
-      must(cdpr::predict_accuracy(rep.estimate, o.box.grid(), n, po), "accuracy");
-  o.noise = cdpr::monitor_noise(n, &pa);
+  const cdpr::PredictedAccuracy pa = box_accuracy(rep.estimate, o);
+  o.noise = cdpr::monitor_noise(sensor_noise(o), &pa);
   o.acceptance_position_rms_m = pa.position_rms_m;
   for (double reference : {0.0, 600.0, 3600.0}) {
     o.reference_s = reference;

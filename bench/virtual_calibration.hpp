@@ -5,9 +5,8 @@
 #pragma once
 
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 
+#include "bench_util.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/recording/recording.hpp"
@@ -17,15 +16,6 @@
 
 namespace cdpr::bench {
 
-template <typename T>
-T must_ok(Result<T> r, const char* what) {
-  if (!r.ok()) {
-    std::fprintf(stderr, "bench: %s: %s\n", what, r.status().to_string().c_str());
-    std::exit(1);
-  }
-  return std::move(*r);
-}
-
 inline IdentificationReport calibrate_virtual_robot(const RobotModel& nominal,
                                                     const RobotModel& truth,
                                                     const sim::Scenario& scenario,
@@ -34,14 +24,14 @@ inline IdentificationReport calibrate_virtual_robot(const RobotModel& nominal,
   const CalibratedModel initial = CalibratedModel::from_robot(nominal);
   PoseDesignOptions design;
   design.num_poses = 25;
-  const PoseDesign poses = must_ok(design_poses(initial, design), "pose design");
-  auto physics = must_ok(sim::Physics::create(truth, scenario, seed), "physics");
+  const PoseDesign poses = must(design_poses(initial, design), "pose design");
+  auto physics = must(sim::Physics::create(truth, scenario, seed), "physics");
   sim::LockstepOptions lo;
   lo.laser_samples = 5;
-  const auto samples = must_ok(sim::run_lockstep(physics, nominal, poses.poses, lo), "lockstep");
-  const auto rec = must_ok(sim::make_recording(samples, nominal, scenario, {}), "recording");
-  const auto set = must_ok(recording::to_measurement_set(rec), "measurement set");
-  return must_ok(identify(initial, set, options), "identify");
+  const auto samples = must(sim::run_lockstep(physics, nominal, poses.poses, lo), "lockstep");
+  const auto rec = must(sim::make_recording(samples, nominal, scenario, {}), "recording");
+  const auto set = must(recording::to_measurement_set(rec), "measurement set");
+  return must(identify(initial, set, options), "identify");
 }
 
 }  // namespace cdpr::bench
