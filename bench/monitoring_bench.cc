@@ -286,10 +286,9 @@ void calibrated_clean_run(const RobotModel& nominal, cdpr::StiffnessEstimate sti
   for (double reference : {0.0, 600.0, 3600.0}) {
     o.reference_s = reference;
     std::printf(
-        "after a real calibration (%s; chi2/dof %.2f, model length uncertainty %.4f mm), %s:\n",
-        label, rep.chi2 / std::max(1, rep.dof), 1e3 * o.noise.model_length,
-        reference > 0.0 ? (reference > 600.0 ? "reference phase 1 h" : "reference phase 600 s")
-                        : "no reference phase");
+        "after a real calibration (%s; chi2/dof %.2f, model length uncertainty %.4f mm), "
+        "reference phase %.0f s (0: none):\n",
+        label, rep.chi2 / std::max(1, rep.dof), 1e3 * o.noise.model_length, reference);
     clean_run(make_run(model, nominal, scenario, seed + 2000), o, hours);
   }
 }
