@@ -51,7 +51,7 @@ struct Process : cdpr::test::Subprocess {
 };
 
 // Kept in step with tests/sim/sim-master-fault.yaml.
-constexpr double kFaultAt = 40.0;  // s after the slaves powered on
+constexpr double kFaultAt = 15.0;  // s after the slaves powered on
 constexpr NodeId kFaultNode = 3;   // cable 3 = the third cia402 node
 constexpr std::uint16_t kFaultEmcy = 0x7500;
 constexpr NodeId kDrives[] = {1, 2, 3, 4, 5, 6, 7, 8};
