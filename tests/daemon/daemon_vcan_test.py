@@ -38,7 +38,7 @@ def scenario():
           f"cdprd holds with the nominal geometry (state {s['state']}, version {s['geometry_version']})")
 
     # 1. Abort mid-sequence.
-    rc, out, err = ctl("calibrate")
+    rc, out, err = cell.calibrate()
     check(rc == 0, f"calibrate starts ({out.strip()}{err.strip()})")
     wait_for(lambda: ctl_json("status")["calibration"]["pose"] >= 2, 180, "two poses measured")
     rc, out, err = ctl("abort")

@@ -126,9 +126,9 @@ def scenario():
         rc, out, err = ctl("home", "--method", "absolute")
         check(rc == 0 or "pose check" in out + err, f"home before calibrating ({rc})")
     if ctl_json("status")["pose"]["trusted"]:
-        rc, out, err = ctl("calibrate")
+        rc, out, err = cell.calibrate()
         check(rc == 0, f"calibrate starts ({(out + err).strip()[:80]})")
-        wait_for(lambda: ctl_json("status")["calibration"]["pose"] >= 2, 180, "two poses measured")
+        wait_for(lambda: ctl_json("status")["calibration"]["pose"] >= 1, 180, "one pose measured")
     subprocess.run(["ip", "link", "set", "vcan0", "down"], check=True)
     wait_for(lambda: ctl_json("status")["state"] == "fault", 60, "bus down: cdprd in fault")
     s = ctl_json("status")
@@ -156,5 +156,7 @@ cell.write_configs(
     "measuring: {poses: 12, laser_samples: 5, average_cycles: 10, "
     "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4}\n"
     "identification: {diagnose: false}\n"
-    "safety: {estop: [{kind: drive_input, node: 1, bit: 16, stale_s: 1.0}]}\n")
+    # stale_s 5, not 1: at a load of 10 a starved cdpr-sim under user-mode-linux sent the drive's
+    # input more than 1 s late (a stale e-stop source, not the opened chain this test asserts).
+    "safety: {estop: [{kind: drive_input, node: 1, bit: 16, stale_s: 5.0}]}\n")
 cell.run(scenario)

@@ -54,6 +54,11 @@ class Cell:
                            text=True, timeout=timeout)
         return r.returncode, r.stdout, r.stderr
 
+    def calibrate(self, *args):
+        """`cdprctl calibrate` without --wait. cdprd designs the poses before it answers: seconds
+        under user-mode-linux, more than cdprctl's default 10 s at a load of 10 (seen)."""
+        return self.ctl("--timeout", "120", "calibrate", *args, timeout=180)
+
     def ctl_json(self, *args):
         rc, out, err = self.ctl("--json", *args)
         if rc != 0:
