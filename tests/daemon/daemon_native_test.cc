@@ -81,14 +81,17 @@ class DaemonNativeTensionControl : public DaemonNative {
 // (config/sim/cdprd.yaml: the tension control in the null space, the poses designed 30 N inside
 // the limits): it passes its gates, the acceptance is bumpless and the next move lands on target.
 // The tension band at every cycle is asserted by daemon_tension_band_test; here its smallest
-// clearance over the 25-pose sequence is printed.
+// clearance over the 25-pose sequence is printed. The scenario's softer cables are estimated
+// (stiffness-per-cable) instead of found by the mismatch locator (76 s of the test's 81 on a
+// loaded machine): the locator's rounds in the daemon are AGrossLaserReadingIsMeasuredAgain...'s.
 TEST_F(DaemonNativeTensionControl, CalibratesMiniAcceptsBumplesslyAndTheNextMoveLandsOnTarget) {
   testing::VirtualCell::Settings shipped;
   shipped.measuring =
       "{poses: 25, laser_samples: 5, laser_interval_s: 0.002, average_cycles: 25, "
       "noise_length_m: 4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 3, "
       "design_tension_margin: 30}";
-  shipped.identification = "{bootstrap: 5}";
+  shipped.identification =
+      "{estimate: [anchors, offsets, laser-plane, stiffness-per-cable], diagnose: false}";
   shipped.extra = "tension_control: {gain: 20, max_rate: 0.02}\n";
   start_daemon(shipped);
   const double t0 = cell_->seconds();
@@ -127,7 +130,7 @@ TEST_F(DaemonNativeTensionControl, CalibratesMiniAcceptsBumplesslyAndTheNextMove
               margin, margin, clearance);
   const json st = daemon().status();
   ASSERT_EQ(st["calibration"]["outcome"], "awaiting_acceptance") << st.dump(2);
-  // The report names the hidden elasticity and proposes anchors close to the truth.
+  // The report proposes anchors close to the truth.
   auto report = request("report");
   ASSERT_TRUE(report.ok) << report.message;
   const json& rep = report.result["report"];
