@@ -345,12 +345,11 @@ Status plan_input(const RobotModel& model, const KinematicsData& kinematics,
 
 // One QP nearest to `reference` into `plan`; the error of an outcome that no reference changes
 // (degenerate, invalid, infeasible), else success (feasible or not found: see plan.outcome).
-Status plan_attempt(const KinematicsData& kinematics, const Wrench6& w, const CableVector& lo,
+Status plan_attempt(const StructureFactor& factor, const Wrench6& w, const CableVector& lo,
                     const CableVector& hi, double reference, TensionPlan& plan) {
   ForceDistributionOptions options;
   options.reference_tension = reference;
-  const ForceDistributionResult r =
-      distribute_forces(kinematics.structure_matrix, w, lo, hi, options);
+  const ForceDistributionResult r = distribute_forces(factor, w, lo, hi, options);
   plan.outcome = r.outcome;
   plan.tensions = r.tensions;
   plan.reference = reference;
@@ -379,13 +378,14 @@ Status not_found() {
 }  // namespace
 
 Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
-                     double reference_tension, double margin, TensionPlan& plan) {
+                     const StructureFactor& factor, double reference_tension, double margin,
+                     TensionPlan& plan) {
   plan.outcome = ForceDistributionOutcome::kInvalidInput;
   CableVector lo, hi;
   CDPR_RETURN_IF_ERROR(plan_input(model, kinematics, reference_tension, margin, lo, hi));
   const Wrench6 w = gravity_wrench(model, kinematics.rotation);
   for (const double scale : {1.0, 2.0, 4.0}) {
-    CDPR_RETURN_IF_ERROR(plan_attempt(kinematics, w, lo, hi, scale * reference_tension, plan));
+    CDPR_RETURN_IF_ERROR(plan_attempt(factor, w, lo, hi, scale * reference_tension, plan));
     if (plan.outcome == ForceDistributionOutcome::kFeasible && plan.cables_at_limits == 0) {
       return Status::success();
     }
@@ -394,15 +394,30 @@ Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
   return not_found();
 }
 
+Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
+                     double reference_tension, double margin, TensionPlan& plan) {
+  StructureFactor factor;
+  factor.compute(kinematics.structure_matrix);
+  return plan_tensions(model, kinematics, factor, reference_tension, margin, plan);
+}
+
 Status plan_tensions_at(const RobotModel& model, const KinematicsData& kinematics,
-                        double reference_tension, double margin, TensionPlan& plan) {
+                        const StructureFactor& factor, double reference_tension, double margin,
+                        TensionPlan& plan) {
   plan.outcome = ForceDistributionOutcome::kInvalidInput;
   CableVector lo, hi;
   CDPR_RETURN_IF_ERROR(plan_input(model, kinematics, reference_tension, margin, lo, hi));
-  CDPR_RETURN_IF_ERROR(plan_attempt(kinematics, gravity_wrench(model, kinematics.rotation), lo, hi,
+  CDPR_RETURN_IF_ERROR(plan_attempt(factor, gravity_wrench(model, kinematics.rotation), lo, hi,
                                     reference_tension, plan));
   if (plan.outcome == ForceDistributionOutcome::kFeasible) return Status::success();
   return not_found();
+}
+
+Status plan_tensions_at(const RobotModel& model, const KinematicsData& kinematics,
+                        double reference_tension, double margin, TensionPlan& plan) {
+  StructureFactor factor;
+  factor.compute(kinematics.structure_matrix);
+  return plan_tensions_at(model, kinematics, factor, reference_tension, margin, plan);
 }
 
 Status check_pose(const RobotModel& model, const Pose& pose, const PathCheckOptions& options,
@@ -539,13 +554,15 @@ double segment_distance(const Eigen::Vector3d& p0, const Eigen::Vector3d& p1,
 }
 
 Status command_counts(const RobotModel& model, const Pose& pose, double reference_tension,
-                      CommandData& data, double margin) {
+                      CommandData& data, std::span<const double> margins, int* chosen) {
+  *chosen = -1;
   const int m = model.num_cables();
   if (!sizes_ok(model, data.kinematics) || data.cable.counts.size() != m ||
-      data.cable.kinematics.lengths.size() != m || static_cast<int>(model.winches.size()) != m) {
+      data.cable.kinematics.lengths.size() != m || static_cast<int>(model.winches.size()) != m ||
+      margins.empty()) {
     return Status::error(ErrorCode::kInvalidArgument,
-                         "command: model with %d cables (1 to %d supported) or command data of "
-                         "another size",
+                         "command: model with %d cables (1 to %d supported), command data of "
+                         "another size or no margin",
                          m, kMaxCables);
   }
   if (!inverse_kinematics(model, pose, data.kinematics)) {
@@ -553,12 +570,25 @@ Status command_counts(const RobotModel& model, const Pose& pose, double referenc
                          "command: cable %d is degenerate at the pose",
                          data.kinematics.invalid_cable + 1);
   }
-  if (Status s = plan_tensions(model, data.kinematics, reference_tension, margin, data.plan);
-      !s.ok()) {
-    return s.prepend("command: ");
+  data.factor.compute(data.kinematics.structure_matrix);
+  Status last;
+  for (std::size_t j = 0; j < margins.size(); ++j) {
+    last = plan_tensions(model, data.kinematics, data.factor, reference_tension, margins[j],
+                         data.plan);
+    if (last.ok()) {
+      compensate_lengths(model, data.kinematics, data.plan.tensions, data.cable);
+      *chosen = static_cast<int>(j);
+      return Status::success();
+    }
   }
-  inverse_kinematics_compensated(model, pose, data.plan.tensions, data.cable);
-  return Status::success();
+  return last.prepend("command: ");
+}
+
+Status command_counts(const RobotModel& model, const Pose& pose, double reference_tension,
+                      CommandData& data, double margin) {
+  int chosen = -1;
+  return command_counts(model, pose, reference_tension, data, std::span<const double>(&margin, 1),
+                        &chosen);
 }
 
 }  // namespace cdpr

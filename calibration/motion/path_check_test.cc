@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
@@ -440,6 +441,38 @@ TEST(CommandCounts, FailureKeepsThePreviousCountsAndNamesTheReason) {
   EXPECT_EQ(data.cable.counts, before);
   CommandData wrong_size(4);
   EXPECT_EQ(command_counts(mini, mini.home, 20.0, wrong_size).code(), ErrorCode::kInvalidArgument);
+}
+
+TEST(CommandCounts, TriesTheMarginsInOrderAndUsesTheFirstFeasibleOne) {
+  const RobotModel mini = testing::mini_robot();
+  const double reference = default_reference_tension(mini);
+  const Pose far = pose_at(0.2, 0.15, 0.1);
+  // The widest margin that is still feasible at `far`, found one margin at a time.
+  CommandData one(mini);
+  double feasible = -1.0, infeasible = -1.0;
+  for (double margin = 0.0; margin < 200.0 && infeasible < 0.0; margin += 5.0) {
+    if (command_counts(mini, far, reference, one, margin).ok()) {
+      feasible = margin;
+    } else if (feasible >= 0.0) {
+      infeasible = margin;
+    }
+  }
+  ASSERT_GE(feasible, 0.0);
+  ASSERT_GT(infeasible, feasible);
+  ASSERT_TRUE(command_counts(mini, far, reference, one, feasible).ok());
+  CommandData data(mini);
+  const std::array<double, 3> margins{infeasible, feasible, 0.0};
+  int chosen = -2;
+  test::AllocationCounter count;
+  ASSERT_TRUE(command_counts(mini, far, reference, data, margins, &chosen).ok());
+  EXPECT_EQ(count.allocations(), 0u);
+  EXPECT_EQ(chosen, 1);
+  EXPECT_EQ(data.cable.counts, one.cable.counts);
+  EXPECT_EQ(data.plan.tensions, one.plan.tensions);
+  // None feasible: the last margin's reason, no index.
+  const std::array<double, 1> too_wide{infeasible};
+  EXPECT_FALSE(command_counts(mini, far, reference, data, too_wide, &chosen).ok());
+  EXPECT_EQ(chosen, -1);
 }
 
 TEST(CommandCounts, AllocatesNothingAlongAMoveNorOnFailure) {

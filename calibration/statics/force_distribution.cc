@@ -13,8 +13,6 @@ constexpr int kMaxNull = kMaxCables - 6;  // largest null-space dimension
 constexpr int kMaxConstraints = 2 * kMaxCables;
 
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
-using CableMatrix =
-    Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxCables, kMaxCables>;
 using NullVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxNull, 1>;
 using NullMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxNull, kMaxNull>;
 
@@ -188,37 +186,33 @@ bool project_origin_onto_polytope(
   return false;
 }
 
-ForceDistributionResult quadratic_program(
-    const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>>& At, const Wrench6& w,
-    const Eigen::Ref<const Eigen::VectorXd>& f_min, const Eigen::Ref<const Eigen::VectorXd>& f_max,
-    const CableVector& f_ref, const ForceDistributionOptions& options) {
+ForceDistributionResult quadratic_program(const StructureFactor& factor, const Wrench6& w,
+                                          const Eigen::Ref<const Eigen::VectorXd>& f_min,
+                                          const Eigen::Ref<const Eigen::VectorXd>& f_max,
+                                          const CableVector& f_ref,
+                                          const ForceDistributionOptions& options) {
   ForceDistributionResult out;
-  const int m = static_cast<int>(At.cols());
-  // A = At^T (m x 6) = Q [R; 0] P^T; Q = [Q1 Q2], Q2 spans the null space of At.
-  const Eigen::Matrix<double, Eigen::Dynamic, 6, 0, kMaxCables, 6> A = At.transpose();
-  const Eigen::ColPivHouseholderQR<Eigen::Matrix<double, Eigen::Dynamic, 6, 0, kMaxCables, 6>> qr(
-      A);
-  const double r00 = std::abs(qr.matrixQR()(0, 0));
-  int rank = 0;
-  for (int k = 0; k < 6; ++k) rank += std::abs(qr.matrixQR()(k, k)) > options.rank_tolerance * r00;
-  if (rank < 6 || !(r00 > 0.0)) {
+  const int m = factor.num_cables();
+  if (!factor.valid()) {
     out.outcome = ForceDistributionOutcome::kDegenerate;
     out.status = Status::error(ErrorCode::kNumericalFailure,
                                "force distribution: the structure matrix has rank %d < 6 at this "
                                "pose",
-                               rank);
+                               factor.rank);
     out.tensions = f_ref;
     return out;
   }
-  CableMatrix Q(m, m);
-  Q.setIdentity();
-  Q.applyOnTheLeft(qr.householderQ());
-  // Particular solution closest to f_ref: f_p = f_ref - Q1 (Q1^T f_ref + R^-T P^T w).
+  // Particular solution closest to f_ref: f_p = f_ref - Q1 (Q1^T f_ref + R^-T P^T w), with
+  // Q = [Q1 Q2] applied as its Householder sequence (never formed).
+  const StructureFactor::Qr& qr = factor.qr;
   const Wrench6 pw = qr.colsPermutation().transpose() * w;
-  const Matrix6d R = qr.matrixQR().topRows<6>().triangularView<Eigen::Upper>();
-  const Wrench6 y = R.transpose().triangularView<Eigen::Lower>().solve(pw);
-  const Wrench6 q1f = Q.leftCols<6>().transpose() * f_ref;
-  const CableVector f_p = f_ref - Q.leftCols<6>() * (q1f + y);
+  const Wrench6 y = qr.matrixQR().topRows<6>().triangularView<Eigen::Upper>().transpose().solve(pw);
+  CableVector t = f_ref;
+  t.applyOnTheLeft(qr.householderQ().transpose());  // Q^T f_ref
+  t.head<6>() += y;
+  t.tail(m - 6).setZero();
+  t.applyOnTheLeft(qr.householderQ());
+  const CableVector f_p = f_ref - t;
   const int r = m - 6;
   if (r == 0) {
     out.tensions = f_p;
@@ -234,19 +228,20 @@ ForceDistributionResult quadratic_program(
                                            worst);
     return out;
   }
+  const StructureFactor::NullBasis& N = factor.null_basis;
   // Constraints on lambda: N_i lambda >= f_min_i - f_p_i and -N_i lambda >= f_p_i - f_max_i.
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxConstraints, kMaxNull> C(2 * m, r);
   Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxConstraints, 1> d(2 * m);
   for (int i = 0; i < m; ++i) {
-    C.row(2 * i) = Q.row(i).tail(r);
+    C.row(2 * i) = N.row(i);
     d(2 * i) = f_min(i) - f_p(i);
-    C.row(2 * i + 1) = -Q.row(i).tail(r);
+    C.row(2 * i + 1) = -N.row(i);
     d(2 * i + 1) = f_p(i) - f_max(i);
   }
   NullVector lambda(r);
   const bool ok = project_origin_onto_polytope(C, d, options.feasibility_tolerance,
                                                options.max_iterations, lambda, &out.iterations);
-  out.tensions = f_p + Q.rightCols(r) * lambda;
+  out.tensions = f_p + N * lambda;
   const int worst =
       worst_violation(out.tensions, f_min, f_max, nullptr, options.feasibility_tolerance, nullptr);
   if (ok && worst < 0) {
@@ -264,6 +259,38 @@ ForceDistributionResult quadratic_program(
                         "wrench (the pose is outside the wrench-feasible workspace)");
   }
   return out;
+}
+
+// The checks every distribute_forces overload makes; false: `out` says why. Else the reference
+// tensions and the total wrench.
+bool valid_input(const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>>& structure_matrix,
+                 const Wrench6& wrench, const Eigen::Ref<const Eigen::VectorXd>& f_min,
+                 const Eigen::Ref<const Eigen::VectorXd>& f_max,
+                 const ForceDistributionOptions& options, ForceDistributionResult& out,
+                 CableVector& f_ref, Wrench6& w) {
+  const int m = static_cast<int>(structure_matrix.cols());
+  if (m < 1 || m > kMaxCables || f_min.size() != m || f_max.size() != m) {
+    out.status =
+        Status::error(ErrorCode::kInvalidArgument,
+                      "force distribution: %d cables (at most %d) with %d and %d limits", m,
+                      kMaxCables, static_cast<int>(f_min.size()), static_cast<int>(f_max.size()));
+    return false;
+  }
+  w = wrench + options.external_wrench;
+  if (!structure_matrix.allFinite() || !w.allFinite() || !f_min.allFinite() || !f_max.allFinite() ||
+      (f_min.array() > f_max.array()).any() ||
+      (options.reference_tension.has_value() && !std::isfinite(*options.reference_tension)) ||
+      options.max_iterations < 1) {
+    out.status = Status(ErrorCode::kInvalidArgument,
+                        "force distribution: non-finite input, f_min > f_max or bad options");
+    return false;
+  }
+  f_ref.resize(m);
+  for (int i = 0; i < m; ++i) {
+    f_ref(i) = options.reference_tension.has_value() ? *options.reference_tension
+                                                     : 0.5 * (f_min(i) + f_max(i));
+  }
+  return true;
 }
 
 }  // namespace
@@ -291,37 +318,75 @@ Wrench6 gravity_wrench(const RobotModel& model, const Eigen::Matrix3d& rotation)
   return w;
 }
 
+bool StructureFactor::compute(
+    const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>>& structure_matrix,
+    double rank_tolerance) {
+  rank = 0;
+  const int m = static_cast<int>(structure_matrix.cols());
+  if (m < 1 || m > kMaxCables) {
+    status = Factored::kBadInput;
+    structure.resize(6, 0);
+    return false;
+  }
+  structure = structure_matrix;
+  if (!structure.allFinite()) {
+    status = Factored::kBadInput;
+    return false;
+  }
+  qr.compute(structure.transpose());
+  const double r00 = std::abs(qr.matrixQR()(0, 0));
+  for (int k = 0; k < std::min(6, m); ++k) {
+    rank += std::abs(qr.matrixQR()(k, k)) > rank_tolerance * r00;
+  }
+  if (rank < 6 || !(r00 > 0.0)) {
+    status = Factored::kRankDeficient;
+    return false;
+  }
+  // Q2 = Q [0; I]: the last m - 6 columns of Q.
+  null_basis.setZero(m, m - 6);
+  null_basis.bottomRows(m - 6).setIdentity();
+  null_basis.applyOnTheLeft(qr.householderQ());
+  status = Factored::kFullRank;
+  return true;
+}
+
+ForceDistributionResult distribute_forces(const StructureFactor& factor, const Wrench6& wrench,
+                                          const Eigen::Ref<const Eigen::VectorXd>& f_min,
+                                          const Eigen::Ref<const Eigen::VectorXd>& f_max,
+                                          const ForceDistributionOptions& options) {
+  CableVector f_ref;
+  Wrench6 w;
+  ForceDistributionResult out;
+  if (!valid_input(factor.structure, wrench, f_min, f_max, options, out, f_ref, w)) return out;
+  if (factor.status == StructureFactor::Factored::kNone ||
+      factor.status == StructureFactor::Factored::kBadInput) {
+    out.status = Status(ErrorCode::kInvalidArgument,
+                        "force distribution: the structure matrix was not factored");
+    return out;
+  }
+  out = quadratic_program(factor, w, f_min, f_max, f_ref, options);
+  if (out.tensions.size() == factor.num_cables()) {
+    finish(out, factor.structure, w, f_min, f_max, options.feasibility_tolerance);
+  }
+  return out;
+}
+
 ForceDistributionResult distribute_forces(
     const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>>& structure_matrix,
     const Wrench6& wrench, const Eigen::Ref<const Eigen::VectorXd>& f_min,
     const Eigen::Ref<const Eigen::VectorXd>& f_max, const ForceDistributionOptions& options) {
+  CableVector f_ref;
+  Wrench6 w;
   ForceDistributionResult out;
-  const int m = static_cast<int>(structure_matrix.cols());
-  if (m < 1 || m > kMaxCables || f_min.size() != m || f_max.size() != m) {
-    out.status =
-        Status::error(ErrorCode::kInvalidArgument,
-                      "force distribution: %d cables (at most %d) with %d and %d limits", m,
-                      kMaxCables, static_cast<int>(f_min.size()), static_cast<int>(f_max.size()));
-    return out;
+  if (!valid_input(structure_matrix, wrench, f_min, f_max, options, out, f_ref, w)) return out;
+  if (options.method == ForceDistributionMethod::kClosedForm) {
+    out = closed_form(structure_matrix, w, f_min, f_max, f_ref, options);
+  } else {
+    StructureFactor factor;
+    factor.compute(structure_matrix, options.rank_tolerance);
+    out = quadratic_program(factor, w, f_min, f_max, f_ref, options);
   }
-  const Wrench6 w = wrench + options.external_wrench;
-  if (!structure_matrix.allFinite() || !w.allFinite() || !f_min.allFinite() || !f_max.allFinite() ||
-      (f_min.array() > f_max.array()).any() ||
-      (options.reference_tension.has_value() && !std::isfinite(*options.reference_tension)) ||
-      options.max_iterations < 1) {
-    out.status = Status(ErrorCode::kInvalidArgument,
-                        "force distribution: non-finite input, f_min > f_max or bad options");
-    return out;
-  }
-  CableVector f_ref(m);
-  for (int i = 0; i < m; ++i) {
-    f_ref(i) = options.reference_tension.has_value() ? *options.reference_tension
-                                                     : 0.5 * (f_min(i) + f_max(i));
-  }
-  out = options.method == ForceDistributionMethod::kClosedForm
-            ? closed_form(structure_matrix, w, f_min, f_max, f_ref, options)
-            : quadratic_program(structure_matrix, w, f_min, f_max, f_ref, options);
-  if (out.tensions.size() == m) {
+  if (out.tensions.size() == structure_matrix.cols()) {
     finish(out, structure_matrix, w, f_min, f_max, options.feasibility_tolerance);
   }
   return out;

@@ -208,6 +208,58 @@ TEST(ForceDistribution, DegenerateAndInvalidInput) {
             ForceDistributionOutcome::kInvalidInput);
 }
 
+// One factorization serves every QP at the pose: the same result as factoring for each call,
+// at other references and limits, and no allocation.
+TEST(ForceDistribution, OneFactorServesEveryPlanAtThePose) {
+  RobotModel model = testing::mini_robot();
+  for (CableModel& c : model.cables) c.f_max = 60.0;
+  KinematicsData kin(model);
+  std::mt19937_64 rng(4);
+  StructureFactor factor;
+  int feasible = 0, infeasible = 0;
+  for (int k = 0; k < 40; ++k) {
+    const Pose pose = testing::random_pose(testing::mini_workspace(), rng);
+    if (!inverse_kinematics(model, pose, kin)) continue;
+    ASSERT_TRUE(factor.compute(kin.structure_matrix));
+    // The null-space basis is orthonormal and annihilated by the structure matrix.
+    const Eigen::MatrixXd N = factor.null_basis;
+    EXPECT_LT((kin.structure_matrix * N).cwiseAbs().maxCoeff(), 1e-12);
+    EXPECT_LT(
+        (N.transpose() * N - Eigen::MatrixXd::Identity(N.cols(), N.cols())).cwiseAbs().maxCoeff(),
+        1e-12);
+    const Wrench6 w = gravity_wrench(model, kin.rotation);
+    for (const double reference : {10.0, 20.0, 40.0}) {
+      for (const double margin : {0.0, 5.0}) {
+        const CableVector lo = CableVector::Constant(8, 1.0 + margin);
+        const CableVector hi = CableVector::Constant(8, 60.0 - margin);
+        ForceDistributionOptions o;
+        o.reference_tension = reference;
+        const ForceDistributionResult a = distribute_forces(kin.structure_matrix, w, lo, hi, o);
+        cdpr::test::AllocationCounter count;
+        const ForceDistributionResult b = distribute_forces(factor, w, lo, hi, o);
+        EXPECT_EQ(count.allocations(), 0u);
+        ASSERT_EQ(a.outcome, b.outcome) << to_string(a.outcome);
+        EXPECT_EQ(a.tensions, b.tensions);
+        feasible += a.feasible();
+        infeasible += !a.feasible();
+      }
+    }
+  }
+  // Both kinds of outcome were compared.
+  EXPECT_GT(feasible, 20);
+  EXPECT_GT(infeasible, 20);
+  // A rank-deficient structure: the factor says so and the QP reports it degenerate.
+  RobotModel flat = testing::mini_robot();
+  flat.platform_anchors.setZero();
+  KinematicsData kf(flat);
+  ASSERT_TRUE(inverse_kinematics(flat, flat.home, kf));
+  EXPECT_FALSE(factor.compute(kf.structure_matrix));
+  EXPECT_EQ(distribute_forces(factor, Wrench6::Zero(), CableVector::Constant(8, 1.0),
+                              CableVector::Constant(8, 60.0), {})
+                .outcome,
+            ForceDistributionOutcome::kDegenerate);
+}
+
 TEST(ForceDistribution, RepeatedCallsDoNotAllocate) {
   RobotModel model = testing::mini_robot();
   for (CableModel& c : model.cables) c.f_max = 60.0;

@@ -167,14 +167,11 @@ bool RtController::solve(const Pose& pose) noexcept {
   const TensionControlOptions& tc = tension_.options();
   const std::array<double, 3> margins{tc.margin + tc.guard, tc.margin, 0.0};
   const std::size_t first = tension_.enabled() ? 0 : 2;
-  double margin = -1.0;
-  for (std::size_t j = first; j < margins.size() && margin < 0.0; ++j) {
-    if (command_counts(geometry_->model, pose, ref_tension_, command_data_, margins[j]).ok()) {
-      margin = margins[j];
-    }
-  }
-  if (margin < 0.0) return false;
-  follow_plan_reference(pose, margin);
+  int chosen = -1;
+  (void)command_counts(geometry_->model, pose, ref_tension_, command_data_,
+                       std::span<const double>(margins).subspan(first), &chosen);
+  if (chosen < 0) return false;
+  follow_plan_reference(margins[first + static_cast<std::size_t>(chosen)]);
   for (int i = 0; i < m_; ++i) {
     const auto k = static_cast<std::size_t>(i);
     desired_[k] = command_data_.cable.counts(i) + offsets_[k];
@@ -190,23 +187,23 @@ bool RtController::solve(const Pose& pose) noexcept {
 // one reference is continuous along the path, so the tensions planned and the lengths that
 // compensate their elongation change smoothly (a step of 60 N in every cable's plan, 4 mm of
 // cable, made a cable of the uncalibrated MINI drop to 8.5 N mid-move).
-void RtController::follow_plan_reference(const Pose& pose, double margin) noexcept {
+void RtController::follow_plan_reference(double margin) noexcept {
   constexpr double kPlanSwitchS = 0.5;  // s from 1x to 2x the reference
   const double goal = command_data_.plan.reference;
   if (std::isnan(plan_reference_)) plan_reference_ = goal;
   const double dmax = ref_tension_ * options_.cycle_s / kPlanSwitchS;
   plan_reference_ += std::clamp(goal - plan_reference_, -dmax, dmax);
   if (plan_reference_ == goal) return;
-  if (plan_tensions_at(geometry_->model, command_data_.kinematics, plan_reference_, margin,
-                       command_data_.plan)
+  if (plan_tensions_at(geometry_->model, command_data_.kinematics, command_data_.factor,
+                       plan_reference_, margin, command_data_.plan)
           .ok()) {
-    inverse_kinematics_compensated(geometry_->model, pose, command_data_.plan.tensions,
-                                   command_data_.cable);
+    compensate_lengths(geometry_->model, command_data_.kinematics, command_data_.plan.tensions,
+                       command_data_.cable);
     return;
   }
   // (the planner's own choice is feasible: back to it)
-  (void)plan_tensions(geometry_->model, command_data_.kinematics, ref_tension_, margin,
-                      command_data_.plan);
+  (void)plan_tensions(geometry_->model, command_data_.kinematics, command_data_.factor,
+                      ref_tension_, margin, command_data_.plan);
   plan_reference_ = command_data_.plan.reference;
 }
 

@@ -364,7 +364,7 @@ class RtController {
   void set_fault(const RtFault& f) noexcept;
   void hold_fault(const RtFault& f) noexcept;
   bool solve(const Pose& pose) noexcept;
-  void follow_plan_reference(const Pose& pose, double margin) noexcept;
+  void follow_plan_reference(double margin) noexcept;
   bool active() const noexcept {
     return mode_ == RtMode::kMoving || mode_ == RtMode::kHolding || mode_ == RtMode::kSlewing ||
            mode_ == RtMode::kHoldingCounts;

@@ -51,17 +51,16 @@ struct CableCommandData {
   Eigen::Matrix<std::int64_t, Eigen::Dynamic, 1> counts_rounded;  // nearest integers
 };
 
-// All cables. Returns false (data.kinematics.invalid_cable set) when a cable is degenerate; the
-// other cables' commands are still computed. `tensions` has one entry per cable, N.
-inline bool inverse_kinematics_compensated(const RobotModel& model, const Pose& pose,
-                                           const Eigen::Ref<const Eigen::VectorXd>& tensions,
-                                           CableCommandData& data) {
-  const bool ok = inverse_kinematics(model, pose, data.kinematics);
+// The commands of all cables from inverse kinematics already made at the pose (`kinematics`,
+// valid); data.kinematics is not touched. `tensions` has one entry per cable, N.
+inline void compensate_lengths(const RobotModel& model, const KinematicsData& kinematics,
+                               const Eigen::Ref<const Eigen::VectorXd>& tensions,
+                               CableCommandData& data) {
   const int m = model.num_cables();
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
     const CableModel& cable = model.cables[k];
-    const double lk = data.kinematics.lengths(i);
+    const double lk = kinematics.lengths(i);
     const double loaded = loaded_length(cable, lk);
     const double dl = cable_elongation<double>(cable, loaded, tensions(i));
     const double command = lk - dl;
@@ -72,6 +71,15 @@ inline bool inverse_kinematics_compensated(const RobotModel& model, const Pose& 
     data.counts(i) = counts;
     data.counts_rounded(i) = std::llround(counts);
   }
+}
+
+// All cables. Returns false (data.kinematics.invalid_cable set) when a cable is degenerate; the
+// other cables' commands are still computed. `tensions` has one entry per cable, N.
+inline bool inverse_kinematics_compensated(const RobotModel& model, const Pose& pose,
+                                           const Eigen::Ref<const Eigen::VectorXd>& tensions,
+                                           CableCommandData& data) {
+  const bool ok = inverse_kinematics(model, pose, data.kinematics);
+  compensate_lengths(model, data.kinematics, tensions, data);
   return ok;
 }
 

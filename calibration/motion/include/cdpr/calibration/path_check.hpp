@@ -20,6 +20,7 @@
 #include <limits>
 #include <numbers>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include "cdpr/calibration/force_distribution.hpp"
@@ -54,6 +55,15 @@ Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
 // choice between 1x, 2x and 4x steps). The same errors; allocates nothing.
 Status plan_tensions_at(const RobotModel& model, const KinematicsData& kinematics,
                         double reference_tension, double margin, TensionPlan& plan);
+
+// The same two with the structure matrix of `kinematics` already factored
+// (factor.compute(kinematics.structure_matrix)): several plans at one pose factor once.
+Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
+                     const StructureFactor& factor, double reference_tension, double margin,
+                     TensionPlan& plan);
+Status plan_tensions_at(const RobotModel& model, const KinematicsData& kinematics,
+                        const StructureFactor& factor, double reference_tension, double margin,
+                        TensionPlan& plan);
 
 struct PathCheckOptions {
   double max_linear_step = 0.005;                          // m between checked points
@@ -121,8 +131,10 @@ struct CommandData {
   explicit CommandData(const RobotModel& model) : CommandData(model.num_cables()) {}
 
   KinematicsData kinematics;  // inverse kinematics at the commanded pose (for the plan)
+  StructureFactor factor;     // of kinematics.structure_matrix
   TensionPlan plan;           // planned tensions, N
-  CableCommandData cable;     // compensated length commands and encoder counts
+  CableCommandData cable;     // compensated length commands and encoder counts (from
+                              // `kinematics`: cable.kinematics is not filled)
 };
 
 // The RT step: inverse kinematics at `pose`, planned tensions (plan_tensions with
@@ -132,5 +144,11 @@ struct CommandData {
 // the caller can hold the previous targets. Allocates, locks, logs and throws nothing.
 Status command_counts(const RobotModel& model, const Pose& pose, double reference_tension,
                       CommandData& data, double margin = 0.0);
+// The same trying the `margins` in order, inverse kinematics and the structure matrix's
+// factorization made once: the first margin with a feasible plan is used and its index stored in
+// *chosen; when none is, the last margin's reason is returned and *chosen is -1. The same
+// guarantees.
+Status command_counts(const RobotModel& model, const Pose& pose, double reference_tension,
+                      CommandData& data, std::span<const double> margins, int* chosen);
 
 }  // namespace cdpr

@@ -20,6 +20,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/QR>
 #include <optional>
 
 #include "cdpr/calibration/kinematics.hpp"
@@ -77,6 +78,32 @@ struct ForceDistributionData {
   KinematicsData kinematics;  // IK at the pose (only for the RobotModel overload)
 };
 
+// The part of the QP that depends only on the pose: the structure matrix A^T (6 x m) factored as
+// A = Q [R; 0] P^T (column-pivoted Householder QR) and an orthonormal basis of its null space
+// (m x (m - 6)). Every QP at the pose (other references, other limits, other wrenches) shares it,
+// so a caller trying several plans at one pose factors once. Fixed capacity: compute() allocates
+// nothing.
+struct StructureFactor {
+  using Qr = Eigen::ColPivHouseholderQR<Eigen::Matrix<double, Eigen::Dynamic, 6, 0, kMaxCables, 6>>;
+  using NullBasis =
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxCables, kMaxCables - 6>;
+
+  // Factors `structure_matrix`; false when it has rank < 6 (relative `rank_tolerance`), is not
+  // finite or has more than kMaxCables or fewer than 6 columns (then valid() is false and a QP
+  // with this factor reports kDegenerate or kInvalidInput).
+  bool compute(const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>>& structure_matrix,
+               double rank_tolerance = 1e-10);
+  bool valid() const { return status == Factored::kFullRank; }
+  int num_cables() const { return static_cast<int>(structure.cols()); }
+
+  enum class Factored { kNone, kFullRank, kRankDeficient, kBadInput };
+  Factored status = Factored::kNone;
+  int rank = 0;
+  StructureMatrix structure;  // A^T as factored
+  Qr qr;
+  NullBasis null_basis;  // m x (m - 6), orthonormal columns spanning {f : A^T f = 0}
+};
+
 // Gravity wrench (force and moment about the platform origin, world) at rotation R.
 Wrench6 gravity_wrench(const RobotModel& model, const Eigen::Matrix3d& rotation);
 
@@ -91,6 +118,14 @@ ForceDistributionResult distribute_forces(
     const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>>& structure_matrix,
     const Wrench6& wrench, const Eigen::Ref<const Eigen::VectorXd>& f_min,
     const Eigen::Ref<const Eigen::VectorXd>& f_max, const ForceDistributionOptions& options);
+
+// The same with the structure matrix already factored (`factor`, computed with
+// options.rank_tolerance): the exact QP whatever options.method says (the closed form needs no
+// factor). Identical results; allocates nothing.
+ForceDistributionResult distribute_forces(const StructureFactor& factor, const Wrench6& wrench,
+                                          const Eigen::Ref<const Eigen::VectorXd>& f_min,
+                                          const Eigen::Ref<const Eigen::VectorXd>& f_max,
+                                          const ForceDistributionOptions& options);
 
 // The reference tension used when none is given: the midpoint of the largest f_min and the
 // smallest f_max over the cables, capped at 4 f_min_max (a moderate pretension).
