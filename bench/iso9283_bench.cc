@@ -6,14 +6,20 @@
 // paper's figures (+58 % position accuracy, path accuracy 1.284 mm, path repeatability 0.18 mm).
 //
 //   build/ci/bench/iso9283_bench [--scenario FILE] [--cycles N] [--path-cycles N] [--seed S]
+//                                [--calibration cdprd|cdpr-fit] [--daemon-config FILE]
 //                                [--stiffness fixed|shared|per-cable] [--out FILE]
+//
+// --calibration cdprd (default): the calibration cdprd with --daemon-config (default
+// config/cdprd.yaml) makes (bench/cdprd_calibration.hpp); cdpr-fit: cdpr-fit calibrate's
+// identify() with --stiffness (bench/virtual_calibration.hpp).
 //
 // --out FILE also writes the figures as the calibration report reads them
 // (cdpr/report/iso9283.hpp; the daemon config's report.iso9283_measured).
 //
 // The virtual robot is cdpr-sim's quasi-static physics (sim/physics.hpp) with the scenario's hidden
-// effects, homed with the nominal model at home (as the daemon's cell powers on). Each 4 ms cycle
-// the commanding model's compensated inverse kinematics with its planned tensions
+// effects, homed on its reference platform at home (the true platform at home at the pretension
+// cdprd holds there, the nominal model's home counts: as the daemon's cell powers on). Each 4 ms
+// cycle the commanding model's compensated inverse kinematics with its planned tensions
 // (command_counts) turns the sampled pose into integer encoder targets; the drives' position loops
 // hold them within their encoder noise (the scenario's encoder sigma, a fresh draw per drive and
 // cycle), and the physics settles to the equilibrium of those motor positions.
@@ -40,6 +46,7 @@
 #include "cdpr/sim/lockstep_io.hpp"
 #include "cdpr/sim/physics.hpp"
 #include "cdpr/sim/scenario.hpp"
+#include "cdprd_calibration.hpp"
 #include "virtual_calibration.hpp"
 
 namespace {
@@ -244,31 +251,53 @@ PathFigures path_test(Cell& cell, const cdpr::Path& path, int cycles) {
   return f;
 }
 
-// The calibrated geometry: cdpr-fit calibrate's library calls (identify with its default
-// options; --stiffness also estimates EA) on a recording of the virtual robot (cdpr-sim's
-// lock-step mode at cdpr-fit design-poses' 25 poses, commanded with the nominal model).
 struct Args {
   std::string scenario;
   int cycles = 30;
   int path_cycles = 10;
   std::uint64_t seed = 7;
-  std::string stiffness = "fixed";  // what the identification does with EA (cdpr-fit: fixed)
-  std::string out;                  // the figures as JSON for the calibration report; "" = none
+  std::string calibration = "cdprd";  // cdprd's calibration, or cdpr-fit calibrate's
+  std::string daemon_config;          // the cdprd config whose calibration is reproduced
+  std::string stiffness = "fixed";    // cdpr-fit: what the identification does with EA
+  std::string out;                    // the figures as JSON for the calibration report; "" = none
 };
 
-RobotModel calibrate(const RobotModel& nominal, const RobotModel& truth,
-                     const cdpr::sim::Scenario& scenario, const Args& args) {
+struct Calibrated {
+  RobotModel model;
+  std::string how;  // one line: which calibration, what it named
+};
+
+// The calibrated geometry from a calibration of `truth` (homed on its reference platform):
+// cdprd's (bench/cdprd_calibration.hpp: the daemon config's pose design, identification, mismatch
+// locator and extra poses), or cdpr-fit calibrate's library calls (identify with its default
+// options, --stiffness also estimates EA, on cdpr-fit design-poses' 25 poses).
+Calibrated calibrate(const RobotModel& nominal, const RobotModel& truth,
+                     const cdpr::sim::Scenario& scenario, const cdpr::controller::DaemonConfig& dc,
+                     const Args& args) {
+  if (args.calibration == "cdprd") {
+    const cdpr::bench::CdprdCalibration c =
+        cdpr::bench::calibrate_as_cdprd(nominal, truth, scenario, args.seed + 1, dc,
+                                        cdpr::bench::cdprd_home_pretension(dc, nominal));
+    std::string named;
+    for (const std::string& e : c.named_effects) named += (named.empty() ? "" : ", ") + e;
+    return {c.model, "cdprd's (" + args.daemon_config + "): " + std::to_string(c.poses) +
+                         " poses, " + std::to_string(c.dropped) +
+                         " designed poses dropped; named: " + (named.empty() ? "nothing" : named) +
+                         "; gates " + (c.gates_passed ? "passed" : "failed")};
+  }
   cdpr::IdentificationOptions io;
   io.estimate_stiffness = args.stiffness == "shared"      ? cdpr::StiffnessEstimate::kShared
                           : args.stiffness == "per-cable" ? cdpr::StiffnessEstimate::kPerCable
                                                           : cdpr::StiffnessEstimate::kFixed;
-  return cdpr::bench::calibrate_virtual_robot(nominal, truth, scenario, args.seed + 1, io)
-      .estimate.robot;
+  return {cdpr::bench::calibrate_virtual_robot(nominal, truth, scenario, args.seed + 1, io)
+              .estimate.robot,
+          "cdpr-fit calibrate's identify, stiffness " + args.stiffness};
 }
 
 Args parse(int argc, char** argv) {
   Args a;
   a.scenario = std::string(CDPR_SOURCE_DIR) + "/config/scenarios/mini-calibration.yaml";
+  a.daemon_config = std::string(CDPR_SOURCE_DIR) + "/config/cdprd.yaml";
   for (int i = 1; i < argc; ++i) {
     const std::string k = argv[i];
     const bool has = i + 1 < argc;
@@ -280,6 +309,12 @@ Args parse(int argc, char** argv) {
       a.path_cycles = std::max(2, std::atoi(argv[++i]));
     } else if (k == "--seed" && has) {
       a.seed = std::strtoull(argv[++i], nullptr, 10);
+    } else if (k == "--calibration" && has &&
+               (std::strcmp(argv[i + 1], "cdprd") == 0 ||
+                std::strcmp(argv[i + 1], "cdpr-fit") == 0)) {
+      a.calibration = argv[++i];
+    } else if (k == "--daemon-config" && has) {
+      a.daemon_config = argv[++i];
     } else if (k == "--stiffness" && has &&
                (std::strcmp(argv[i + 1], "fixed") == 0 || std::strcmp(argv[i + 1], "shared") == 0 ||
                 std::strcmp(argv[i + 1], "per-cable") == 0)) {
@@ -289,7 +324,8 @@ Args parse(int argc, char** argv) {
     } else {
       std::fprintf(stderr,
                    "usage: iso9283_bench [--scenario FILE] [--cycles N] [--path-cycles N] "
-                   "[--seed S] [--stiffness fixed|shared|per-cable] [--out FILE]\n");
+                   "[--seed S] [--calibration cdprd|cdpr-fit] [--daemon-config FILE] "
+                   "[--stiffness fixed|shared|per-cable] [--out FILE]\n");
       std::exit(2);
     }
   }
@@ -311,15 +347,15 @@ int main(int argc, char** argv) {
   const RobotModel nominal =
       must(cdpr::config::load_robot_config(src + "/config/mini.yaml"), "mini");
   const cdpr::sim::Scenario scenario = must(cdpr::sim::load_scenario(args.scenario), "scenario");
-  RobotModel truth = must(cdpr::sim::resolve_truth(scenario, nominal), "truth");
-  // Homed on the reference platform with the nominal model (the cell's drives power on there).
-  const Eigen::VectorXd homed = must(
-      cdpr::homing_offsets(truth, nominal, cdpr::default_reference_tension(nominal)), "homing");
-  for (int i = 0; i < truth.num_cables(); ++i) {
-    truth.winches[static_cast<std::size_t>(i)].length_offset =
-        nominal.winches[static_cast<std::size_t>(i)].length_offset + homed(i);
-  }
-  const RobotModel calibrated = calibrate(nominal, truth, scenario, args);
+  const cdpr::controller::DaemonConfig dc =
+      must(cdpr::controller::load_daemon_config(args.daemon_config), "--daemon-config");
+  // Homed on its reference platform at the pretension cdprd holds home at (the cell's drives
+  // power on there; cdprd's reference homing).
+  const RobotModel truth = cdpr::bench::homed_on_reference(
+      must(cdpr::sim::resolve_truth(scenario, nominal), "truth"), nominal, scenario,
+      cdpr::bench::cdprd_home_pretension(dc, nominal));
+  const Calibrated cal = calibrate(nominal, truth, scenario, dc, args);
+  const RobotModel& calibrated = cal.model;
   const double calib_s = std::chrono::duration<double>(Clock::now() - wall0).count();
   auto anchor_rms = [&](const RobotModel& m) {
     return std::sqrt((m.frame_anchors - truth.frame_anchors).squaredNorm() / truth.num_cables());
@@ -395,11 +431,9 @@ int main(int argc, char** argv) {
   row("RT line", fig[0].line.rt, fig[1].line.rt, kPaperRT);
   row("RT circle", fig[0].circle.rt, fig[1].circle.rt, kPaperRT);
   std::printf(
-      "\ncalibration (identify, stiffness %s): frame anchors %.2f mm RMS from the truth "
-      "(nominal %.2f mm; they trade against the encoder zeros along each cable), largest "
+      "\ncalibration %s\n  frame anchors %.2f mm RMS from the truth (nominal %.2f mm), largest "
       "EA error %.1f %%\n",
-      args.stiffness.c_str(), 1e3 * anchor_rms(calibrated), 1e3 * anchor_rms(nominal),
-      100.0 * ea_error);
+      cal.how.c_str(), 1e3 * anchor_rms(calibrated), 1e3 * anchor_rms(nominal), 100.0 * ea_error);
   std::printf("speed: line %.2f s (peak %.3f m/s), circle %.2f s (peak %.3f m/s), 4 ms cycles\n",
               fig[0].line.duration, fig[0].line.peak_speed, fig[0].circle.duration,
               fig[0].circle.peak_speed);
@@ -413,9 +447,9 @@ int main(int argc, char** argv) {
     char setup[512];
     std::snprintf(setup, sizeof setup,
                   "iso9283_bench: virtual MINI, truth %s, seed %llu, %d pose cycles, %d path "
-                  "cycles, identification stiffness %s",
+                  "cycles, calibration %s",
                   args.scenario.c_str(), static_cast<unsigned long long>(args.seed), args.cycles,
-                  args.path_cycles, args.stiffness.c_str());
+                  args.path_cycles, cal.how.c_str());
     m.setup = setup;
     cdpr::report::Iso9283Figures* columns[2] = {&m.nominal, &m.calibrated};
     for (int k = 0; k < 2; ++k) {

@@ -51,7 +51,8 @@ cdpr_add_gtest(NAME daemon_state_store_test SOURCES ${_d}/src/state_store_test.c
 cdpr_add_gtest(NAME daemon_log_coalescer_test SOURCES ${_d}/src/log_coalescer_test.cc
                LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_calibration_report_test SOURCES ${_d}/src/calibration_report_test.cc
-               ${_d}/src/calibration_report_iso9283_test.cc LIBS cdpr_daemon)
+               ${_d}/src/calibration_report_iso9283_test.cc LIBS cdpr_daemon
+               cdpr_calibration_testing)
 cdpr_add_gtest(NAME daemon_supervisor_test SOURCES ${_d}/src/supervisor_test.cc LIBS cdpr_daemon)
 cdpr_add_gtest(NAME daemon_measuring_sequence_test SOURCES ${_d}/src/measuring_sequence_test.cc
                LIBS cdpr_daemon)

@@ -305,6 +305,19 @@ std::string calibration_html(const CalibrationOutcome& o, const CalibrationRepor
   return page;
 }
 
+PoseDesignOptions measuring_design_options(const DaemonConfig& c, const RobotModel& model) {
+  PoseDesignOptions o;
+  o.num_poses = c.measuring.poses;
+  o.max_angle = c.measuring.max_angle;
+  o.angle_steps = c.measuring.design_angle_steps;
+  o.emphasis_weight = c.measuring.design_emphasis_weight;
+  // Candidates keep the design margin, at least the planning margin so that no designed pose is
+  // dropped below for it.
+  o.tension_margin = std::max(c.measuring.design_tension_margin, c.motion.tension_margin);
+  fit_design_box_to_robot(model, o);
+  return o;
+}
+
 ExtraPoseRound extra_pose_round(const Diagnosis& d) {
   ExtraPoseRound r;
   for (const ConfoundedFinding& cf : d.confounded) {

@@ -8,6 +8,7 @@
 
 #include "cdpr/calibration/effect_library.hpp"
 #include "cdpr/calibration/mismatch.hpp"
+#include "testing/test_robots.hpp"
 
 namespace cdpr::controller {
 namespace {
@@ -95,6 +96,32 @@ TEST(ExtraPoseRound, SeparatingPosesAloneLeaveTheNextDiagnosisFull) {
   EXPECT_TRUE(r.confirm_suspect.empty());
   d.confounded.clear();
   EXPECT_TRUE(extra_pose_round(d).poses.empty());  // nothing asked: the sequence is done
+}
+
+// cdprd's pose design (the daemon's and iso9283_bench's): the config's design settings, the larger
+// of the design and planning margins, the candidate box fitted to the robot.
+TEST(MeasuringDesignOptions, TakesTheConfigsDesignWithTheLargerOfTheTwoMargins) {
+  const RobotModel robot = cdpr::testing::mini_robot();
+  DaemonConfig c;
+  c.measuring.poses = 17;
+  c.measuring.max_angle = 0.1;
+  c.measuring.design_angle_steps = 3;
+  c.measuring.design_emphasis_weight = 2.5;
+  c.measuring.design_tension_margin = 4.0;
+  c.motion.tension_margin = 7.0;
+  const PoseDesignOptions o = measuring_design_options(c, robot);
+  EXPECT_EQ(o.num_poses, 17);
+  EXPECT_EQ(o.max_angle, 0.1);
+  EXPECT_EQ(o.angle_steps, 3);
+  EXPECT_EQ(o.emphasis_weight, 2.5);
+  EXPECT_EQ(o.tension_margin, 7.0);
+  c.measuring.design_tension_margin = 12.0;
+  EXPECT_EQ(measuring_design_options(c, robot).tension_margin, 12.0);
+  PoseDesignOptions fitted;
+  fit_design_box_to_robot(robot, fitted);
+  EXPECT_TRUE(o.center.isApprox(fitted.center));
+  EXPECT_TRUE(o.half_extent.isApprox(fitted.half_extent));
+  EXPECT_FALSE(o.half_extent.isApprox(PoseDesignOptions{}.half_extent));
 }
 
 }  // namespace

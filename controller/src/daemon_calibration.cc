@@ -101,17 +101,8 @@ Result<std::vector<Pose>> Daemon::plan_poses(const std::string& poses_csv) {
     if (!list.ok()) return list.status();
     poses = list->poses;
   } else {
-    PoseDesignOptions o;
-    o.num_poses = config_.measuring.poses;
-    o.max_angle = config_.measuring.max_angle;
-    o.angle_steps = config_.measuring.design_angle_steps;
-    o.emphasis_weight = config_.measuring.design_emphasis_weight;
-    // Candidates keep the design margin, at least the planning margin so that no designed pose is
-    // dropped below for it.
-    o.tension_margin =
-        std::max(config_.measuring.design_tension_margin, config_.motion.tension_margin);
-    fit_design_box_to_robot(g->model, o);
-    auto d = design_poses(CalibratedModel::from_robot(g->model), o);
+    auto d = design_poses(CalibratedModel::from_robot(g->model),
+                          measuring_design_options(config_, g->model));
     if (!d.ok()) return d.status();
     poses = d->poses;
   }

@@ -24,6 +24,7 @@
 #include "cdpr/calibration/diagnosis.hpp"
 #include "cdpr/calibration/identification.hpp"
 #include "cdpr/calibration/measurement.hpp"
+#include "cdpr/calibration/pose_design.hpp"
 #include "cdpr/calibration/predicted_accuracy.hpp"
 #include "cdpr/controller/daemon_config.hpp"
 #include "cdpr/report/iso9283.hpp"
@@ -93,6 +94,12 @@ void load_iso9283_measured(const std::string& path, CalibrationReportContext& c)
 std::string iso9283_html(const CalibrationOutcome& o, const CalibrationReportContext& c);
 std::string iso9283_text(const CalibrationOutcome& o, const CalibrationReportContext& c);
 nlohmann::json iso9283_json(const CalibrationOutcome& o, const CalibrationReportContext& c);
+
+// cdprd's pose design for `model` when no pose list is given: measuring.poses, max_angle,
+// design_angle_steps and design_emphasis_weight, candidates kept max(design_tension_margin,
+// motion.tension_margin) inside [f_min, f_max], the candidate box fitted to the robot
+// (fit_design_box_to_robot).
+PoseDesignOptions measuring_design_options(const DaemonConfig& c, const RobotModel& model);
 
 // One round of extra poses that the mismatch locator asks for: the separating poses of each
 // confounded pair, then a suspect's follow-up poses, and how the next diagnosis runs. After a
