@@ -214,6 +214,8 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   const Selection selection = select_candidates(D0, d.screen, np, options);
   const Folds folds = assign_folds(D0, np, options);
   const CvRms cv_before = cv_rms(D0, nullptr, folds.fold, folds.K);
+  const State standard{identification, set, d.before, D0, {}, {}, cv_before, {}, {}, {}};
+  RefitMemo memo(standard);
   const RefitContext ctx{options,
                          D0,
                          selection,
@@ -223,8 +225,8 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
                          std::log(static_cast<double>(n)),
                          d.before.log_det_covariance,
                          bic_log_sizes(D0, options.bic_informing_rows),
-                         nominal};
-  const State standard{identification, set, d.before, D0, {}, {}, cv_before, {}, {}, {}};
+                         nominal,
+                         &memo};
 
   // Stages 2 and 3, refits and acceptance.
   Acceptance acc = accept_effects(ctx, standard, d.screen);
@@ -233,7 +235,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
   // Stage 3c, the backward check when the second round added an effect.
   const bool second = std::any_of(acc.accepted.begin(), acc.accepted.end(),
                                   [](const EffectFit& f) { return f.round == 2; });
-  if (second && options.backward_check && backward_check(ctx, standard, acc)) {
+  if (second && options.backward_check && backward_check(ctx, acc)) {
     auto again =
         locate_mismatch(acc.current.report, acc.current.set, acc.current.opt, options.screen);
     if (again) d.screen_after = std::move(*again);
@@ -255,7 +257,7 @@ Result<Diagnosis> diagnose(const CalibratedModel& nominal, const MeasurementSet&
     d.gross_readings.clear();
   }
   // Stage 4, naming: the pairs this recording cannot tell apart.
-  const std::vector<ConfoundedPair> found = confounded_pairs(ctx, standard, d.screen, acc);
+  const std::vector<ConfoundedPair> found = confounded_pairs(ctx, d.screen, acc);
   if (options.polish_gauss_newton) refresh_gauss_newton_parameters(acc.current, acc.accepted);
   refresh_identified_parameters(acc.current, acc.accepted);
   d.accepted = std::move(acc.accepted);

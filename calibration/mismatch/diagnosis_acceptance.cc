@@ -176,26 +176,29 @@ bool confounded_clash(const std::vector<ConfoundedPair>& pairs, const std::strin
 }
 
 // The effects `ids` refitted jointly from the standard model, in that order (each marked
-// accepted); nullopt when one cannot be fitted.
+// accepted; the Gauss-Newton ones polished beside each later one, RefitMemo::path); nullopt when
+// one cannot be fitted.
 struct JointFit {
   State state;
   std::vector<EffectFit> fits;
   double penalty = 0.0;  // the BIC penalty of the effects' extra parameters together
 };
 
-std::optional<JointFit> joint_refit(const RefitContext& ctx, const State& standard,
-                                    const std::vector<std::string>& ids) {
-  JointFit out{standard, {}, 0.0};
+std::optional<JointFit> joint_refit(const RefitContext& ctx, const std::vector<std::string>& ids) {
+  JointFit out;
+  std::vector<std::string> prefix;
   for (const std::string& id : ids) {
-    EffectFit f;
-    auto nx = refit(ctx, out.state, id, f);
-    if (!nx) return std::nullopt;
-    out.state = std::move(*nx);
-    if (ctx.options.polish_gauss_newton && !out.fits.empty()) polish_gauss_newton(ctx, out.state);
+    prefix.push_back(id);
+    const Trial* t = ctx.memo->step(ctx, prefix);
+    if (t == nullptr) return std::nullopt;
+    EffectFit f = t->fit;
     out.penalty += f.extra_parameters * ctx.log_size(id);
     f.accepted = true;
     out.fits.push_back(std::move(f));
   }
+  const State* st = ctx.memo->path(ctx, ids);
+  if (st == nullptr) return std::nullopt;
+  out.state = *st;
   return out;
 }
 
@@ -220,8 +223,8 @@ namespace {
 // DiagnosisOptions::refinement_gate_p; else the simpler member takes its place. (The paths' joint
 // BIC charges one curvature parameter log n, ~6: LARGE's Hooke beside sag, seed 5, was named
 // nonlinear elasticity at a deviance gain of 7.6.)
-void keep_refinements_that_pass(const RefitContext& ctx, const State& standard,
-                                const MismatchSummary& screen, Acceptance& acc) {
+void keep_refinements_that_pass(const RefitContext& ctx, const MismatchSummary& screen,
+                                Acceptance& acc) {
   if (!(ctx.options.refinement_gate_p > 0.0)) return;
   const double library = static_cast<double>(std::max<std::size_t>(1, screen.candidates.size()));
   for (std::size_t pos = 0; pos < acc.accepted.size(); ++pos) {
@@ -242,7 +245,7 @@ void keep_refinements_that_pass(const RefitContext& ctx, const State& standard,
     if (simple == nullptr) continue;
     std::vector<std::string> ids;
     for (const EffectFit& f : acc.accepted) ids.push_back(f.id == rich.id ? simple->id : f.id);
-    auto joint = joint_refit(ctx, standard, ids);
+    auto joint = joint_refit(ctx, ids);
     if (!joint) continue;
     acc.joint_bics[ids] = joint_bic(ctx, joint->state, joint->penalty);
     const int dk = rich.extra_parameters - joint->fits[pos].extra_parameters;
@@ -312,6 +315,7 @@ ForwardPath forward_from(const RefitContext& ctx, const MismatchSummary& screen,
   path.accepted.front().accepted = true;
   std::set<std::string> groups{selection_group(first.fit.family)};
   std::set<std::string> ids{first.fit.id};
+  std::vector<std::string> in_turn{first.fit.id};  // the accepted effects in the order added
   while (static_cast<int>(path.accepted.size()) < options.max_effects) {
     std::vector<Trial> more;
     for (const std::string& id : ctx.selection.to_refit) {
@@ -326,9 +330,9 @@ ForwardPath forward_from(const RefitContext& ctx, const MismatchSummary& screen,
                 confounded_clash(screen.confounded, t, id, false, options.forward_own_directions);
       }
       if (clash) continue;
-      EffectFit fit;
-      auto st = refit(ctx, path.state, id, fit);
-      if (st) more.push_back({std::move(fit), std::move(*st)});
+      std::vector<std::string> with = in_turn;
+      with.push_back(id);
+      if (const Trial* t = ctx.memo->step(ctx, with)) more.push_back(*t);
     }
     const Trial* best = best_step(more, gate);
     if (best == nullptr) break;
@@ -347,8 +351,8 @@ ForwardPath forward_from(const RefitContext& ctx, const MismatchSummary& screen,
     path.accepted.push_back(f);
     groups.insert(selection_group(f.family));
     ids.insert(f.id);
-    path.state = best->state;
-    if (options.polish_gauss_newton) polish_gauss_newton(ctx, path.state);
+    in_turn.push_back(f.id);
+    path.state = *ctx.memo->path(ctx, in_turn);
   }
   path.bic = joint_bic(ctx, path.state, bic_penalty(ctx, path.accepted));
   return path;
@@ -357,8 +361,8 @@ ForwardPath forward_from(const RefitContext& ctx, const MismatchSummary& screen,
 // One pass of the swaps: the accepted set with each effect replaced in turn by every other kept
 // candidate, refitted jointly from the standard model; the best swap that lowers the joint BIC
 // clearly is made (`acc.accepted`, `current`). False when none helps.
-bool swap_once(const RefitContext& ctx, const State& standard, const MismatchSummary& screen,
-               Acceptance& acc, State& current) {
+bool swap_once(const RefitContext& ctx, const MismatchSummary& screen, Acceptance& acc,
+               State& current) {
   const DiagnosisOptions& options = ctx.options;
   const std::vector<ConfoundedPair>& pairs = screen.confounded;
   const double bic_now = joint_bic(ctx, current, bic_penalty(ctx, acc.accepted));
@@ -394,7 +398,7 @@ bool swap_once(const RefitContext& ctx, const State& standard, const MismatchSum
       for (std::size_t q = 0; q < acc.accepted.size(); ++q) {
         ids.push_back(q == pos ? id : acc.accepted[q].id);
       }
-      auto joint = joint_refit(ctx, standard, ids);
+      auto joint = joint_refit(ctx, ids);
       const double b = joint ? joint_bic(ctx, joint->state, joint->penalty)
                              : std::numeric_limits<double>::infinity();
       acc.joint_bics[ids] = b;
@@ -427,9 +431,7 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
   const DiagnosisOptions& options = ctx.options;
   Acceptance out;
   for (const std::string& id : ctx.selection.to_refit) {
-    EffectFit fit;
-    auto st = refit(ctx, standard, id, fit);
-    if (st) out.trials.push_back({std::move(fit), std::move(*st)});
+    if (const Trial* t = ctx.memo->step(ctx, {id})) out.trials.push_back(*t);
   }
   const Gate gate = gate_of(options);
   State current = standard;
@@ -459,10 +461,10 @@ Acceptance accept_effects(const RefitContext& ctx, const State& standard,
   // confounded with one of the others, whatever its own directions: each swap is a joint refit of
   // the whole set.
   for (int pass = 0; pass < 3 && out.accepted.size() >= 2; ++pass) {
-    if (!swap_once(ctx, standard, screen, out, current)) break;
+    if (!swap_once(ctx, screen, out, current)) break;
   }
   out.current = std::move(current);
-  keep_refinements_that_pass(ctx, standard, screen, out);
+  keep_refinements_that_pass(ctx, screen, out);
   for (auto& c : out.candidates) {
     c.accepted = false;
     for (const auto& f : out.accepted) {
@@ -509,9 +511,11 @@ MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& scr
                                           options.second_round_own_directions);
       }
       if (clash) continue;
-      EffectFit fit;
-      auto st = refit(ctx, acc.current, cs.id, fit);
-      if (st) more.push_back({std::move(fit), std::move(*st)});
+      // acc.current is the path of the accepted effects in their order (RefitMemo::path).
+      std::vector<std::string> with;
+      for (const auto& f : acc.accepted) with.push_back(f.id);
+      with.push_back(cs.id);
+      if (const Trial* t = ctx.memo->step(ctx, with)) more.push_back(*t);
     }
     const Trial* best = best_step(more, gate, options.second_round_min_evidence);
     if (best == nullptr) break;
@@ -530,8 +534,9 @@ MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& scr
     // Its size beside the accepted effects; as a candidate, its fit from the standard model.
     acc.accepted.push_back(f);
     acc.ids_taken.insert(f.id);
-    acc.current = best->state;
-    if (options.polish_gauss_newton) polish_gauss_newton(ctx, acc.current);
+    std::vector<std::string> in_turn;
+    for (const auto& a : acc.accepted) in_turn.push_back(a.id);
+    acc.current = *ctx.memo->path(ctx, in_turn);
     bool listed = false;
     for (auto& c : acc.candidates) {
       if (c.id == f.id) {
@@ -545,7 +550,7 @@ MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& scr
   return last;
 }
 
-bool backward_check(const RefitContext& ctx, const State& standard, Acceptance& acc) {
+bool backward_check(const RefitContext& ctx, Acceptance& acc) {
   const double alpha = ctx.options.screen.alpha;
   bool dropped = false;
   while (acc.accepted.size() >= 2) {
@@ -557,7 +562,7 @@ bool backward_check(const RefitContext& ctx, const State& standard, Acceptance& 
       for (std::size_t q = 0; q < acc.accepted.size(); ++q) {
         if (q != pos) ids.push_back(acc.accepted[q].id);
       }
-      auto joint = joint_refit(ctx, standard, ids);
+      auto joint = joint_refit(ctx, ids);
       const int k = acc.accepted[pos].extra_parameters;
       if (!joint || k <= 0) {
         p.push_back(0.0);  // cannot be tested: kept
@@ -596,8 +601,8 @@ bool backward_check(const RefitContext& ctx, const State& standard, Acceptance& 
   return dropped;
 }
 
-std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const State& standard,
-                                             const MismatchSummary& screen, Acceptance& acc) {
+std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const MismatchSummary& screen,
+                                             Acceptance& acc) {
   // A pair of the screen (canonical correlation above the threshold) is reported as confounded
   // only when this recording cannot tell its two fits apart: a BIC difference of more than
   // DiagnosisOptions::decisive_bic between them (both fitted from the standard model) is very
@@ -618,7 +623,7 @@ std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const Stat
     }
     auto known = acc.joint_bics.find(ids);  // the swaps' last pass tried most of these
     if (known == acc.joint_bics.end()) {
-      auto joint = joint_refit(ctx, standard, ids);
+      auto joint = joint_refit(ctx, ids);
       const double b = joint ? joint_bic(ctx, joint->state, joint->penalty)
                              : std::numeric_limits<double>::infinity();
       known = acc.joint_bics.emplace(ids, b).first;
@@ -632,11 +637,10 @@ std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const Stat
     if (!taken_a && !taken_b) continue;
     for (const std::string& id : {p.first, p.second}) {
       if (trial_fit(acc.trials, id) != nullptr) continue;
-      EffectFit fit;
-      auto st = refit(ctx, standard, id, fit);
-      if (!st) continue;
-      acc.trials.push_back({fit, std::move(*st)});
-      acc.candidates.push_back(std::move(fit));
+      const Trial* t = ctx.memo->step(ctx, {id});
+      if (t == nullptr) continue;
+      acc.trials.push_back(*t);
+      acc.candidates.push_back(t->fit);
     }
     const EffectFit* fa = trial_fit(acc.trials, p.first);
     const EffectFit* fb = trial_fit(acc.trials, p.second);

@@ -79,6 +79,8 @@ struct State {
   std::vector<Eigen::VectorXd> catenary_compliance;
 };
 
+class RefitMemo;
+
 // What the refits of one diagnosis share.
 struct RefitContext {
   const DiagnosisOptions& options;
@@ -92,6 +94,8 @@ struct RefitContext {
   std::map<std::string, double> log_sizes;  // per candidate: log of its BIC sample size
   // The model the recording's tension readings were made with (their force sensor calibration).
   const CalibratedModel& nominal;
+  // The refits from the standard model by a sequence of effects, each done once (RefitMemo).
+  RefitMemo* memo = nullptr;
 
   double log_size(const std::string& id) const {
     const auto it = log_sizes.find(id);
@@ -102,6 +106,29 @@ struct RefitContext {
 struct Trial {
   EffectFit fit;
   State state;
+};
+
+// The refits from the standard model by a sequence of effect ids, each done once per diagnosis:
+// refit() depends only on the state it starts from and the effect, and the stages refit the same
+// sequences again (the trials are the first steps of every forward path and of the swaps' joint
+// refits; the swaps, the refinements, the backward check and the naming refit sets whose
+// prefixes the forward paths or the swaps fitted before). The results are those of the refits
+// done anew.
+class RefitMemo {
+ public:
+  explicit RefitMemo(const State& standard) : standard_(standard) {}
+  // The last effect of `ids` refitted on path(ids without it) (the standard model for one
+  // effect), with its fit. nullptr: it cannot be fitted there (or the path cannot be).
+  const Trial* step(const RefitContext& ctx, const std::vector<std::string>& ids);
+  // The state after the effects of `ids` in turn: step(ids)'s, its Gauss-Newton effects polished
+  // after the second and every later effect (DiagnosisOptions::polish_gauss_newton), as a forward
+  // path and a joint refit have it. nullptr: cannot be fitted.
+  const State* path(const RefitContext& ctx, const std::vector<std::string>& ids);
+
+ private:
+  const State& standard_;
+  std::map<std::vector<std::string>, std::optional<Trial>> steps_;
+  std::map<std::vector<std::string>, State> polished_;
 };
 
 // ---- Stage 3, acceptance: every kept candidate refitted from the standard model (the trials),
@@ -279,12 +306,12 @@ MismatchSummary second_round(const RefitContext& ctx, const MismatchSummary& scr
 // likelihood ratio of the full set against that (Holm over the accepted effects). The effect with
 // the weakest evidence is dropped while its corrected p-value is not below alpha. Returns whether
 // an effect was dropped.
-bool backward_check(const RefitContext& ctx, const State& standard, Acceptance& acc);
+bool backward_check(const RefitContext& ctx, Acceptance& acc);
 
 // ---- Stage 4, naming: the screen's confounded pairs that this recording cannot tell apart (both
 // fitted from the standard model; the fits not yet tried are added to the trials and candidates).
-std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const State& standard,
-                                             const MismatchSummary& screen, Acceptance& acc);
+std::vector<ConfoundedPair> confounded_pairs(const RefitContext& ctx, const MismatchSummary& screen,
+                                             Acceptance& acc);
 
 // ---- diagnosis_extra_poses.cc
 

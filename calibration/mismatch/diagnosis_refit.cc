@@ -544,4 +544,34 @@ std::optional<State> refit(const RefitContext& ctx, const State& cur, const std:
   return next;
 }
 
+const Trial* RefitMemo::step(const RefitContext& ctx, const std::vector<std::string>& ids) {
+  if (ids.empty()) return nullptr;
+  const auto known = steps_.find(ids);
+  if (known != steps_.end()) return known->second ? &*known->second : nullptr;
+  const State* from = ids.size() == 1
+                          ? &standard_
+                          : path(ctx, std::vector<std::string>(ids.begin(), ids.end() - 1));
+  std::optional<Trial> t;
+  if (from != nullptr) {
+    EffectFit fit;
+    auto st = refit(ctx, *from, ids.back(), fit);
+    if (st) t = Trial{std::move(fit), std::move(*st)};
+  }
+  auto& slot = steps_[ids];
+  slot = std::move(t);
+  return slot ? &*slot : nullptr;
+}
+
+const State* RefitMemo::path(const RefitContext& ctx, const std::vector<std::string>& ids) {
+  if (ids.empty()) return &standard_;
+  const Trial* t = step(ctx, ids);
+  if (t == nullptr) return nullptr;
+  if (ids.size() < 2 || !ctx.options.polish_gauss_newton) return &t->state;
+  const auto known = polished_.find(ids);
+  if (known != polished_.end()) return &known->second;
+  State st = t->state;
+  polish_gauss_newton(ctx, st);
+  return &polished_.emplace(ids, std::move(st)).first->second;
+}
+
 }  // namespace cdpr::diagnosis_detail
