@@ -202,17 +202,12 @@ ForceDistributionResult quadratic_program(const StructureFactor& factor, const W
     out.tensions = f_ref;
     return out;
   }
-  // Particular solution closest to f_ref: f_p = f_ref - Q1 (Q1^T f_ref + R^-T P^T w), with
-  // Q = [Q1 Q2] applied as its Householder sequence (never formed).
-  const StructureFactor::Qr& qr = factor.qr;
-  const Wrench6 pw = qr.colsPermutation().transpose() * w;
-  const Wrench6 y = qr.matrixQR().topRows<6>().triangularView<Eigen::Upper>().transpose().solve(pw);
-  CableVector t = f_ref;
-  t.applyOnTheLeft(qr.householderQ().transpose());  // Q^T f_ref
-  t.head<6>() += y;
-  t.tail(m - 6).setZero();
-  t.applyOnTheLeft(qr.householderQ());
-  const CableVector f_p = f_ref - t;
+  // Particular solution closest to f_ref: f_p = f_ref - Q1 (Q1^T f_ref + R^-T P^T w).
+  const StructureFactor::CableMatrix& Q = factor.q;
+  const Wrench6 pw = factor.qr.colsPermutation().transpose() * w;
+  const Wrench6 y = factor.r.transpose().triangularView<Eigen::Lower>().solve(pw);
+  const Wrench6 q1f = Q.leftCols<6>().transpose() * f_ref;
+  const CableVector f_p = f_ref - Q.leftCols<6>() * (q1f + y);
   const int r = m - 6;
   if (r == 0) {
     out.tensions = f_p;
@@ -228,20 +223,19 @@ ForceDistributionResult quadratic_program(const StructureFactor& factor, const W
                                            worst);
     return out;
   }
-  const StructureFactor::NullBasis& N = factor.null_basis;
   // Constraints on lambda: N_i lambda >= f_min_i - f_p_i and -N_i lambda >= f_p_i - f_max_i.
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxConstraints, kMaxNull> C(2 * m, r);
   Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxConstraints, 1> d(2 * m);
   for (int i = 0; i < m; ++i) {
-    C.row(2 * i) = N.row(i);
+    C.row(2 * i) = Q.row(i).tail(r);
     d(2 * i) = f_min(i) - f_p(i);
-    C.row(2 * i + 1) = -N.row(i);
+    C.row(2 * i + 1) = -Q.row(i).tail(r);
     d(2 * i + 1) = f_p(i) - f_max(i);
   }
   NullVector lambda(r);
   const bool ok = project_origin_onto_polytope(C, d, options.feasibility_tolerance,
                                                options.max_iterations, lambda, &out.iterations);
-  out.tensions = f_p + N * lambda;
+  out.tensions = f_p + Q.rightCols(r) * lambda;
   const int worst =
       worst_violation(out.tensions, f_min, f_max, nullptr, options.feasibility_tolerance, nullptr);
   if (ok && worst < 0) {
@@ -342,10 +336,9 @@ bool StructureFactor::compute(
     status = Factored::kRankDeficient;
     return false;
   }
-  // Q2 = Q [0; I]: the last m - 6 columns of Q.
-  null_basis.setZero(m, m - 6);
-  null_basis.bottomRows(m - 6).setIdentity();
-  null_basis.applyOnTheLeft(qr.householderQ());
+  q.setIdentity(m, m);
+  q.applyOnTheLeft(qr.householderQ());
+  r = qr.matrixQR().topRows<6>().triangularView<Eigen::Upper>();
   status = Factored::kFullRank;
   return true;
 }

@@ -222,7 +222,7 @@ TEST(ForceDistribution, OneFactorServesEveryPlanAtThePose) {
     if (!inverse_kinematics(model, pose, kin)) continue;
     ASSERT_TRUE(factor.compute(kin.structure_matrix));
     // The null-space basis is orthonormal and annihilated by the structure matrix.
-    const Eigen::MatrixXd N = factor.null_basis;
+    const Eigen::MatrixXd N = factor.null_basis();
     EXPECT_LT((kin.structure_matrix * N).cwiseAbs().maxCoeff(), 1e-12);
     EXPECT_LT(
         (N.transpose() * N - Eigen::MatrixXd::Identity(N.cols(), N.cols())).cwiseAbs().maxCoeff(),

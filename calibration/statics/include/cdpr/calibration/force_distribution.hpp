@@ -85,8 +85,8 @@ struct ForceDistributionData {
 // nothing.
 struct StructureFactor {
   using Qr = Eigen::ColPivHouseholderQR<Eigen::Matrix<double, Eigen::Dynamic, 6, 0, kMaxCables, 6>>;
-  using NullBasis =
-      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxCables, kMaxCables - 6>;
+  using CableMatrix =
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxCables, kMaxCables>;
 
   // Factors `structure_matrix`; false when it has rank < 6 (relative `rank_tolerance`), is not
   // finite or has more than kMaxCables or fewer than 6 columns (then valid() is false and a QP
@@ -95,13 +95,16 @@ struct StructureFactor {
                double rank_tolerance = 1e-10);
   bool valid() const { return status == Factored::kFullRank; }
   int num_cables() const { return static_cast<int>(structure.cols()); }
+  // m x (m - 6), orthonormal columns spanning {f : A^T f = 0} (valid() only).
+  auto null_basis() const { return q.rightCols(q.cols() - 6); }
 
   enum class Factored { kNone, kFullRank, kRankDeficient, kBadInput };
   Factored status = Factored::kNone;
   int rank = 0;
   StructureMatrix structure;  // A^T as factored
   Qr qr;
-  NullBasis null_basis;  // m x (m - 6), orthonormal columns spanning {f : A^T f = 0}
+  CableMatrix q;                  // Q (m x m), formed once (valid() only)
+  Eigen::Matrix<double, 6, 6> r;  // R (upper triangular; valid() only)
 };
 
 // Gravity wrench (force and moment about the platform origin, world) at rotation R.
