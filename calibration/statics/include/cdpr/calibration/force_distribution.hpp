@@ -20,7 +20,6 @@
 #pragma once
 
 #include <Eigen/Core>
-#include <Eigen/QR>
 #include <optional>
 
 #include "cdpr/calibration/kinematics.hpp"
@@ -84,7 +83,6 @@ struct ForceDistributionData {
 // so a caller trying several plans at one pose factors once. Fixed capacity: compute() allocates
 // nothing.
 struct StructureFactor {
-  using Qr = Eigen::ColPivHouseholderQR<Eigen::Matrix<double, Eigen::Dynamic, 6, 0, kMaxCables, 6>>;
   using CableMatrix =
       Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxCables, kMaxCables>;
 
@@ -101,10 +99,10 @@ struct StructureFactor {
   enum class Factored { kNone, kFullRank, kRankDeficient, kBadInput };
   Factored status = Factored::kNone;
   int rank = 0;
-  StructureMatrix structure;  // A^T as factored
-  Qr qr;
-  CableMatrix q;                  // Q (m x m), formed once (valid() only)
-  Eigen::Matrix<double, 6, 6> r;  // R (upper triangular; valid() only)
+  StructureMatrix structure;                // A^T as factored
+  Eigen::PermutationMatrix<6> permutation;  // P (valid() only)
+  CableMatrix q;                            // Q (m x m), formed once (valid() only)
+  Eigen::Matrix<double, 6, 6> r;            // R (upper triangular; valid() only)
 };
 
 // Gravity wrench (force and moment about the platform origin, world) at rotation R.
