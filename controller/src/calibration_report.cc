@@ -144,6 +144,21 @@ Gate mismatch_gate(const Diagnosis* diagnosis, const std::string& verdict_key,
   return g;
 }
 
+// RMS of the fit's standard deviations of the parameters the monitor's length prior covers
+// (frame-anchor coordinates, encoder zeros); NaN when it estimated none with a finite one.
+double length_uncertainty(const IdentificationReport& fit) {
+  double sum = 0.0;
+  int n = 0;
+  for (const ParameterEstimate& p : fit.parameters) {
+    if ((p.id.kind == ParameterKind::kFrameAnchor || p.id.kind == ParameterKind::kLengthOffset) &&
+        std::isfinite(p.std_dev)) {
+      sum += p.std_dev * p.std_dev;
+      ++n;
+    }
+  }
+  return n > 0 ? std::sqrt(sum / n) : std::numeric_limits<double>::quiet_NaN();
+}
+
 }  // namespace
 
 CalibrationOutcome evaluate_calibration(const RobotModel& before, const MeasurementSet& set,
@@ -169,6 +184,8 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
     o.verdict = "identification only (the mismatch locator is off)";
     o.verdict_key = "not_diagnosed";
   }
+  o.model_length_m = length_uncertainty(*o.fit);
+  if (o.fit->rms_wrench_n > 0.0) o.model_force_n = o.fit->rms_wrench_n;
   o.gates.push_back(fit_gate(*o.fit, gates));
   o.gates.push_back(anchor_change_gate(before, o.model, gates));
   o.gates.push_back(predicted_accuracy_gate(before, o.model, set, options, gates, o));
@@ -250,6 +267,7 @@ json calibration_json(const CalibrationOutcome& o, const CalibrationReportContex
           {"gates", gates},
           {"gates_passed", o.gates_passed},
           {"predicted_position_rms_m", o.predicted_position_rms_m},
+          {"monitoring", monitoring_figures(o)},
           {"iso9283", iso9283_json(o, c)},
           {"fit",
            {{"chi2", o.fit->chi2},
@@ -261,6 +279,15 @@ json calibration_json(const CalibrationOutcome& o, const CalibrationReportContex
           {"standard_fit", {{"chi2", o.standard->chi2}, {"dof", o.standard->dof}}},
           {"frame_anchors", anchors},
           {"length_residuals_normalized", residuals}};
+}
+
+json monitoring_figures(const CalibrationOutcome& o) {
+  // (predicted_position_rms_m stays 0 when the prediction failed: the gate says why)
+  const double position =
+      o.predicted_position_rms_m > 0.0 ? o.predicted_position_rms_m : std::nan("");
+  return {{"predicted_position_rms_m", finite_or_null(position)},
+          {"model_length_m", finite_or_null(o.model_length_m)},
+          {"model_force_n", finite_or_null(o.model_force_n)}};
 }
 
 std::string calibration_html(const CalibrationOutcome& o, const CalibrationReportContext& c,

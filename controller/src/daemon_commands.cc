@@ -235,6 +235,7 @@ Reply Daemon::cmd_accept(const json&, const PeerInfo& peer) {
   std::shared_ptr<const RobotModel> proposed;
   int id = 0;
   int parent = 0;
+  json monitoring;  // what the monitor takes from the calibration (monitoring_figures)
   {
     std::lock_guard lock(mu_);
     const DaemonState st = supervisor_.state();
@@ -245,9 +246,12 @@ Reply Daemon::cmd_accept(const json&, const PeerInfo& peer) {
     proposed = calibration_->proposed;
     id = calibration_->id;
     parent = active_version_;
+    monitoring = calibration_->summary.value("monitoring", json(nullptr));
   }
-  auto version = store_->add_geometry(
-      *proposed, {{"source", "calibration"}, {"calibration", id}, {"parent", parent}});
+  auto version = store_->add_geometry(*proposed, {{"source", "calibration"},
+                                                  {"calibration", id},
+                                                  {"parent", parent},
+                                                  {"monitoring", monitoring}});
   if (!version.ok()) {
     return Reply::failure(ControlErrorCode::kInternal, version.status().to_string());
   }

@@ -7,6 +7,8 @@
 
 #include <cmath>
 #include <limits>
+#include <string>
+#include <vector>
 
 #include "cdpr/controller/daemon.hpp"
 
@@ -23,7 +25,7 @@ json vector_json(const Eigen::VectorXd& v) {
 }
 
 json health_json(const Monitor& monitor, const MonitorAssessment& a, int version,
-                 int moving_samples) {
+                 int moving_samples, const json& figures) {
   json rows = json::array();
   for (const MonitorRow& r : a.rows) {
     rows.push_back({{"name", r.name},
@@ -58,6 +60,7 @@ json health_json(const Monitor& monitor, const MonitorAssessment& a, int version
           {"effects", effects},
           {"position_rms_acceptance_m", a.position_rms_acceptance_m},
           {"position_rms_now_m", a.position_rms_now_m},
+          {"figures", figures},
           {"proposal",
            {{"needed", p.needed},
             {"full_sequence", p.full_sequence},
@@ -68,16 +71,72 @@ json health_json(const Monitor& monitor, const MonitorAssessment& a, int version
           {"text", describe(a)}};
 }
 
+// What a geometry's metadata says the calibration that made it reported for the monitor.
+struct Reported {
+  bool calibrated = false;  // made by an accepted calibration
+  std::string source;       // "calibration <id>"
+  json figures;             // its "monitoring" (calibration_report.hpp monitoring_figures)
+};
+
+// One figure, {value, source}: the calibration's, else the config's (`missing` collects the keys
+// a calibrated geometry lacks).
+json monitor_figure(const Reported& r, const char* key, double config_value,
+                    const MonitoringSettings& mc, std::vector<std::string>& missing) {
+  if (mc.override_calibration) {
+    return {{"value", config_value}, {"source", "config (monitoring.override_calibration)"}};
+  }
+  const json v = r.figures.is_object() ? r.figures.value(key, json(nullptr)) : json(nullptr);
+  if (v.is_number() && std::isfinite(v.get<double>()) && v.get<double>() >= 0.0) {
+    return {{"value", v.get<double>()}, {"source", r.source}};
+  }
+  if (r.calibrated) missing.emplace_back(key);
+  return {{"value", config_value}, {"source", "config"}};
+}
+
+// The monitor's model uncertainty and acceptance figure for geometry `version`, with where each
+// came from: the calibration that made it, else the config (the nominal geometry, a state file
+// written before the calibration stated them, a figure it could not give); logged.
+json monitor_figures(const MonitoringSettings& mc, const Result<json>& meta, int version) {
+  Reported r;
+  if (meta.ok() && meta->is_object() && meta->value("source", std::string()) == "calibration") {
+    r.calibrated = true;
+    const json id = meta->value("calibration", json(nullptr));
+    r.source = "calibration " + (id.is_number_integer() ? id.dump() : std::string("?"));
+    r.figures = meta->value("monitoring", json(nullptr));
+  }
+  std::vector<std::string> missing;
+  json f = {{"model_length_m", monitor_figure(r, "model_length_m", mc.model_length_m, mc, missing)},
+            {"model_force_n", monitor_figure(r, "model_force_n", mc.model_force_n, mc, missing)},
+            {"acceptance_position_m",
+             monitor_figure(r, "predicted_position_rms_m", mc.acceptance_position_m, mc, missing)}};
+  if (!missing.empty()) {
+    std::string keys;
+    for (const std::string& k : missing) keys += (keys.empty() ? "" : ", ") + k;
+    spdlog::warn(
+        "health: geometry {} ({}) states no {} (a state file from before they were kept, or a "
+        "figure the calibration could not give): the config's monitoring values instead",
+        version, r.source, keys);
+  } else {
+    spdlog::info("health: monitoring geometry {} with the model uncertainty of {}", version,
+                 f["model_length_m"]["source"].get<std::string>());
+  }
+  return f;
+}
+
 }  // namespace
 
 Status Daemon::restart_monitor(const Geometry& g) {
   const MonitoringSettings& mc = config_.monitoring;
+  monitor_figures_ = monitor_figures(mc, store_->geometry_meta(g.version), g.version);
   MonitorOptions o;
   o.noise.sigma_length = config_.measuring.noise_length_m;
   o.noise.sigma_force = config_.measuring.noise_force_n;
   o.noise.sigma_laser = config_.measuring.noise_laser_m;
-  o.noise.model_length = mc.model_length_m;
-  o.noise.model_force = mc.model_force_n;
+  o.noise.model_length = monitor_figures_["model_length_m"]["value"].get<double>();
+  o.noise.model_force = monitor_figures_["model_force_n"]["value"].get<double>();
+  o.acceptance_position_rms_m = monitor_figures_["acceptance_position_m"]["value"].get<double>();
+  // The box the calibration predicted its accuracy over (calibration_report.cc).
+  o.box.center = g.model.home.position;
   o.reference_s = mc.reference_s;
   o.false_alarms_per_hour = mc.false_alarms_per_hour;
   o.samples_per_hour = 3600.0 / mc.period_s;
@@ -173,7 +232,8 @@ void Daemon::watch_health(const RtSnapshot& s) {
         "health: {}; predicted position error {:.3f} mm (at acceptance {:.3f} mm): "
         "cdprctl health",
         words, 1e3 * a->position_rms_now_m, 1e3 * a->position_rms_acceptance_m);
-    publish("health", health_json(*monitor_, *a, g->version, health_moving_samples_));
+    publish("health",
+            health_json(*monitor_, *a, g->version, health_moving_samples_, monitor_figures_));
   }
 }
 
@@ -187,6 +247,7 @@ Reply Daemon::cmd_health(const json&, const PeerInfo&) {
   if (!monitor_ || monitor_->samples() == 0) {
     return Reply::success({{"enabled", true},
                            {"samples", 0},
+                           {"figures", monitor_ ? monitor_figures_ : json(nullptr)},
                            {"message",
                             "no sample yet: the monitor samples while the robot holds a trusted "
                             "pose under a geometry"}});
@@ -196,7 +257,8 @@ Reply Daemon::cmd_health(const json&, const PeerInfo&) {
     return Reply::failure(ControlErrorCode::kInternal,
                           "health: the assessment failed: " + std::string(a.status().message()));
   }
-  return Reply::success(health_json(*monitor_, *a, monitor_version_, health_moving_samples_));
+  return Reply::success(
+      health_json(*monitor_, *a, monitor_version_, health_moving_samples_, monitor_figures_));
 }
 
 }  // namespace cdpr::controller

@@ -356,6 +356,22 @@ TEST_F(DaemonNative, RejectKeepsTheGeometryRestartKeepsTheAcceptedOneAndRollback
   const int v2 = acc.result["version"].get<int>();
   ASSERT_TRUE(run_until([&] { return daemon().state() == DaemonState::kHolding; }, 30.0));
   ASSERT_EQ(daemon().status()["geometry_version"], v2);
+  // The new version's metadata carries what the calibration reported for the in-service monitor
+  // (its report's figures): the predicted position error and the model's uncertainty.
+  const Reply show = request("geometry_show", {{"version", v2}});
+  ASSERT_TRUE(show.ok) << show.message;
+  const json& figures = show.result["meta"]["monitoring"];
+  const Reply report = request("report");
+  ASSERT_TRUE(report.ok) << report.message;
+  EXPECT_EQ(figures, report.result["report"]["monitoring"]);
+  for (const char* key : {"predicted_position_rms_m", "model_length_m", "model_force_n"}) {
+    ASSERT_TRUE(figures[key].is_number()) << key << ": " << figures.dump();
+    EXPECT_GT(figures[key].get<double>(), 0.0) << key;
+  }
+  EXPECT_EQ(figures["predicted_position_rms_m"],
+            report.result["report"]["predicted_position_rms_m"]);
+  std::printf("[daemon-native] accepted geometry's monitoring figures: %s\n",
+              figures.dump().c_str());
 
   // Restart: a new daemon on the same state directory comes back with version v2, where the
   // platform is, without a jump.

@@ -46,6 +46,86 @@ class DaemonHealth : public testing::CellTest {
   Pose home_;
 };
 
+// The monitor of a geometry takes its model uncertainty and acceptance figure from the metadata
+// the accept wrote (calibration_report.hpp monitoring_figures), else from the config.
+class DaemonHealthFigures : public DaemonHealth {
+ protected:
+  static constexpr double kConfigLength = 3e-4, kConfigForce = 1.5, kConfigAcceptance = 5e-5;
+  // Starts the daemon on a state directory whose active version 2 is the nominal robot with
+  // `meta` (none: version 1, the nominal geometry, is the active one) and returns the health
+  // reply's figures once the monitor has a sample.
+  json figures(const json* meta, const std::string& settings = "") {
+    if (meta != nullptr) {
+      auto store = StateStore::open((dir_ / "state").string());
+      EXPECT_TRUE(store.ok());
+      EXPECT_TRUE(store->add_geometry(cell_->nominal, {{"source", "nominal"}}).ok());
+      EXPECT_EQ(*store->add_geometry(cell_->nominal, *meta), 2);
+      EXPECT_TRUE(store->activate(2, {{"why", "test"}}).ok());
+    }
+    testing::VirtualCell::Settings s;
+    s.extra = "monitoring: {enabled: true, period_s: 0.2, reference_s: 0, model_length_m: " +
+              std::to_string(kConfigLength) + ", model_force_n: " + std::to_string(kConfigForce) +
+              ", acceptance_position_m: " + std::to_string(kConfigAcceptance) + settings + "}\n";
+    start_daemon(s);
+    EXPECT_TRUE(holds_settled(10.0));
+    EXPECT_EQ(daemon().status()["geometry_version"], meta != nullptr ? 2 : 1);
+    json h;
+    EXPECT_TRUE(run_until(
+        [&] {
+          const Reply r = request("health");
+          h = r.result;
+          return r.ok && h.value("samples", 0) > 0;
+        },
+        5.0))
+        << h.dump(2);
+    EXPECT_DOUBLE_EQ(h["position_rms_acceptance_m"].get<double>(),
+                     h["figures"]["acceptance_position_m"]["value"].get<double>());
+    return h["figures"];
+  }
+  void expect_config(const json& f, const std::string& source = "config") {
+    EXPECT_EQ(f["model_length_m"]["source"], source) << f.dump(2);
+    EXPECT_DOUBLE_EQ(f["model_length_m"]["value"].get<double>(), kConfigLength);
+    EXPECT_EQ(f["model_force_n"]["source"], source);
+    EXPECT_DOUBLE_EQ(f["model_force_n"]["value"].get<double>(), kConfigForce);
+    EXPECT_EQ(f["acceptance_position_m"]["source"], source);
+    EXPECT_DOUBLE_EQ(f["acceptance_position_m"]["value"].get<double>(), kConfigAcceptance);
+  }
+  const json calibrated_ = {{"source", "calibration"},
+                            {"calibration", 4},
+                            {"parent", 1},
+                            {"monitoring",
+                             {{"predicted_position_rms_m", 2.9e-5},
+                              {"model_length_m", 2.2e-4},
+                              {"model_force_n", 0.07}}}};
+};
+
+TEST_F(DaemonHealthFigures, AnAcceptedCalibrationsGeometryIsMonitoredWithItsOwnFigures) {
+  const json f = figures(&calibrated_);
+  const json& stated = calibrated_["monitoring"];
+  EXPECT_EQ(f["model_length_m"]["source"], "calibration 4") << f.dump(2);
+  EXPECT_DOUBLE_EQ(f["model_length_m"]["value"].get<double>(), stated["model_length_m"]);
+  EXPECT_EQ(f["model_force_n"]["source"], "calibration 4");
+  EXPECT_DOUBLE_EQ(f["model_force_n"]["value"].get<double>(), stated["model_force_n"]);
+  EXPECT_EQ(f["acceptance_position_m"]["source"], "calibration 4");
+  EXPECT_DOUBLE_EQ(f["acceptance_position_m"]["value"].get<double>(),
+                   stated["predicted_position_rms_m"]);
+}
+
+TEST_F(DaemonHealthFigures, AnOlderStateFileWithoutTheFiguresLoadsWithTheConfigs) {
+  json older = calibrated_;
+  older.erase("monitoring");
+  expect_config(figures(&older));
+}
+
+TEST_F(DaemonHealthFigures, TheNominalGeometryIsMonitoredWithTheConfigs) {
+  expect_config(figures(nullptr));
+}
+
+TEST_F(DaemonHealthFigures, TheConfigOverridesTheCalibrationWhenItSaysSo) {
+  expect_config(figures(&calibrated_, ", override_calibration: true"),
+                "config (monitoring.override_calibration)");
+}
+
 TEST_F(DaemonHealth, IsOffUnlessTheConfigTurnsItOn) {
   start(false);
   const Reply r = request("health");

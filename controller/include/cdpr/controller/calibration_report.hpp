@@ -16,6 +16,7 @@
 // (report.iso9283_measured).
 #pragma once
 
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -52,6 +53,10 @@ struct CalibrationOutcome {
   bool gates_passed = false;
   std::string failed_gates;  // "fit, mismatch"
   double predicted_position_rms_m = 0.0;
+  // What the in-service monitor takes from this calibration once accepted (monitoring_figures;
+  // docs/monitoring.md "In the daemon"); NaN where the calibration gives none.
+  double model_length_m = std::numeric_limits<double>::quiet_NaN();
+  double model_force_n = std::numeric_limits<double>::quiet_NaN();
   // AP-like figure predicted at ISO 9283's points of the box about home; when it could not be
   // computed, why (iso9283_predicted.points == 0).
   PredictedIsoPosition iso9283_predicted;
@@ -122,6 +127,16 @@ CalibrationOutcome evaluate_calibration(const RobotModel& before, const Measurem
                                         const IdentificationOptions& options);
 
 nlohmann::json calibration_json(const CalibrationOutcome& o, const CalibrationReportContext& c);
+// The figures the in-service monitor needs of this calibration, kept in the accepted geometry's
+// metadata ("monitoring" in geometry/NNNNNN.json and in report.json; null where not given):
+//  - predicted_position_rms_m: the predicted RMS position error over the ISO 9283 box (the
+//    predicted_accuracy gate), the "at acceptance" figure;
+//  - model_length_m: the model's length uncertainty, RMS of the final fit's standard deviations
+//    of the frame-anchor coordinates and encoder zeros it estimated (the monitor's prior on
+//    exactly those parameters);
+//  - model_force_n: the model's force uncertainty, the final fit's RMS equilibrium residual per
+//    force axis at the measured poses.
+nlohmann::json monitoring_figures(const CalibrationOutcome& o);
 // The page a person reads before accepting: the verdict, the gates and the next step, inserted at
 // the top of `report_page` (the calibration report of cdpr/report/report.hpp).
 std::string calibration_html(const CalibrationOutcome& o, const CalibrationReportContext& c,

@@ -353,7 +353,10 @@ class Daemon {
   // health request reads it).
   mutable std::mutex health_mu_;
   std::unique_ptr<Monitor> monitor_;
-  int monitor_version_ = -1;            // geometry version it monitors
+  int monitor_version_ = -1;  // geometry version it monitors
+  // Its model uncertainty and acceptance figure, each {value, source}: the calibration's or the
+  // config's (daemon_health.cc monitor_figures).
+  nlohmann::json monitor_figures_;
   std::int64_t monitor_start_ns_ = 0;   // robot time it started
   std::int64_t monitor_sample_ns_ = 0;  // of its last sample
   std::int64_t monitor_assess_ns_ = 0;  // of its last assessment

@@ -173,11 +173,17 @@ struct MonitoringSettings {
   double false_alarms_per_hour = 0.1;  // stated rate of the detectors together
   double alert_position_m = 1e-4;      // m of predicted RMS position error above acceptance
   double assess_period_s = 60.0;       // s between assessments after an alarm
-  // The accepted model's own uncertainty (one standard deviation): of a cable length (e.g. its
-  // anchors' standard deviation) and of the force balance (e.g. the weight's); the sensors' noise
-  // is identification.noise_*.
+  // The model's own uncertainty (one standard deviation): of a cable length (its anchors' and
+  // encoder zeros' standard deviation) and of the force balance (per force axis); the sensors'
+  // noise is measuring.noise_*. And the predicted RMS position error over the ISO 9283 box the
+  // model was accepted with (0: none stated). An accepted calibration states its own (its
+  // geometry's metadata, calibration_report.hpp monitoring_figures): these are the fallbacks for
+  // the nominal geometry, a state file written before the calibration stated them, or a figure
+  // it could not give; override_calibration makes them win over the calibration's.
   double model_length_m = 1e-4;
   double model_force_n = 2.0;
+  double acceptance_position_m = 0.0;
+  bool override_calibration = false;
   // s of samples after a geometry is activated that fit its own error (the prior: the model
   // uncertainty above) before the detectors judge changes against it (MonitorOptions::
   // reference_s; it should see the application's poses); 0: the model is taken as exact.
