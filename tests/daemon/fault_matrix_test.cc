@@ -32,6 +32,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <regex>
@@ -54,10 +55,14 @@ using json = nlohmann::json;
 namespace fs = std::filesystem;
 
 const std::string kSource = CDPR_SOURCE_DIR;
-constexpr int kCable = 2;          // 0-based: cable 3, node 3
-constexpr int kForceNode = 9;      // config/canopen-mini.yaml
-constexpr int kMeasuringPose = 3;  // the fault comes while pose 4 of 25 is measured
-constexpr double kObserve = 3.0;   // s of robot time between the injection and the verdict
+constexpr int kCable = 2;              // 0-based: cable 3, node 3
+constexpr int kForceNode = 9;          // config/canopen-mini.yaml
+constexpr int kMeasuringPose = 3;      // the fault comes while pose 4 of 25 is measured
+constexpr int kIdentifyingPoses = 10;  // the identifying phase's calibration
+constexpr double kObserve = 3.0;       // s of robot time between the injection and the verdict
+// The measuring cell's bound of a fault that acts in real time (FaultRow::real_time): generous
+// beside the laser driver's 5 readings x 3 tries x VirtualCell::kLaserAnswerTimeoutS.
+constexpr auto kRealTimeBound = std::chrono::seconds(120);
 
 enum class Phase { kStartup, kHolding, kMoving, kMeasuring, kIdentifying, kHotSwap };
 const std::vector<Phase> kPhases = {Phase::kStartup,   Phase::kHolding,     Phase::kMoving,
@@ -127,6 +132,11 @@ struct FaultRow {
   // The daemon runs on the network with the safety chain's objects mapped
   // (VirtualCell::write_safety_network).
   bool safety_network = false;
+  // The fault acts through a thread that waits in real time (the laser driver's timeouts): the
+  // measuring cell is observed until the sequence stops or moves on, bounded in real time, not in
+  // robot time (which the cell steps as fast as it can), so that no race between the bound and
+  // the fault's real timeouts decides the outcome.
+  bool real_time = false;
 };
 
 std::string numbers_hidden(std::string s) {
@@ -144,65 +154,90 @@ std::string numbers_hidden(std::string s) {
   return s;
 }
 
-// The measuring group of the identifying phase's 10-pose calibration.
+// The measuring group of the identifying phase's calibration (identification only).
 const std::string kIdentifyingMeasuring =
-    "{poses: 10, laser_samples: 3, laser_interval_s: 0.002, average_cycles: 25, noise_length_m: "
-    "4e-7, noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 1}";
+    "{poses: " + std::to_string(kIdentifyingPoses) +
+    ", laser_samples: 3, laser_interval_s: 0.002, average_cycles: 25, noise_length_m: 4e-7, "
+    "noise_force_n: 0.1, noise_laser_m: 1e-4, tension_band: 1}";
 
-// The scratch folder of this process's designed pose lists (removed at exit; a forked child
-// leaves with _exit and keeps it).
+// The scratch folder of this process's pose lists (removed at exit; a forked child leaves with
+// _exit and keeps it).
 class PoseFiles {
  public:
   PoseFiles()
-      : dir_(fs::temp_directory_path() / ("cdpr-matrix-poses-" + std::to_string(::getpid()))) {}
+      : dir_(fs::temp_directory_path() / ("cdpr-matrix-poses-" + std::to_string(::getpid()))) {
+    fs::create_directories(dir_);
+  }
   ~PoseFiles() {
     std::error_code ec;
     fs::remove_all(dir_, ec);
   }
   const fs::path& dir() const { return dir_; }
-  std::map<std::string, std::string> files;  // measuring group -> its pose list
 
  private:
   fs::path dir_;
 };
-
-// `measuring` (a flow mapping) with the poses cdprd designs for it as measuring.pose_file: the
-// design, made once per process by a dry run of a cell's daemon, is what every calibrate request
-// of a cell would design again (the phase's and the way back's), and it took most of a cell's
-// time; the faults act on the sequence, not on the design.
-std::string with_designed_poses(const std::string& measuring) {
+PoseFiles& pose_files() {
   static PoseFiles pf;
-  auto it = pf.files.find(measuring);
-  if (it == pf.files.end()) {
-    std::string file;
-    fs::create_directories(pf.dir());
-    const fs::path scratch = pf.dir() / "design";
+  return pf;
+}
+
+// `poses` written as a pose list in the scratch folder; "" when there is none or it fails.
+std::string pose_file(const std::vector<Pose>& poses, const std::string& name) {
+  if (poses.empty()) return "";
+  recording::PoseList list;
+  list.poses = poses;
+  const std::string file = (pose_files().dir() / name).string();
+  return recording::write_pose_list(list, file).ok() ? file : "";
+}
+
+// The first `count` of the poses cdprd designs for the cell's default measuring group on the
+// nominal geometry, as a pose list: designed once per process by a dry run of a cell's daemon,
+// and given to the measuring phase's calibration (all of them) and the identifying phase's (the
+// first kIdentifyingPoses) as measuring.pose_file. Each `calibrate` would design them again, and
+// the design took most of a cell's time; the faults act on the sequence, not on the design. ""
+// when the design failed (the cells then design their own, as cdprd does).
+std::string designed_pose_file(std::size_t count) {
+  static const std::vector<Pose> designed = [] {
+    std::vector<Pose> poses;
+    const fs::path scratch = pose_files().dir() / "design";
     if (auto c = testing::VirtualCell::create(kSource, scratch); c.ok()) {
-      testing::VirtualCell::Settings s;
-      s.measuring = measuring;
       Reply dry;
       dry.ok = false;
-      if ((*c)->start_daemon(s).ok()) dry = (*c)->request("calibrate", {{"dry_run", true}});
-      if (dry.ok && !dry.result["poses"].empty()) {
-        file = (pf.dir() / ("poses-" + std::to_string(pf.files.size()) + ".csv")).string();
-        std::ofstream out(file);
-        out << "# units: SI\npose,x,y,z,roll,pitch,yaw\n";
-        char line[256];
-        int j = 0;
+      if ((*c)->start_daemon().ok()) dry = (*c)->request("calibrate", {{"dry_run", true}});
+      if (dry.ok) {
         for (const json& p : dry.result["poses"]) {
-          std::snprintf(line, sizeof line, "%d,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", j++,
-                        p[0].get<double>(), p[1].get<double>(), p[2].get<double>(),
-                        p[3].get<double>(), p[4].get<double>(), p[5].get<double>());
-          out << line;
+          Eigen::Matrix<double, 6, 1> v;
+          for (int a = 0; a < 6; ++a) v(a) = p[a].get<double>();
+          poses.push_back(Pose::from_vector(v));
         }
       }
     }
-    fs::remove_all(scratch);
-    // (no file: the cells design their poses themselves, as cdprd does)
-    it = pf.files.emplace(measuring, file).first;
-  }
-  if (it->second.empty()) return measuring;
-  return measuring.substr(0, measuring.rfind('}')) + ", pose_file: " + it->second + "}";
+    std::error_code ec;
+    fs::remove_all(scratch, ec);
+    return poses;
+  }();
+  count = std::min(count, designed.size());
+  return pose_file({designed.begin(), designed.begin() + static_cast<std::ptrdiff_t>(count)},
+                   "designed-" + std::to_string(count) + ".csv");
+}
+
+// The nominal home alone, as a pose list: the calibration of the phases that calibrate only on
+// their way back (taken, then aborted at once), which needs no designed sequence. The platform
+// holds there on either geometry of the hot swap (whose way back calibrates on the one then
+// active).
+const std::string& home_pose_file() {
+  static const std::string file = [] {
+    auto nominal = config::load_robot_config(kSource + "/config/mini.yaml");
+    return nominal.ok() ? pose_file({nominal->home}, "home.csv") : std::string();
+  }();
+  return file;
+}
+
+// `measuring` (a flow mapping) with `file` as its pose_file ("": as it is).
+std::string with_pose_file(const std::string& measuring, const std::string& file) {
+  if (file.empty()) return measuring;
+  return measuring.substr(0, measuring.rfind('}')) + ", pose_file: " + file + "}";
 }
 
 // The state a cell is in, and the verdict.
@@ -212,7 +247,7 @@ class MatrixCell {
     dir_ = fs::temp_directory_path() / ("cdpr-matrix-" + std::to_string(::getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
-    (void)extra_config();  // the poses designed before the cell's log is watched
+    (void)extra_config();  // the poses designed before the cell's log is watched (and the fork)
   }
   ~MatrixCell() {
     cell_.reset();
@@ -382,13 +417,17 @@ class MatrixCell {
       auto network = cell_->write_safety_network();
       if (network.ok()) config += "canopen: " + *network + "\n";
     }
+    const std::string measuring = Cell::Settings{}.measuring;
     if (phase_ == Phase::kIdentifying) {
-      return config + "measuring: " + with_designed_poses(kIdentifyingMeasuring) +
+      return config + "measuring: " +
+             with_pose_file(kIdentifyingMeasuring, designed_pose_file(kIdentifyingPoses)) +
              "\nidentification: {diagnose: false}\n";
     }
-    // (the hot swap's way back calibrates on whichever geometry is then active: designed there)
-    if (phase_ == Phase::kHotSwap) return config;
-    return "measuring: " + with_designed_poses(Cell::Settings{}.measuring) + "\n" + config;
+    if (phase_ == Phase::kMeasuring) {
+      const std::size_t all = std::numeric_limits<std::size_t>::max();
+      return "measuring: " + with_pose_file(measuring, designed_pose_file(all)) + "\n" + config;
+    }
+    return "measuring: " + with_pose_file(measuring, home_pose_file()) + "\n" + config;
   }
   static std::string read(const std::string& path) {
     auto t = read_text_file(path);
@@ -591,13 +630,17 @@ class MatrixCell {
   // poses; while identifying, until the identification ends; then (and otherwise) kObserve.
   void observe() {
     if (phase_ == Phase::kMeasuring) {
-      cell_->run_until(
-          [&] {
-            const json c = daemon().status()["calibration"];
-            return daemon().state() == DaemonState::kFault || c["outcome"] != "measuring" ||
-                   c["pose"].get<int>() >= kMeasuringPose + 2;
-          },
-          300.0);
+      auto stopped_or_moved_on = [&] {
+        const json c = daemon().status()["calibration"];
+        return daemon().state() == DaemonState::kFault || c["outcome"] != "measuring" ||
+               c["pose"].get<int>() >= kMeasuringPose + 2;
+      };
+      if (row_.real_time) {
+        const auto end = std::chrono::steady_clock::now() + kRealTimeBound;
+        while (!stopped_or_moved_on() && std::chrono::steady_clock::now() < end) cell_->cycle();
+      } else {
+        cell_->run_until(stopped_or_moved_on, 300.0);
+      }
     } else if (phase_ == Phase::kIdentifying) {
       cell_->run_until([&] { return daemon().state() != DaemonState::kIdentifying; }, 300.0);
     }
@@ -804,7 +847,11 @@ std::vector<FaultRow> fault_rows() {
     c.slave->set_fault(sim::LaserFaultMode::kNone);
     c.laser_status.reset();
   };
-  rows.push_back({"laser timeout", laser(sim::LaserFaultMode::kTimeout), laser_ok, {}, nullptr});
+  {
+    FaultRow timeout{"laser timeout", laser(sim::LaserFaultMode::kTimeout), laser_ok, {}, nullptr};
+    timeout.real_time = true;
+    rows.push_back(timeout);
+  }
   rows.push_back({"laser garbage", laser(sim::LaserFaultMode::kGarbage), laser_ok, {}, nullptr});
   rows.push_back(
       {"laser out of range", laser(sim::LaserFaultMode::kOutOfRange), laser_ok, {}, nullptr});
