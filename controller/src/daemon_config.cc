@@ -107,10 +107,12 @@ Status read_tension_control(const YamlField& n, TensionControlSettings& t) {
 
 Status read_monitoring(const YamlField& n, MonitoringSettings& m) {
   if (!n.present()) return Status::success();
-  CDPR_RETURN_IF_ERROR(
-      n.check_keys({"enabled", "period_s", "false_alarms_per_hour", "alert_position_m",
-                    "assess_period_s", "model_length_m", "model_force_n", "acceptance_position_m",
-                    "override_calibration", "reference_s", "move_speed_m_s"}));
+  CDPR_RETURN_IF_ERROR(n.check_keys(
+      {"enabled", "period_s", "false_alarms_per_hour", "alert_position_m", "assess_period_s",
+       "model_length_m", "model_force_n", "acceptance_position_m", "override_calibration",
+       "reference_s", "move_speed_m_s", "max_following_m", "laser_max_age_s"}));
+  CDPR_RETURN_IF_ERROR(in_range(n, "max_following_m", 0.0, 1.0, "m", m.max_following_m));
+  CDPR_RETURN_IF_ERROR(in_range(n, "laser_max_age_s", 1e-3, 60.0, "s", m.laser_max_age_s));
   CDPR_RETURN_IF_ERROR(
       in_range(n, "acceptance_position_m", 0.0, 1.0, "m", m.acceptance_position_m));
   CDPR_RETURN_IF_ERROR(n.optional("override_calibration", m.override_calibration));

@@ -95,6 +95,8 @@ TEST(DaemonConfig, ErrorsNameFileLineAndField) {
       {"measuring: {design_tension_margin: -1}", "measuring.design_tension_margin"},
       {"measuring: {design_angle_steps: 0}", "measuring.design_angle_steps"},
       {"measuring: {design_emphasis_weight: -1}", "measuring.design_emphasis_weight"},
+      {"monitoring: {max_following_m: -1e-4}", "monitoring.max_following_m"},
+      {"monitoring: {laser_max_age_s: 0}", "monitoring.laser_max_age_s"},
   };
   for (const auto& [group, field] : out_of_range) {
     auto refused = parse_daemon_config("robot: r\ncanopen: n\n" + group + "\n", "d.yaml");

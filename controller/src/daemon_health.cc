@@ -5,11 +5,13 @@
 // `health` request shows the assessment. Nothing here moves the robot.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <string>
 #include <vector>
 
+#include "cdpr/calibration/winch.hpp"
 #include "cdpr/controller/daemon.hpp"
 
 namespace cdpr::controller {
@@ -25,7 +27,7 @@ json vector_json(const Eigen::VectorXd& v) {
 }
 
 json health_json(const Monitor& monitor, const MonitorAssessment& a, int version,
-                 int moving_samples, const json& figures) {
+                 const HealthCounts& counts, const json& figures) {
   json rows = json::array();
   for (const MonitorRow& r : a.rows) {
     rows.push_back({{"name", r.name},
@@ -50,7 +52,10 @@ json health_json(const Monitor& monitor, const MonitorAssessment& a, int version
   return {{"enabled", true},
           {"geometry_version", version},
           {"samples", a.samples},
-          {"samples_moving", moving_samples},
+          {"samples_moving", counts.moving},
+          {"moving_skipped_following", counts.moving_skipped_following},
+          {"laser_samples", counts.laser},
+          {"laser_skipped", counts.laser_skipped},
           {"referenced", a.referenced},
           {"reference_consistent", a.reference_consistent},
           {"alarms", monitor.alarms()},
@@ -142,7 +147,7 @@ Status Daemon::restart_monitor(const Geometry& g) {
   o.samples_per_hour = 3600.0 / mc.period_s;
   monitor_.reset();
   monitor_version_ = g.version;
-  health_moving_samples_ = 0;
+  health_counts_ = {};
   health_alerted_ = false;
   health_alarmed_ = false;
   monitor_assess_ns_ = 0;
@@ -166,20 +171,58 @@ double Daemon::health_speed(const RtSnapshot& s) {
   return speed;
 }
 
+// The largest following error of the drives (target vs actual counts) as cable length, m.
+double Daemon::following_error_m(const RtSnapshot& s, const RobotModel& model) {
+  double worst = 0.0;
+  for (int i = 0; i < model.num_cables() && i < s.num_cables; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    worst = std::max(worst, std::abs(winch_length_change<double>(
+                                model.winches[k], s.target_counts[k] - s.actual_counts[k])));
+  }
+  return worst;
+}
+
+// The laser's newest reading (taken by its own poll thread; CLOCK_MONOTONIC stamps) when it is
+// ok, taken after the supervisor saw this hold settled and at most laser_max_age_s old; NaN and
+// counted as skipped otherwise. None when the daemon or the geometry has no laser.
+double Daemon::health_laser(const Geometry& g) {
+  constexpr double kNone = std::numeric_limits<double>::quiet_NaN();
+  if (io_.laser == nullptr || g.model.lasers.empty()) return kNone;
+  const modbus::LaserReading r = io_.laser->latest();
+  const std::int64_t age_ns = modbus::monotonic_ns() - r.stamp_ns;
+  const bool fresh = r.ok() && r.sequence > 0 && health_settled_mono_ns_ >= 0 &&
+                     r.stamp_ns >= health_settled_mono_ns_ &&
+                     static_cast<double>(age_ns) <= config_.monitoring.laser_max_age_s * 1e9 &&
+                     std::isfinite(r.distance_m);
+  if (!fresh) {
+    ++health_counts_.laser_skipped;
+    return kNone;
+  }
+  ++health_counts_.laser;
+  return r.distance_m;
+}
+
 void Daemon::watch_health(const RtSnapshot& s) {
   const MonitoringSettings& mc = config_.monitoring;
-  if (!mc.enabled || worker_running_.load() || !s.have_tensions) return;
+  if (!mc.enabled) return;
   // A settled hold, or a slow (quasi-static) move when move_speed_m_s allows it.
   const DaemonState ds = state();
-  const bool holding = ds == DaemonState::kHolding && s.mode == RtMode::kHolding && s.settled;
+  const bool holding = ds == DaemonState::kHolding && s.mode == RtMode::kHolding && s.settled &&
+                       !worker_running_.load();
   bool moving = false;
   {
     std::lock_guard lock(health_mu_);
     const double speed = health_speed(s);
     moving = mc.move_speed_m_s > 0.0 && ds == DaemonState::kMoving && s.mode == RtMode::kMoving &&
              speed <= mc.move_speed_m_s;
+    // The laser's readings count from the first tick that saw this hold settled.
+    if (!holding) {
+      health_settled_mono_ns_ = -1;
+    } else if (health_settled_mono_ns_ < 0) {
+      health_settled_mono_ns_ = modbus::monotonic_ns();
+    }
   }
-  if (!holding && !moving) return;
+  if ((!holding && !moving) || worker_running_.load() || !s.have_tensions) return;
   const Geometry* g = nullptr;
   std::array<double, kMaxAxes> offsets{};
   {
@@ -200,6 +243,11 @@ void Daemon::watch_health(const RtSnapshot& s) {
   }
   if (!monitor_ || static_cast<double>(s.now_ns - monitor_sample_ns_) < mc.period_s * 1e9) return;
   monitor_sample_ns_ = s.now_ns;
+  // A move is quasi-static only while the drives follow their targets closely.
+  if (moving && following_error_m(s, g->model) > mc.max_following_m) {
+    ++health_counts_.moving_skipped_following;
+    return;
+  }
   MonitorSample sample;
   sample.time_s = 1e-9 * static_cast<double>(s.now_ns - monitor_start_ns_);
   sample.pose = s.pose();
@@ -209,9 +257,11 @@ void Daemon::watch_health(const RtSnapshot& s) {
     sample.lengths[static_cast<std::size_t>(i)] = lengths(i);
     sample.tensions[static_cast<std::size_t>(i)] = tensions(i);
   }
+  // One laser on the platform (DaemonIo): the geometry's first laser model.
+  if (holding) sample.lasers[0] = health_laser(*g);
   const int before = monitor_->samples();
   const bool alarm = monitor_->add(sample);
-  if (moving && monitor_->samples() > before) ++health_moving_samples_;
+  if (moving && monitor_->samples() > before) ++health_counts_.moving;
   if (alarm && !health_alarmed_) {
     health_alarmed_ = true;
     const std::string row = monitor_->row_name(monitor_->first_alarm_row());
@@ -232,8 +282,7 @@ void Daemon::watch_health(const RtSnapshot& s) {
         "health: {}; predicted position error {:.3f} mm (at acceptance {:.3f} mm): "
         "cdprctl health",
         words, 1e3 * a->position_rms_now_m, 1e3 * a->position_rms_acceptance_m);
-    publish("health",
-            health_json(*monitor_, *a, g->version, health_moving_samples_, monitor_figures_));
+    publish("health", health_json(*monitor_, *a, g->version, health_counts_, monitor_figures_));
   }
 }
 
@@ -258,7 +307,7 @@ Reply Daemon::cmd_health(const json&, const PeerInfo&) {
                           "health: the assessment failed: " + std::string(a.status().message()));
   }
   return Reply::success(
-      health_json(*monitor_, *a, monitor_version_, health_moving_samples_, monitor_figures_));
+      health_json(*monitor_, *a, monitor_version_, health_counts_, monitor_figures_));
 }
 
 }  // namespace cdpr::controller

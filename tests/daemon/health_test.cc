@@ -18,13 +18,11 @@ using json = nlohmann::json;
 class DaemonHealth : public testing::CellTest {
  protected:
   DaemonHealth() : CellTest("cdprd-health-") {}
-  void start(bool enabled) {
+  // `monitoring` (when enabled): the monitoring settings' keys, with their leading comma.
+  void start(bool enabled, const std::string& monitoring =
+                               ", assess_period_s: 2, reference_s: 4, move_speed_m_s: 1.0") {
     testing::VirtualCell::Settings s;
-    if (enabled) {
-      s.extra =
-          "monitoring: {enabled: true, period_s: 0.2, assess_period_s: 2, reference_s: 4, "
-          "move_speed_m_s: 1.0}\n";
-    }
+    if (enabled) s.extra = "monitoring: {enabled: true, period_s: 0.2" + monitoring + "}\n";
     start_daemon(s);
     ASSERT_TRUE(holds_settled(10.0));
     home_ = daemon().rt().snapshot().pose();
@@ -42,6 +40,12 @@ class DaemonHealth : public testing::CellTest {
     const std::int64_t t0 = daemon().rt().snapshot().now_ns;
     ASSERT_TRUE(
         run_until([&] { return daemon().rt().snapshot().now_ns - t0 > 2'000'000'000; }, 5.0));
+  }
+  // The health reply's result.
+  json health() {
+    const Reply r = request("health");
+    EXPECT_TRUE(r.ok) << r.message;
+    return r.result;
   }
   Pose home_;
 };
@@ -172,6 +176,62 @@ TEST_F(DaemonHealth, SamplesWhileHoldingAndSeesAWrongGeometryWithoutMovingTheRob
   // Asking moves nothing.
   EXPECT_EQ(daemon().rt().snapshot().pose().vector(), before.vector());
   EXPECT_EQ(daemon().state(), DaemonState::kHolding);
+}
+
+// The virtual MINI carries a laser (config/mini.yaml `lasers`, read over Modbus by the driver's
+// poll thread): the samples at settled holds carry its reading, a row of their own.
+TEST_F(DaemonHealth, SamplesTheLaserAtSettledHolds) {
+  start(true, ", reference_s: 0");
+  visit(0.05, 0, 0);
+  visit(0, 0, 0);
+  const json h = health();
+  EXPECT_GT(h["laser_samples"].get<int>(), 0) << h.dump(2);
+  // Only a sample right after a hold settled can precede the first reading after it.
+  EXPECT_LT(h["laser_skipped"].get<int>(), h["laser_samples"].get<int>()) << h.dump(2);
+  bool laser_row = false;
+  for (const json& r : h["rows"]) laser_row = laser_row || r["name"] == "laser 1";
+  EXPECT_TRUE(laser_row) << h["rows"].dump(2);
+}
+
+// A reading from before the hold settled (the poll thread stopped) or one that failed (no
+// target) is not the platform's distance now: the sample goes without it, counted.
+TEST_F(DaemonHealth, SkipsAStaleOrFailedLaserReading) {
+  start(true, ", reference_s: 0");
+  visit(0, 0, 0.03);
+  const json before = health();
+  cell_->laser_status = sim::LaserStatus::kNoTarget;
+  visit(0, 0, 0);
+  const json failed = health();
+  EXPECT_EQ(failed["laser_samples"], before["laser_samples"]) << failed.dump(2);
+  const int skipped = failed["laser_skipped"].get<int>() - before["laser_skipped"].get<int>();
+  EXPECT_GE(skipped, 5) << failed.dump(2);  // the visit holds 2 s at 0.2 s per sample
+  cell_->laser_status.reset();
+  cell_->laser->stop();
+  visit(0, 0, 0.03);  // the newest reading is from before this hold
+  const json stale = health();
+  EXPECT_EQ(stale["laser_samples"], before["laser_samples"]) << stale.dump(2);
+  EXPECT_GE(stale["laser_skipped"].get<int>() - failed["laser_skipped"].get<int>(), 5);
+  EXPECT_GT(stale["samples"].get<int>(), failed["samples"].get<int>());  // sampled without it
+}
+
+// A sample during a move is used only while the drives follow their targets within
+// max_following_m: the virtual drives follow a cycle late, a following error of the cable speed
+// times the delay.
+TEST_F(DaemonHealth, SamplesMovesOnlyBelowTheFollowingErrorBound) {
+  start(true, ", reference_s: 0, move_speed_m_s: 1.0, max_following_m: 1e-9");
+  visit(0.06, 0, 0);
+  visit(0, 0, 0);
+  const json tight = health();
+  EXPECT_EQ(tight["samples_moving"], 0) << tight.dump(2);
+  EXPECT_GT(tight["moving_skipped_following"].get<int>(), 0) << tight.dump(2);
+  EXPECT_GT(tight["samples"].get<int>(), 0);  // the holds are sampled
+
+  start(true, ", reference_s: 0, move_speed_m_s: 1.0, max_following_m: 0.05");
+  visit(0.06, 0, 0);
+  visit(0, 0, 0);
+  const json loose = health();
+  EXPECT_GT(loose["samples_moving"].get<int>(), 0) << loose.dump(2);
+  EXPECT_EQ(loose["moving_skipped_following"], 0) << loose.dump(2);
 }
 
 }  // namespace

@@ -65,6 +65,14 @@ struct DaemonIo {
   std::chrono::microseconds poll{1000};
 };
 
+// What the in-service monitor's samples carried, for one geometry (daemon_health.cc).
+struct HealthCounts {
+  int moving = 0;                    // samples taken during moves
+  int moving_skipped_following = 0;  // moves not sampled: a following error above the bound
+  int laser = 0;                     // samples at holds with a laser reading
+  int laser_skipped = 0;             // samples at holds without one (stale, failed, pre-settle)
+};
+
 struct PeerInfo {
   int pid = -1, uid = -1, gid = -1;
 };
@@ -217,6 +225,10 @@ class Daemon {
   // In-service monitoring (daemon_health.cc): a sample per period while settled, events.
   void watch_health(const RtSnapshot& s);
   double health_speed(const RtSnapshot& s);  // under health_mu_
+  // Under health_mu_: the laser's reading for a sample at a settled hold (NaN: none usable).
+  double health_laser(const Geometry& g);
+  // The largest following error of the drives, as cable length (m).
+  static double following_error_m(const RtSnapshot& s, const RobotModel& model);
   Status restart_monitor(const Geometry& g);
   void latch_fault(const RtSnapshot& s);
   void after_fault_reset();
@@ -365,7 +377,10 @@ class Daemon {
   // The previous supervisor tick's commanded position and time (the platform's speed in moves).
   std::array<double, 3> health_last_position_{};
   std::int64_t health_last_ns_ = -1;
-  int health_moving_samples_ = 0;  // samples taken during moves, for this geometry
+  HealthCounts health_counts_;
+  // CLOCK_MONOTONIC (the laser's time base) when the supervisor first saw the current settled
+  // hold; -1: not holding settled.
+  std::int64_t health_settled_mono_ns_ = -1;
 
   // Under sink_mu_: where events go.
   std::mutex sink_mu_;

@@ -170,6 +170,12 @@ struct MonitoringSettings {
   // Samples are taken at settled holds and, when this is > 0, during moves whose commanded speed
   // stays below it (m/s: quasi-static, the following error and inertia negligible); 0: holds only.
   double move_speed_m_s = 0.0;
+  // A sample taken during a move is used only while every drive's following error (target vs
+  // actual counts, as cable length through the winch model) is below this, m.
+  double max_following_m = 2e-4;
+  // The laser's newest reading (its own poll thread) joins a sample at a settled hold when it is
+  // ok, taken after the hold settled and at most this old (s); else the sample has no laser.
+  double laser_max_age_s = 0.25;
   double false_alarms_per_hour = 0.1;  // stated rate of the detectors together
   double alert_position_m = 1e-4;      // m of predicted RMS position error above acceptance
   double assess_period_s = 60.0;       // s between assessments after an alarm
