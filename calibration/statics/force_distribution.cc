@@ -288,7 +288,7 @@ bool valid_input(const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>
 }
 
 // Rank, Q, R and the column permutation of a column-pivoted QR of A (m x 6) into `f`.
-template <typename Qr>
+template <typename QMatrix, typename Qr>
 bool take_factors(const Qr& qr, int m, double rank_tolerance, StructureFactor& f) {
   const double r00 = std::abs(qr.matrixQR()(0, 0));
   f.rank = 0;
@@ -299,8 +299,9 @@ bool take_factors(const Qr& qr, int m, double rank_tolerance, StructureFactor& f
     f.status = StructureFactor::Factored::kRankDeficient;
     return false;
   }
-  f.q.setIdentity(m, m);
-  f.q.applyOnTheLeft(qr.householderQ());
+  QMatrix q = QMatrix::Identity(m, m);  // formed at the QR's own (fixed or capped) size
+  q.applyOnTheLeft(qr.householderQ());
+  f.q = q;
   f.r = qr.matrixQR().template topRows<6>().template triangularView<Eigen::Upper>();
   f.permutation = qr.colsPermutation();
   f.status = StructureFactor::Factored::kFullRank;
@@ -352,11 +353,11 @@ bool StructureFactor::compute(
   if (m == 8) {
     using Fixed = Eigen::Matrix<double, 8, 6>;
     const Eigen::ColPivHouseholderQR<Fixed> qr(Fixed(structure.transpose()));
-    return take_factors(qr, m, rank_tolerance, *this);
+    return take_factors<Eigen::Matrix<double, 8, 8>>(qr, m, rank_tolerance, *this);
   }
   using Capped = Eigen::Matrix<double, Eigen::Dynamic, 6, 0, kMaxCables, 6>;
   const Eigen::ColPivHouseholderQR<Capped> qr(Capped(structure.transpose()));
-  return take_factors(qr, m, rank_tolerance, *this);
+  return take_factors<StructureFactor::CableMatrix>(qr, m, rank_tolerance, *this);
 }
 
 ForceDistributionResult distribute_forces(const StructureFactor& factor, const Wrench6& wrench,
