@@ -58,7 +58,7 @@ struct CellSettings {
 class VirtualCell {
  public:
   // Per try of the laser driver (of 3): the slave answers from a thread of this process.
-  static constexpr double kLaserAnswerTimeoutS = 0.5;
+  static constexpr double kLaserAnswerTimeoutS = 1.0;
   // `source` is the project's root (config/), `dir` a scratch folder for the state directory.
   // How the laser reaches the daemon: Modbus TCP on loopback (the driver configured in code), or
   // Modbus RTU over a pseudo-terminal the virtual robot serves, read by the driver that cdprd's

@@ -74,7 +74,7 @@ void LaserSensor::poll_loop() {
       std::chrono::nanoseconds(static_cast<std::int64_t>(1e9 / config_.poll_rate_hz));
   auto next = std::chrono::steady_clock::now();
   for (;;) {
-    {
+    if (callers_.load(std::memory_order_acquire) == 0) {
       std::lock_guard<std::mutex> lk(bus_mutex_);
       latest_.store(take_reading());
     }
@@ -86,7 +86,22 @@ void LaserSensor::poll_loop() {
   }
 }
 
+namespace {
+// Counts a caller of the link for its lifetime (LaserSensor::callers_).
+class CallerScope {
+ public:
+  explicit CallerScope(std::atomic<int>& n) : n_(n) { n_.fetch_add(1, std::memory_order_acq_rel); }
+  ~CallerScope() { n_.fetch_sub(1, std::memory_order_acq_rel); }
+  CallerScope(const CallerScope&) = delete;
+  CallerScope& operator=(const CallerScope&) = delete;
+
+ private:
+  std::atomic<int>& n_;
+};
+}  // namespace
+
 LaserReading LaserSensor::read_once() {
+  const CallerScope caller(callers_);
   std::lock_guard<std::mutex> lk(bus_mutex_);
   LaserReading r = take_reading();
   latest_.store(r);
@@ -189,6 +204,7 @@ Result<Measurement> LaserSensor::measure(int n, const MeasureOptions& options) {
   std::vector<double> values;
   values.reserve(static_cast<std::size_t>(n));
   Measurement m;
+  const CallerScope caller(callers_);  // the polling thread waits for the whole series
   for (int i = 0; i < n; ++i) {
     if (i > 0) sleep_s(interval);
     const LaserReading r = read_once();
@@ -197,6 +213,9 @@ Result<Measurement> LaserSensor::measure(int n, const MeasureOptions& options) {
     } else {
       ++m.failed;
       m.last_failure = r.error;
+      // The readings left cannot make `min_valid` any more: a silent laser fails the pose after
+      // n - min_valid + 1 tries, not n.
+      if (n - m.failed < min_valid) break;
     }
   }
   const RobustMean rm = robust_mean(values, options.reject_k, min_sigma);

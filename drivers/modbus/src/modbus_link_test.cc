@@ -151,6 +151,21 @@ TEST(LaserSensor, AbsentDeviceGivesErrorReadingsNotCrashesOrHangs) {
   EXPECT_NE(m.status().message().find("/dev/cdpr-no-such-tty"), std::string_view::npos);
 }
 
+TEST(LaserSensor, MeasureStopsOnceTooFewReadingsAreLeftToSucceed) {
+  LaserConfig cfg;
+  cfg.name = "absent";
+  cfg.link.transport = RtuSettings{"/dev/cdpr-no-such-tty", 19200, 'E', 8, 1, false};
+  cfg.map = simple_map();
+  LaserSensor laser(cfg);  // not started: only measure() reads
+  constexpr int kReadings = 10;
+  const Result<Measurement> m = laser.measure(kReadings, {.interval_s = 0.0, .min_valid = 4});
+  ASSERT_FALSE(m.ok());
+  // 7 failures leave 3 readings, fewer than the 4 needed: no eighth try.
+  EXPECT_EQ(laser.latest().sequence, static_cast<std::uint64_t>(kReadings - 4 + 1));
+  EXPECT_NE(m.status().message().find("7 failed"), std::string_view::npos)
+      << m.status().to_string();
+}
+
 TEST(LaserSensor, BadConfigurationIsRefusedAtStart) {
   LaserConfig cfg;
   cfg.link.transport = TcpSettings{"127.0.0.1", 502};

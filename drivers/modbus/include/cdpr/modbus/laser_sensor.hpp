@@ -11,6 +11,7 @@
 // problems (e.g. RS-485 mode unavailable) are in status().warnings.
 #pragma once
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <limits>
@@ -103,7 +104,8 @@ class LaserSensor {
   // Takes one reading now (connecting first if needed) and publishes it.
   LaserReading read_once();
   // Takes n readings and averages them with median/MAD outlier rejection. Fails (with the last
-  // problem) when fewer than options.min_valid readings remain.
+  // problem) when fewer than options.min_valid readings remain; stops reading as soon as the
+  // failed ones leave fewer than min_valid to come (a silent laser costs n - min_valid + 1 tries).
   Result<Measurement> measure(int n, const MeasureOptions& options = {});
 
   DriverStatus status() const;
@@ -115,6 +117,9 @@ class LaserSensor {
 
   LaserConfig config_;
   mutable std::mutex bus_mutex_;  // the link: polling thread and read_once/measure
+  // read_once/measure calls in progress: the polling thread stands aside while any is (a mutex
+  // is not fair: a poll re-locking at once could starve a measurement for many readings).
+  std::atomic<int> callers_{0};
   ModbusLink link_;
   std::int64_t next_connect_ns_ = 0;
   int consecutive_failures_ = 0;
