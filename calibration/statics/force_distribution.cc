@@ -1,7 +1,6 @@
 #include "cdpr/calibration/force_distribution.hpp"
 
 #include <Eigen/Cholesky>
-#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -202,12 +201,8 @@ ForceDistributionResult quadratic_program(const StructureFactor& factor, const W
     out.tensions = f_ref;
     return out;
   }
-  // Particular solution closest to f_ref: f_p = f_ref - Q1 (Q1^T f_ref + R^-T P^T w).
-  const StructureFactor::CableMatrix& Q = factor.q;
-  const Wrench6 pw = factor.permutation.transpose() * w;
-  const Wrench6 y = factor.r.transpose().triangularView<Eigen::Lower>().solve(pw);
-  const Wrench6 q1f = Q.leftCols<6>().transpose() * f_ref;
-  const CableVector f_p = f_ref - Q.leftCols<6>() * (q1f + y);
+  // Particular solution closest to f_ref (the least-norm correction).
+  const CableVector f_p = factor.particular(f_ref, w);
   const int r = m - 6;
   if (r == 0) {
     out.tensions = f_p;
@@ -226,16 +221,17 @@ ForceDistributionResult quadratic_program(const StructureFactor& factor, const W
   // Constraints on lambda: N_i lambda >= f_min_i - f_p_i and -N_i lambda >= f_p_i - f_max_i.
   Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxConstraints, kMaxNull> C(2 * m, r);
   Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxConstraints, 1> d(2 * m);
+  const StructureFactor::NullMatrix& N = factor.null_basis();
   for (int i = 0; i < m; ++i) {
-    C.row(2 * i) = Q.row(i).tail(r);
+    C.row(2 * i) = N.row(i);
     d(2 * i) = f_min(i) - f_p(i);
-    C.row(2 * i + 1) = -Q.row(i).tail(r);
+    C.row(2 * i + 1) = -N.row(i);
     d(2 * i + 1) = f_p(i) - f_max(i);
   }
   NullVector lambda(r);
   const bool ok = project_origin_onto_polytope(C, d, options.feasibility_tolerance,
                                                options.max_iterations, lambda, &out.iterations);
-  out.tensions = f_p + Q.rightCols(r) * lambda;
+  out.tensions = f_p + N * lambda;
   const int worst =
       worst_violation(out.tensions, f_min, f_max, nullptr, options.feasibility_tolerance, nullptr);
   if (ok && worst < 0) {
@@ -287,27 +283,6 @@ bool valid_input(const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>
   return true;
 }
 
-// Rank, Q, R and the column permutation of a column-pivoted QR of A (m x 6) into `f`.
-template <typename QMatrix, typename Qr>
-bool take_factors(const Qr& qr, int m, double rank_tolerance, StructureFactor& f) {
-  const double r00 = std::abs(qr.matrixQR()(0, 0));
-  f.rank = 0;
-  for (int k = 0; k < std::min(6, m); ++k) {
-    f.rank += std::abs(qr.matrixQR()(k, k)) > rank_tolerance * r00;
-  }
-  if (f.rank < 6 || !(r00 > 0.0)) {
-    f.status = StructureFactor::Factored::kRankDeficient;
-    return false;
-  }
-  QMatrix q = QMatrix::Identity(m, m);  // formed at the QR's own (fixed or capped) size
-  q.applyOnTheLeft(qr.householderQ());
-  f.q = q;
-  f.r = qr.matrixQR().template topRows<6>().template triangularView<Eigen::Upper>();
-  f.permutation = qr.colsPermutation();
-  f.status = StructureFactor::Factored::kFullRank;
-  return true;
-}
-
 }  // namespace
 
 const char* to_string(ForceDistributionOutcome outcome) {
@@ -331,33 +306,6 @@ Wrench6 gravity_wrench(const RobotModel& model, const Eigen::Matrix3d& rotation)
   Wrench6 w;
   w << G, (rotation * model.platform.center_of_mass).cross(G);
   return w;
-}
-
-bool StructureFactor::compute(
-    const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>>& structure_matrix,
-    double rank_tolerance) {
-  rank = 0;
-  const int m = static_cast<int>(structure_matrix.cols());
-  if (m < 1 || m > kMaxCables) {
-    status = Factored::kBadInput;
-    structure.resize(6, 0);
-    return false;
-  }
-  structure = structure_matrix;
-  if (!structure.allFinite()) {
-    status = Factored::kBadInput;
-    return false;
-  }
-  // Eight cables (the common over-constrained robot) through Eigen's fixed-size QR: the same
-  // algorithm, several times faster than the dynamic-size one at this size.
-  if (m == 8) {
-    using Fixed = Eigen::Matrix<double, 8, 6>;
-    const Eigen::ColPivHouseholderQR<Fixed> qr(Fixed(structure.transpose()));
-    return take_factors<Eigen::Matrix<double, 8, 8>>(qr, m, rank_tolerance, *this);
-  }
-  using Capped = Eigen::Matrix<double, Eigen::Dynamic, 6, 0, kMaxCables, 6>;
-  const Eigen::ColPivHouseholderQR<Capped> qr(Capped(structure.transpose()));
-  return take_factors<StructureFactor::CableMatrix>(qr, m, rank_tolerance, *this);
 }
 
 ForceDistributionResult distribute_forces(const StructureFactor& factor, const Wrench6& wrench,
