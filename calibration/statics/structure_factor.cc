@@ -150,17 +150,21 @@ void StructureFactor::apply_qt(CableVector& x) const {
 }
 
 CableVector StructureFactor::particular(const CableVector& f_ref, const Wrench6& w) const {
-  // A = Q1 R P^T: f = f_ref - Q1 (Q1^T f_ref + y), y = R^-T P^T w, i.e. Q [-y; Q2^T f_ref].
-  CableVector g = f_ref;
-  apply_qt(g);
+  // A = Q1 R P^T: f = f_ref - Q1 (Q1^T f_ref + y), y = R^-T P^T w, i.e. N N^T f_ref - Q1 y.
+  const int m = num_cables();
+  CableVector g = CableVector::Zero(m);
   const Wrench6 pw = permutation.transpose() * w;
-  for (int k = 0; k < 6; ++k) {  // forward substitution with R^T; g_k = -y_k
+  for (int k = 0; k < 6; ++k) {  // forward substitution with R^T
     double s = pw(k);
-    for (int j = 0; j < k; ++j) s += r(j, k) * g(j);
-    g(k) = -s / r(k, k);
+    for (int j = 0; j < k; ++j) s -= r(j, k) * g(j);
+    g(k) = s / r(k, k);
   }
-  apply_q(g);
-  return g;
+  apply_q(g);  // Q [y; 0] = Q1 y
+  for (int j = 0; j < m - 6; ++j) {
+    const double c = null.col(j).dot(f_ref);
+    for (int i = 0; i < m; ++i) g(i) -= c * null(i, j);
+  }
+  return -g;
 }
 
 }  // namespace cdpr

@@ -5,6 +5,7 @@
 
 #include <Eigen/Geometry>
 #include <Eigen/QR>
+#include <optional>
 #include <random>
 
 #include "alloc_counter.hpp"
@@ -110,6 +111,84 @@ void expect_same_qp(const StructureMatrix& at, const Wrench6& w, double lo, doub
   }
   feasible += a.feasible();
   infeasible += a.outcome == ForceDistributionOutcome::kInfeasible;
+}
+
+// The QP's answer by enumeration, for null spaces of dimension 1 or 2: the projection of the
+// origin onto {lambda : C lambda >= d} is the nearest feasible point among the origin, the
+// projections onto each constraint's line and the constraints' pairwise intersections (none
+// feasible: the polytope is empty). Independent of the active-set method.
+std::optional<CableVector> enumerated_qp(const StructureFactor& f, const Wrench6& w, double lo,
+                                         double hi, double reference) {
+  const int m = f.num_cables(), r = m - 6;
+  const CableVector f_p = f.particular(CableVector::Constant(m, reference), w);
+  const Eigen::MatrixXd N = f.null_basis();
+  Eigen::MatrixXd C(2 * m, r);
+  Eigen::VectorXd d(2 * m);
+  for (int i = 0; i < m; ++i) {
+    C.row(2 * i) = N.row(i);
+    d(2 * i) = lo - f_p(i);
+    C.row(2 * i + 1) = -N.row(i);
+    d(2 * i + 1) = f_p(i) - hi;
+  }
+  std::optional<Eigen::VectorXd> best;
+  const auto consider = [&](const Eigen::VectorXd& x) {
+    if (((C * x - d).array() < -1e-9).any()) return;
+    if (!best || x.norm() < best->norm()) best = x;
+  };
+  consider(Eigen::VectorXd::Zero(r));
+  for (int j = 0; j < 2 * m; ++j) consider(C.row(j).transpose() * d(j) / C.row(j).squaredNorm());
+  for (int j = 0; r == 2 && j < 2 * m; ++j) {
+    for (int k = j + 1; k < 2 * m; ++k) {
+      Eigen::Matrix2d M;
+      M << C.row(j), C.row(k);
+      if (std::abs(M.determinant()) > 1e-12) consider(M.inverse() * Eigen::Vector2d(d(j), d(k)));
+    }
+  }
+  if (!best) return std::nullopt;
+  return CableVector(f_p + N * *best);
+}
+
+TEST(StructureFactor, QpIsTheEnumeratedProjectionForSevenAndEightCables) {
+  std::mt19937_64 rng(15);
+  const RobotModel model = testing::mini_robot();
+  KinematicsData kin(model);
+  int feasible = 0, infeasible = 0;
+  for (int k = 0; k < 600; ++k) {
+    StructureMatrix at;
+    Wrench6 w;
+    w << 0.0, 0.0, -100.0, 0.0, 0.0, 0.0;
+    if (k % 3 == 0) {  // MINI
+      if (!inverse_kinematics(model, testing::random_pose(testing::mini_workspace(), rng), kin)) {
+        continue;
+      }
+      at = kin.structure_matrix;
+      w = gravity_wrench(model, kin.rotation);
+    } else {
+      at = random_structure(k % 3 == 1 ? 7 : 8, rng);
+    }
+    StructureFactor f;
+    ASSERT_TRUE(f.compute(at));
+    for (const double hi : {40.0, 80.0, 150.0}) {
+      for (const double reference : {15.0, 30.0, 60.0}) {
+        ForceDistributionOptions o;
+        o.reference_tension = reference;
+        const int m = f.num_cables();
+        const ForceDistributionResult qp = distribute_forces(f, w, CableVector::Constant(m, 10.0),
+                                                             CableVector::Constant(m, hi), o);
+        const std::optional<CableVector> ref = enumerated_qp(f, w, 10.0, hi, reference);
+        ASSERT_EQ(qp.feasible(), ref.has_value()) << to_string(qp.outcome) << " k " << k;
+        if (!ref) {
+          EXPECT_EQ(qp.outcome, ForceDistributionOutcome::kInfeasible);
+          ++infeasible;
+          continue;
+        }
+        EXPECT_LT(relative_gap(qp.tensions, *ref), 1e-9) << k;
+        ++feasible;
+      }
+    }
+  }
+  EXPECT_GT(feasible, 300);
+  EXPECT_GT(infeasible, 300);
 }
 
 TEST(StructureFactor, MatchesEigensColumnPivotedQrOnMini) {
