@@ -80,9 +80,12 @@ inline void reflect(const StructureFactor& f, int k, int m_runtime, double* x) {
 template <int kRows>
 void apply(const StructureFactor& f, bool transposed, double* x) {
   const int m = f.num_cables();
+  // Unrolled: with the row count known, every reflection's loops have constant bounds.
   if (transposed) {
+#pragma GCC unroll 6
     for (int k = 0; k < 6; ++k) reflect<kRows>(f, k, m, x);
   } else {
+#pragma GCC unroll 6
     for (int k = 5; k >= 0; --k) reflect<kRows>(f, k, m, x);
   }
 }
