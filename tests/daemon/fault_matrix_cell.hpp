@@ -719,11 +719,15 @@ class MatrixCell {
         how = "fault_reset refused (`" + numbers_hidden(r.message) + "`); cdprd restart → holding";
         return after(how, recalibrates());
       }
-      bool back = holds_settled(5.0);
+      // Paced again: the reset's re-enable and settling are judged in real seconds (at robot
+      // speed 5 s went by before a loaded machine's daemon settled: "fault_reset leaves holding").
+      cell_->pace(true);
+      bool back = holds_settled(8.0);
       if (!back && daemon().state() == DaemonState::kFault) {
         (void)cell_->request("fault_reset");
         back = holds_settled(15.0);
       }
+      cell_->pace(false);
       if (back) {
         how = "fault_reset → holding";
       } else {

@@ -227,16 +227,26 @@ class VirtualCell {
   double laser_offset_m = 0.0;  // added to the laser's distance (a beam on the wrong target)
 
   // One SYNC period: the daemon's RT cycle, then the robot until the next one; the supervisor
-  // every 5 cycles. While the worker identifies, the CPU is left to it (the robot holds).
+  // every 5 cycles. While the worker identifies (in real time), robot time runs with the wall
+  // clock, as on a robot: a bound in robot time on the identification is then one in real
+  // seconds, whatever the machine's load (stepped as fast as it could go, 900 s of robot time went
+  // by while a loaded machine's worker was still diagnosing), and the CPU is left to the worker.
   void cycle() {
     daemon->cycle(clock.now());
     const can::Timestamp next = clock.now() + network.sync_period;
     while (clock.now() < next) idle();
     if (++cycles_ % 5 == 0) daemon->service();
+    const bool identifying = daemon->state() == DaemonState::kIdentifying;
+    if (identifying && !paced_ && !identifying_paced_) {
+      identifying_wall_origin_ = std::chrono::steady_clock::now();
+      identifying_robot_origin_ = clock.now();
+    }
+    identifying_paced_ = identifying && !paced_;
     if (paced_) {
       std::this_thread::sleep_until(wall_origin_ + (clock.now() - robot_origin_));
-    } else if (daemon->state() == DaemonState::kIdentifying) {
-      std::this_thread::sleep_for(2ms);
+    } else if (identifying_paced_) {
+      std::this_thread::sleep_until(identifying_wall_origin_ +
+                                    (clock.now() - identifying_robot_origin_));
     }
   }
   // Paced: robot time runs with the wall clock (from now on), so what the daemon's threads do in
@@ -432,6 +442,9 @@ class VirtualCell {
   bool paced_ = false;
   std::chrono::steady_clock::time_point wall_origin_;
   can::Timestamp robot_origin_{0};
+  bool identifying_paced_ = false;  // robot time runs with the wall clock while identifying
+  std::chrono::steady_clock::time_point identifying_wall_origin_;
+  can::Timestamp identifying_robot_origin_{0};
 };
 
 }  // namespace cdpr::controller::testing

@@ -60,6 +60,7 @@ class SocketCanBus final : public CanBus {
 
   int fd_ = -1;
   std::string name_;
+  Status empty_poll_;  // what a poll (timeout 0) that finds no frame returns, made once
   int rcvbuf_ = 0;
   std::atomic<std::uint64_t> sent_{0};
   std::atomic<std::uint64_t> received_{0};

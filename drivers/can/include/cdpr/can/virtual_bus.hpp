@@ -101,6 +101,7 @@ class VirtualCanEndpoint final : public CanBus {
 
   std::shared_ptr<VirtualCanBus::State> state_;
   std::string name_;
+  Status empty_poll_;  // what a poll (timeout 0) that finds no frame returns, made once
   std::unique_ptr<Queue> queue_;
   std::atomic<bool> tx_failing_{false};
 };
