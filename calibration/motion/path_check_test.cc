@@ -108,10 +108,9 @@ TEST(PlanTensions, ChoosesAsAQpAtEveryReferenceWould) {
     ++chosen[expected_reference == reference ? 0 : expected_reference == 2 * reference ? 1 : 2];
     EXPECT_EQ(plan.reference, expected_reference);
     EXPECT_EQ(plan.cables_at_limits, expected.cables_at_limits);
-    EXPECT_LT((Eigen::VectorXd(plan.tensions) - Eigen::VectorXd(expected.tensions))
-                  .cwiseAbs()
-                  .maxCoeff(),
-              1e-9 * hi.maxCoeff());
+    EXPECT_LT(
+        (Eigen::VectorXd(plan.tensions) - Eigen::VectorXd(expected.tensions)).cwiseAbs().maxCoeff(),
+        1e-9 * hi.maxCoeff());
   }
   // Every branch was taken.
   for (const int n : chosen) EXPECT_GT(n, 10) << chosen[0] << " " << chosen[1] << " " << chosen[2];
