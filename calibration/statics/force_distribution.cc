@@ -1,6 +1,7 @@
 #include "cdpr/calibration/force_distribution.hpp"
 
 #include <Eigen/Cholesky>
+#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -108,133 +109,73 @@ ForceDistributionResult closed_form(
   return out;
 }
 
-// Solves G r = b for the q x q Gram matrix G of the active normals (independent, so G is
-// positive definite): Cholesky in place, Eigen's LDLT should rounding make it fail.
-void solve_gram(double (&g)[kMaxNull][kMaxNull], const double* b, int q, double* r) {
-  double l[kMaxNull][kMaxNull];
-  bool ok = true;
-  for (int a = 0; a < q && ok; ++a) {
-    for (int c = 0; c <= a; ++c) {
-      double sum = g[a][c];
-      for (int e = 0; e < c; ++e) sum -= l[a][e] * l[c][e];
-      if (a == c) {
-        ok = sum > 0.0;
-        l[a][a] = ok ? std::sqrt(sum) : 0.0;
-      } else {
-        l[a][c] = sum / l[c][c];
-      }
-    }
-  }
-  if (!ok) {
-    NullMatrix G(q, q);
-    NullVector rhs(q);
-    for (int a = 0; a < q; ++a) {
-      rhs(a) = b[a];
-      for (int c = 0; c < q; ++c) G(a, c) = g[a][c];
-    }
-    const NullVector x = G.ldlt().solve(rhs);
-    for (int a = 0; a < q; ++a) r[a] = x(a);
-    return;
-  }
-  for (int a = 0; a < q; ++a) {
-    double sum = b[a];
-    for (int c = 0; c < a; ++c) sum -= l[a][c] * r[c];
-    r[a] = sum / l[a][a];
-  }
-  for (int a = q - 1; a >= 0; --a) {
-    double sum = r[a];
-    for (int c = a + 1; c < q; ++c) sum -= l[c][a] * r[c];
-    r[a] = sum / l[a][a];
-  }
-}
-
-// min 1/2 |x|^2 subject to C x >= d, dual active set (Goldfarb & Idnani 1983) with the identity
-// Hessian. The 2m rows of C are the null basis' rows N_i (lower limit of cable i, row 2i) and
-// -N_i (upper limit, row 2i + 1). Returns false when infeasible. Fixed-capacity arrays: the
-// active set has at most n = m - 6 normals.
-bool project_origin_onto_polytope(const StructureFactor::NullMatrix& N, const double* d, double tol,
-                                  int max_iterations, double* x, int* iterations) {
-  const int n = static_cast<int>(N.cols());
-  const int nc = 2 * static_cast<int>(N.rows());
-  const auto normal = [&](int j, double* out) {
-    const double sign = (j & 1) != 0 ? -1.0 : 1.0;
-    for (int a = 0; a < n; ++a) out[a] = sign * N(j >> 1, a);
-  };
-  const auto dot = [n](const double* p, const double* q) {
-    double s = 0.0;
-    for (int a = 0; a < n; ++a) s += p[a] * q[a];
-    return s;
-  };
-  for (int a = 0; a < n; ++a) x[a] = 0.0;
-  double act[kMaxNull][kMaxNull];  // the active constraints' normals
+// min 1/2 |x|^2 subject to C x >= d (rows of C are the constraint normals), dual active set
+// (Goldfarb & Idnani 1983) with the identity Hessian. Returns false when infeasible.
+bool project_origin_onto_polytope(
+    const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxConstraints, kMaxNull>& C,
+    const Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxConstraints, 1>& d, double tol,
+    int max_iterations, NullVector& x, int* iterations) {
+  const int n = static_cast<int>(C.cols());
+  const int nc = static_cast<int>(C.rows());
+  x.setZero(n);
+  int active[kMaxNull];
   double u[kMaxNull + 1];
   int q = 0;
   *iterations = 0;
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxNull, kMaxNull> N(n, 0);
   while (*iterations < max_iterations) {
     ++*iterations;
     // Most violated constraint.
     int p = -1;
     double worst = -tol;
-    for (int j = 0; j < nc; j += 2) {
-      double nx = 0.0;
-      for (int a = 0; a < n; ++a) nx += N(j >> 1, a) * x[a];
-      if (nx - d[j] < worst) {
-        worst = nx - d[j];
+    for (int j = 0; j < nc; ++j) {
+      const double s = C.row(j).dot(x) - d(j);
+      if (s < worst) {
+        worst = s;
         p = j;
-      }
-      if (-nx - d[j + 1] < worst) {
-        worst = -nx - d[j + 1];
-        p = j + 1;
       }
     }
     if (p < 0) return true;  // optimal
-    double np[kMaxNull];
-    normal(p, np);
+    const NullVector np = C.row(p).transpose();
     u[q] = 0.0;  // multiplier of p
     for (;;) {
-      // Dual direction r = (N^T N)^-1 N^T np, primal direction z = np - N r (N: active normals).
-      double z[kMaxNull], r[kMaxNull];
-      for (int a = 0; a < n; ++a) z[a] = np[a];
+      // Dual direction r = (N^T N)^-1 N^T np, primal direction z = np - N r.
+      NullVector z = np;
+      Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxNull, 1> r(q);
       if (q > 0) {
-        double g[kMaxNull][kMaxNull], b[kMaxNull];
-        for (int k = 0; k < q; ++k) {
-          b[k] = dot(act[k], np);
-          for (int c = 0; c <= k; ++c) g[k][c] = g[c][k] = dot(act[k], act[c]);
-        }
-        solve_gram(g, b, q, r);
-        for (int k = 0; k < q; ++k) {
-          for (int a = 0; a < n; ++a) z[a] -= act[k][a] * r[k];
-        }
+        N.resize(n, q);
+        for (int k = 0; k < q; ++k) N.col(k) = C.row(active[k]).transpose();
+        const NullMatrix G = N.transpose() * N;
+        r = G.ldlt().solve(N.transpose() * np);
+        z.noalias() -= N * r;
       }
       // Partial step: the largest step keeping the active multipliers >= 0.
       double t1 = std::numeric_limits<double>::infinity();
       int drop = -1;
       for (int k = 0; k < q; ++k) {
-        if (r[k] > 0.0 && u[k] / r[k] < t1) {
-          t1 = u[k] / r[k];
+        if (r(k) > 0.0 && u[k] / r(k) < t1) {
+          t1 = u[k] / r(k);
           drop = k;
         }
       }
       // Full step: makes constraint p active.
-      const double zz = dot(z, np);
-      const double s_p = dot(np, x) - d[p];
+      const double zz = z.dot(np);
+      const double s_p = np.dot(x) - d(p);
       const double t2 =
-          zz > 1e-14 * dot(np, np) ? -s_p / zz : std::numeric_limits<double>::infinity();
+          zz > 1e-14 * np.squaredNorm() ? -s_p / zz : std::numeric_limits<double>::infinity();
       const double t = std::min(t1, t2);
       if (!std::isfinite(t)) return false;  // constraint p cannot be satisfied: infeasible
-      for (int a = 0; a < n; ++a) x[a] += t * z[a];
-      for (int k = 0; k < q; ++k) u[k] -= t * r[k];
+      x += t * z;
+      for (int k = 0; k < q; ++k) u[k] -= t * r(k);
       u[q] += t;
       if (t2 <= t1) {
-        for (int a = 0; a < n; ++a) act[q][a] = np[a];
+        active[q] = p;
         ++q;
         break;
       }
       // Drop constraint `drop` and try again with p.
       for (int k = drop; k + 1 <= q; ++k) {
-        if (k + 1 < q) {
-          for (int a = 0; a < n; ++a) act[k][a] = act[k + 1][a];
-        }
+        if (k + 1 < q) active[k] = active[k + 1];
         u[k] = u[k + 1];
       }
       --q;
@@ -261,8 +202,12 @@ ForceDistributionResult quadratic_program(const StructureFactor& factor, const W
     out.tensions = f_ref;
     return out;
   }
-  // Particular solution closest to f_ref (the least-norm correction).
-  const CableVector f_p = factor.particular(f_ref, w);
+  // Particular solution closest to f_ref: f_p = f_ref - Q1 (Q1^T f_ref + R^-T P^T w).
+  const StructureFactor::CableMatrix& Q = factor.q;
+  const Wrench6 pw = factor.permutation.transpose() * w;
+  const Wrench6 y = factor.r.transpose().triangularView<Eigen::Lower>().solve(pw);
+  const Wrench6 q1f = Q.leftCols<6>().transpose() * f_ref;
+  const CableVector f_p = f_ref - Q.leftCols<6>() * (q1f + y);
   const int r = m - 6;
   if (r == 0) {
     out.tensions = f_p;
@@ -279,17 +224,18 @@ ForceDistributionResult quadratic_program(const StructureFactor& factor, const W
     return out;
   }
   // Constraints on lambda: N_i lambda >= f_min_i - f_p_i and -N_i lambda >= f_p_i - f_max_i.
-  const StructureFactor::NullMatrix& N = factor.null_basis();
-  double d[kMaxConstraints];
+  Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxConstraints, kMaxNull> C(2 * m, r);
+  Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kMaxConstraints, 1> d(2 * m);
   for (int i = 0; i < m; ++i) {
-    d[2 * i] = f_min(i) - f_p(i);
-    d[2 * i + 1] = f_p(i) - f_max(i);
+    C.row(2 * i) = Q.row(i).tail(r);
+    d(2 * i) = f_min(i) - f_p(i);
+    C.row(2 * i + 1) = -Q.row(i).tail(r);
+    d(2 * i + 1) = f_p(i) - f_max(i);
   }
-  double lambda[kMaxNull];
-  const bool ok = project_origin_onto_polytope(N, d, options.feasibility_tolerance,
+  NullVector lambda(r);
+  const bool ok = project_origin_onto_polytope(C, d, options.feasibility_tolerance,
                                                options.max_iterations, lambda, &out.iterations);
-  out.tensions = f_p;
-  for (int j = 0; j < r; ++j) out.tensions += lambda[j] * N.col(j);
+  out.tensions = f_p + Q.rightCols(r) * lambda;
   const int worst =
       worst_violation(out.tensions, f_min, f_max, nullptr, options.feasibility_tolerance, nullptr);
   if (ok && worst < 0) {
@@ -341,6 +287,27 @@ bool valid_input(const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>
   return true;
 }
 
+// Rank, Q, R and the column permutation of a column-pivoted QR of A (m x 6) into `f`.
+template <typename QMatrix, typename Qr>
+bool take_factors(const Qr& qr, int m, double rank_tolerance, StructureFactor& f) {
+  const double r00 = std::abs(qr.matrixQR()(0, 0));
+  f.rank = 0;
+  for (int k = 0; k < std::min(6, m); ++k) {
+    f.rank += std::abs(qr.matrixQR()(k, k)) > rank_tolerance * r00;
+  }
+  if (f.rank < 6 || !(r00 > 0.0)) {
+    f.status = StructureFactor::Factored::kRankDeficient;
+    return false;
+  }
+  QMatrix q = QMatrix::Identity(m, m);  // formed at the QR's own (fixed or capped) size
+  q.applyOnTheLeft(qr.householderQ());
+  f.q = q;
+  f.r = qr.matrixQR().template topRows<6>().template triangularView<Eigen::Upper>();
+  f.permutation = qr.colsPermutation();
+  f.status = StructureFactor::Factored::kFullRank;
+  return true;
+}
+
 }  // namespace
 
 const char* to_string(ForceDistributionOutcome outcome) {
@@ -364,6 +331,33 @@ Wrench6 gravity_wrench(const RobotModel& model, const Eigen::Matrix3d& rotation)
   Wrench6 w;
   w << G, (rotation * model.platform.center_of_mass).cross(G);
   return w;
+}
+
+bool StructureFactor::compute(
+    const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>>& structure_matrix,
+    double rank_tolerance) {
+  rank = 0;
+  const int m = static_cast<int>(structure_matrix.cols());
+  if (m < 1 || m > kMaxCables) {
+    status = Factored::kBadInput;
+    structure.resize(6, 0);
+    return false;
+  }
+  structure = structure_matrix;
+  if (!structure.allFinite()) {
+    status = Factored::kBadInput;
+    return false;
+  }
+  // Eight cables (the common over-constrained robot) through Eigen's fixed-size QR: the same
+  // algorithm, several times faster than the dynamic-size one at this size.
+  if (m == 8) {
+    using Fixed = Eigen::Matrix<double, 8, 6>;
+    const Eigen::ColPivHouseholderQR<Fixed> qr(Fixed(structure.transpose()));
+    return take_factors<Eigen::Matrix<double, 8, 8>>(qr, m, rank_tolerance, *this);
+  }
+  using Capped = Eigen::Matrix<double, Eigen::Dynamic, 6, 0, kMaxCables, 6>;
+  const Eigen::ColPivHouseholderQR<Capped> qr(Capped(structure.transpose()));
+  return take_factors<StructureFactor::CableMatrix>(qr, m, rank_tolerance, *this);
 }
 
 ForceDistributionResult distribute_forces(const StructureFactor& factor, const Wrench6& wrench,

@@ -1,5 +1,6 @@
 #include "cdpr/controller/tension_control.hpp"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
 
@@ -167,52 +168,23 @@ bool TensionControl::update_compliances(const RobotModel& model, const CommandDa
 
 bool TensionControl::project(const CommandData& data, int m, const std::array<double, kMaxAxes>& w,
                              std::array<double, kMaxAxes>& v) const noexcept {
-  // The kernel's orthonormal basis N (m x r) from the factor command_counts made of this very
-  // structure matrix; none (rank < 6) or another pose's: no kernel to speak of.
-  const StructureFactor& factor = data.factor;
   const auto& s = data.kinematics.structure_matrix;  // A^T, 6 x m
-  if (m <= 6 || s.cols() != m || !factor.valid() || factor.num_cables() != m ||
-      factor.structure != s) {
-    return false;
-  }
-  // The nearest point of the kernel in the metric W: x = N lambda, (N^T W N) lambda = N^T W v,
-  // an r x r system (2 x 2 for eight cables) instead of the 6 x 6 normal equations; Cholesky.
-  const StructureFactor::NullMatrix& N = factor.null_basis();
-  const int r = m - 6;
-  constexpr int kMaxKernel = kMaxCables - 6;
-  double g[kMaxKernel][kMaxKernel] = {}, lambda[kMaxKernel] = {};
+  if (m <= 6 || s.cols() != m) return false;
+  // Fixed-size 6 x 6 normal matrix: no allocation.
+  Eigen::Matrix<double, 6, 6> normal = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> rhs = Eigen::Matrix<double, 6, 1>::Zero();
   for (int i = 0; i < m; ++i) {
     const auto k = static_cast<std::size_t>(i);
-    for (int a = 0; a < r; ++a) {
-      const double wn = w[k] * N(i, a);
-      lambda[a] += wn * v[k];
-      for (int b = 0; b <= a; ++b) g[a][b] += wn * N(i, b);
-    }
+    const Eigen::Matrix<double, 6, 1> col = s.col(i);
+    normal += col * col.transpose() / w[k];
+    rhs += col * v[k];
   }
-  for (int a = 0; a < r; ++a) {  // G = L L^T in the lower triangle
-    for (int b = 0; b <= a; ++b) {
-      double sum = g[a][b];
-      for (int c = 0; c < b; ++c) sum -= g[a][c] * g[b][c];
-      if (a == b) {
-        if (!(sum > 0.0)) return false;  // not positive definite (a weight <= 0)
-        g[a][a] = std::sqrt(sum);
-      } else {
-        g[a][b] = sum / g[b][b];
-      }
-    }
-  }
-  for (int a = 0; a < r; ++a) {  // L y = N^T W v
-    for (int c = 0; c < a; ++c) lambda[a] -= g[a][c] * lambda[c];
-    lambda[a] /= g[a][a];
-  }
-  for (int a = r - 1; a >= 0; --a) {  // L^T lambda = y
-    for (int c = a + 1; c < r; ++c) lambda[a] -= g[c][a] * lambda[c];
-    lambda[a] /= g[a][a];
-  }
+  const Eigen::LLT<Eigen::Matrix<double, 6, 6>> llt(normal);
+  if (llt.info() != Eigen::Success) return false;  // rank < 6: no kernel to speak of
+  const Eigen::Matrix<double, 6, 1> z = llt.solve(rhs);
   for (int i = 0; i < m; ++i) {
-    double x = 0.0;
-    for (int a = 0; a < r; ++a) x += N(i, a) * lambda[a];
-    v[static_cast<std::size_t>(i)] = x;
+    const auto k = static_cast<std::size_t>(i);
+    v[k] -= s.col(i).dot(z) / w[k];
   }
   return true;
 }

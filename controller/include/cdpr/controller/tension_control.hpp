@@ -122,10 +122,8 @@ class TensionControl {
   // Adds a step of phi (N) and of the take-up (counts), scaled to the rate limit.
   void integrate(const RobotModel& model, const std::array<double, kMaxAxes>& df,
                  const std::array<double, kMaxAxes>& dt) noexcept;
-  // The weighted projection onto the kernel of A^T: v -= W^-1 A (A^T W^-1 A)^-1 A^T v, i.e. the
-  // point of the kernel nearest to v in the metric W = diag(w), computed on the kernel's basis
-  // (data.factor). False (v unchanged) without a kernel (m <= 6, rank < 6, or data.factor not
-  // of data.kinematics' structure matrix).
+  // The weighted projection onto the kernel of A^T: v -= W^-1 A (A^T W^-1 A)^-1 A^T v. False
+  // (v unchanged) without a kernel (m <= 6, rank < 6).
   bool project(const CommandData& data, int m, const std::array<double, kMaxAxes>& w,
                std::array<double, kMaxAxes>& v) const noexcept;
 

@@ -78,42 +78,31 @@ struct ForceDistributionData {
 };
 
 // The part of the QP that depends only on the pose: the structure matrix A^T (6 x m) factored as
-// A P = Q [R; 0] (column-pivoted Householder QR, structure_factor.cc) and an orthonormal basis of
-// its null space (m x (m - 6)). Q is kept as its six Householder reflections, never formed. Every
-// QP at the pose (other references, other limits, other wrenches) shares it, so a caller trying
-// several plans at one pose factors once. Fixed capacity: compute() allocates nothing.
+// A = Q [R; 0] P^T (column-pivoted Householder QR) and an orthonormal basis of its null space
+// (m x (m - 6)). Every QP at the pose (other references, other limits, other wrenches) shares it,
+// so a caller trying several plans at one pose factors once. Fixed capacity: compute() allocates
+// nothing.
 struct StructureFactor {
-  using NullMatrix =
-      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxCables, kMaxCables - 6>;
-  using Reflectors = Eigen::Matrix<double, Eigen::Dynamic, 6, 0, kMaxCables, 6>;
+  using CableMatrix =
+      Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kMaxCables, kMaxCables>;
 
-  // Factors `structure_matrix`; false when it has rank < 6 (relative `rank_tolerance`: |R_kk| <=
-  // rank_tolerance |R_00|), is not finite or has more than kMaxCables or fewer than 6 columns
-  // (then valid() is false and a QP with this factor reports kDegenerate or kInvalidInput).
+  // Factors `structure_matrix`; false when it has rank < 6 (relative `rank_tolerance`), is not
+  // finite or has more than kMaxCables or fewer than 6 columns (then valid() is false and a QP
+  // with this factor reports kDegenerate or kInvalidInput).
   bool compute(const Eigen::Ref<const Eigen::Matrix<double, 6, Eigen::Dynamic>>& structure_matrix,
                double rank_tolerance = 1e-10);
   bool valid() const { return status == Factored::kFullRank; }
   int num_cables() const { return static_cast<int>(structure.cols()); }
   // m x (m - 6), orthonormal columns spanning {f : A^T f = 0} (valid() only).
-  const NullMatrix& null_basis() const { return null; }
-  // x <- Q x and x <- Q^T x for an m-vector x (valid() only).
-  void apply_q(CableVector& x) const;
-  void apply_qt(CableVector& x) const;
-  // The tensions nearest to f_ref that balance the wrench w (A^T f = -w), least-norm correction:
-  // f_ref - A (A^T A)^-1 (A^T f_ref + w) (valid() only).
-  CableVector particular(const CableVector& f_ref, const Wrench6& w) const;
+  auto null_basis() const { return q.rightCols(q.cols() - 6); }
 
   enum class Factored { kNone, kFullRank, kRankDeficient, kBadInput };
   Factored status = Factored::kNone;
   int rank = 0;
   StructureMatrix structure;                // A^T as factored
   Eigen::PermutationMatrix<6> permutation;  // P (valid() only)
-  // Below the diagonal of column k: the k-th reflection's vector v (v_k = 1 implied, rows < k
-  // zero): H_k = I - tau_k v v^T, Q = H_0 ... H_5. On and above the diagonal: R.
-  Reflectors reflectors;
-  Eigen::Matrix<double, 6, 1> tau;
-  Eigen::Matrix<double, 6, 6> r;  // R (upper triangular; valid() only)
-  NullMatrix null;                // Q's last m - 6 columns (valid() only)
+  CableMatrix q;                            // Q (m x m), formed once (valid() only)
+  Eigen::Matrix<double, 6, 6> r;            // R (upper triangular; valid() only)
 };
 
 // Gravity wrench (force and moment about the platform origin, world) at rotation R.
