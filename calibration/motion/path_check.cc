@@ -384,40 +384,12 @@ Status plan_tensions(const RobotModel& model, const KinematicsData& kinematics,
   CableVector lo, hi;
   CDPR_RETURN_IF_ERROR(plan_input(model, kinematics, reference_tension, margin, lo, hi));
   const Wrench6 w = gravity_wrench(model, kinematics.rotation);
-  // The 1x and 2x attempts are taken only with no cable on an edge. The QP's answer has none only
-  // when it is the unconstrained nearest point p_w + r N N^T 1 (particular(r 1, w), linear in the
-  // reference r) strictly inside the band: a point outside projects onto an edge (or proves the
-  // pose infeasible, which the 4x attempt proves as well). So those two are tested on that point
-  // and only the 4x attempt, the fallback, solves the QP.
-  if (factor.valid() && factor.num_cables() == lo.size()) {
-    const int m = factor.num_cables();
-    const double tol = ForceDistributionOptions{}.feasibility_tolerance;
-    const CableVector p_w = factor.particular(CableVector::Zero(m), w);
-    const StructureFactor::NullMatrix& n = factor.null_basis();
-    const CableVector u = n * (n.transpose() * CableVector::Ones(m));
-    for (const double scale : {1.0, 2.0}) {
-      const double r = scale * reference_tension;
-      bool inside = true;
-      for (int i = 0; i < m && inside; ++i) {
-        const double f = p_w(i) + r * u(i);
-        inside = f > lo(i) + tol && f < hi(i) - tol;
-      }
-      if (!inside) continue;
-      plan.outcome = ForceDistributionOutcome::kFeasible;
-      plan.tensions = p_w + r * u;
-      plan.reference = r;
-      plan.cables_at_limits = 0;
+  for (const double scale : {1.0, 2.0, 4.0}) {
+    CDPR_RETURN_IF_ERROR(plan_attempt(factor, w, lo, hi, scale * reference_tension, plan));
+    if (plan.outcome == ForceDistributionOutcome::kFeasible && plan.cables_at_limits == 0) {
       return Status::success();
     }
-  } else {
-    for (const double scale : {1.0, 2.0}) {
-      CDPR_RETURN_IF_ERROR(plan_attempt(factor, w, lo, hi, scale * reference_tension, plan));
-      if (plan.outcome == ForceDistributionOutcome::kFeasible && plan.cables_at_limits == 0) {
-        return Status::success();
-      }
-    }
   }
-  CDPR_RETURN_IF_ERROR(plan_attempt(factor, w, lo, hi, 4.0 * reference_tension, plan));
   if (plan.outcome == ForceDistributionOutcome::kFeasible) return Status::success();
   return not_found();
 }

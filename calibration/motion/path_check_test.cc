@@ -65,57 +65,6 @@ TEST(PlanTensions, MatchesTheVirtualRobotsPlanner) {
   EXPECT_GT(infeasible, 20);
 }
 
-// The planner's rule written out with a QP at every reference (1x, 2x, 4x: the first with no
-// cable on an edge, else the 4x one if feasible), against plan_tensions, which solves the QP only
-// for the 4x fallback: the same choice, reference and tensions, with several margins, on poses
-// inside and outside the wrench-feasible workspace.
-TEST(PlanTensions, ChoosesAsAQpAtEveryReferenceWould) {
-  const RobotModel mini = testing::mini_robot();
-  const double reference = default_reference_tension(mini);
-  std::mt19937_64 rng(11);
-  const testing::WorkspaceBox box = testing::mini_workspace();
-  KinematicsData kinematics(mini);
-  StructureFactor factor;
-  TensionPlan plan;
-  std::array<int, 4> chosen{};  // 1x, 2x, 4x, failed
-  for (int k = 0; k < 1500; ++k) {
-    const Pose pose = testing::random_pose(box, rng);
-    ASSERT_TRUE(inverse_kinematics(mini, pose, kinematics));
-    factor.compute(kinematics.structure_matrix);
-    const double margin = std::array<double, 3>{0.0, 10.0, 30.0}[k % 3];
-    const Status s = plan_tensions(mini, kinematics, factor, reference, margin, plan);
-    Eigen::VectorXd lo(mini.num_cables()), hi(mini.num_cables());
-    for (int i = 0; i < mini.num_cables(); ++i) {
-      lo(i) = mini.cables[static_cast<std::size_t>(i)].f_min + margin;
-      hi(i) = mini.cables[static_cast<std::size_t>(i)].f_max - margin;
-    }
-    const Wrench6 w = gravity_wrench(mini, kinematics.rotation);
-    ForceDistributionResult expected;
-    double expected_reference = 0.0;
-    for (const double scale : {1.0, 2.0, 4.0}) {
-      ForceDistributionOptions o;
-      o.reference_tension = scale * reference;
-      expected = distribute_forces(factor, w, lo, hi, o);
-      expected_reference = scale * reference;
-      if (expected.outcome == ForceDistributionOutcome::kInfeasible) break;
-      if (expected.feasible() && expected.cables_at_limits == 0) break;
-    }
-    ASSERT_EQ(s.ok(), expected.feasible()) << s.to_string();
-    if (!s.ok()) {
-      ++chosen[3];
-      continue;
-    }
-    ++chosen[expected_reference == reference ? 0 : expected_reference == 2 * reference ? 1 : 2];
-    EXPECT_EQ(plan.reference, expected_reference);
-    EXPECT_EQ(plan.cables_at_limits, expected.cables_at_limits);
-    EXPECT_LT(
-        (Eigen::VectorXd(plan.tensions) - Eigen::VectorXd(expected.tensions)).cwiseAbs().maxCoeff(),
-        1e-9 * hi.maxCoeff());
-  }
-  // Every branch was taken.
-  for (const int n : chosen) EXPECT_GT(n, 10) << chosen[0] << " " << chosen[1] << " " << chosen[2];
-}
-
 TEST(PlanTensions, KeepsTensionsInsideTheMarginBand) {
   const RobotModel mini = testing::mini_robot();
   KinematicsData kinematics(mini);
