@@ -302,6 +302,19 @@ TEST(RobotConfig, SaveThenLoadIsExactForAPulleyGivenWithATiltedAxisAndAnObliqueR
   expect_save_load_exact(*model);
 }
 
+// A negative zero (a file may say "-0.") is written as 0: "-0" would read back as the integer 0
+// and a second save would differ from the first (found by fuzz/robot_config_fuzz.cc).
+TEST(RobotConfig, SaveWritesANegativeZeroAsZeroSoThatSaveAndLoadAreStable) {
+  Result<RobotModel> model = load_robot_config(source_path("config/mini.yaml"));
+  ASSERT_TRUE(model.ok()) << model.status().to_string();
+  model->platform_anchors(0, 6) = -0.0;
+  const std::string saved = save_robot_config(*model);
+  EXPECT_EQ(saved.find("-0,"), std::string::npos) << saved;
+  auto again = parse_robot_config(saved, "saved.yaml");
+  ASSERT_TRUE(again.ok()) << again.status().to_string();
+  EXPECT_EQ(save_robot_config(*again), saved);
+}
+
 TEST(RobotConfig, SaveKeepsNumbersThatNeedAllSeventeenDigits) {
   Result<RobotModel> model = load_robot_config(source_path("config/mini.yaml"));
   ASSERT_TRUE(model.ok()) << model.status().to_string();

@@ -463,6 +463,7 @@ RobotModel Parser::parse(const YamlField& root) {
 
 // Shortest decimal form that reads back to the same double (at most 17 significant digits).
 std::string num(double v) {
+  if (v == 0.0) v = 0.0;  // -0 would be written "-0", which the reader takes for the integer 0
   char buf[64];
   const auto r = std::to_chars(buf, buf + sizeof(buf), v);
   return std::string(buf, r.ptr);
