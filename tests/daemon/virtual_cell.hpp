@@ -236,25 +236,17 @@ class VirtualCell {
     const can::Timestamp next = clock.now() + network.sync_period;
     while (clock.now() < next) idle();
     if (++cycles_ % 5 == 0) daemon->service();
-    const bool identifying = daemon->state() == DaemonState::kIdentifying;
-    if (identifying && !paced_ && !identifying_paced_) {
-      identifying_wall_origin_ = std::chrono::steady_clock::now();
-      identifying_robot_origin_ = clock.now();
-    }
-    identifying_paced_ = identifying && !paced_;
-    if (paced_) {
-      std::this_thread::sleep_until(wall_origin_ + (clock.now() - robot_origin_));
-    } else if (identifying_paced_) {
-      std::this_thread::sleep_until(identifying_wall_origin_ +
-                                    (clock.now() - identifying_robot_origin_));
-    }
+    const bool pace_now = paced_ || daemon->state() == DaemonState::kIdentifying;
+    if (pace_now && !pacing_) anchor_pace();
+    pacing_ = pace_now;
+    if (pacing_) std::this_thread::sleep_until(wall_origin_ + (clock.now() - robot_origin_));
   }
   // Paced: robot time runs with the wall clock (from now on), so what the daemon's threads do in
   // real time (laser readings, the identification) costs the robot time it would cost on a robot.
   void pace(bool on) {
     paced_ = on;
-    wall_origin_ = std::chrono::steady_clock::now();
-    robot_origin_ = clock.now();
+    pacing_ = on;
+    anchor_pace();
   }
 
   // Cycles until `done` or `max_s` of robot time; returns whether done.
@@ -439,12 +431,16 @@ class VirtualCell {
   std::mutex events_mu_;
   std::vector<nlohmann::json> events_;
   std::uint64_t cycles_ = 0;
+  // Pacing: asked for (pace), or while the daemon identifies; robot time then runs with the wall
+  // clock from the origins taken when it began.
+  void anchor_pace() {
+    wall_origin_ = std::chrono::steady_clock::now();
+    robot_origin_ = clock.now();
+  }
   bool paced_ = false;
+  bool pacing_ = false;
   std::chrono::steady_clock::time_point wall_origin_;
   can::Timestamp robot_origin_{0};
-  bool identifying_paced_ = false;  // robot time runs with the wall clock while identifying
-  std::chrono::steady_clock::time_point identifying_wall_origin_;
-  can::Timestamp identifying_robot_origin_{0};
 };
 
 }  // namespace cdpr::controller::testing

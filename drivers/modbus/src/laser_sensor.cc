@@ -23,6 +23,18 @@ void sleep_s(double s) {
   std::this_thread::sleep_for(std::chrono::nanoseconds(static_cast<std::int64_t>(s * 1e9)));
 }
 
+// Counts a caller of the link for its lifetime (LaserSensor::callers_).
+class CallerScope {
+ public:
+  explicit CallerScope(std::atomic<int>& n) : n_(n) { n_.fetch_add(1, std::memory_order_acq_rel); }
+  ~CallerScope() { n_.fetch_sub(1, std::memory_order_acq_rel); }
+  CallerScope(const CallerScope&) = delete;
+  CallerScope& operator=(const CallerScope&) = delete;
+
+ private:
+  std::atomic<int>& n_;
+};
+
 }  // namespace
 
 std::int64_t monotonic_ns() {
@@ -85,20 +97,6 @@ void LaserSensor::poll_loop() {
     if (stop_cv_.wait_until(lk, next, [this] { return stop_requested_; })) break;
   }
 }
-
-namespace {
-// Counts a caller of the link for its lifetime (LaserSensor::callers_).
-class CallerScope {
- public:
-  explicit CallerScope(std::atomic<int>& n) : n_(n) { n_.fetch_add(1, std::memory_order_acq_rel); }
-  ~CallerScope() { n_.fetch_sub(1, std::memory_order_acq_rel); }
-  CallerScope(const CallerScope&) = delete;
-  CallerScope& operator=(const CallerScope&) = delete;
-
- private:
-  std::atomic<int>& n_;
-};
-}  // namespace
 
 LaserReading LaserSensor::read_once() {
   const CallerScope caller(callers_);
